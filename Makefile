@@ -1,0 +1,35 @@
+# Set-up is two commands on a fresh machine: `make eval` and `make test`.
+SHELL := /bin/bash
+VENV := .venv
+PY := $(VENV)/bin/python
+export MUJOCO_GL ?= egl
+
+# Python 3.12: on PATH, else through pyenv (see scripts/find-python312.sh).
+PYTHON312 ?= $(shell scripts/find-python312.sh)
+
+PLUGINS := $(wildcard plugins/*/pyproject.toml)
+
+.PHONY: eval test test-all perf clean
+
+$(VENV): pyproject.toml $(PLUGINS)
+	@test -n "$(PYTHON312)" || { echo "Python 3.12 not found (PATH or pyenv)"; exit 1; }
+	@echo "using $(PYTHON312)"
+	test -x $(PY) || $(PYTHON312) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip 2>&1 | grep -v "^WARNING: Location" || true
+	$(PY) -m pip install -q -e ".[test,ray]" $(foreach p,$(dir $(PLUGINS)),-e ./$(p)) 2>&1 | grep -v "^WARNING: Location"; test $${PIPESTATUS[0]} -eq 0
+	touch $(VENV)
+
+eval: $(VENV)
+	$(VENV)/bin/molmo-eval policy=scripted benchmark=pick_v1 workers=2
+
+test: $(VENV)
+	$(PY) -m pytest -q
+
+test-all: $(VENV)
+	$(PY) -m pytest -q -m "slow or not slow"
+
+perf: $(VENV)
+	$(PY) -m pytest -q -s -m perf tests/perf
+
+clean:
+	rm -rf $(VENV) outputs runs

@@ -1,0 +1,79 @@
+"""The hook specifications every molmo_lerobot plugin implements (one file, one docstring per hook).
+
+A plugin is a module (or object) named by an entry point in the group ``molmo_lerobot``.
+It implements any subset of these hooks with ``@molmo_lerobot.hookimpl``. Our built-in
+task types, robots, camera systems, scene datasets and policies are plugins too and
+register through the very same entry points (see ``pyproject.toml``).
+
+Each ``molmo_*`` provider hook returns a list of descriptors; the registries in
+:mod:`molmo_lerobot.plugins` index them by name (and alias) and report conflicts.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import pluggy
+
+if TYPE_CHECKING:
+    from molmo_lerobot.benchmark.schema import EpisodeSpec
+    from molmo_lerobot.cameras.base import CameraSystem
+    from molmo_lerobot.policies.base import PolicyType
+    from molmo_lerobot.robots.base import RobotType
+    from molmo_lerobot.sim.scenes import SceneDataset
+    from molmo_lerobot.tasks.base import TaskType
+
+PROJECT = "molmo_lerobot"
+hookspec = pluggy.HookspecMarker(PROJECT)
+hookimpl = pluggy.HookimplMarker(PROJECT)
+
+
+@hookspec
+def molmo_task_types() -> list[TaskType]:
+    """Task types this plugin provides.
+
+    Each :class:`~molmo_lerobot.tasks.base.TaskType` has a short ``name`` (``"pick"``) and
+    ``aliases`` (e.g. MolmoSpaces' dotted ``task_cls`` paths) so that benchmark files
+    written for MolmoSpaces resolve to it unchanged.
+    """
+
+
+@hookspec
+def molmo_robots() -> list[RobotType]:
+    """Robots this plugin provides, keyed by ``name`` and ``aliases`` (episode ``robot.robot_name``)."""
+
+
+@hookspec
+def molmo_camera_systems() -> list[CameraSystem]:
+    """Camera systems: how an episode's camera specs become MuJoCo cameras (and their randomization)."""
+
+
+@hookspec
+def molmo_scene_datasets() -> list[SceneDataset]:
+    """Scene datasets: what an episode's ``scene_dataset`` + ``house_index`` build with MjSpec."""
+
+
+@hookspec
+def molmo_policies() -> list[PolicyType]:
+    """Policies, keyed by ``name`` as used on the command line (``policy=<name>``)."""
+
+
+@hookspec
+def molmo_config_dirs() -> list[str]:
+    """Directories holding Hydra config groups (``policy/<name>.yaml`` …) to add to the search path.
+
+    A third-party policy plugin returns the directory of its own ``policy/<name>.yaml`` so
+    that ``molmo-eval policy=<name>`` finds it without touching this repository.
+    """
+
+
+@hookspec
+def molmo_episode_overrides(episode: EpisodeSpec, config: Any) -> EpisodeSpec | None:
+    """Edit an episode before it runs (MolmoSpaces' robot eval overrides).
+
+    Called once per episode with the validated spec and the run config. Return a new
+    :class:`EpisodeSpec` (e.g. ``episode.model_copy(update=...)``) to replace it, or
+    ``None`` to leave it alone. Implementations run in registration order and each sees
+    the previous one's result. They must be deterministic: the same episode and config
+    always give the same result.
+    """

@@ -1,0 +1,87 @@
+"""The policy interface: reset once per episode, then act on observations.
+
+Observation (a plain dict, so it crosses process and network boundaries unchanged)::
+
+    {
+      "images": {camera_name: uint8 array (H, W, 3)},      # only if the policy wants images
+      "depth":  {camera_name: float32 array (H, W)},       # cameras with record_depth
+      "qpos":   {move_group: float array},                 # e.g. {"arm": (7,), "gripper": (1,)}
+      "qvel":   {move_group: float array},
+      "tcp_pose": float array (7,),                        # x, y, z, qw, qx, qy, qz in world
+      "prompt": str,                                       # the episode's language instruction
+      "step": int,                                         # policy step index in the episode
+    }
+
+Action: a dict keyed by move group, ``{"arm": (7,) joint positions, "gripper": (1,)}`` with
+the gripper command normalized to [0, 1] (0 open, 1 closed). A *chunk* is the same dict
+with a leading time axis, ``{"arm": (H, 7), "gripper": (H, 1)}``; chunks run open loop.
+The rollout loop validates every action (keys, shapes, finite values) and turns a bad one
+into a per-episode error that names the policy, the move group and what was wrong.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from molmo_lerobot.benchmark.schema import EpisodeSpec
+    from molmo_lerobot.sim.env import Env
+
+Observation = dict[str, Any]
+Action = dict[str, np.ndarray]
+
+
+@dataclass
+class EpisodeContext:
+    """What a policy learns at reset.
+
+    ``env`` gives privileged simulator access; only scripted experts may use it, a policy
+    under evaluation must act on observations alone.
+    """
+
+    spec: EpisodeSpec
+    episode_index: int
+    seed: int
+    prompt: str
+    move_groups: dict[str, int]
+    policy_dt_s: float
+    env: Env | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class Policy(ABC):
+    """A policy instance. One instance serves one worker, episodes in sequence."""
+
+    #: Whether ``act`` needs camera images. Policies that do not (scripted experts) let the
+    #: environment skip rendering unless a recorder asks for frames.
+    needs_images: bool = True
+
+    @abstractmethod
+    def reset(self, ctx: EpisodeContext) -> None:
+        """Start a new episode. Must clear every per-episode state."""
+
+    @abstractmethod
+    def act(self, obs: Observation) -> Action:
+        """Return one action or a chunk of actions (leading time axis) for ``obs``."""
+
+    def close(self) -> None:
+        """Release resources (connections, GPU memory). Called once when the worker ends."""
+
+
+@dataclass(frozen=True)
+class PolicyType:
+    """A policy plugin's descriptor.
+
+    ``factory(config)`` builds a :class:`Policy` from the resolved ``policy`` config group
+    (a plain dict). It runs inside each worker process, so it must be picklable by name
+    (a module-level function or class).
+    """
+
+    name: str
+    factory: Callable[[dict[str, Any]], Policy]
+    description: str = ""
