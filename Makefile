@@ -16,7 +16,7 @@ $(VENV): pyproject.toml $(PLUGINS)
 	@echo "using $(PYTHON312)"
 	test -x $(PY) || $(PYTHON312) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip 2>&1 | grep -v "^WARNING: Location" || true
-	$(PY) -m pip install -q -e ".[test,ray]" $(foreach p,$(dir $(PLUGINS)),-e ./$(p)) 2>&1 | grep -v "^WARNING: Location"; test $${PIPESTATUS[0]} -eq 0
+	$(PY) -m pip install -q -e ".[test,ray,training]" $(foreach p,$(dir $(PLUGINS)),-e ./$(p)) 2>&1 | grep -v "^WARNING: Location"; test $${PIPESTATUS[0]} -eq 0
 	touch $(VENV)
 
 eval: $(VENV)

@@ -1,0 +1,86 @@
+"""Episode results and the run summary (``results.json``): honest counts and Wilson CIs.
+
+Every attempted episode counts. An episode that raised, timed out or whose worker died is
+a failure with its ``error`` recorded; it is never dropped from the denominator.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+
+@dataclass
+class EpisodeResult:
+    """One attempted episode. The first seven fields are the ``episodes.jsonl`` contract."""
+
+    episode_index: int
+    house_index: int | None
+    task_cls: str | None
+    success: bool
+    success_once: bool
+    steps: int
+    seed: int
+    error: str | None = None
+    task_type: str | None = None
+    prompt: str | None = None
+    horizon: int | None = None
+    duration_s: float = 0.0
+    attempts: int = 1
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> EpisodeResult:
+        known = {k: d[k] for k in cls.__dataclass_fields__ if k in d}
+        return cls(**known)
+
+    @classmethod
+    def failed(cls, episode_index: int, house_index: int | None, task_cls: str | None, seed: int,
+               error: str, **kw: Any) -> EpisodeResult:
+        return cls(episode_index, house_index, task_cls, False, False, 0, seed, error, **kw)
+
+
+def wilson_ci(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    """Wilson score interval for k successes in n trials (``(0, 1)`` when n == 0)."""
+    if n == 0:
+        return (0.0, 1.0)
+    p = k / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def _block(results: list[EpisodeResult]) -> dict[str, Any]:
+    n = len(results)
+    k = sum(r.success for r in results)
+    k_once = sum(r.success_once for r in results)
+    return {
+        "success_rate": k / n if n else 0.0,
+        "success_once_rate": k_once / n if n else 0.0,
+        "n_episodes": n,
+        "n_success": k,
+        "n_success_once": k_once,
+        "n_errors": sum(r.error is not None for r in results),
+        "ci95": list(wilson_ci(k, n)),
+        "success_once_ci95": list(wilson_ci(k_once, n)),
+    }
+
+
+def summarize(results: list[EpisodeResult], **context: Any) -> dict[str, Any]:
+    """The ``results.json`` document: overall and per-task blocks plus ``context`` fields."""
+    by_task: dict[str, list[EpisodeResult]] = defaultdict(list)
+    for r in results:
+        by_task[r.task_type or r.task_cls or "unknown"].append(r)
+    summary = {"primary_metric": "success_rate (success at the final step)", **_block(results)}
+    summary["per_task"] = {t: _block(rs) for t, rs in sorted(by_task.items())}
+    summary["errors"] = [
+        {"episode_index": r.episode_index, "error": r.error} for r in results if r.error is not None
+    ]
+    summary.update(context)
+    return summary

@@ -1,0 +1,120 @@
+"""Per-worker state and the work item an executor hands it: one episode at a time.
+
+The same :class:`EpisodeWorker` runs inside local worker processes and Ray actors, so
+every executor shares the one rollout loop and gives the same per-episode outcomes.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from molmo_lerobot.policies.base import EpisodeContext
+from molmo_lerobot.runner.recorders import EpisodeInfo, RecorderFactory
+from molmo_lerobot.runner.results import EpisodeResult
+from molmo_lerobot.runner.rollout import resolve_horizon, rollout
+
+
+@dataclass(frozen=True)
+class WorkItem:
+    """One episode: its position in the benchmark, its (overridden) spec and its seed."""
+
+    episode_index: int
+    spec: dict[str, Any]
+    seed: int
+
+
+@dataclass
+class WorkerJob:
+    """Everything a worker needs, picklable (plain data + recorder factories)."""
+
+    policy: dict[str, Any]
+    timing: dict[str, float]
+    horizon: int | None
+    output_dir: str
+    benchmark_name: str
+    benchmark_sha256: str
+    recorders: list[RecorderFactory] = field(default_factory=list)
+
+
+class EpisodeWorker:
+    """Loads plugins and the policy once, then runs episodes in sequence."""
+
+    def __init__(self, job: WorkerJob, worker_id: str) -> None:
+        from molmo_lerobot.plugins import get_plugins
+        from molmo_lerobot.runner.policy import make_policy
+        from molmo_lerobot.sim.env import Timing
+
+        self.job = job
+        self.worker_id = worker_id
+        self.plugins = get_plugins()
+        self.timing = Timing(**job.timing)
+        self.policy_name = str(job.policy["name"])
+        self.policy = make_policy(job.policy)
+        self.recorders = [f.make(worker_id, Path(job.output_dir)) for f in job.recorders]
+
+    def run(self, item: WorkItem) -> EpisodeResult:
+        """Run one episode; any exception becomes this episode's recorded error."""
+        from molmo_lerobot.benchmark.schema import EpisodeSpec
+        from molmo_lerobot.sim.env import make_env
+
+        t0 = time.perf_counter()
+        raw_task = item.spec.get("task") or {}
+        house = item.spec.get("house_index")
+        task_cls = raw_task.get("task_cls") if isinstance(raw_task, dict) else None
+        result: EpisodeResult
+        try:
+            spec = EpisodeSpec.model_validate(item.spec)
+            task_type = self.plugins.task_type(spec.task.task_cls)
+            horizon = resolve_horizon(self.job.horizon, spec.task, task_type.default_horizon_sec,
+                                      self.timing.policy_dt_ms)
+            prompt = spec.language.task_description if spec.language else ""
+            env = make_env(spec, self.timing, self.plugins)
+            try:
+                env.reset(item.seed)
+                task = task_type.create(spec, env)
+                ctx = EpisodeContext(
+                    spec=spec, episode_index=item.episode_index, seed=item.seed, prompt=prompt,
+                    move_groups=dict(env.move_groups), policy_dt_s=self.timing.policy_dt_ms / 1000.0, env=env,
+                )
+                info = EpisodeInfo(
+                    episode_index=item.episode_index, house_index=house, seed=item.seed, prompt=prompt,
+                    task_type=task_type.name, fps=1000.0 / self.timing.policy_dt_ms, horizon=horizon,
+                    camera_names=list(env.camera_names), img_resolution=tuple(spec.img_resolution),
+                    joint_names=dict(env.joint_names), move_groups=dict(env.move_groups),
+                    extra={"task_cls": task_cls, "policy": self.policy_name,
+                           "benchmark": self.job.benchmark_name, "benchmark_sha256": self.job.benchmark_sha256},
+                )
+                outcome = rollout(env, task, self.policy, ctx, horizon, self.recorders, info, self.policy_name)
+            finally:
+                env.close()
+            result = EpisodeResult(
+                episode_index=item.episode_index, house_index=house, task_cls=task_cls,
+                success=outcome.success, success_once=outcome.success_once, steps=outcome.steps,
+                seed=item.seed, task_type=task_type.name, prompt=prompt, horizon=horizon,
+            )
+        except Exception as exc:
+            result = EpisodeResult.failed(item.episode_index, house, task_cls, item.seed, _describe(exc))
+            if os.environ.get("MOLMO_DEBUG"):
+                traceback.print_exc()
+        result.duration_s = time.perf_counter() - t0
+        for rec in self.recorders:
+            rec.end_episode(result)
+        return result
+
+    def close(self) -> None:
+        for rec in self.recorders:
+            rec.close()
+        self.policy.close()
+
+
+def _describe(exc: BaseException) -> str:
+    """One line: exception type, message and where it was raised."""
+    tb = traceback.extract_tb(exc.__traceback__)
+    where = f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
+    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    return f"{type(exc).__name__}: {msg}{where}"

@@ -1,0 +1,42 @@
+import math
+
+import pytest
+
+from molmo_lerobot.runner.results import EpisodeResult, summarize, wilson_ci
+
+
+@pytest.mark.parametrize(
+    ("k", "n", "lo", "hi"),
+    [(8, 10, 0.4902, 0.9433), (0, 10, 0.0, 0.2775), (10, 10, 0.7225, 1.0), (50, 100, 0.4038, 0.5962)],
+)
+def test_wilson_matches_reference_values(k, n, lo, hi):
+    got = wilson_ci(k, n)
+    assert math.isclose(got[0], lo, abs_tol=1e-4) and math.isclose(got[1], hi, abs_tol=1e-4)
+
+
+def test_wilson_empty_is_uninformative():
+    assert wilson_ci(0, 0) == (0.0, 1.0)
+
+
+def test_summary_counts_errors_as_failures_and_splits_tasks():
+    rs = [
+        EpisodeResult(0, 1, "a.Pick", True, True, 10, 1, task_type="pick"),
+        EpisodeResult(1, 1, "a.Pick", False, True, 10, 2, task_type="pick"),
+        EpisodeResult.failed(2, 2, "a.Open", 3, "RuntimeError: boom", task_type="open"),
+    ]
+    s = summarize(rs, seed=0)
+    assert s["n_episodes"] == 3 and s["n_success"] == 1 and s["n_errors"] == 1
+    assert s["success_rate"] == pytest.approx(1 / 3)
+    assert s["success_once_rate"] == pytest.approx(2 / 3)
+    assert s["per_task"]["pick"]["n_episodes"] == 2
+    assert s["per_task"]["open"]["n_errors"] == 1
+    assert s["errors"] == [{"episode_index": 2, "error": "RuntimeError: boom"}]
+    assert s["seed"] == 0
+
+
+def test_episode_result_roundtrip_keeps_contract_fields():
+    r = EpisodeResult(3, 7, "x.Pick", True, True, 303, 42, task_type="pick")
+    d = r.to_dict()
+    for key in ("episode_index", "house_index", "task_cls", "success", "success_once", "steps", "seed", "error"):
+        assert key in d
+    assert EpisodeResult.from_dict(d) == r
