@@ -1,1 +1,11 @@
-"""benchmark."""
+"""Benchmarks: MolmoSpaces-compatible episode schema, loading with a content hash, validation, generation.
+
+``load_benchmark(path)`` reads a benchmark directory or file into a :class:`Benchmark`;
+``validate_benchmark(bench, plugins)`` (in :mod:`.validate`) checks it against the
+installed plugins.
+"""
+
+from molmo_lerobot.benchmark.load import Benchmark, BenchmarkError, Problem, load_benchmark
+from molmo_lerobot.benchmark.schema import BenchmarkMetadata, EpisodeSpec
+
+__all__ = ["Benchmark", "BenchmarkError", "BenchmarkMetadata", "EpisodeSpec", "Problem", "load_benchmark"]

@@ -1,0 +1,282 @@
+"""Load a benchmark (either MolmoSpaces layout, or one JSON file) and hash its content.
+
+Layouts, tried in this order for a directory:
+
+* ``benchmark.json``: a list of episode objects (+ optional ``benchmark_metadata.json``);
+* legacy ``house_<id>/episode_<8 digits>.json``: one episode per file, in MolmoSpaces'
+  order (house directories sorted by name, then episode files sorted by name), so episode
+  indices match theirs.
+
+A path to a ``.json`` file is read as a list of episodes or as a single episode.
+
+Every problem in every episode is collected before failing; :class:`BenchmarkError` lists
+them one per line as ``<file>: episode <i>: field <path>: <what is wrong>``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ValidationError
+
+from molmo_lerobot.benchmark.schema import UNION_TAGS, BenchmarkMetadata, EpisodeSpec
+
+BENCHMARK_FILE = "benchmark.json"
+METADATA_FILE = "benchmark_metadata.json"
+_HOUSE_DIR = re.compile(r"house_(-?\d+)")
+_EPISODE_FILE = re.compile(r"episode_\d{8}\.json")
+_UNREADABLE = object()  # stands for a file already reported as unreadable
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One thing wrong with a benchmark: where (file, episode index, field) and what."""
+
+    file: str
+    message: str
+    episode_index: int | None = None
+    field: str | None = None
+
+    def __str__(self) -> str:
+        parts = [self.file]
+        if self.episode_index is not None:
+            parts.append(f"episode {self.episode_index}")
+        if self.field:
+            parts.append(f"field {self.field}")
+        return ": ".join([*parts, self.message])
+
+
+class BenchmarkError(ValueError):
+    """A benchmark that cannot be loaded or used; ``problems`` lists every reason."""
+
+    def __init__(self, problems: list[Problem]) -> None:
+        self.problems = list(problems)
+        super().__init__("\n".join(str(p) for p in self.problems))
+
+
+@dataclass(frozen=True)
+class Origin:
+    """Where an episode was read from: its file and, in a list file, its position there."""
+
+    file: str
+    position: int | None = None
+
+
+@dataclass
+class Benchmark:
+    """A loaded benchmark. ``episodes[i]`` came from ``origins[i]``."""
+
+    name: str
+    episodes: list[EpisodeSpec]
+    metadata: BenchmarkMetadata | None
+    sha256: str
+    path: Path
+    origins: list[Origin] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.episodes)
+
+    def where(self, index: int) -> str:
+        """``"<file>: episode <index>"``, for messages about one episode."""
+        return f"{self.origins[index].file}: episode {index}"
+
+
+# Hashing -----------------------------------------------------------------------------------
+
+
+def canonical_json(obj: Any) -> str:
+    """JSON with sorted keys and no whitespace: equal content gives equal text."""
+    if isinstance(obj, BaseModel):
+        obj = obj.model_dump(mode="json")
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+
+
+def benchmark_sha256(episodes: list[EpisodeSpec]) -> str:
+    """SHA-256 of the canonical JSON of the validated episodes, in order.
+
+    Computed on the parsed models, so key order, whitespace, ``1`` vs ``1.0``, omitted
+    defaults and the file layout do not change it; any change of content does.
+    """
+    data = [ep.model_dump(mode="json") for ep in episodes]
+    return hashlib.sha256(canonical_json(data).encode("utf-8")).hexdigest()
+
+
+# Loading -----------------------------------------------------------------------------------
+
+
+def load_benchmark(path: str | Path) -> Benchmark:
+    """Load and schema-validate a benchmark directory or JSON file; raise :class:`BenchmarkError`."""
+    path = Path(path)
+    problems: list[Problem] = []
+    raw: list[tuple[Origin, Any]] = []
+    metadata: BenchmarkMetadata | None = None
+
+    if path.is_dir():
+        bench_file = path / BENCHMARK_FILE
+        if bench_file.is_file():
+            raw = _read_list_file(bench_file, problems)
+        else:
+            raw = _read_legacy_dir(path, problems)
+            if not raw and not problems:
+                problems.append(
+                    Problem(str(path), f"no {BENCHMARK_FILE} and no house_<id>/episode_<8 digits>.json files")
+                )
+        meta_file = path / METADATA_FILE
+        if meta_file.is_file():
+            metadata = _read_metadata(meta_file, problems)
+    elif path.is_file():
+        data = _read_json(path, problems)
+        if isinstance(data, dict):
+            raw = [(Origin(str(path)), data)]
+        elif data is not _UNREADABLE:
+            raw = _episode_list(path, data, problems)
+        meta_file = path.with_name(METADATA_FILE)
+        if path.name == BENCHMARK_FILE and meta_file.is_file():
+            metadata = _read_metadata(meta_file, problems)
+    else:
+        problems.append(Problem(str(path), "no such benchmark file or directory"))
+
+    episodes: list[EpisodeSpec] = []
+    origins: list[Origin] = []
+    for index, (origin, data) in enumerate(raw):
+        if data is _UNREADABLE:
+            continue
+        if not isinstance(data, dict):
+            problems.append(Problem(origin.file, f"expected an episode object, got {_json_type(data)}", index))
+            continue
+        try:
+            episodes.append(EpisodeSpec.model_validate(data))
+            origins.append(origin)
+        except ValidationError as exc:
+            problems.extend(Problem(origin.file, msg, index, loc) for loc, msg in validation_messages(exc))
+    if not raw and not problems:
+        problems.append(Problem(str(path), "benchmark has no episodes"))
+    if problems:
+        raise BenchmarkError(problems)
+    return Benchmark(
+        name=_benchmark_name(path, metadata),
+        episodes=episodes,
+        metadata=metadata,
+        sha256=benchmark_sha256(episodes),
+        path=path,
+        origins=origins,
+    )
+
+
+def _benchmark_name(path: Path, metadata: BenchmarkMetadata | None) -> str:
+    if metadata is not None and metadata.name:
+        return metadata.name
+    if path.is_file():
+        return path.parent.name if path.name == BENCHMARK_FILE else path.stem
+    return path.resolve().name
+
+
+def _read_json(file: Path, problems: list[Problem]) -> Any:
+    try:
+        text = file.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        problems.append(Problem(str(file), f"cannot read: {exc}"))
+        return _UNREADABLE
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        problems.append(Problem(str(file), f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"))
+        return _UNREADABLE
+
+
+def _read_list_file(file: Path, problems: list[Problem]) -> list[tuple[Origin, Any]]:
+    data = _read_json(file, problems)
+    return [] if data is _UNREADABLE else _episode_list(file, data, problems)
+
+
+def _episode_list(file: Path, data: Any, problems: list[Problem]) -> list[tuple[Origin, Any]]:
+    if not isinstance(data, list):
+        problems.append(Problem(str(file), f"expected a list of episode objects, got {_json_type(data)}"))
+        return []
+    return [(Origin(str(file), i), ep) for i, ep in enumerate(data)]
+
+
+def _read_legacy_dir(root: Path, problems: list[Problem]) -> list[tuple[Origin, Any]]:
+    out: list[tuple[Origin, Any]] = []
+    for house_dir in sorted(p for p in root.glob("house_*") if p.is_dir()):
+        if not _HOUSE_DIR.fullmatch(house_dir.name):
+            problems.append(Problem(str(house_dir), "directory name is not house_<integer>"))
+            continue
+        for ep_file in sorted(house_dir.glob("episode_*.json")):
+            if not _EPISODE_FILE.fullmatch(ep_file.name):
+                problems.append(Problem(str(ep_file), "file name is not episode_<8 digits>.json"))
+                continue
+            # An unreadable file is already reported; it keeps its slot so later indices stay true.
+            out.append((Origin(str(ep_file)), _read_json(ep_file, problems)))
+    return out
+
+
+
+def _read_metadata(file: Path, problems: list[Problem]) -> BenchmarkMetadata | None:
+    data = _read_json(file, problems)
+    if data is _UNREADABLE:
+        return None
+    if not isinstance(data, dict):
+        problems.append(Problem(str(file), f"expected an object, got {_json_type(data)}"))
+        return None
+    try:
+        return BenchmarkMetadata.model_validate(data)
+    except ValidationError as exc:
+        problems.extend(Problem(str(file), msg, None, loc) for loc, msg in validation_messages(exc))
+        return None
+
+
+# Error formatting --------------------------------------------------------------------------
+
+
+def validation_messages(exc: ValidationError) -> list[tuple[str, str]]:
+    """(field path, message) per pydantic error, with union tags removed from the path."""
+    out = []
+    for err in exc.errors(include_url=False):
+        loc = _strip_tags(tuple(err["loc"]))
+        kind, msg, value = err["type"], err["msg"], err.get("input")
+        if kind == "missing":
+            msg = "missing"
+        elif kind == "camera_type":
+            loc = (*loc, "type")
+            shown = value.get("type") if isinstance(value, dict) else value
+            msg = f"unknown camera type {shown!r} (expected 'robot_mounted' or 'exocentric')"
+        elif kind not in ("vector_length", "vector_finite", "zero_quaternion", "resolution"):
+            msg = f"{msg} (got {_short(value)})"
+        out.append((format_loc(loc), msg))
+    return out
+
+
+def _strip_tags(loc: tuple) -> tuple:
+    out: list = []
+    for part in loc:
+        in_task = tuple(out) == ("task",)
+        in_camera = len(out) == 2 and out[0] == "cameras" and isinstance(out[1], int)
+        if isinstance(part, str) and part in UNION_TAGS and (in_task or in_camera):
+            continue
+        out.append(part)
+    return tuple(out)
+
+
+def format_loc(loc: tuple) -> str:
+    """``("cameras", 0, "pos")`` -> ``"cameras[0].pos"``."""
+    text = ""
+    for part in loc:
+        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else str(part))
+    return text
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    text = json.dumps(value) if isinstance(value, (dict, list, str, int, float, bool, type(None))) else repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _json_type(value: Any) -> str:
+    return {dict: "an object", list: "a list", str: "a string", bool: "a boolean", type(None): "null"}.get(
+        type(value), "a number"
+    )

@@ -1,0 +1,90 @@
+"""Check a schema-valid benchmark against the installed plugins (what a run would need).
+
+Every episode is checked and every problem returned (never raised), each naming the file,
+the episode index and the field: unknown task classes (with "did you mean"), robots no
+plugin provides, init_qpos that does not fit the robot's move groups, unknown scene
+datasets, missing or duplicate cameras, empty instructions.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from typing import Any
+
+from molmo_lerobot.benchmark.load import Benchmark, Problem
+from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.plugins import PluginError, Plugins, get_plugins
+
+
+def validate_benchmark(bench: Benchmark, plugins: Plugins | None = None) -> list[Problem]:
+    """All problems of all episodes of ``bench``, in episode order (empty when it can run)."""
+    plugins = plugins if plugins is not None else get_plugins()
+    problems: list[Problem] = []
+    for index, episode in enumerate(bench.episodes):
+        file = bench.origins[index].file if index < len(bench.origins) else str(bench.path)
+        problems.extend(validate_episode(episode, plugins, index=index, file=file))
+    return problems
+
+
+def validate_episode(episode: EpisodeSpec, plugins: Plugins, *, index: int | None = None, file: str = "<episode>") -> list[Problem]:
+    """Problems of one episode; ``index``/``file`` only label them."""
+    out: list[Problem] = []
+
+    def problem(field: str, message: str) -> None:
+        out.append(Problem(file, message, index, field))
+
+    _lookup(plugins, "task_type", episode.task_name, "task.task_type" if _by_type(episode) else "task.task_cls", problem)
+
+    robot = _lookup(plugins, "robot", episode.robot.robot_name, "robot.robot_name", problem, "robot")
+    sizes = getattr(robot, "move_groups", None)
+    if isinstance(sizes, Mapping):
+        for group, values in episode.robot.init_qpos.items():
+            field = f"robot.init_qpos.{group}"
+            if group not in sizes:
+                if values:  # MolmoSpaces writes empty lists for groups a robot lacks ("base": [])
+                    problem(field, f"robot {robot.name!r} has no move group {group!r} "
+                                   f"(move groups: {', '.join(sizes)})")
+            elif len(values) != sizes[group]:
+                problem(field, f"expected {sizes[group]} values, got {len(values)}")
+
+    _lookup(plugins, "scene_dataset", episode.scene_dataset, "scene_dataset", problem, "scene dataset")
+
+    if not episode.cameras:
+        problem("cameras", "no cameras (an episode needs at least one)")
+    seen: dict[str, int] = {}
+    for i, cam in enumerate(episode.cameras):
+        if cam.name in seen:
+            problem(f"cameras[{i}].name", f"duplicate camera name {cam.name!r} (also cameras[{seen[cam.name]}])")
+        seen.setdefault(cam.name, i)
+        if not 0 < cam.fov < 180:
+            problem(f"cameras[{i}].fov", f"field of view must be in (0, 180) degrees, got {cam.fov}")
+
+    if not episode.language.task_description.strip():
+        problem("language.task_description", "empty task description")
+    return out
+
+
+def _by_type(episode: EpisodeSpec) -> bool:
+    """Whether the registry key came from ``task_type`` (a class shared by several task types)."""
+    return episode.task_name != episode.task.task_cls
+
+
+def _lookup(plugins: Plugins, kind: str, name: str, field: str, problem: Any, what: str | None = None) -> Any:
+    """The ``kind`` plugin object called ``name``, or record why not as a problem on ``field``.
+
+    The message is the registry's first line ("unknown task 'x'; did you mean ...",
+    reworded as "no <what> plugin provides 'x'" when ``what`` is given), plus the error of
+    any broken plugin whose entry-point name matches ``name``.
+    """
+    try:
+        return getattr(plugins, kind)(name)
+    except PluginError as exc:
+        text = str(exc).splitlines()[0]
+        if what is not None:
+            text = re.sub(r"^unknown \w+ ", f"no {what} plugin provides ", text)
+        for rec in plugins.broken():
+            if rec.name in name or name in rec.name:
+                text += f"; plugin {rec.name!r} from {rec.distribution} failed to load: {rec.error}"
+        problem(field, text)
+        return None

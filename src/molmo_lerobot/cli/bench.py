@@ -1,0 +1,145 @@
+"""``molmo-bench``: check benchmark files and make new benchmarks.
+
+  molmo-bench validate PATH
+  molmo-bench generate --task pick --houses 10 --episodes-per-house 5 --seed 0 --name pick_v1 [--out DIR]
+
+``validate`` prints a summary (name, episodes, tasks, content hash) or every problem
+(file, episode index, field) and exits 1. ``generate`` writes a deterministic benchmark
+(``benchmark.json`` + ``benchmark_metadata.json``) and validates it; the output directory
+appears only once it is complete.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import sys
+import tempfile
+from collections import Counter
+from pathlib import Path
+
+from pydantic import ValidationError
+
+from molmo_lerobot.benchmark.load import Benchmark, BenchmarkError, Problem, load_benchmark, validation_messages
+from molmo_lerobot.benchmark.molmospaces import known_task_name
+from molmo_lerobot.benchmark.schema import NATIVE_TASK_CLS, EpisodeSpec
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="molmo-bench", description="Check and make benchmarks.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    val = sub.add_parser("validate", help="check a benchmark directory or JSON file")
+    val.add_argument("path", type=Path)
+    val.add_argument("--schema-only", action="store_true", help="skip the checks against installed plugins")
+    gen = sub.add_parser("generate", help="generate a benchmark deterministically")
+    gen.add_argument("--task", default="pick")
+    gen.add_argument("--houses", type=int, required=True, help="number of scenes (houses)")
+    gen.add_argument("--episodes-per-house", type=int, required=True)
+    gen.add_argument("--seed", type=int, default=0)
+    gen.add_argument("--name", required=True)
+    gen.add_argument("--out", type=Path, help="output directory (default: benchmarks/<name>)")
+    gen.add_argument("--force", action="store_true", help="replace an existing output directory")
+    args = parser.parse_args(argv)
+    if args.command == "validate":
+        return _validate(args.path, schema_only=args.schema_only)
+    return _generate(args)
+
+
+def _validate(path: Path, *, schema_only: bool) -> int:
+    try:
+        bench = load_benchmark(path)
+    except BenchmarkError as exc:
+        return _report(exc.problems)
+    if not schema_only:
+        from molmo_lerobot.benchmark.validate import validate_benchmark
+        from molmo_lerobot.plugins import get_plugins
+
+        plugins = get_plugins()
+        problems = validate_benchmark(bench, plugins)
+        if problems:
+            for rec in plugins.broken():
+                print(f"note: plugin {rec.name!r} from {rec.distribution} failed to load: {rec.error}", file=sys.stderr)
+            return _report(problems)
+    _print_summary(bench)
+    print("checked    " + ("schema only" if schema_only else "schema and installed plugins: ok"))
+    return 0
+
+
+def _report(problems: list[Problem]) -> int:
+    for p in problems:
+        print(p, file=sys.stderr)
+    n_eps = len({p.episode_index for p in problems if p.episode_index is not None})
+    tail = f" in {n_eps} episode{'s' * (n_eps != 1)}" if n_eps else ""
+    print(f"molmo-bench: {len(problems)} problem{'s' * (len(problems) != 1)}{tail}", file=sys.stderr)
+    return 1
+
+
+def _print_summary(bench: Benchmark) -> None:
+    houses = {ep.house_index for ep in bench.episodes}
+    robots = Counter(ep.robot.robot_name for ep in bench.episodes)
+    cams = Counter(cam.name for ep in bench.episodes for cam in ep.cameras)
+    print(f"benchmark  {bench.name}  ({bench.path})")
+    print(f"episodes   {len(bench.episodes)} over {len(houses)} houses")
+    tasks = Counter(_task_label(ep.task.task_cls, ep.task.task_type) for ep in bench.episodes)
+    print("tasks      " + ", ".join(f"{k} ({v})" for k, v in tasks.items()))
+    print("robots     " + ", ".join(f"{k} ({v})" for k, v in robots.items()))
+    print("cameras    " + ", ".join(f"{k} ({v})" for k, v in cams.items()))
+    print(f"sha256     {bench.sha256}")
+
+
+def _task_label(task_cls: str, task_type: str | None) -> str:
+    """A short task name for known classes (``pick``), else the class path."""
+    return NATIVE_TASK_CLS.get(task_cls) or known_task_name(task_cls, task_type) or task_cls
+
+
+def _generate(args: argparse.Namespace) -> int:
+    from molmo_lerobot.benchmark.generate import generate_benchmark, write_benchmark
+
+    if args.houses < 1 or args.episodes_per_house < 1:
+        print("molmo-bench: error: --houses and --episodes-per-house must be >= 1", file=sys.stderr)
+        return 2
+    out: Path = args.out or Path("benchmarks") / args.name
+    if out.exists() and not args.force:
+        print(f"molmo-bench: error: {out} exists (use --force to replace it)", file=sys.stderr)
+        return 2
+    try:
+        episodes, metadata = generate_benchmark(args.task, args.houses, args.episodes_per_house, args.seed, args.name)
+    except (ValueError, LookupError) as exc:
+        print(f"molmo-bench: error: {exc}", file=sys.stderr)
+        return 2
+    bad = []
+    for i, ep in enumerate(episodes):
+        try:
+            EpisodeSpec.model_validate(ep)
+        except ValidationError as exc:  # a generator bug, reported per field
+            bad.extend(Problem("<generated>", msg, i, loc) for loc, msg in validation_messages(exc))
+    if bad:
+        return _report(bad)
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    tmp.chmod(0o777 & ~umask)  # mkdtemp makes it private; the result is an ordinary directory
+    try:
+        write_benchmark(tmp, episodes, metadata)
+        bench = load_benchmark(tmp)
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(tmp, out)
+    except BenchmarkError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        return _report(exc.problems)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    bench.path = out
+    if bench.metadata is None or not bench.metadata.name:
+        bench.name = out.name
+    _print_summary(bench)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

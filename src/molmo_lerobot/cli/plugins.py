@@ -1,0 +1,63 @@
+"""``molmo-plugins``: list every plugin entry point and what became of it.
+
+Columns: name, kind(s), distribution, version, status (``ok`` or ``error: <reason>``).
+``--hooks`` adds, per plugin, the hooks it implements and the names it provides. Every
+provider hook is called first, so a plugin whose hook raises shows up as broken. A broken
+plugin is listed, never fatal: the command exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from molmo_lerobot.plugins import KIND_HOOKS, Plugins, PluginRecord
+
+_PROVIDER_KINDS = ("task", "robot", "camera", "scene", "policy")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="molmo-plugins", description="List installed molmo_lerobot plugins.")
+    parser.add_argument("--hooks", action="store_true", help="also list the hooks each plugin implements")
+    args = parser.parse_args(argv)
+    plugins = Plugins()
+    for kind in _PROVIDER_KINDS:  # run every provider hook, so failing hooks are recorded
+        plugins.names(kind)
+    plugins.config_dirs()
+    print(format_table(plugins.records))
+    if args.hooks:
+        for rec in plugins.records:
+            print(f"\n{rec.name} ({rec.value})")
+            hooks = implemented_hooks(plugins, rec)
+            print("  hooks:    " + (", ".join(hooks) or "-"))
+            print("  provides: " + (", ".join(rec.provides) or "-"))
+    broken = plugins.broken()
+    if broken:
+        print(f"\n{len(broken)} of {len(plugins.records)} plugins failed to load; "
+              "runs that do not need them are unaffected.", file=sys.stderr)
+    return 0
+
+
+def implemented_hooks(plugins: Plugins, rec: PluginRecord) -> list[str]:
+    if rec.module is None:
+        return []
+    return sorted(h.name for h in plugins.pm.get_hookcallers(rec.module) or [] if h.name in KIND_HOOKS)
+
+
+def format_table(records: list[PluginRecord]) -> str:
+    header = ("NAME", "KIND", "DISTRIBUTION", "VERSION", "STATUS")
+    rows = [
+        (r.name, ",".join(r.kinds) or "-", r.distribution, r.version, "ok" if r.status == "ok" else f"error: {r.error}")
+        for r in records
+    ]
+    if not rows:
+        return "no plugins installed (entry-point group molmo_lerobot is empty)"
+    widths = [max(len(row[i]) for row in [header, *rows]) for i in range(len(header) - 1)]
+    lines = []
+    for row in [header, *rows]:
+        lines.append("  ".join(cell.ljust(w) for cell, w in zip(row[:-1], widths)) + "  " + row[-1])
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

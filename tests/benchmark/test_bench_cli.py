@@ -1,0 +1,116 @@
+"""``molmo-bench validate`` / ``generate``: a summary, or every problem and exit 1, never a traceback."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import types
+
+import pytest
+
+from molmo_lerobot.cli.bench import main
+
+
+def test_validate_prints_a_summary(data, capsys):
+    assert main(["validate", "--schema-only", str(data / "pick_legacy")]) == 0
+    out = capsys.readouterr().out
+    assert "pick_legacy" in out and "4 over 2 houses" in out
+    assert "tasks      pick (4)" in out and "wrist_camera (4)" in out
+    from molmo_lerobot.benchmark.load import load_benchmark
+
+    assert f"sha256     {load_benchmark(data / 'pick_list').sha256}" in out
+
+
+def test_validate_reports_every_problem(tmp_path, data, capsys):
+    episodes = json.loads((data / "pick_list" / "benchmark.json").read_text())
+    episodes[1]["task"]["robot_base_pose"] = [0, 0, 0]
+    episodes[2]["robot"].pop("robot_name")
+    (tmp_path / "benchmark.json").write_text(json.dumps(episodes))
+    assert main(["validate", str(tmp_path)]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err[-3:] == [
+        f"{tmp_path / 'benchmark.json'}: episode 1: field task.robot_base_pose: expected 7 values, got 3",
+        f"{tmp_path / 'benchmark.json'}: episode 2: field robot.robot_name: missing",
+        "molmo-bench: 2 problems in 2 episodes",
+    ]
+
+
+def test_validate_subprocess_has_no_traceback(tmp_path):
+    (tmp_path / "benchmark.json").write_text('[{"house_index": 3, "task": {"task_cls": "x.y.Z",]')
+    res = subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.bench", "validate", str(tmp_path)],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 1, res.stderr
+    assert "invalid JSON at line 1, column 50" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_validate_unknown_task_with_installed_plugins(tmp_path, data, capsys):
+    episodes = json.loads((data / "pick_list" / "benchmark.json").read_text())
+    episodes[0]["task"]["task_cls"] = "x.y.Z"
+    (tmp_path / "benchmark.json").write_text(json.dumps(episodes))
+    assert main(["validate", str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    assert f"{tmp_path / 'benchmark.json'}: episode 0: field task.task_cls: unknown task 'x.y.Z'" in err
+
+
+@pytest.fixture
+def fake_generator(monkeypatch, data):
+    """A stand-in ``benchmark.generate`` module returning the fixture episodes (the real one is the sim's)."""
+    episodes = json.loads((data / "pick_list" / "benchmark.json").read_text())
+    calls = []
+
+    def generate_benchmark(task, n_houses, episodes_per_house, seed, name):
+        calls.append((task, n_houses, episodes_per_house, seed, name))
+        if task != "pick":
+            raise ValueError(f"unknown task {task!r} for the generator")
+        return episodes[: n_houses * episodes_per_house], {"name": name, "num_episodes": n_houses * episodes_per_house}
+
+    def write_benchmark(out_dir, eps, metadata):
+        (out_dir / "benchmark.json").write_text(json.dumps(eps))
+        (out_dir / "benchmark_metadata.json").write_text(json.dumps(metadata))
+
+    module = types.ModuleType("molmo_lerobot.benchmark.generate")
+    module.generate_benchmark, module.write_benchmark = generate_benchmark, write_benchmark
+    monkeypatch.setitem(sys.modules, "molmo_lerobot.benchmark.generate", module)
+    return types.SimpleNamespace(calls=calls, episodes=episodes)
+
+
+def test_generate_writes_and_summarizes(tmp_path, fake_generator, capsys):
+    out = tmp_path / "pick_small"
+    args = ["generate", "--task", "pick", "--houses", "2", "--episodes-per-house", "2", "--seed", "3",
+            "--name", "pick_small", "--out", str(out)]
+    assert main(args) == 0
+    assert fake_generator.calls == [("pick", 2, 2, 3, "pick_small")]
+    assert "benchmark  pick_small" in capsys.readouterr().out
+    assert json.loads((out / "benchmark.json").read_text()) == fake_generator.episodes[:4]
+    assert main(args) == 2 and "exists (use --force" in capsys.readouterr().err
+    assert main([*args, "--force"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pick_small"]  # no temporary directories left
+
+
+def test_generate_never_leaves_partial_output(tmp_path, fake_generator, capsys):
+    fake_generator.episodes[1]["task"]["robot_base_pose"] = [0.0]
+    out = tmp_path / "broken"
+    assert main(["generate", "--houses", "1", "--episodes-per-house", "2", "--name", "broken", "--out", str(out)]) == 1
+    assert "<generated>: episode 1: field task.robot_base_pose: expected 7 values, got 1" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+    assert main(["generate", "--task", "stack", "--houses", "1", "--episodes-per-house", "1", "--name", "x",
+                 "--out", str(out)]) == 2
+    assert "unknown task 'stack' for the generator" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_generate_with_the_real_generator_is_deterministic(tmp_path, capsys):
+    from molmo_lerobot.benchmark.load import load_benchmark
+    from molmo_lerobot.benchmark.validate import validate_benchmark
+
+    def run(name, seed):
+        args = ["generate", "--task", "pick", "--houses", "2", "--episodes-per-house", "2", "--seed", str(seed),
+                "--name", "tiny", "--out", str(tmp_path / name)]
+        assert main(args) == 0, capsys.readouterr().err
+        return load_benchmark(tmp_path / name)
+
+    a, b, c = run("a", 0), run("b", 0), run("c", 1)
+    assert a.sha256 == b.sha256 != c.sha256
+    assert a.name == "tiny" and len(a) == 4 and len({ep.house_index for ep in a.episodes}) == 2
+    assert validate_benchmark(a) == []
