@@ -103,7 +103,11 @@ def _make_executor(cfg: dict[str, Any]) -> Any:
     if ex["name"] == "ray":
         from molmo_lerobot.runner.ray_executor import RayExecutor
 
-        return RayExecutor(int(cfg["workers"]), address=ex.get("address"), **common)
+        options = {k: v for k, v in ex.items() if k != "name"}
+        try:
+            return RayExecutor(int(cfg["workers"]), **options, **common)
+        except TypeError as exc:
+            raise RunError(f"executor=ray: bad option ({exc}); see conf/executor/ray.yaml") from None
     raise RunError(f"unknown executor {ex['name']!r} (available: local, ray)")
 
 
@@ -117,7 +121,9 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     policy_name = str(cfg["policy"]["name"])
     plugins.policy(policy_name)  # unknown or broken policy plugin: fail before any work
     bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]))
-    problems = {p.episode_index: p for p in validate_benchmark(bench, plugins)}
+    problems: dict[int, list[str]] = {}
+    for p in validate_benchmark(bench, plugins):
+        problems.setdefault(p.episode_index, []).append(f"{p.field}: {p.message}" if p.field else p.message)
 
     started = datetime.now(UTC)
     out = Path(cfg.get("output_dir") or Path("runs") / f"{bench.name}-{policy_name}-{started:%Y%m%d-%H%M%S}")
@@ -134,9 +140,9 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         seed = episode_seed(cfg["seed"], raw)
         if i in problems:
             errors.append(EpisodeResult.failed(i, spec.house_index, spec.task.task_cls, seed,
-                                               f"invalid episode: {problems[i].message}"))
+                                               "invalid episode: " + "; ".join(problems[i])))
             continue
-        task_type = plugins.task_type(spec.task.task_cls)
+        task_type = plugins.task_type(spec.task_name)
         entry = thresholds.setdefault(task_type.name, {**task_type.thresholds(spec), "horizon_steps": []})
         horizon = resolve_horizon(cfg.get("horizon"), spec.task, task_type.default_horizon_sec,
                                   cfg["timing"]["policy_dt_ms"])

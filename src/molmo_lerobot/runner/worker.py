@@ -69,7 +69,7 @@ class EpisodeWorker:
         result: EpisodeResult
         try:
             spec = EpisodeSpec.model_validate(item.spec)
-            task_type = self.plugins.task_type(spec.task.task_cls)
+            task_type = self.plugins.task_type(spec.task_name)
             horizon = resolve_horizon(self.job.horizon, spec.task, task_type.default_horizon_sec,
                                       self.timing.policy_dt_ms)
             prompt = spec.language.task_description if spec.language else ""

@@ -1,0 +1,26 @@
+"""Entry point ``pi0`` in the ``molmo_lerobot`` group: the policy and its Hydra config."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from molmo_lerobot import hookimpl
+from molmo_lerobot.policies.base import Policy, PolicyType
+
+
+def make_pi0_policy(cfg: dict[str, Any]) -> Policy:
+    """Remote mode unless ``policy.path`` is set (then LeRobot's PI0 in this process)."""
+    from molmo_pi0.policy import Pi0InProcessPolicy, Pi0RemotePolicy
+
+    return Pi0InProcessPolicy(cfg) if cfg.get("path") else Pi0RemotePolicy(cfg)
+
+
+@hookimpl
+def molmo_policies() -> list[PolicyType]:
+    return [PolicyType("pi0", make_pi0_policy, "pi0 / pi0.5: openpi server (DROID keys) or LeRobot PI0 (policy.path)")]
+
+
+@hookimpl
+def molmo_config_dirs() -> list[str]:
+    return [str(Path(__file__).resolve().parent / "conf")]

@@ -1,0 +1,98 @@
+"""The pi0 policy in its two modes: remote (openpi protocol, DROID keys) and in process (LeRobot PI0)."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import ConfigDict, Field
+
+from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
+from molmo_lerobot.policies.lerobot_policy import parse_config
+from molmo_lerobot.protocol.client import PolicyClient
+from molmo_pi0.droid import ACTIONS, DroidConfig, droid_actions, droid_observation
+
+
+class Pi0Config(DroidConfig):
+    """The ``policy`` group for ``policy=pi0`` (see conf/policy/pi0.yaml)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = "pi0"
+    host: str = "127.0.0.1"
+    port: int | None = Field(default=8000, ge=0, le=65535)
+    api_key: str | None = None
+    path: str | None = None
+    device: str = "auto"
+    timeout_s: float = Field(default=120.0, gt=0)
+    connect_timeout_s: float = Field(default=60.0, ge=0)
+    max_message_bytes: int = Field(default=64 * 2**20, ge=1024)
+    reset: Literal["none", "message", "reconnect"] = "none"
+    inprocess_cameras: dict[str, str] = Field(default_factory=dict)
+    inprocess_state: list[str] = Field(default_factory=lambda: ["arm", "gripper"])
+
+
+class Pi0RemotePolicy(Policy):
+    """One websocket connection per policy instance (= per worker); chunk length from the response."""
+
+    def __init__(self, cfg: dict[str, Any]) -> None:
+        self.cfg: Pi0Config = parse_config(cfg, Pi0Config)
+        self.client = PolicyClient(
+            self.cfg.host,
+            self.cfg.port,
+            timeout_s=self.cfg.timeout_s,
+            connect_timeout_s=self.cfg.connect_timeout_s,
+            max_message_bytes=self.cfg.max_message_bytes,
+            api_key=self.cfg.api_key,
+        )
+        self._ctx: EpisodeContext | None = None
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        self._ctx = ctx
+        if self.cfg.reset == "reconnect" or not self.client.connected:
+            self.client.connect()
+        if self.cfg.reset == "message":
+            self.client.reset(prompt=ctx.prompt, episode_index=ctx.episode_index, seed=ctx.seed)
+
+    def act(self, obs: Observation) -> Action:
+        assert self._ctx is not None, "reset() must be called before act()"
+        request = droid_observation(obs, self.cfg, self._ctx.prompt)
+        response = self.client.infer(request)
+        if ACTIONS not in response:
+            raise ValueError(f"policy server {self.client.uri} answered without 'actions' (keys: {sorted(response)})")
+        return droid_actions(response[ACTIONS], request["observation/joint_position"], self.cfg,
+                             self._ctx.policy_dt_s, f"policy server {self.client.uri}")
+
+    def close(self) -> None:
+        self.client.close()
+
+
+class Pi0InProcessPolicy(Policy):
+    """LeRobot's PI0 (or any LeRobot checkpoint emitting DROID-style actions) in this process."""
+
+    def __init__(self, cfg: dict[str, Any]) -> None:
+        self.cfg: Pi0Config = parse_config(cfg, Pi0Config)
+        from molmo_lerobot.policies.lerobot_policy import LeRobotPolicy
+
+        try:
+            self.inner = LeRobotPolicy({
+                "name": "pi0", "path": self.cfg.path, "device": self.cfg.device, "mode": "chunk",
+                "cameras": self.cfg.inprocess_cameras, "state": self.cfg.inprocess_state, "verify_weights": True,
+            })
+        except ImportError as exc:
+            raise ImportError(f"policy=pi0 policy.path=… needs `pip install molmo-pi0[inprocess]` ({exc})") from exc
+        self.needs_images = self.inner.needs_images
+        self._ctx: EpisodeContext | None = None
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        self._ctx = ctx
+        self.inner.reset(ctx)
+
+    def act(self, obs: Observation) -> Action:
+        assert self._ctx is not None, "reset() must be called before act()"
+        raw = self.inner.predict(obs)
+        arm = np.asarray(obs["qpos"]["arm"], dtype=np.float64)
+        return droid_actions(raw, arm, self.cfg, self._ctx.policy_dt_s, f"pi0 checkpoint {self.cfg.path!r}")
+
+    def close(self) -> None:
+        self.inner.close()

@@ -1,0 +1,279 @@
+"""``policy=lerobot policy.path=…``: any LeRobot pretrained policy with its pre/post processors.
+
+Our observation (images by camera name, ``qpos`` by move group, prompt) is mapped to the
+policy's feature keys: each image feature ``observation.images.<key>`` takes the camera named
+in ``cameras`` (default: the camera with the same name), ``observation.state`` is the
+concatenation of the ``state`` move groups, and the prompt goes under ``task``. The action
+vector is split into move groups in ``action_groups`` order (default: the episode's).
+
+``mode: step`` calls ``select_action`` every step (LeRobot's own action queue and temporal
+ensembling); ``mode: chunk`` returns the whole predicted chunk, which our rollout runs open
+loop (renders only at chunk ends). Loading refuses a checkpoint whose weights did not
+actually end up in the model (some LeRobot policies silently keep random weights).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from molmo_lerobot.hookspecs import hookimpl
+from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
+from molmo_lerobot.policies.image_ops import resize_with_pad
+
+
+class WeightsNotLoadedError(RuntimeError):
+    """A checkpoint's weights are not the ones in the model (missing, renamed or random)."""
+
+
+class LeRobotPolicyConfig(BaseModel):
+    """The ``policy`` config group for ``policy=lerobot`` (see conf/policy/lerobot.yaml)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = "lerobot"
+    path: str
+    device: str = "auto"
+    mode: Literal["step", "chunk"] = "step"
+    n_action_steps: int | None = Field(default=None, ge=1)
+    cameras: dict[str, str] = Field(default_factory=dict)
+    state: list[str] = Field(default_factory=lambda: ["arm", "gripper"])
+    state_key: str = "observation.state"
+    action_groups: list[str] | None = None
+    task_key: str = "task"
+    resize: Literal["pad", "stretch", "none"] = "pad"
+    verify_weights: bool = True
+    max_unmatched_fraction: float = Field(default=0.01, ge=0.0, le=1.0)
+
+
+def parse_config(cfg: dict[str, Any], model: type[BaseModel] = LeRobotPolicyConfig) -> Any:
+    """Validate a policy config dict; errors become one line naming the field."""
+    try:
+        return model.model_validate(cfg)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        where = ".".join(str(p) for p in err["loc"]) or "policy"
+        raise ValueError(f"policy config {cfg.get('name', '?')!r}: policy.{where}: {err['msg']}") from None
+
+
+def pick_device(requested: str) -> str:
+    import torch
+
+    if requested != "auto":
+        if requested.startswith("cuda") and not torch.cuda.is_available():
+            raise ValueError(f"policy.device={requested!r} but CUDA is not available on this machine")
+        return requested
+    if torch.cuda.is_available():
+        return "cuda"
+    if getattr(torch.backends, "mps", None) is not None and torch.backends.mps.is_available():
+        return "mps"
+    return "cpu"
+
+
+def _model_file(path: str) -> str:
+    if os.path.isdir(path):
+        return str(Path(path) / "model.safetensors")
+    from huggingface_hub import hf_hub_download
+
+    return hf_hub_download(repo_id=path, filename="model.safetensors", local_files_only=True)
+
+
+def verify_weights_loaded(model: Any, model_file: str, max_unmatched_fraction: float = 0.01) -> dict[str, int]:
+    """Check that the model's tensors are the checkpoint's.
+
+    Tensors are matched by name (allowing added/removed leading prefixes such as ``model.``).
+    Any matched tensor whose value differs means the load failed; more than
+    ``max_unmatched_fraction`` of the elements without a counterpart in the file means the
+    checkpoint does not belong to this model. Raises :class:`WeightsNotLoadedError`.
+    """
+    import torch
+    from safetensors import safe_open
+
+    if not os.path.isfile(model_file):
+        raise WeightsNotLoadedError(f"{model_file}: no such weights file")
+    with safe_open(model_file, framework="pt", device="cpu") as f:
+        by_suffix: dict[str, str | None] = {}
+        for key in f.keys():
+            for suffix in _suffixes(key):
+                by_suffix[suffix] = None if suffix in by_suffix and by_suffix[suffix] != key else key
+        state = model.state_dict()
+        seen_storage: dict[int, bool] = {}
+        total = unmatched = 0
+        unmatched_names: list[str] = []
+        differing: list[str] = []
+        for name, tensor in state.items():
+            total += tensor.numel()
+            key = next((by_suffix[s] for s in _suffixes(name) if by_suffix.get(s)), None)
+            ptr = tensor.data_ptr() if tensor.numel() else -1
+            if key is None:
+                if not seen_storage.get(ptr):  # tied weights are saved once, under one name
+                    unmatched += tensor.numel()
+                    unmatched_names.append(name)
+                continue
+            stored = f.get_tensor(key)
+            if stored.shape != tensor.shape or not torch.equal(stored.to(tensor.dtype), tensor.detach().cpu()):
+                differing.append(name)
+            else:
+                seen_storage[ptr] = True
+    if differing:
+        raise WeightsNotLoadedError(
+            f"{model_file}: {len(differing)} of {len(state)} tensors differ from the checkpoint "
+            f"(e.g. {', '.join(differing[:3])}); the weights did not load"
+        )
+    if total and unmatched / total > max_unmatched_fraction:
+        raise WeightsNotLoadedError(
+            f"{model_file}: {unmatched / total:.1%} of the model's parameters have no counterpart in the "
+            f"checkpoint (e.g. {', '.join(unmatched_names[:3])}); the weights did not load"
+        )
+    return {"tensors": len(state), "unmatched_tensors": len(unmatched_names)}
+
+
+def _suffixes(name: str) -> list[str]:
+    parts = name.split(".")
+    return [".".join(parts[i:]) for i in range(min(3, len(parts) - 1) + 1)]
+
+
+class LeRobotPolicy(Policy):
+    """A LeRobot ``PreTrainedPolicy`` with its processors, behind our Policy interface."""
+
+    def __init__(self, cfg: dict[str, Any]) -> None:
+        self.cfg: LeRobotPolicyConfig = parse_config(cfg)
+        self.device = pick_device(self.cfg.device)
+        self.policy, self.preprocessor, self.postprocessor = self._load()
+        features = self.policy.config.input_features
+        from lerobot.configs.types import FeatureType
+
+        self.image_features = {k: tuple(f.shape) for k, f in features.items() if f.type is FeatureType.VISUAL}
+        self.state_dim = features[self.cfg.state_key].shape[0] if self.cfg.state_key in features else None
+        self.needs_images = bool(self.image_features)
+        self._groups: dict[str, int] = {}
+        self._prompt = ""
+
+    def _load(self) -> tuple[Any, Any, Any]:
+        from lerobot.configs.policies import PreTrainedConfig
+        from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+
+        path = self.cfg.path
+        if not os.path.isdir(path) and (path.startswith((".", "/", "~")) or path.count("/") != 1):
+            raise FileNotFoundError(f"policy.path={path!r}: no such directory")
+        try:
+            config = PreTrainedConfig.from_pretrained(path)
+        except Exception as exc:
+            raise ValueError(f"policy.path={path!r}: not a LeRobot pretrained policy ({type(exc).__name__}: {exc})") from None
+        config.device = self.device
+        if self.cfg.n_action_steps is not None and hasattr(config, "n_action_steps"):
+            config.n_action_steps = self.cfg.n_action_steps
+        policy = get_policy_class(config.type).from_pretrained(path, config=config)
+        policy.to(self.device)
+        policy.eval()
+        if self.cfg.verify_weights:
+            verify_weights_loaded(policy, _model_file(path), self.cfg.max_unmatched_fraction)
+        pre, post = make_pre_post_processors(
+            config,
+            pretrained_path=path,
+            preprocessor_overrides={"device_processor": {"device": self.device}},
+        )
+        return policy, pre, post
+
+    # Policy interface ------------------------------------------------------------------
+    def reset(self, ctx: EpisodeContext) -> None:
+        self.policy.reset()
+        for pipeline in (self.preprocessor, self.postprocessor):
+            pipeline.reset()
+        self._groups = dict(ctx.move_groups)
+        self._prompt = ctx.prompt
+
+    def act(self, obs: Observation) -> Action:
+        actions = self.predict(obs)
+        groups = self.cfg.action_groups or list(self._groups)
+        dims = [self._groups.get(g, 0) for g in groups]
+        if sum(dims) != actions.shape[-1]:
+            raise ValueError(
+                f"policy {self.cfg.path!r} outputs {actions.shape[-1]} action values but move groups "
+                f"{dict(zip(groups, dims))} need {sum(dims)} (set policy.action_groups)"
+            )
+        out, start = {}, 0
+        for group, dim in zip(groups, dims):
+            out[group] = actions[:, start : start + dim]
+            start += dim
+        return {g: a[0] for g, a in out.items()} if self.cfg.mode == "step" else out
+
+    def predict(self, obs: Observation) -> np.ndarray:
+        """Unnormalized actions (H, A): H = 1 in step mode, the executed chunk in chunk mode."""
+        import torch
+
+        batch = self._batch(obs)
+        with torch.inference_mode():
+            batch = self.preprocessor(batch)
+            if self.cfg.mode == "step":
+                action = self.policy.select_action(batch)
+            else:
+                action = self.policy.predict_action_chunk(batch)
+                n = getattr(self.policy.config, "n_action_steps", None)
+                action = action[:, :n] if n else action
+            action = self.postprocessor(action)
+        arr = action.detach().to("cpu", torch.float32).numpy()
+        return arr.reshape(-1, arr.shape[-1])
+
+    def _batch(self, obs: Observation) -> dict[str, Any]:
+        import torch
+
+        images = obs.get("images") or {}
+        batch: dict[str, Any] = {}
+        for key, (c, h, w) in self.image_features.items():
+            short = key.removeprefix("observation.images.")
+            camera = next((cam for cam, k in self.cfg.cameras.items() if k in (key, short)), short)
+            if camera not in images:
+                raise KeyError(
+                    f"policy feature {key!r} wants camera {camera!r}, observation has {sorted(images)} "
+                    f"(map it with policy.cameras.<camera>={key})"
+                )
+            img = np.asarray(images[camera])
+            if img.shape[:2] != (h, w):
+                if self.cfg.resize == "none":
+                    raise ValueError(f"camera {camera!r} gives {img.shape[:2]}, policy feature {key!r} wants {(h, w)}")
+                img = resize_with_pad(img, h, w) if self.cfg.resize == "pad" else _stretch(img, h, w)
+            img = img if img.flags.writeable and img.flags.c_contiguous else np.array(img, order="C")
+            batch[key] = torch.from_numpy(img).permute(2, 0, 1).float().div_(255.0)
+        if self.state_dim is not None:
+            qpos = obs.get("qpos") or {}
+            missing = [g for g in self.cfg.state if g not in qpos]
+            if missing:
+                raise KeyError(f"policy.state names move groups {missing} absent from the observation ({sorted(qpos)})")
+            state = np.concatenate([np.asarray(qpos[g], np.float32).reshape(-1) for g in self.cfg.state])
+            if state.shape[0] != self.state_dim:
+                raise ValueError(
+                    f"{self.cfg.state_key} needs {self.state_dim} values, move groups {self.cfg.state} give {state.shape[0]}"
+                )
+            batch[self.cfg.state_key] = torch.from_numpy(state)
+        batch[self.cfg.task_key] = obs.get("prompt", self._prompt) or self._prompt
+        return batch
+
+    def close(self) -> None:
+        self.policy = self.preprocessor = self.postprocessor = None
+        try:
+            import torch
+
+            if torch.cuda.is_available():
+                torch.cuda.empty_cache()
+        except ImportError:
+            pass
+
+
+def _stretch(img: np.ndarray, h: int, w: int) -> np.ndarray:
+    import cv2
+
+    return cv2.resize(np.ascontiguousarray(img, dtype=np.uint8), (w, h), interpolation=cv2.INTER_AREA)
+
+
+def make_lerobot_policy(cfg: dict[str, Any]) -> Policy:
+    return LeRobotPolicy(cfg)
+
+
+@hookimpl
+def molmo_policies() -> list[PolicyType]:
+    return [PolicyType("lerobot", make_lerobot_policy, "any LeRobot pretrained policy (policy.path=…)")]

@@ -1,0 +1,121 @@
+"""policy=lerobot with a tiny ACT saved by save_pretrained and loaded by path (CPU, offline)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from lerobot.configs.types import FeatureType, PolicyFeature  # noqa: E402
+from lerobot.policies.act.configuration_act import ACTConfig  # noqa: E402
+from lerobot.policies.act.modeling_act import ACTPolicy  # noqa: E402
+from lerobot.policies.factory import make_pre_post_processors  # noqa: E402
+
+from molmo_lerobot.policies.base import EpisodeContext  # noqa: E402
+from molmo_lerobot.policies.lerobot_policy import (  # noqa: E402
+    LeRobotPolicy,
+    WeightsNotLoadedError,
+    verify_weights_loaded,
+)
+
+CHUNK = 4
+
+
+def save_tiny_act(root, image_hw=(24, 32)) -> str:
+    torch.manual_seed(0)
+    cfg = ACTConfig(
+        input_features={
+            "observation.images.front": PolicyFeature(FeatureType.VISUAL, (3, *image_hw)),
+            "observation.state": PolicyFeature(FeatureType.STATE, (8,)),
+        },
+        output_features={"action": PolicyFeature(FeatureType.ACTION, (8,))},
+        pretrained_backbone_weights=None,
+        dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, n_decoder_layers=1,
+        chunk_size=CHUNK, n_action_steps=CHUNK, use_vae=False, device="cpu",
+    )
+    policy = ACTPolicy(cfg)
+    pre, post = make_pre_post_processors(cfg, dataset_stats=None)
+    for obj in (policy, pre, post):
+        obj.save_pretrained(root)
+    return str(root)
+
+
+@pytest.fixture(scope="module")
+def act_dir(tmp_path_factory):
+    return save_tiny_act(tmp_path_factory.mktemp("act"))
+
+
+def ctx() -> EpisodeContext:
+    return EpisodeContext(spec=None, episode_index=0, seed=0, prompt="pick the cube",
+                          move_groups={"arm": 7, "gripper": 1}, policy_dt_s=0.066)
+
+
+def obs(camera="front", hw=(48, 64)) -> dict:
+    rng = np.random.default_rng(0)
+    return {
+        "images": {camera: rng.integers(0, 255, (*hw, 3), dtype=np.uint8)},
+        "qpos": {"arm": np.linspace(-1, 1, 7), "gripper": np.array([0.5])},
+        "prompt": "pick the cube",
+    }
+
+
+def test_step_mode_uses_action_queue(act_dir):
+    policy = LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu"})
+    policy.reset(ctx())
+    calls = []
+    inner = policy.policy.predict_action_chunk
+    policy.policy.predict_action_chunk = lambda b, **kw: calls.append(1) or inner(b, **kw)
+    actions = [policy.act(obs()) for _ in range(CHUNK + 1)]
+    assert all(a["arm"].shape == (7,) and a["gripper"].shape == (1,) for a in actions)
+    assert len(calls) == 2  # one model call per chunk of CHUNK steps
+    assert all(np.isfinite(a["arm"]).all() for a in actions)
+
+
+def test_chunk_mode_returns_whole_chunk(act_dir):
+    policy = LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu", "mode": "chunk",
+                            "cameras": {"wrist": "observation.images.front"}})
+    policy.reset(ctx())
+    out = policy.act(obs(camera="wrist"))
+    assert out["arm"].shape == (CHUNK, 7) and out["gripper"].shape == (CHUNK, 1)
+    step = LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu"})
+    step.reset(ctx())
+    np.testing.assert_allclose(step.act(obs())["arm"], out["arm"][0], rtol=1e-5, atol=1e-6)
+
+
+def test_missing_camera_and_bad_state_are_clear(act_dir):
+    policy = LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu"})
+    policy.reset(ctx())
+    with pytest.raises(KeyError, match="wants camera 'front'.*policy.cameras"):
+        policy.act(obs(camera="exo"))
+    bad = LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu", "state": ["arm"]})
+    bad.reset(ctx())
+    with pytest.raises(ValueError, match="needs 8 values"):
+        bad.act(obs())
+
+
+def test_bad_config_names_field(act_dir):
+    with pytest.raises(ValueError, match="policy.mode"):
+        LeRobotPolicy({"name": "lerobot", "path": act_dir, "mode": "sometimes"})
+    with pytest.raises(FileNotFoundError, match="no such directory"):
+        LeRobotPolicy({"name": "lerobot", "path": "/nonexistent/ckpt"})
+
+
+def test_refuses_checkpoint_whose_weights_did_not_load(act_dir, tmp_path):
+    from safetensors.torch import load_file, save_file
+
+    loaded = LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu"})
+    assert verify_weights_loaded(loaded.policy, f"{act_dir}/model.safetensors")["tensors"] > 10
+    # Same checkpoint with every tensor renamed: from_pretrained (strict=False) silently keeps random weights.
+    import shutil
+
+    broken = tmp_path / "broken"
+    shutil.copytree(act_dir, broken)
+    tensors = load_file(broken / "model.safetensors")
+    save_file({f"renamed_{k.replace('.', '_')}": v for k, v in tensors.items()}, broken / "model.safetensors")
+    with pytest.raises(WeightsNotLoadedError, match="no counterpart"):
+        LeRobotPolicy({"name": "lerobot", "path": str(broken), "device": "cpu"})
+    # Weights present under the right names but not what the model holds.
+    other = ACTPolicy(loaded.policy.config)
+    with pytest.raises(WeightsNotLoadedError, match="differ from the checkpoint"):
+        verify_weights_loaded(other, f"{act_dir}/model.safetensors")
