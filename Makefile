@@ -7,7 +7,8 @@ export MUJOCO_GL ?= egl
 # Python 3.12: on PATH, else through pyenv (see scripts/find-python312.sh).
 PYTHON312 ?= $(shell scripts/find-python312.sh)
 
-PLUGINS := $(wildcard plugins/*/pyproject.toml)
+# Plugin distributions to install; the example plugin is installed by its own test instead.
+PLUGINS := $(filter-out plugins/molmo-example-%,$(wildcard plugins/*/pyproject.toml))
 
 .PHONY: eval test test-all perf clean
 

@@ -1,0 +1,47 @@
+"""molmo-eval fails fast with one clear line (and no traceback) on bad configuration."""
+
+import json
+
+import pytest
+
+from molmo_lerobot.cli.eval import main
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["policy=scriptd"], "unknown policy 'scriptd'; did you mean 'scripted'?"),
+        (["benchmark=nope"], "unknown benchmark 'nope'"),
+        (["wokers=3"], "Could not override 'wokers'"),
+        (["executor=slurm"], "unknown executor 'slurm'"),
+    ],
+)
+def test_bad_config_is_one_clear_line(args, needle, capsys, tmp_path):
+    assert main([*args, f"output_dir={tmp_path / 'out'}"]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and "Traceback" not in err
+    assert not (tmp_path / "out" / "results.json").exists()
+
+
+def test_malformed_benchmark_names_the_file(tmp_path, capsys):
+    bench = tmp_path / "bad"
+    bench.mkdir()
+    (bench / "benchmark.json").write_text('[{"house_index": 1,}]')
+    assert main([f"benchmark.path={bench}", f"output_dir={tmp_path / 'out'}"]) == 2
+    err = capsys.readouterr().err
+    assert str(bench / "benchmark.json") in err and "line 1" in err and "Traceback" not in err
+
+
+def test_existing_output_dir_is_not_overwritten(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "results.json").write_text(json.dumps({"success_rate": 1.0}))
+    assert main(["limit=1", f"output_dir={out}"]) == 2
+    assert "already holds a run" in capsys.readouterr().err
+    assert json.loads((out / "results.json").read_text()) == {"success_rate": 1.0}
+
+
+def test_print_config(capsys):
+    assert main(["--cfg", "policy=random", "workers=3"]) == 0
+    out = capsys.readouterr().out
+    assert "name: random" in out and "workers: 3" in out

@@ -1,0 +1,90 @@
+"""End to end through ``molmo-eval``: outputs match the contract, outcomes do not depend on workers."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from molmo_lerobot.config import compose
+from molmo_lerobot.runner.evaluate import run_evaluation
+
+EPISODE_KEYS = {"episode_index", "house_index", "task_cls", "success", "success_once", "steps", "seed", "error"}
+RESULT_KEYS = {"success_rate", "success_once_rate", "n_episodes", "n_success", "n_errors", "ci95", "per_task",
+               "benchmark", "policy", "thresholds", "versions", "seed"}
+
+
+def _episodes(path):
+    return [json.loads(line) for line in (path / "episodes.jsonl").read_text().splitlines()]
+
+
+def _outcomes(rows):
+    return [(r["episode_index"], r["success"], r["success_once"], r["steps"], r["seed"], r["error"]) for r in rows]
+
+
+@pytest.fixture(scope="module")
+def two_worker_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("w2") / "run"
+    env = {**os.environ, "MUJOCO_GL": "egl"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "molmo_lerobot.cli.eval", "policy=scripted", "benchmark=pick_v1", "workers=2",
+         "limit=4", f"output_dir={out}", "progress=false"],
+        capture_output=True, text=True, env=env, timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return out, proc.stdout
+
+
+def test_contract_outputs(two_worker_run):
+    out, stdout = two_worker_run
+    results = json.loads((out / "results.json").read_text())
+    assert RESULT_KEYS <= set(results)
+    assert results["n_episodes"] == 4 and results["n_errors"] == 0
+    assert results["benchmark"]["name"] == "pick_v1" and len(results["benchmark"]["sha256"]) == 64
+    assert results["benchmark"]["n_episodes"] >= 50
+    assert results["policy"]["name"] == "scripted"
+    lo, hi = results["ci95"]
+    assert 0.0 <= lo <= results["success_rate"] <= hi <= 1.0
+    assert results["thresholds"]["pick"]["succ_pos_threshold"] == pytest.approx(0.01)
+    assert results["thresholds"]["pick"]["horizon_steps"] == [303]
+    assert {"mujoco", "lerobot", "python"} <= set(results["versions"])
+    rows = _episodes(out)
+    assert [r["episode_index"] for r in rows] == [0, 1, 2, 3]
+    assert all(EPISODE_KEYS <= set(r) for r in rows)
+    assert all(r["steps"] == 303 for r in rows)
+    assert "pick_v1 · scripted: success" in stdout
+
+
+def test_workers_do_not_change_outcomes(two_worker_run, tmp_path):
+    out2, _ = two_worker_run
+    res1 = run_evaluation(compose(["policy=scripted", "workers=1", "limit=4", f"output_dir={tmp_path / 'w1'}",
+                                   "progress=false"]))
+    assert _outcomes(_episodes(tmp_path / "w1")) == _outcomes(_episodes(out2))
+    assert [r.success for r in res1.episodes] == [r["success"] for r in _episodes(out2)]
+
+
+def test_seed_changes_episode_seeds_only_where_asked(two_worker_run, tmp_path):
+    out2, _ = two_worker_run
+    res = run_evaluation(compose(["policy=random", "workers=1", "limit=2", "seed=1", "horizon=5",
+                                  f"output_dir={tmp_path / 's1'}", "progress=false"]))
+    seeds0 = [r["seed"] for r in _episodes(out2)[:2]]
+    assert [r.seed for r in res.episodes] != seeds0
+    assert res.summary["seed"] == 1
+
+
+@pytest.mark.slow
+def test_scripted_full_pick_v1(tmp_path):
+    res = run_evaluation(compose(["policy=scripted", "workers=2", f"output_dir={tmp_path}", "progress=false"]))
+    assert res.summary["n_episodes"] >= 50 and res.summary["n_errors"] == 0
+    assert res.summary["success_rate"] >= 0.80
+
+
+@pytest.mark.slow
+def test_random_floor(tmp_path):
+    res = run_evaluation(compose(["policy=random", "workers=2", "limit=20", f"output_dir={tmp_path}",
+                                  "progress=false"]))
+    assert res.summary["n_episodes"] == 20 and res.summary["n_errors"] == 0
+    assert res.summary["success_rate"] <= 0.10
