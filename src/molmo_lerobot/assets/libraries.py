@@ -1,0 +1,337 @@
+"""Asset libraries: UID → MJCF + metadata document (MolmoSpaces' fields).
+
+Three kinds share one interface:
+
+- :class:`BuiltinAssetLibrary` — the primitive objects of the procedural scenes;
+- :class:`DirectoryAssetLibrary` — a user library registered at runtime from a directory::
+
+      <dir>/library.json            {"name": "...", "objects": {"<uid>": "objects/<uid>.json", ...}}
+      <dir>/objects/<uid>.json      the metadata document + "mjcf": "<relative path>"
+                                    [+ "arrays": "<relative .npz>" whose arrays join the annotation]
+      <dir>/grasps/<robot>/<uid>.npz  (optional grasp library, see :mod:`.grasps`)
+
+- :class:`ResourceAssetLibrary` — a big library installed through the resource manager
+  (``objects/<source>@<version>``: ``<uid>/<uid>.xml`` per object and one ``metadata.jsonl``),
+  whose metadata is kept in LMDB; ``install`` fetches the object's archive and its grasps.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import uuid
+from abc import ABC, abstractmethod
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import lmdb
+import numpy as np
+import zstandard
+
+from molmo_lerobot.assets.grasps import BuiltinGraspLibrary, GraspLibrary
+
+METADATA_FIELDS = ("assetId", "category", "description", "description_long", "description_short", "synset",
+                   "mass", "boundingBox")
+
+
+class AssetError(LookupError):
+    """An unknown UID or a malformed library; the message names the file, UID and field."""
+
+
+@dataclass(frozen=True)
+class UidLocation:
+    """Where a UID lives: its library, the archive holding it (if packed) and its MJCF file.
+
+    ``mjcf_path`` is ``None`` for generated MJCF (built-in objects): use ``library.mjcf(uid)``.
+    """
+
+    library: str
+    archive: str | None
+    mjcf_path: Path | None
+
+
+class AssetLibrary(ABC):
+    """A named collection of objects keyed by globally unique UIDs."""
+
+    name: str
+
+    @abstractmethod
+    def uids(self) -> Iterator[str]: ...
+
+    @abstractmethod
+    def __contains__(self, uid: object) -> bool: ...
+
+    @abstractmethod
+    def metadata(self, uid: str) -> dict:
+        """The metadata document of ``uid`` (raises :class:`AssetError` if unknown)."""
+
+    @abstractmethod
+    def locate(self, uid: str) -> UidLocation: ...
+
+    def mjcf(self, uid: str) -> str:
+        """The MJCF text of ``uid``."""
+        path = self.install(uid).mjcf_path
+        if path is None:
+            raise AssetError(f"library {self.name!r}: UID {uid!r} has no MJCF")
+        return Path(path).read_text()
+
+    def install(self, uid: str) -> UidLocation:
+        """Make ``uid``'s files (and grasps) available locally; returns its location."""
+        return self.locate(uid)
+
+    def grasp_library(self) -> GraspLibrary | None:
+        """The grasp library that ships with this asset library, if any."""
+        return None
+
+    def _unknown(self, uid: str) -> AssetError:
+        return AssetError(f"library {self.name!r} has no UID {uid!r}")
+
+
+class BuiltinAssetLibrary(AssetLibrary):
+    """The built-in primitive objects (``molmo_lerobot.assets.builtin``) as an asset library."""
+
+    name = "builtin"
+
+    def __init__(self) -> None:
+        from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
+
+        self.objects = BUILTIN_OBJECTS
+        self._grasps = BuiltinGraspLibrary()
+
+    def uids(self) -> Iterator[str]:
+        return iter(sorted(self.objects))
+
+    def __contains__(self, uid: object) -> bool:
+        return uid in self.objects
+
+    def metadata(self, uid: str) -> dict:
+        if uid not in self.objects:
+            raise self._unknown(uid)
+        return self.objects[uid].metadata()
+
+    def locate(self, uid: str) -> UidLocation:
+        if uid not in self.objects:
+            raise self._unknown(uid)
+        return UidLocation(self.name, None, None)
+
+    def mjcf(self, uid: str) -> str:
+        if uid not in self.objects:
+            raise self._unknown(uid)
+        return self.objects[uid].mjcf()
+
+    def grasp_library(self) -> GraspLibrary:
+        return self._grasps
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise AssetError(f"{path}: file not found") from None
+    except ValueError as exc:
+        raise AssetError(f"{path}: invalid JSON ({exc})") from None
+    if not isinstance(data, dict):
+        raise AssetError(f"{path}: expected a JSON object")
+    return data
+
+
+class DirectoryAssetLibrary(AssetLibrary):
+    """A user library: ``library.json`` index, one JSON per object, optional NPZ arrays and grasps."""
+
+    INDEX = "library.json"
+
+    def __init__(self, root: str | os.PathLike, name: str | None = None) -> None:
+        self.root = Path(root).expanduser().resolve()
+        index_path = self.root / self.INDEX
+        index = _read_json(index_path)
+        objects = index.get("objects")
+        if not isinstance(objects, dict) or not all(isinstance(v, str) for v in objects.values()):
+            raise AssetError(f"{index_path}: field 'objects' must map UID → relative JSON path")
+        self.name = name or index.get("name") or self.root.name
+        self._objects: dict[str, Path] = {uid: self.root / rel for uid, rel in objects.items()}
+        for uid, path in self._objects.items():
+            if not path.resolve().is_relative_to(self.root):
+                raise AssetError(f"{index_path}: object {uid!r} points outside the library ({path})")
+            if not path.is_file():
+                raise AssetError(f"{index_path}: object {uid!r}: {path} not found")
+        self._docs: dict[str, dict] = {}
+        grasp_root = self.root / "grasps"
+        self._grasps = GraspLibrary(grasp_root, name=f"{self.name}-grasps") if grasp_root.is_dir() else None
+
+    def uids(self) -> Iterator[str]:
+        return iter(sorted(self._objects))
+
+    def __contains__(self, uid: object) -> bool:
+        return uid in self._objects
+
+    def _doc(self, uid: str) -> dict:
+        if uid not in self._objects:
+            raise self._unknown(uid)
+        if uid not in self._docs:
+            path = self._objects[uid]
+            doc = _read_json(path)
+            if doc.get("assetId", uid) != uid:
+                raise AssetError(f"{path}: field 'assetId' is {doc['assetId']!r}, the index says {uid!r}")
+            if not isinstance(doc.get("mjcf"), str):
+                raise AssetError(f"{path}: field 'mjcf' (relative path of the MJCF file) is missing")
+            self._docs[uid] = doc
+        return self._docs[uid]
+
+    def metadata(self, uid: str) -> dict:
+        doc = dict(self._doc(uid))
+        doc.setdefault("assetId", uid)
+        doc.pop("mjcf")
+        arrays = doc.pop("arrays", None)
+        if arrays is not None:
+            path = self._objects[uid].parent / arrays
+            try:
+                with np.load(path, allow_pickle=False) as npz:
+                    doc.update({k: npz[k] for k in npz.files})
+            except (OSError, ValueError) as exc:
+                raise AssetError(f"{self._objects[uid]}: field 'arrays': cannot read {path} ({exc})") from None
+        return doc
+
+    def locate(self, uid: str) -> UidLocation:
+        doc = self._doc(uid)
+        path = (self._objects[uid].parent / doc["mjcf"]).resolve()
+        if not path.is_file():
+            raise AssetError(f"{self._objects[uid]}: field 'mjcf': {path} not found")
+        return UidLocation(self.name, None, path)
+
+    def grasp_library(self) -> GraspLibrary | None:
+        return self._grasps
+
+
+class MetadataStore:
+    """UID → metadata document in LMDB (zstd JSON values, a completion marker); fork-safe."""
+
+    COMPLETE = b"__complete__"
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = Path(path)
+        self._env: lmdb.Environment | None = None
+        self._pid = -1
+        self._dctx = zstandard.ZstdDecompressor()
+
+    @classmethod
+    def build(cls, path: str | os.PathLike, jsonl: str | os.PathLike) -> MetadataStore:
+        """Load ``metadata.jsonl`` (one document with ``assetId`` per line) into a new store at ``path``."""
+        path, jsonl = Path(path), Path(jsonl)
+        tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+        cctx = zstandard.ZstdCompressor(level=3)
+        env = lmdb.open(str(tmp), map_size=max(1 << 26, jsonl.stat().st_size * 4), sync=False)
+        try:
+            with env.begin(write=True) as txn, open(jsonl) as fh:
+                for lineno, line in enumerate(fh, 1):
+                    if not line.strip():
+                        continue
+                    try:
+                        doc = json.loads(line)
+                        uid = doc["assetId"]
+                    except (ValueError, KeyError, TypeError):
+                        raise AssetError(f"{jsonl}:{lineno}: expected a JSON object with field 'assetId'") from None
+                    txn.put(uid.encode(), cctx.compress(json.dumps(doc).encode()))
+                txn.put(cls.COMPLETE, b"1")
+            env.sync(True)
+        finally:
+            env.close()
+        try:
+            os.replace(tmp, path)
+        except OSError:  # another process finished the same build first
+            shutil.rmtree(tmp, ignore_errors=True)
+        return cls(path)
+
+    @property
+    def env(self) -> lmdb.Environment:
+        if self._env is None or self._pid != os.getpid():
+            from molmo_lerobot.resources.errors import ResourceError
+            from molmo_lerobot.resources.index import open_readonly
+
+            try:
+                self._env = open_readonly(self.path, self.COMPLETE)
+            except ResourceError as exc:
+                raise AssetError(f"metadata store: {exc}; delete it to rebuild") from None
+            self._pid, self._dctx = os.getpid(), zstandard.ZstdDecompressor()
+        return self._env
+
+    def exists(self) -> bool:
+        return (self.path / "data.mdb").is_file()
+
+    def get(self, uid: str) -> dict | None:
+        with self.env.begin() as txn:
+            raw = txn.get(uid.encode())
+        return None if raw is None else json.loads(self._dctx.decompress(raw))
+
+    def uids(self) -> Iterator[str]:
+        with self.env.begin() as txn:
+            keys = [k.decode() for k in txn.cursor().iternext(keys=True, values=False) if k != self.COMPLETE]
+        return iter(keys)
+
+
+class ResourceAssetLibrary(AssetLibrary):
+    """A packed object library installed through a :class:`~molmo_lerobot.resources.ResourceManager`.
+
+    ``objects`` names the object package (``objects/<source>@<version>``, packed with
+    ``--uid-depth 0``: ``<uid>/<uid>.xml``, ``metadata.jsonl``); ``grasps`` optionally a grasp
+    package (``grasps/<source>@<version>``, ``--uid-depth 1``: ``<robot>/<uid>.npz``).
+    """
+
+    METADATA = "metadata.jsonl"
+
+    def __init__(self, manager, objects: str, grasps: str | None = None, name: str | None = None) -> None:
+        from molmo_lerobot.resources.manager import ResourceSpec
+
+        self.manager = manager
+        self.objects, self.grasps = ResourceSpec.parse(objects), ResourceSpec.parse(grasps) if grasps else None
+        self.name = name or self.objects.source
+        self._store: MetadataStore | None = None
+
+    def _meta(self) -> MetadataStore:
+        if self._store is None:
+            store = MetadataStore(self.manager.meta_dir(self.objects) / "metadata.lmdb")
+            if not store.exists():
+                store = MetadataStore.build(store.path, self.manager.ensure_path(self.objects, self.METADATA))
+            self._store = store
+        return self._store
+
+    def uids(self) -> Iterator[str]:
+        return self._meta().uids()
+
+    def __contains__(self, uid: object) -> bool:
+        return isinstance(uid, str) and bool(self.manager.index(self.objects).archives_for_uid(uid))
+
+    def metadata(self, uid: str) -> dict:
+        doc = self._meta().get(uid)
+        if doc is None:
+            raise self._unknown(uid)
+        return doc
+
+    def _mjcf_rel(self, uid: str) -> tuple[str, str]:
+        index = self.manager.index(self.objects)
+        for rel in (f"{uid}/{uid}.xml", f"{uid}/model.xml"):
+            archive = index.archive_for_path(rel)
+            if archive is not None:
+                return archive, rel
+        raise self._unknown(uid)
+
+    def locate(self, uid: str) -> UidLocation:
+        archive, rel = self._mjcf_rel(uid)
+        return UidLocation(self.name, archive, self._root(self.objects) / rel)
+
+    def install(self, uid: str) -> UidLocation:
+        location = self.locate(uid)
+        self.manager.ensure_uid(self.objects, uid)
+        if self.grasps is not None and self.manager.index(self.grasps).archives_for_uid(uid):
+            self.manager.ensure_uid(self.grasps, uid)
+        return location
+
+    def _root(self, spec) -> Path:
+        linked = self.manager.linked().get(spec.data_type, {}).get(spec.source)
+        return self.manager.link_path(spec) if linked == spec.version else self.manager.version_dir(spec)
+
+    def grasp_library(self) -> GraspLibrary | None:
+        if self.grasps is None:
+            return None
+        return GraspLibrary(self._root(self.grasps), name=f"{self.name}-grasps")

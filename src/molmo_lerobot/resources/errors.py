@@ -1,0 +1,19 @@
+"""Errors of the resource manager: each message is one line naming the archive, path or lock."""
+
+from __future__ import annotations
+
+
+class ResourceError(RuntimeError):
+    """A resource could not be packed, fetched, installed or verified."""
+
+
+class CorruptArchiveError(ResourceError):
+    """An archive's size or sha256 does not match its manifest, or it cannot be decompressed."""
+
+
+class UnsafeArchiveError(ResourceError):
+    """An archive member would escape the extraction directory or is not a plain file/dir/link."""
+
+
+class StaleLockError(ResourceError):
+    """A lock could not be taken in time; the message names the holder and what to do."""

@@ -1,0 +1,39 @@
+"""Shared pytest fixtures."""
+
+from __future__ import annotations
+
+import pytest
+
+try:  # tests/ is a rootdir-inserted path (no __init__.py) or a package
+    from hub_standin import HubStandin, pinned_client_factory
+except ImportError:
+    from tests.hub_standin import HubStandin, pinned_client_factory
+
+
+@pytest.fixture
+def hub_standin(tmp_path_factory, monkeypatch):
+    """A running local stand-in of the Hugging Face Hub; ``huggingface_hub`` is pointed at it.
+
+    Sets ``HF_ENDPOINT``, disables Xet and offline mode, moves the hub cache to a temp dir
+    (both the environment and the already-imported ``huggingface_hub.constants``), and pins
+    the client's HTTP session to the stand-in, so nothing reaches the network.
+    """
+    import huggingface_hub.constants as hfc
+    from huggingface_hub import set_client_factory
+    from huggingface_hub.utils._http import default_client_factory
+
+    with HubStandin(tmp_path_factory.mktemp("hub_standin")) as hub:
+        cache = tmp_path_factory.mktemp("hf_cache")
+        for key, value in {"HF_ENDPOINT": hub.endpoint, "HF_HUB_DISABLE_XET": "1", "HF_HUB_OFFLINE": "0",
+                           "HF_HUB_CACHE": str(cache), "HF_HUB_DISABLE_TELEMETRY": "1"}.items():
+            monkeypatch.setenv(key, value)
+        monkeypatch.setattr(hfc, "ENDPOINT", hub.endpoint)
+        monkeypatch.setattr(hfc, "HUGGINGFACE_CO_URL_TEMPLATE", hub.endpoint + "/{repo_id}/resolve/{revision}/{filename}")
+        monkeypatch.setattr(hfc, "HF_HUB_DISABLE_XET", True)
+        monkeypatch.setattr(hfc, "HF_HUB_OFFLINE", False)
+        monkeypatch.setattr(hfc, "HF_HUB_CACHE", str(cache))
+        set_client_factory(pinned_client_factory(hub.endpoint))
+        try:
+            yield hub
+        finally:
+            set_client_factory(default_client_factory)
