@@ -1,0 +1,255 @@
+"""The built-in object set: graspable primitives (blocks, cans, mugs, balls …) and their analytic grasps.
+
+Every object is one MuJoCo primitive geom on one free body, sized for the Franka hand
+(at most :data:`MAX_GRASP_WIDTH` across the grasped dimension). Grasps are poses of the
+gripper TCP in the object frame: origin between the finger pads, ``+z`` the approach
+direction (palm → fingertips), ``+y`` the finger opening/closing axis.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: widest object dimension the Franka hand grasps reliably (it opens to 0.08 m)
+MAX_GRASP_WIDTH = 0.07
+#: distance along the approach axis from the TCP to the fingertips
+TCP_TO_FINGERTIP = 0.035
+#: clearance kept between the fingertips and the far side of the object
+FINGERTIP_CLEARANCE = 0.005
+#: distance along the approach axis from the palm (base of the fingers) to the TCP
+PALM_TO_TCP = 0.058
+#: half the finger width along the TCP x axis; grasps keep the pads on the object
+PAD_HALF_WIDTH = 0.01
+
+SHAPES = ("box", "cylinder", "sphere", "capsule")
+
+
+@dataclass(frozen=True)
+class BuiltinObject:
+    """A primitive object: one free body named ``uid`` holding one geom."""
+
+    uid: str
+    category: str
+    shape: str  # "box" | "cylinder" | "sphere" | "capsule"
+    size: tuple[float, ...]  # MuJoCo geom size convention (half sizes)
+    rgba: tuple[float, float, float, float]
+    mass: float
+    description: str
+    synset: str
+
+    def __post_init__(self) -> None:
+        expected = {"box": 3, "cylinder": 2, "sphere": 1, "capsule": 2}
+        if self.shape not in expected:
+            raise ValueError(f"object {self.uid!r}: shape {self.shape!r} is not one of {SHAPES}")
+        if len(self.size) != expected[self.shape] or min(self.size) <= 0:
+            raise ValueError(f"object {self.uid!r}: {self.shape} needs {expected[self.shape]} positive sizes, got {self.size}")
+
+    @property
+    def half_extents(self) -> tuple[float, float, float]:
+        """Half extents of the axis-aligned bounding box in the object frame."""
+        s = self.size
+        if self.shape == "box":
+            return (s[0], s[1], s[2])
+        if self.shape == "cylinder":
+            return (s[0], s[0], s[1])
+        if self.shape == "sphere":
+            return (s[0], s[0], s[0])
+        return (s[0], s[0], s[1] + s[0])  # capsule: radius, half-length of the segment
+
+    @property
+    def color(self) -> str:
+        """The colour word of the description (first word)."""
+        return self.description.split()[0]
+
+    def metadata(self) -> dict:
+        """The asset-library metadata document (MolmoSpaces' fields)."""
+        hx, hy, hz = self.half_extents
+        words = self.description.split()
+        return {
+            "assetId": self.uid,
+            "category": self.category,
+            "description": self.description,
+            "description_long": f"a {self.description} ({self.shape} primitive, {self.mass * 1000:.0f} g)",
+            "description_short": {
+                "one_word": words[-1],
+                "two_words": " ".join(words[-2:]),
+                "three_words": " ".join(words[-3:]),
+            },
+            "synset": self.synset,
+            "mass": self.mass,
+            "boundingBox": {"x": round(2 * hx, 6), "y": round(2 * hy, 6), "z": round(2 * hz, 6)},
+        }
+
+    def mjcf(self) -> str:
+        """A standalone MJCF document: one free body ``uid`` with its geom."""
+        size = " ".join(f"{v:g}" for v in self.size)
+        rgba = " ".join(f"{v:g}" for v in self.rgba)
+        # condim 6 adds torsional and rolling friction so round objects do not roll away
+        return (
+            f'<mujoco model="{self.uid}">\n'
+            "  <worldbody>\n"
+            f'    <body name="{self.uid}">\n'
+            f'      <freejoint name="{self.uid}_free"/>\n'
+            f'      <geom name="{self.uid}_geom" type="{self.shape}" size="{size}" rgba="{rgba}" '
+            f'mass="{self.mass:g}" friction="1.0 0.01 0.001" condim="6" contype="1" conaffinity="1"/>\n'
+            "    </body>\n"
+            "  </worldbody>\n"
+            "</mujoco>\n"
+        )
+
+
+def _obj(uid, category, shape, size, rgba, mass, description, synset) -> tuple[str, BuiltinObject]:
+    return uid, BuiltinObject(uid, category, shape, tuple(size), tuple(rgba), mass, description, synset)
+
+
+RED = (0.85, 0.12, 0.1, 1.0)
+GREEN = (0.15, 0.7, 0.2, 1.0)
+BLUE = (0.12, 0.3, 0.85, 1.0)
+YELLOW = (0.95, 0.85, 0.1, 1.0)
+ORANGE = (1.0, 0.5, 0.05, 1.0)
+PURPLE = (0.55, 0.2, 0.7, 1.0)
+WHITE = (0.92, 0.92, 0.9, 1.0)
+GREY = (0.6, 0.62, 0.65, 1.0)
+
+BUILTIN_OBJECTS: dict[str, BuiltinObject] = dict(
+    [
+        _obj("builtin_red_block", "block", "box", (0.025, 0.025, 0.025), RED, 0.08, "red wooden block", "block.n.01"),
+        _obj("builtin_green_block", "block", "box", (0.022, 0.022, 0.022), GREEN, 0.06, "green wooden block", "block.n.01"),
+        _obj("builtin_blue_block", "block", "box", (0.027, 0.027, 0.027), BLUE, 0.1, "blue wooden block", "block.n.01"),
+        _obj("builtin_yellow_brick", "brick", "box", (0.02, 0.045, 0.025), YELLOW, 0.09, "yellow toy brick", "brick.n.01"),
+        _obj("builtin_red_can", "can", "cylinder", (0.03, 0.055), RED, 0.15, "red soda can", "can.n.01"),
+        _obj("builtin_grey_can", "can", "cylinder", (0.032, 0.04), GREY, 0.2, "grey tin can", "can.n.01"),
+        _obj("builtin_red_mug", "mug", "cylinder", (0.034, 0.045), RED, 0.15, "red ceramic mug", "mug.n.04"),
+        _obj("builtin_blue_mug", "mug", "cylinder", (0.034, 0.045), BLUE, 0.15, "blue ceramic mug", "mug.n.04"),
+        _obj("builtin_white_cup", "cup", "cylinder", (0.029, 0.05), WHITE, 0.05, "white paper cup", "cup.n.01"),
+        _obj("builtin_green_bottle", "bottle", "cylinder", (0.03, 0.08), GREEN, 0.2, "green plastic bottle", "bottle.n.01"),
+        _obj("builtin_yellow_ball", "ball", "sphere", (0.032,), YELLOW, 0.06, "yellow tennis ball", "tennis_ball.n.01"),
+        _obj("builtin_orange", "fruit", "sphere", (0.034,), ORANGE, 0.13, "orange fruit", "orange.n.01"),
+        _obj("builtin_purple_marker", "marker", "capsule", (0.015, 0.05), PURPLE, 0.04, "purple felt marker", "marker.n.03"),
+    ]
+)
+
+
+def _pose(approach: np.ndarray, finger: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """A 4x4 TCP pose with ``+z = approach`` and ``+y = finger`` (made orthogonal) at ``pos``."""
+    z = approach / np.linalg.norm(approach)
+    y = finger - np.dot(finger, z) * z
+    y /= np.linalg.norm(y)
+    x = np.cross(y, z)
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, y, z, pos
+    return T
+
+
+def _depth(half: float) -> float | None:
+    """TCP offset along the approach from the centre, or None when the pads cannot reach the object.
+
+    The TCP sits at the centre unless that would push the fingertips past the far side or
+    the palm into the near side. The pads must still reach the object's mid-plane.
+    """
+    s = min(0.0, half - TCP_TO_FINGERTIP - FINGERTIP_CLEARANCE, PALM_TO_TCP - FINGERTIP_CLEARANCE - half)
+    return s if s + TCP_TO_FINGERTIP - FINGERTIP_CLEARANCE >= 0 else None
+
+
+def _perpendicular(v: np.ndarray) -> np.ndarray:
+    helper = np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    p = np.cross(v, helper)
+    return p / np.linalg.norm(p)
+
+
+def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues rotation of ``v`` about unit ``axis``."""
+    c, s = np.cos(angle), np.sin(angle)
+    return v * c + np.cross(axis, v) * s + axis * np.dot(axis, v) * (1 - c)
+
+
+def _box_grasps(half: np.ndarray) -> list[np.ndarray]:
+    out = []
+    for k in range(3):  # face normal axis; the palm is outside that face
+        s = _depth(half[k])
+        if s is None:
+            continue
+        for sign in (1.0, -1.0):
+            approach = np.zeros(3)
+            approach[k] = -sign
+            for j in range(3):
+                if j == k or 2 * half[j] > MAX_GRASP_WIDTH:
+                    continue
+                m = 3 - k - j  # the axis along the finger width
+                if half[m] < PAD_HALF_WIDTH:
+                    continue
+                for fs in (1.0, -1.0):
+                    finger = np.zeros(3)
+                    finger[j] = fs
+                    out.append(_pose(approach, finger, s * approach))
+    return out
+
+
+def _round_side_grasps(radius: float, half_len: float, n_azimuth: int, n_along: int) -> list[np.ndarray]:
+    """Approach perpendicular to the local z axis, fingers closing across the diameter."""
+    if 2 * radius > MAX_GRASP_WIDTH:
+        return []
+    s = _depth(radius)
+    if s is None:
+        return []
+    reach = max(0.0, half_len - PAD_HALF_WIDTH)
+    offsets = np.linspace(-reach, reach, n_along) if n_along > 1 and reach > 0 else np.zeros(1)
+    out = []
+    for phi in np.arange(n_azimuth) * 2 * np.pi / n_azimuth:
+        approach = np.array([np.cos(phi), np.sin(phi), 0.0])
+        finger = np.cross([0.0, 0.0, 1.0], approach)
+        for t in offsets:
+            for fs in (1.0, -1.0):
+                out.append(_pose(approach, fs * finger, s * approach + np.array([0.0, 0.0, t])))
+    return out
+
+
+def _round_end_grasps(radius: float, half_height: float, n_yaw: int) -> list[np.ndarray]:
+    """Approach along ±z (top-down when upright), fingers at ``n_yaw`` yaws."""
+    if 2 * radius > MAX_GRASP_WIDTH:
+        return []
+    s = _depth(half_height)
+    if s is None:
+        return []
+    out = []
+    for sign in (1.0, -1.0):
+        approach = np.array([0.0, 0.0, -sign])
+        for yaw in np.arange(n_yaw) * 2 * np.pi / n_yaw:
+            finger = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+            out.append(_pose(approach, finger, s * approach))
+    return out
+
+
+def _sphere_grasps(radius: float) -> list[np.ndarray]:
+    if 2 * radius > MAX_GRASP_WIDTH:
+        return []
+    s = _depth(radius)
+    if s is None:
+        return []
+    dirs = [np.eye(3)[i] * sg for i in range(3) for sg in (1.0, -1.0)]
+    dirs += [np.array([a, b, c]) / np.sqrt(3) for a in (1, -1) for b in (1, -1) for c in (1, -1)]
+    out = []
+    for approach in dirs:
+        base = _perpendicular(approach)
+        for roll in np.arange(4) * np.pi / 4:
+            out.append(_pose(approach, _rotate(base, approach, roll), s * approach))
+    return out
+
+
+def analytic_grasps(obj: BuiltinObject) -> np.ndarray:
+    """Grasp poses ``(N, 4, 4)`` of the gripper TCP in ``obj``'s frame (see the module docstring)."""
+    if obj.shape == "box":
+        grasps = _box_grasps(np.asarray(obj.size, dtype=float))
+    elif obj.shape == "cylinder":
+        r, hh = obj.size
+        grasps = _round_end_grasps(r, hh, 8) + _round_side_grasps(r, hh, 8, 3)
+    elif obj.shape == "sphere":
+        grasps = _sphere_grasps(obj.size[0])
+    else:  # capsule: the ends are hemispheres, so the end grasps see radius + half-length
+        r, hl = obj.size
+        grasps = _round_end_grasps(r, hl + r, 8) + _round_side_grasps(r, hl, 8, 3)
+    if not grasps:
+        raise ValueError(f"object {obj.uid!r}: no grasp fits a {MAX_GRASP_WIDTH} m wide gripper")
+    return np.stack(grasps).astype(np.float64)

@@ -1,0 +1,52 @@
+"""The random policy (a policy plugin): a baseline that should essentially never succeed.
+
+Each chunk moves the arm to a random joint target near the current pose (uniform within
+``scale`` radians per joint) and sets the gripper to a random command; draws come from a
+generator seeded by the episode seed, so episodes replay exactly.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from molmo_lerobot import hookimpl
+from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
+
+
+class RandomPolicy(Policy):
+    """Random joint targets near the current pose and a random gripper. Config: ``scale``, ``chunk``."""
+
+    needs_images = False
+
+    def __init__(self, config: dict[str, Any]) -> None:
+        self.scale = float(config.get("scale", 0.15))
+        self.chunk = int(config.get("chunk", 8))
+        if self.scale < 0 or self.chunk < 1:
+            raise ValueError("random policy: scale must be >= 0 and chunk >= 1")
+        self.rng = np.random.default_rng(0)
+        self.move_groups: dict[str, int] = {}
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        self.rng = np.random.default_rng(ctx.seed)
+        self.move_groups = dict(ctx.move_groups)
+
+    def act(self, obs: Observation) -> Action:
+        out: Action = {}
+        for group, dim in self.move_groups.items():
+            if group == "gripper":
+                goal = self.rng.uniform(0.0, 1.0, dim)
+            else:
+                goal = np.asarray(obs["qpos"][group], dtype=np.float64) + self.rng.uniform(-self.scale, self.scale, dim)
+            out[group] = np.repeat(goal[None], self.chunk, axis=0)
+        return out
+
+
+def make_random(config: dict[str, Any]) -> RandomPolicy:
+    return RandomPolicy(config)
+
+
+@hookimpl
+def molmo_policies() -> list[PolicyType]:
+    return [PolicyType(name="random", factory=make_random, description="random joint targets near the current pose")]

@@ -1,0 +1,253 @@
+"""The scripted pick expert (a policy plugin): privileged grasp selection + mink IK.
+
+At reset it reads the target object's pose from the simulator (``ctx.env``), turns the
+object's grasp candidates into world poses, keeps those that approach from above, keep
+the fingertips off the table and the fingers clear of neighbouring objects, and takes the
+first (closest to the current wrist yaw) that IK reaches. It then plays a fixed script,
+re-planning each phase from the current state:
+
+approach (pre-grasp 10 cm back along the approach) → descend (straight line) → close →
+lift (straight up) → hold. Joint targets follow a smooth (minimum-jerk) profile and are
+returned as chunks, so the environment renders only at chunk ends.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+from typing import Any
+
+import mink
+import mujoco
+import numpy as np
+
+from molmo_lerobot import hookimpl
+from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, TCP_TO_FINGERTIP, analytic_grasps
+from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
+
+PREGRASP_DISTANCE = 0.10
+LIFT_HEIGHT = 0.12
+#: steepest accepted approach tilt from straight down
+MAX_TILT_DEG = 40.0
+#: clearance kept between open fingers and neighbouring objects / between fingertips and the support
+FINGER_CLEARANCE = 0.012
+TABLE_CLEARANCE = 0.004
+#: half the open gripper span along its finger axis, fingers included
+OPEN_HALF_SPAN = 0.052
+
+
+def _pose_matrix(pose7: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    mat = np.zeros(9)
+    mujoco.mju_quat2Mat(mat, np.asarray(pose7[3:], dtype=np.float64))
+    T[:3, :3] = mat.reshape(3, 3)
+    T[:3, 3] = pose7[:3]
+    return T
+
+
+def object_grasps(env: Any, name: str) -> np.ndarray:
+    """Grasp candidates ``(N, 4, 4)`` in the body frame of scene object ``name``."""
+    uid = name
+    try:
+        from molmo_lerobot.plugins import get_plugins
+
+        objects = get_plugins().scene_dataset(env.spec.scene_dataset).metadata(env.spec.house_index)["objects"]
+        uid = objects.get(name, {}).get("asset_id", name)
+    except LookupError:
+        pass
+    if uid not in BUILTIN_OBJECTS:
+        raise ValueError(f"scripted policy: no grasps for object {name!r} (asset {uid!r})")
+    return analytic_grasps(BUILTIN_OBJECTS[uid])
+
+
+@cache
+def _ik_model(robot_name: str, base_pose: tuple[float, ...]) -> mujoco.MjModel:
+    """The robot alone at its base pose (world coordinates, no objects) for IK."""
+    from molmo_lerobot.plugins import get_plugins
+
+    world = mujoco.MjSpec()
+    get_plugins().robot(robot_name).add_to(world, base_pose)
+    return world.compile()
+
+
+class IKSolver:
+    """Differential IK with mink on the robot alone, for its TCP site, in world coordinates."""
+
+    def __init__(self, robot: Any, robot_name: str, base_pose: tuple[float, ...]) -> None:
+        self.model = _ik_model(robot_name, base_pose)
+        self.handle = robot.bind(self.model)
+        self.scratch = mujoco.MjData(self.model)
+        self.config = mink.Configuration(self.model)
+        self.frame = mink.FrameTask(self.model.site(self.handle.tcp_site).name, "site", position_cost=1.0,
+                                    orientation_cost=0.5, lm_damping=1e-3)
+        self.posture = mink.PostureTask(self.model, cost=1e-3)
+        self.limits = [mink.ConfigurationLimit(self.model)]
+
+    def solve(self, target: np.ndarray, q_arm: np.ndarray, iters: int = 150,
+              tol: tuple[float, float] = (1e-3, 1e-2)) -> np.ndarray | None:
+        """Arm joint positions placing the TCP at ``target`` (4x4, world), or None if unreachable."""
+        self.handle.set_qpos(self.scratch, "arm", q_arm)
+        self.config.update(self.scratch.qpos)
+        self.posture.set_target(self.scratch.qpos)
+        self.frame.set_target(mink.SE3.from_matrix(target))
+        dt = 0.1
+        for _ in range(iters):
+            err = self.frame.compute_error(self.config)
+            if np.linalg.norm(err[:3]) < tol[0] and np.linalg.norm(err[3:]) < tol[1]:
+                return self.handle.qpos(self.config.data, "arm")
+            vel = mink.solve_ik(self.config, [self.frame, self.posture], dt, solver="daqp", damping=1e-4,
+                                limits=self.limits)
+            self.config.integrate_inplace(vel, dt)
+        return None
+
+
+def _min_jerk(n: int) -> np.ndarray:
+    s = np.arange(1, n + 1) / n
+    return 10 * s**3 - 15 * s**4 + 6 * s**5
+
+
+class ScriptedPick(Policy):
+    """Pick expert: see the module docstring. Config: ``chunk`` (steps per action chunk), ``speed`` (rad/s)."""
+
+    needs_images = False
+
+    def __init__(self, config: dict[str, Any]) -> None:
+        self.chunk = int(config.get("chunk", 12))
+        self.speed = float(config.get("speed", 1.0))
+        if self.chunk < 1 or self.speed <= 0:
+            raise ValueError("scripted policy: chunk must be >= 1 and speed > 0")
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        if ctx.env is None:
+            raise ValueError("scripted policy needs privileged simulator access (ctx.env)")
+        env = self.env = ctx.env
+        self.dt = ctx.policy_dt_s
+        self.target = env.spec.task.pickup_obj_name
+        self.ik = IKSolver(env.robot_type, env.spec.robot.robot_name,
+                           tuple(float(v) for v in env.spec.task.robot_base_pose))
+        self.phases = ["approach", "descend", "close", "lift", "hold"]
+        self.queue: list[Action] = []
+        self.grasp_local: np.ndarray | None = None
+        self.q_cmd = env.robot.targets(env.data, "arm")
+        self.g_cmd = float(env.robot.targets(env.data, "gripper")[0])
+
+    # Planning -----------------------------------------------------------------------------------
+    def _object_T(self) -> np.ndarray:
+        return _pose_matrix(self.env.body_pose(self.target))
+
+    def _neighbours(self) -> list[tuple[np.ndarray, float]]:
+        """Centres and footprint radii of the other free objects."""
+        env, m = self.env, self.env.model
+        out = []
+        skip = env.subtree_bodies(self.target) | env.robot.body_ids
+        for b in range(1, m.nbody):
+            if b in skip or m.body_jntnum[b] == 0 or m.body_parentid[b] != 0:
+                continue
+            geoms = range(m.body_geomadr[b], m.body_geomadr[b] + m.body_geomnum[b])
+            radius = max((m.geom_rbound[g] + np.linalg.norm(m.geom_pos[g]) for g in geoms), default=0.0)
+            out.append((env.data.xpos[b].copy(), float(radius)))
+        return out
+
+    def _choose_grasp(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(grasp pose in object frame, pre-grasp arm q, grasp arm q) for the best feasible candidate."""
+        env = self.env
+        T_obj = self._object_T()
+        local = object_grasps(env, self.target)
+        world = T_obj @ local
+        approach = world[:, :3, 2]
+        down = -approach[:, 2]
+        tips = world[:, :3, 3] + TCP_TO_FINGERTIP * approach
+        support = self._support_height(T_obj)
+        ok = (down >= np.cos(np.radians(MAX_TILT_DEG))) & (tips[:, 2] >= support + TABLE_CLEARANCE)
+        fingers = world[:, :3, 1]
+        for centre, radius in self._neighbours():
+            for sign in (1.0, -1.0):
+                tip_xy = (world[:, :3, 3] + sign * OPEN_HALF_SPAN * fingers)[:, :2]
+                ok &= np.linalg.norm(tip_xy - centre[:2], axis=1) >= radius + FINGER_CLEARANCE
+        if not ok.any():
+            raise RuntimeError(f"scripted policy: no collision-free top grasp for {self.target!r}")
+        tcp = env.data.site_xmat[env.robot.tcp_site].reshape(3, 3)
+        yaw_cost = 1.0 - np.abs(fingers @ tcp[:, 1])  # the hand is symmetric: ±y are equal
+        tilt_cost = 1.0 - down
+        order = np.argsort(np.where(ok, yaw_cost + 2.0 * tilt_cost, np.inf), kind="stable")
+        q_now = env.robot.qpos(env.data, "arm")
+        for i in order[: int(ok.sum())]:
+            T_grasp = world[i]
+            T_pre = T_grasp.copy()
+            T_pre[:3, 3] -= PREGRASP_DISTANCE * T_grasp[:3, 2]
+            q_pre = self.ik.solve(T_pre, q_now)
+            if q_pre is None:
+                continue
+            q_grasp = self.ik.solve(T_grasp, q_pre)
+            if q_grasp is not None:
+                return local[i], q_pre, q_grasp
+        raise RuntimeError(f"scripted policy: IK found no reachable grasp for {self.target!r}")
+
+    def _support_height(self, T_obj: np.ndarray) -> float:
+        """Lowest point of the object's bounding box: the surface it rests on."""
+        m, b = self.env.model, self.env.body_id(self.target)
+        geoms = range(m.body_geomadr[b], m.body_geomadr[b] + m.body_geomnum[b])
+        return float(min(T_obj[2, 3] + m.geom_pos[g][2] - m.geom_rbound[g] for g in geoms)
+                     if m.body_geomnum[b] else T_obj[2, 3])
+
+    def _move(self, q_goal: np.ndarray, gripper: float, min_time: float) -> None:
+        """Queue a smooth joint-space move from the last command to ``q_goal``."""
+        dq = np.max(np.abs(q_goal - self.q_cmd))
+        n = max(1, int(np.ceil(max(min_time, dq / self.speed) / self.dt)))
+        for s in _min_jerk(n):
+            self.queue.append({"arm": self.q_cmd + s * (q_goal - self.q_cmd),
+                               "gripper": np.array([self.g_cmd + s * (gripper - self.g_cmd)])})
+        self.q_cmd, self.g_cmd = q_goal.copy(), gripper
+
+    def _line(self, T_from: np.ndarray, T_to: np.ndarray, q_seed: np.ndarray, gripper: float, duration: float,
+              points: int = 4) -> None:
+        """Queue a straight TCP line (IK at ``points`` via-points, fixed orientation)."""
+        q = q_seed
+        for k in range(1, points + 1):
+            T = T_to.copy()
+            T[:3, 3] = T_from[:3, 3] + (T_to[:3, 3] - T_from[:3, 3]) * k / points
+            q_next = self.ik.solve(T, q)
+            if q_next is None:
+                raise RuntimeError(f"scripted policy: IK failed on the straight line for {self.target!r}")
+            self._move(q_next, gripper, duration / points)
+            q = q_next
+
+    def _plan(self, phase: str) -> None:
+        env = self.env
+        if phase == "approach":
+            self.grasp_local, q_pre, _ = self._choose_grasp()
+            self._move(q_pre, 0.0, 1.0)
+        elif phase == "descend":
+            T_grasp = self._object_T() @ self.grasp_local  # the object may have been nudged
+            T_pre = T_grasp.copy()
+            T_pre[:3, 3] -= PREGRASP_DISTANCE * T_grasp[:3, 2]
+            self._line(T_pre, T_grasp, env.robot.qpos(env.data, "arm"), 0.0, 1.0)
+            self._move(self.q_cmd, 0.0, 2 * self.dt)  # settle
+        elif phase == "close":
+            self._move(self.q_cmd, 1.0, 0.5)
+            self._move(self.q_cmd, 1.0, 0.2)
+        elif phase == "lift":
+            site = env.robot.tcp_site
+            T_now = np.eye(4)
+            T_now[:3, :3] = env.data.site_xmat[site].reshape(3, 3)
+            T_now[:3, 3] = env.data.site_xpos[site]
+            T_up = T_now.copy()
+            T_up[2, 3] += LIFT_HEIGHT
+            self._line(T_now, T_up, self.q_cmd, 1.0, 1.2)
+        else:  # hold
+            self._move(self.q_cmd, 1.0, self.chunk * self.dt)
+
+    def act(self, obs: Observation) -> Action:
+        while not self.queue:
+            phase = self.phases[0] if len(self.phases) == 1 else self.phases.pop(0)
+            self._plan(phase)
+        chunk, self.queue = self.queue[: self.chunk], self.queue[self.chunk:]
+        return {g: np.stack([a[g] for a in chunk]) for g in chunk[0]}
+
+
+def make_scripted(config: dict[str, Any]) -> ScriptedPick:
+    return ScriptedPick(config)
+
+
+@hookimpl
+def molmo_policies() -> list[PolicyType]:
+    return [PolicyType(name="scripted", factory=make_scripted, description="privileged pick expert (IK + grasps)")]

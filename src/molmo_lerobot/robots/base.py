@@ -1,0 +1,78 @@
+"""Robot descriptors: how a robot enters a scene (MjSpec) and how its move groups map to MuJoCo.
+
+A :class:`RobotType` is what a robot plugin returns from ``molmo_robots()``. It adds the
+robot to a world :class:`mujoco.MjSpec` at a base pose, then :meth:`RobotType.bind` gives a
+:class:`RobotHandle` over the compiled model that reads and writes each move group
+(``{"arm": 7, "gripper": 1}`` for a Franka) in the robot's public units.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+
+import mujoco
+import numpy as np
+
+
+class RobotHandle(ABC):
+    """A robot bound to one compiled model: state per move group and low-level commands."""
+
+    @abstractmethod
+    def qpos(self, data: mujoco.MjData, group: str) -> np.ndarray:
+        """Joint positions of ``group`` in public units (gripper: 0 open … 1 closed)."""
+
+    @abstractmethod
+    def qvel(self, data: mujoco.MjData, group: str) -> np.ndarray:
+        """Joint velocities of ``group`` in public units per second."""
+
+    @abstractmethod
+    def set_qpos(self, data: mujoco.MjData, group: str, values: np.ndarray) -> None:
+        """Teleport ``group`` to ``values`` (zero velocity) and hold it there (ctrl = values)."""
+
+    @abstractmethod
+    def targets(self, data: mujoco.MjData, group: str) -> np.ndarray:
+        """The position targets currently commanded to ``group``."""
+
+    @abstractmethod
+    def command(self, data: mujoco.MjData, group: str, values: np.ndarray) -> None:
+        """Write position targets for ``group`` (clipped to the actuator range) into ``data.ctrl``.
+
+        The map from ``values`` to ``ctrl`` must be affine (up to clipping): the environment
+        interpolates controller ticks in ctrl space.
+        """
+
+    @property
+    @abstractmethod
+    def tcp_site(self) -> int:
+        """Site id of the tool centre point (origin between the finger pads, +z approach, +y fingers)."""
+
+    @property
+    @abstractmethod
+    def body_ids(self) -> frozenset[int]:
+        """Ids of every body that belongs to the robot (for contact tests)."""
+
+
+class RobotType(ABC):
+    """A robot plugin's descriptor, keyed by ``name`` and ``aliases`` (episode ``robot.robot_name``)."""
+
+    name: str
+    aliases: tuple[str, ...] = ()
+    #: move group -> action dimension
+    move_groups: dict[str, int]
+    #: move group -> public joint names (no "/": they become LeRobot feature names)
+    joint_names: dict[str, list[str]]
+    #: move group -> default initial positions, used where an episode gives none
+    default_init_qpos: dict[str, list[float]]
+
+    @abstractmethod
+    def spec(self) -> mujoco.MjSpec:
+        """A standalone spec of the robot with its base at the origin (also used for IK)."""
+
+    @abstractmethod
+    def add_to(self, world: mujoco.MjSpec, base_pose: Sequence[float]) -> None:
+        """Attach the robot to ``world`` at ``base_pose`` (x, y, z, qw, qx, qy, qz)."""
+
+    @abstractmethod
+    def bind(self, model: mujoco.MjModel) -> RobotHandle:
+        """Resolve the robot's joints, actuators and sites in a compiled model that contains it."""

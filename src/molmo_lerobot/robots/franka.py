@@ -1,0 +1,220 @@
+"""Franka Emika Panda with its parallel gripper, loaded from the installed gymnasium-robotics package.
+
+The MJCF, meshes and actuators come from ``gymnasium_robotics/envs/assets/kitchen_franka``
+at run time (nothing is copied into this repository). At load time the spec is adjusted
+with MjSpec so that it behaves like the real arm and like DROID data:
+
+* joints 6 and 7 use the standard Panda zero positions and limits (the kitchen model
+  rotates their frames by 90° and 45°; only the joint zero moves, the geometry does not);
+* every body has gravity compensation, as the real arm's controller does;
+* the arm joints lose the kitchen model's heavy damping (100 N·m·s/rad, more than the
+  87 N·m the motors may apply at 1 rad/s) and the actuators get joint-impedance gains
+  (stiffness :data:`ARM_KP`, damping :data:`ARM_KV`) within the real torque limits, so the arm
+  tracks joint targets at DROID speeds (use the ``implicitfast`` integrator);
+* a ``tcp`` site sits between the finger pads (+z approach, +y finger axis).
+
+Move groups: ``arm`` (7 joint positions, rad) and ``gripper`` (1 value, 0 open … 1 closed).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from collections.abc import Sequence
+from functools import cache
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from molmo_lerobot import hookimpl
+from molmo_lerobot.benchmark.molmospaces import FRANKA_ROBOT_NAMES
+from molmo_lerobot.robots.base import RobotHandle, RobotType
+
+PREFIX = "robot/"
+#: finger joint travel (each finger, metres)
+FINGER_TRAVEL = 0.04
+#: TCP offset along link 7's z axis: finger base (0.1654) + middle of the finger pads (0.06)
+TCP_OFFSET = 0.2254
+#: standard Panda limits for the joints whose zero the kitchen model shifts
+_STANDARD_LIMITS = {6: (-0.0175, 3.7525), 7: (-2.8973, 2.8973)}
+#: joint-impedance position gains per arm joint (N·m/rad, N·m·s/rad)
+ARM_KP = (4500.0, 4500.0, 3500.0, 3500.0, 2000.0, 2000.0, 2000.0)
+ARM_KV = (450.0, 450.0, 350.0, 350.0, 200.0, 200.0, 200.0)
+
+
+def franka_asset_dir() -> Path:
+    """Directory of the Franka MJCF files inside the installed gymnasium-robotics package."""
+    found = importlib.util.find_spec("gymnasium_robotics")
+    if found is None or not found.submodule_search_locations:
+        raise FileNotFoundError("the Franka robot needs the 'gymnasium-robotics' package (pip install gymnasium-robotics)")
+    path = Path(next(iter(found.submodule_search_locations))) / "envs" / "assets" / "kitchen_franka" / "franka_assets"
+    if not (path / "chain.xml").is_file():
+        raise FileNotFoundError(f"Franka assets not found at {path} (gymnasium-robotics layout changed?)")
+    return path
+
+
+@cache
+def _base_xml() -> tuple[str, str]:
+    root = franka_asset_dir()
+    xml = (
+        '<mujoco model="franka_panda">'
+        f'<include file="{root / "assets.xml"}"/>'
+        f'<worldbody><include file="{root / "chain.xml"}"/></worldbody>'
+        f'<include file="{root / "actuator.xml"}"/>'
+        "</mujoco>"
+    )
+    return xml, str(root)
+
+
+def load_franka_spec() -> mujoco.MjSpec:
+    """The adjusted Panda spec (see the module docstring), base at the origin."""
+    xml, root = _base_xml()
+    spec = mujoco.MjSpec.from_string(xml)
+    # The include files name meshes relative to their meshdir; make every path absolute.
+    meshdir = Path(root) / "meshes"
+    for mesh in spec.meshes:
+        mesh.file = str(meshdir / Path(mesh.file).relative_to(root))
+    spec.meshdir = ""
+    spec.nuser_actuator = -1
+    for act in spec.actuators:
+        act.userdata = []
+    renames = {f"robot:panda0_joint{k}": (f"joint{k}", f"actuator{k}") for k in range(1, 8)}
+    renames["robot:panda0_finger_joint1"] = ("finger_joint1", "finger_actuator1")
+    renames["robot:panda0_finger_joint2"] = ("finger_joint2", "finger_actuator2")
+    for act in spec.actuators:  # actuators name their joint: rename both together
+        joint, actuator = renames[act.target]
+        spec.joint(act.target).name = joint
+        act.target, act.name = joint, actuator
+    # Standard Panda joint zeros: link6/link7 frames are Rx(90°) like the real kinematics.
+    for link in ("panda0_link6", "panda0_link7"):
+        body = spec.body(link)
+        body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
+        body.quat = [math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0]
+    for k, (lo, hi) in _STANDARD_LIMITS.items():
+        spec.joint(f"joint{k}").range = [lo, hi]
+    for k in range(1, 8):  # position targets limited to the joint range
+        joint, act = spec.joint(f"joint{k}"), spec.actuator(f"actuator{k}")
+        act.ctrlrange = list(joint.range)
+        kp, kv = ARM_KP[k - 1], ARM_KV[k - 1]
+        act.gainprm = [kp] + [0.0] * 9
+        act.biasprm = [0.0, -kp, -kv] + [0.0] * 7
+        joint.damping = [1.0, 0.0, 0.0]
+        joint.armature = 0.1
+    for body in spec.bodies:
+        if body.name != "world":
+            body.gravcomp = 1.0
+    half = math.pi / 8  # TCP frame: link 7 rotated -45° about z, like the fingers
+    spec.body("panda0_link7").add_site(
+        name="tcp", pos=[0.0, 0.0, TCP_OFFSET], quat=[math.cos(half), 0.0, 0.0, -math.sin(half)], size=[0.005] * 3,
+        group=4,
+    )
+    return spec
+
+
+class FrankaHandle(RobotHandle):
+    """Move-group access to a compiled model holding the Franka under ``prefix``."""
+
+    def __init__(self, model: mujoco.MjModel, prefix: str) -> None:
+        def jid(name: str) -> int:
+            return model.joint(prefix + name).id
+
+        arm = [jid(f"joint{k}") for k in range(1, 8)]
+        fingers = [jid("finger_joint1"), jid("finger_joint2")]
+        self._arm_q = np.array([model.jnt_qposadr[j] for j in arm])
+        self._arm_v = np.array([model.jnt_dofadr[j] for j in arm])
+        self._fin_q = np.array([model.jnt_qposadr[j] for j in fingers])
+        self._fin_v = np.array([model.jnt_dofadr[j] for j in fingers])
+        self._arm_u = np.array([model.actuator(f"{prefix}actuator{k}").id for k in range(1, 8)])
+        self._fin_u = np.array([model.actuator(f"{prefix}finger_actuator{k}").id for k in (1, 2)])
+        self._lo = model.actuator_ctrlrange[self._arm_u, 0].copy()
+        self._hi = model.actuator_ctrlrange[self._arm_u, 1].copy()
+        self._tcp = model.site(prefix + "tcp").id
+        root = model.body(prefix + "panda0_link0").id
+        self._bodies = frozenset(b for b in range(model.nbody) if _descends(model, b, root))
+
+    def _check(self, group: str) -> None:
+        if group not in ("arm", "gripper"):
+            raise KeyError(f"franka has move groups 'arm' and 'gripper', not {group!r}")
+
+    def qpos(self, data, group):
+        self._check(group)
+        if group == "arm":
+            return data.qpos[self._arm_q].copy()
+        return np.array([1.0 - data.qpos[self._fin_q].sum() / (2 * FINGER_TRAVEL)])
+
+    def qvel(self, data, group):
+        self._check(group)
+        if group == "arm":
+            return data.qvel[self._arm_v].copy()
+        return np.array([-data.qvel[self._fin_v].sum() / (2 * FINGER_TRAVEL)])
+
+    def set_qpos(self, data, group, values):
+        self._check(group)
+        values = np.asarray(values, dtype=np.float64)
+        if group == "arm":
+            data.qpos[self._arm_q] = values
+            data.qvel[self._arm_v] = 0.0
+        else:
+            data.qpos[self._fin_q] = FINGER_TRAVEL * (1.0 - float(np.clip(values[0], 0.0, 1.0)))
+            data.qvel[self._fin_v] = 0.0
+        self.command(data, group, values)
+
+    def targets(self, data, group):
+        self._check(group)
+        if group == "arm":
+            return data.ctrl[self._arm_u].copy()
+        return np.array([1.0 - data.ctrl[self._fin_u[0]] / FINGER_TRAVEL])
+
+    def command(self, data, group, values):
+        self._check(group)
+        values = np.asarray(values, dtype=np.float64)
+        if group == "arm":
+            data.ctrl[self._arm_u] = np.clip(values, self._lo, self._hi)
+        else:
+            data.ctrl[self._fin_u] = FINGER_TRAVEL * (1.0 - float(np.clip(values[0], 0.0, 1.0)))
+
+    @property
+    def tcp_site(self) -> int:
+        return self._tcp
+
+    @property
+    def body_ids(self) -> frozenset[int]:
+        return self._bodies
+
+
+def _descends(model: mujoco.MjModel, body: int, root: int) -> bool:
+    while body > 0:
+        if body == root:
+            return True
+        body = int(model.body_parentid[body])
+    return False
+
+
+class Franka(RobotType):
+    """Franka Panda arm + hand (gymnasium-robotics meshes), joint-position controlled."""
+
+    name = "franka"
+    aliases = ("franka_panda", *FRANKA_ROBOT_NAMES)
+    move_groups = {"arm": 7, "gripper": 1}
+    joint_names = {"arm": [f"panda_joint{k}" for k in range(1, 8)], "gripper": ["panda_gripper"]}
+    #: hand pointing down above the table, fingers along the world y axis
+    default_init_qpos = {"arm": [0.0, -0.55, 0.0, -2.4, 0.0, 1.85, 0.785], "gripper": [0.0]}
+
+    def spec(self) -> mujoco.MjSpec:
+        return load_franka_spec()
+
+    def add_to(self, world: mujoco.MjSpec, base_pose: Sequence[float]) -> None:
+        pose = [float(v) for v in base_pose]
+        if len(pose) != 7:
+            raise ValueError(f"robot_base_pose needs 7 values (x, y, z, qw, qx, qy, qz), got {len(pose)}")
+        frame = world.worldbody.add_frame(pos=pose[:3], quat=pose[3:])
+        frame.attach_body(load_franka_spec().body("panda0_link0"), PREFIX, "")
+
+    def bind(self, model: mujoco.MjModel) -> FrankaHandle:
+        return FrankaHandle(model, PREFIX)
+
+
+@hookimpl
+def molmo_robots() -> list[RobotType]:
+    return [Franka()]

@@ -1,0 +1,346 @@
+"""The simulation environment: one episode's MuJoCo model and data, stepped at the policy rate.
+
+``make_env(spec, timing, plugins)`` assembles the scene with MjSpec — scene dataset house
+→ robot at ``task.robot_base_pose`` → ``scene_modifications`` → cameras — and compiles it
+with the physics timestep set from ``timing.sim_dt_ms`` (never taken from any XML) and
+the solver options every scene shares (:data:`PHYSICS_OPTIONS`: the ``implicitfast``
+integrator for stiff position actuators, elliptic friction cones and ``impratio`` 10 so
+that grasped objects do not creep out of the fingers).
+
+One :meth:`Env.step` is one policy step: ``policy_dt / ctrl_dt`` controller ticks, each
+moving the position targets linearly from the previous command towards the new one, and
+each followed by ``ctrl_dt / sim_dt`` physics steps.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import warnings
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import mujoco
+import numpy as np
+
+from molmo_lerobot.sim.scenes import attach_mjcf
+
+if TYPE_CHECKING:
+    from molmo_lerobot.benchmark.schema import EpisodeSpec
+    from molmo_lerobot.plugins import Plugins
+    from molmo_lerobot.robots.base import RobotType
+
+DEFAULT_CAMERA_SYSTEM = "standard"
+PHYSICS_OPTIONS = {"integrator": mujoco.mjtIntegrator.mjINT_IMPLICITFAST, "cone": mujoco.mjtCone.mjCONE_ELLIPTIC,
+                   "impratio": 10.0}
+
+
+def _ratio(num: float, den: float, what: str) -> int:
+    r = num / den
+    n = round(r)
+    if n < 1 or abs(r - n) > 1e-9 * max(1.0, r):
+        raise ValueError(f"timing: {what} must be a whole multiple, got {num:g} / {den:g} = {r:g}")
+    return int(n)
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Policy, controller and physics periods in milliseconds (MolmoSpaces: 66 / 2 / 2)."""
+
+    policy_dt_ms: float = 66.0
+    ctrl_dt_ms: float = 2.0
+    sim_dt_ms: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name in ("policy_dt_ms", "ctrl_dt_ms", "sim_dt_ms"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"timing: {name} must be a positive number, got {value!r}")
+        _ratio(self.policy_dt_ms, self.ctrl_dt_ms, "policy_dt_ms / ctrl_dt_ms")
+        _ratio(self.ctrl_dt_ms, self.sim_dt_ms, "ctrl_dt_ms / sim_dt_ms")
+
+    @property
+    def ctrl_ticks(self) -> int:
+        """Controller ticks per policy step."""
+        return _ratio(self.policy_dt_ms, self.ctrl_dt_ms, "policy_dt_ms / ctrl_dt_ms")
+
+    @property
+    def substeps(self) -> int:
+        """Physics steps per controller tick."""
+        return _ratio(self.ctrl_dt_ms, self.sim_dt_ms, "ctrl_dt_ms / sim_dt_ms")
+
+    @property
+    def sim_dt_s(self) -> float:
+        return self.sim_dt_ms / 1000.0
+
+    @property
+    def policy_dt_s(self) -> float:
+        return self.policy_dt_ms / 1000.0
+
+
+# Scene assembly --------------------------------------------------------------------------------
+
+#: compiled models by scene-defining content; episodes of one house share the compilation
+_MODEL_CACHE: OrderedDict[str, tuple[mujoco.MjModel, list[str]]] = OrderedDict()
+_MODEL_CACHE_SIZE = 4
+
+
+def _model_key(spec: EpisodeSpec, timing: Timing, camera_system: str) -> str:
+    mods = spec.scene_modifications.model_dump(mode="json", exclude={"object_poses"})
+    return json.dumps([spec.scene_dataset, spec.house_index, spec.robot.robot_name, spec.task.robot_base_pose,
+                       list(spec.img_resolution), [c.model_dump(mode="json") for c in spec.cameras], mods,
+                       timing.sim_dt_ms, camera_system], sort_keys=True)
+
+
+def _add_primitive(world: mujoco.MjSpec, name: str, prim: Any) -> None:
+    body = world.worldbody.add_body(name=prim.body_name or name, pos=list(prim.initial_pos))
+    if prim.add_freejoint:
+        joint = body.add_freejoint(name=prim.freejoint_name or f"{body.name}/free")
+        if prim.freejoint_damping is not None:
+            joint.damping = float(prim.freejoint_damping)
+    types = {"box": mujoco.mjtGeom.mjGEOM_BOX, "sphere": mujoco.mjtGeom.mjGEOM_SPHERE,
+             "capsule": mujoco.mjtGeom.mjGEOM_CAPSULE, "cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,
+             "ellipsoid": mujoco.mjtGeom.mjGEOM_ELLIPSOID}
+    for g in prim.geoms:
+        geom = body.add_geom(name=f"{body.name}{g.name_suffix}", type=types[g.geom_type], size=list(g.size),
+                             rgba=list(g.rgba))
+        for attr in ("contype", "conaffinity", "mass"):
+            if getattr(g, attr) is not None:
+                setattr(geom, attr, getattr(g, attr))
+        if g.friction is not None:
+            geom.friction = list(g.friction) + [0.005, 0.0001][: max(0, 3 - len(g.friction))]
+
+
+def _build_model(spec: EpisodeSpec, timing: Timing, plugins: Plugins, robot: RobotType,
+                 camera_system: str) -> tuple[mujoco.MjModel, list[str]]:
+    scene = plugins.scene_dataset(spec.scene_dataset)
+    world = scene.build(spec.house_index)
+    robot.add_to(world, spec.task.robot_base_pose)
+    mods = spec.scene_modifications
+    for name in mods.removed_objects:
+        body = world.body(name)
+        if body is None:
+            raise ValueError(f"scene_modifications.removed_objects: no body {name!r} in house {spec.house_index}")
+        world.delete(body)
+    for name, xml in mods.added_objects.items():
+        attach_mjcf(world, xml, name, source=f"scene_modifications.added_objects[{name!r}]")
+    for name, prim in mods.primitive_objects.items():
+        _add_primitive(world, name, prim)
+    body_names = [b.name for b in world.bodies]
+
+    def find_body(name: str) -> mujoco.MjsBody | None:
+        if name in body_names:
+            return world.body(name)
+        suffixed = [n for n in body_names if n.endswith("/" + name)]
+        return world.body(suffixed[0]) if len(suffixed) == 1 else None
+
+    cams = plugins.camera_system(camera_system).add_cameras(world, spec.cameras, find_body)
+    width, height = spec.img_resolution
+    world.visual.global_.offwidth = max(world.visual.global_.offwidth, int(width))
+    world.visual.global_.offheight = max(world.visual.global_.offheight, int(height))
+    world.option.timestep = timing.sim_dt_s
+    for option, value in PHYSICS_OPTIONS.items():
+        setattr(world.option, option, value)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        try:
+            model = world.compile()
+        except ValueError as exc:
+            raise ValueError(f"scene {spec.scene_dataset!r} house {spec.house_index} does not compile: "
+                             f"{str(exc).strip().splitlines()[-1]}") from None
+    return model, cams
+
+
+def make_env(spec: EpisodeSpec, timing: Timing, plugins: Plugins,
+             camera_system: str = DEFAULT_CAMERA_SYSTEM) -> Env:
+    """Assemble, compile (cached per scene content) and wrap one episode's simulation."""
+    robot = plugins.robot(spec.robot.robot_name)
+    key = _model_key(spec, timing, camera_system)
+    if key in _MODEL_CACHE:
+        _MODEL_CACHE.move_to_end(key)
+    else:
+        _MODEL_CACHE[key] = _build_model(spec, timing, plugins, robot, camera_system)
+        while len(_MODEL_CACHE) > _MODEL_CACHE_SIZE:
+            _MODEL_CACHE.popitem(last=False)
+    model, cams = _MODEL_CACHE[key]
+    return Env(spec, timing, copy.copy(model), robot, list(cams))
+
+
+# The environment ---------------------------------------------------------------------------------
+
+
+def pose7(pos: np.ndarray, mat: np.ndarray) -> np.ndarray:
+    """Position + rotation matrix as ``[x, y, z, qw, qx, qy, qz]``."""
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(mat, dtype=np.float64).reshape(9))
+    return np.concatenate([pos, quat])
+
+
+class Env:
+    """One episode's simulation. Built by :func:`make_env`; see the module docstring for timing."""
+
+    def __init__(self, spec: EpisodeSpec, timing: Timing, model: mujoco.MjModel, robot: RobotType,
+                 camera_names: list[str]) -> None:
+        if abs(model.opt.timestep - timing.sim_dt_s) > 1e-12:
+            raise ValueError(f"model timestep {model.opt.timestep} differs from sim_dt_ms={timing.sim_dt_ms}")
+        self.spec = spec
+        self.timing = timing
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.robot_type = robot
+        self.robot = robot.bind(model)
+        self.move_groups: dict[str, int] = dict(robot.move_groups)
+        self.joint_names: dict[str, list[str]] = {g: list(n) for g, n in robot.joint_names.items()}
+        self.camera_names = camera_names
+        self._depth_cameras = [c.name for c in spec.cameras if c.record_depth]
+        self._renderer: mujoco.Renderer | None = None
+        self._depth_renderer: mujoco.Renderer | None = None
+        self.seed: int | None = None
+        self.rng = np.random.default_rng()
+
+    # Lifecycle -----------------------------------------------------------------------------------
+    def reset(self, seed: int) -> None:
+        """Initial state from the spec: robot ``init_qpos`` and ``object_poses``; deterministic.
+
+        ``seed`` seeds :attr:`rng`, the stream plugins use for any per-episode randomization.
+        """
+        self.seed = int(seed)
+        self.rng = np.random.default_rng(self.seed)
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        init = self.spec.robot.init_qpos
+        unknown = sorted(set(init) - set(self.move_groups))
+        if unknown:
+            raise ValueError(f"robot.init_qpos: unknown move group(s) {unknown} (robot has {sorted(self.move_groups)})")
+        for group, dim in self.move_groups.items():
+            values = init.get(group, self.robot_type.default_init_qpos[group])
+            if len(values) != dim:
+                raise ValueError(f"robot.init_qpos[{group!r}]: expected {dim} values, got {len(values)}")
+            self.robot.set_qpos(d, group, np.asarray(values, dtype=np.float64))
+        for name, pose in self.spec.scene_modifications.object_poses.items():
+            self._place(name, np.asarray(pose, dtype=np.float64))
+        mujoco.mj_forward(m, d)
+
+    def _place(self, name: str, pose: np.ndarray) -> None:
+        bid = self.body_id(name, f"scene_modifications.object_poses[{name!r}]")
+        quat = pose[3:] / np.linalg.norm(pose[3:])
+        jnt = self.model.body_jntadr[bid]
+        if self.model.body_jntnum[bid] == 1 and self.model.jnt_type[jnt] == mujoco.mjtJoint.mjJNT_FREE:
+            adr = self.model.jnt_qposadr[jnt]
+            self.data.qpos[adr:adr + 3] = pose[:3]
+            self.data.qpos[adr + 3:adr + 7] = quat
+            self.data.qvel[self.model.jnt_dofadr[jnt]:self.model.jnt_dofadr[jnt] + 6] = 0.0
+        elif self.model.body_jntnum[bid] == 0 and self.model.body_parentid[bid] == 0:
+            self.model.body_pos[bid] = pose[:3]  # a static body: this env owns its model copy
+            self.model.body_quat[bid] = quat
+        else:
+            raise ValueError(f"scene_modifications.object_poses[{name!r}]: body is neither free nor a static "
+                             "top-level body")
+
+    def close(self) -> None:
+        for r in (self._renderer, self._depth_renderer):
+            if r is not None:
+                r.close()
+        self._renderer = self._depth_renderer = None
+
+    # Stepping ------------------------------------------------------------------------------------
+    def _validate(self, action: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        if not isinstance(action, dict):
+            raise ValueError(f"action must be a dict keyed by move group, got {type(action).__name__}")
+        if set(action) != set(self.move_groups):
+            raise ValueError(f"action has move groups {sorted(action)}, expected {sorted(self.move_groups)}")
+        out = {}
+        for group, dim in self.move_groups.items():
+            a = np.asarray(action[group], dtype=np.float64)
+            if a.shape != (dim,):
+                raise ValueError(f"action[{group!r}] has shape {a.shape}, expected ({dim},)")
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"action[{group!r}] has non-finite values: {a.tolist()}")
+            out[group] = a
+        return out
+
+    def step(self, action: dict[str, np.ndarray]) -> None:
+        """Run one policy step towards ``action`` (arm joint targets, gripper 0 open … 1 closed)."""
+        target = self._validate(action)
+        m, d = self.model, self.data
+        start = d.ctrl.copy()
+        for g, goal in target.items():
+            self.robot.command(d, g, goal)
+        delta = d.ctrl - start
+        ticks, substeps = self.timing.ctrl_ticks, self.timing.substeps
+        for k in range(1, ticks + 1):  # the robot's command maps are affine: interpolate in ctrl space
+            d.ctrl[:] = start + delta * (k / ticks)
+            mujoco.mj_step(m, d, nstep=substeps)
+        if not np.all(np.isfinite(d.qpos)):
+            raise RuntimeError(f"physics diverged at t={d.time:.3f}s (non-finite state)")
+
+    # Observation ---------------------------------------------------------------------------------
+    def observe(self, images: bool) -> dict[str, Any]:
+        """The Observation of :mod:`molmo_lerobot.policies.base` (images rendered only if asked)."""
+        d = self.data
+        site = self.robot.tcp_site
+        obs: dict[str, Any] = {
+            "qpos": {g: self.robot.qpos(d, g) for g in self.move_groups},
+            "qvel": {g: self.robot.qvel(d, g) for g in self.move_groups},
+            "tcp_pose": pose7(d.site_xpos[site], d.site_xmat[site]),
+        }
+        if images:
+            obs["images"] = {name: self.render(name) for name in self.camera_names}
+            if self._depth_cameras:
+                obs["depth"] = {name: self.render_depth(name) for name in self._depth_cameras}
+        return obs
+
+    def _make_renderer(self) -> mujoco.Renderer:
+        width, height = self.spec.img_resolution
+        return mujoco.Renderer(self.model, height=int(height), width=int(width))
+
+    def render(self, camera: str) -> np.ndarray:
+        """RGB uint8 image (H, W, 3) from ``camera``; the renderer is created once and reused."""
+        if self._renderer is None:
+            self._renderer = self._make_renderer()
+        self._renderer.update_scene(self.data, camera=camera)
+        return self._renderer.render()
+
+    def render_depth(self, camera: str) -> np.ndarray:
+        """Depth in metres, float32 (H, W), from ``camera``."""
+        if self._depth_renderer is None:
+            self._depth_renderer = self._make_renderer()
+            self._depth_renderer.enable_depth_rendering()
+        self._depth_renderer.update_scene(self.data, camera=camera)
+        return self._depth_renderer.render().astype(np.float32)
+
+    # Privileged access (tasks, scripted experts) --------------------------------------------------
+    def body_id(self, name: str, field: str = "body") -> int:
+        bid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
+        if bid < 0:
+            raise ValueError(f"{field}: no body {name!r} in the scene")
+        return bid
+
+    def body_pose(self, name: str) -> np.ndarray:
+        """World pose ``[x, y, z, qw, qx, qy, qz]`` of body ``name``."""
+        bid = self.body_id(name)
+        return np.concatenate([self.data.xpos[bid], self.data.xquat[bid]])
+
+    def subtree_bodies(self, name: str) -> frozenset[int]:
+        """Ids of ``name`` and every body below it."""
+        root = self.body_id(name)
+        out = {root}
+        for b in range(root + 1, self.model.nbody):
+            if int(self.model.body_parentid[b]) in out:
+                out.add(b)
+        return frozenset(out)
+
+    def contact_bodies(self, bodies: frozenset[int]) -> set[int]:
+        """Bodies (outside ``bodies``) in contact with any of ``bodies`` right now."""
+        d, gb = self.data, self.model.geom_bodyid
+        touching: set[int] = set()
+        for i in range(d.ncon):
+            c = d.contact[i]
+            b1, b2 = int(gb[c.geom1]), int(gb[c.geom2])
+            if b1 in bodies and b2 not in bodies:
+                touching.add(b2)
+            elif b2 in bodies and b1 not in bodies:
+                touching.add(b1)
+        return touching

@@ -1,0 +1,63 @@
+"""Scene datasets: what an episode's ``scene_dataset`` + ``house_index`` build with MjSpec.
+
+A :class:`SceneDataset` is what a scene plugin returns from ``molmo_scene_datasets()``.
+``build(house_index)`` returns a fresh world spec (no robot, no cameras); ``metadata``
+describes the house: which bodies are objects and which asset each one is (MolmoSpaces'
+scene metadata), where the robot stands, and the region where objects may be placed.
+"""
+
+from __future__ import annotations
+
+import warnings
+from abc import ABC, abstractmethod
+from typing import Any
+
+import mujoco
+
+
+class SceneDataset(ABC):
+    """A family of scenes indexed by ``house_index``."""
+
+    name: str
+    aliases: tuple[str, ...] = ()
+
+    @abstractmethod
+    def n_houses(self) -> int | None:
+        """How many houses exist (``None`` for an unbounded procedural family)."""
+
+    @abstractmethod
+    def build(self, house_index: int) -> mujoco.MjSpec:
+        """A fresh world spec for this house, deterministic in ``house_index``."""
+
+    @abstractmethod
+    def metadata(self, house_index: int) -> dict[str, Any]:
+        """House description, JSON-ready. At least ``objects``: ``{body_name: {"asset_id": uid, ...}}``."""
+
+    def check_house(self, house_index: int) -> None:
+        """Raise a clear ``ValueError`` if ``house_index`` is out of range."""
+        n = self.n_houses()
+        if house_index < 0 or (n is not None and house_index >= n):
+            bound = f"0..{n - 1}" if n is not None else ">= 0"
+            raise ValueError(f"scene dataset {self.name!r}: house_index {house_index} out of range ({bound})")
+
+
+def attach_mjcf(world: mujoco.MjSpec, xml: str, body_name: str, pos=(0.0, 0.0, 0.0), quat=(1.0, 0.0, 0.0, 0.0),
+                source: str = "object") -> None:
+    """Attach the first top-level body of an MJCF document to ``world``, renamed ``body_name``.
+
+    Every other element of the child gets the prefix ``"<body_name>/"`` so that names of
+    different objects never collide. ``xml`` is MJCF text or a path to an MJCF file.
+    """
+    try:
+        child = mujoco.MjSpec.from_file(xml) if not xml.lstrip().startswith("<") else mujoco.MjSpec.from_string(xml)
+    except Exception as exc:
+        raise ValueError(f"{source}: cannot parse MJCF for {body_name!r}: {str(exc).strip().splitlines()[0]}") from None
+    top = child.worldbody.first_body()
+    if top is None:
+        raise ValueError(f"{source}: MJCF for {body_name!r} has no body")
+    original = top.name
+    frame = world.worldbody.add_frame(pos=list(pos), quat=list(quat))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        frame.attach_body(top, f"{body_name}/", "")
+    world.body(f"{body_name}/{original}").name = body_name

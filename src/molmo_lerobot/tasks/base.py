@@ -1,0 +1,48 @@
+"""Task types: the success rule (and reward) of an episode, evaluated every policy step.
+
+A :class:`TaskType` is what a task plugin returns from ``molmo_task_types()``; it is keyed
+by ``name`` and ``aliases`` (MolmoSpaces' dotted ``task_cls`` paths). ``create(spec, env)``
+returns a :class:`Task` bound to one episode's environment.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from molmo_lerobot.benchmark.schema import EpisodeSpec
+    from molmo_lerobot.sim.env import Env
+
+
+class Task(ABC):
+    """One episode's task. ``setup`` runs after ``env.reset``; ``success`` after every policy step."""
+
+    @abstractmethod
+    def setup(self) -> None:
+        """Remember the start state the success rule compares against."""
+
+    @abstractmethod
+    def success(self) -> bool:
+        """Whether the task is solved in the current simulator state."""
+
+    def reward(self) -> float | None:
+        """A per-step reward, or ``None`` when the task defines none."""
+        return None
+
+
+class TaskType(ABC):
+    """A task plugin's descriptor."""
+
+    name: str
+    aliases: tuple[str, ...] = ()
+    #: horizon used when neither the CLI nor the episode (``task_horizon_sec``) gives one
+    default_horizon_sec: float
+
+    @abstractmethod
+    def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
+        """The success thresholds this episode is judged by (reported in results.json)."""
+
+    @abstractmethod
+    def create(self, spec: EpisodeSpec, env: Env) -> Task:
+        """A task instance for this episode; raise ``ValueError`` naming the field if the spec does not fit."""

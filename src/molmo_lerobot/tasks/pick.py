@@ -1,0 +1,70 @@
+"""The pick task (a task plugin): lift the object and hold it, touching nothing but the robot.
+
+Success (MolmoSpaces' rule, evaluated every policy step): the object's height is at least
+``succ_pos_threshold`` (default 0.01 m) above its height at the start of the episode
+**and** it touches the robot and nothing else (no table, no other object).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from molmo_lerobot import hookimpl
+from molmo_lerobot.benchmark.molmospaces import task_aliases
+from molmo_lerobot.tasks.base import Task, TaskType
+
+if TYPE_CHECKING:
+    from molmo_lerobot.benchmark.schema import EpisodeSpec
+    from molmo_lerobot.sim.env import Env
+
+DEFAULT_SUCC_POS_THRESHOLD = 0.01
+
+
+class PickTask(Task):
+    """Pick ``spec.task.pickup_obj_name``."""
+
+    def __init__(self, spec: EpisodeSpec, env: Env) -> None:
+        name = getattr(spec.task, "pickup_obj_name", None)
+        if not name:
+            raise ValueError("task.pickup_obj_name: missing (a pick task needs the object to pick)")
+        self.env = env
+        self.object_name = name
+        self.threshold = float(getattr(spec.task, "succ_pos_threshold", DEFAULT_SUCC_POS_THRESHOLD))
+        self._object = env.body_id(name, "task.pickup_obj_name")
+        self.object_bodies = env.subtree_bodies(name)
+        self.start_height: float | None = None
+
+    def setup(self) -> None:
+        self.start_height = float(self.env.data.xpos[self._object][2])
+
+    def lift(self) -> float:
+        """Height gained since ``setup`` (metres)."""
+        if self.start_height is None:
+            raise RuntimeError("PickTask.setup() must run before success()")
+        return float(self.env.data.xpos[self._object][2]) - self.start_height
+
+    def success(self) -> bool:
+        if self.lift() < self.threshold:
+            return False
+        touching = self.env.contact_bodies(self.object_bodies)
+        return bool(touching) and touching <= self.env.robot.body_ids
+
+    def reward(self) -> float:
+        return 1.0 if self.success() else 0.0
+
+
+class PickTaskType(TaskType):
+    name = "pick"
+    aliases = ("molmo_lerobot.tasks.pick.PickTask", *task_aliases("pick"))
+    default_horizon_sec = 20.0
+
+    def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
+        return {"succ_pos_threshold": float(getattr(spec.task, "succ_pos_threshold", DEFAULT_SUCC_POS_THRESHOLD))}
+
+    def create(self, spec: EpisodeSpec, env: Env) -> PickTask:
+        return PickTask(spec, env)
+
+
+@hookimpl
+def molmo_task_types() -> list[TaskType]:
+    return [PickTaskType()]
