@@ -45,6 +45,11 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, *, index: int | Non
                 if values:  # MolmoSpaces writes empty lists for groups a robot lacks ("base": [])
                     problem(field, f"robot {robot.name!r} has no move group {group!r} "
                                    f"(move groups: {', '.join(sizes)})")
+            elif hasattr(robot, "init_qpos"):
+                try:
+                    robot.init_qpos(group, values)
+                except ValueError as exc:
+                    problem(field, str(exc))
             elif len(values) != sizes[group]:
                 problem(field, f"expected {sizes[group]} values, got {len(values)}")
 

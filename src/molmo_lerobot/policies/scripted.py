@@ -21,7 +21,8 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, TCP_TO_FINGERTIP, analytic_grasps
+from molmo_lerobot.assets.builtin import TCP_TO_FINGERTIP
+from molmo_lerobot.assets.grasps import get_grasps
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
 
 PREGRASP_DISTANCE = 0.10
@@ -45,7 +46,11 @@ def _pose_matrix(pose7: np.ndarray) -> np.ndarray:
 
 
 def object_grasps(env: Any, name: str) -> np.ndarray:
-    """Grasp candidates ``(N, 4, 4)`` in the body frame of scene object ``name``."""
+    """Grasp candidates ``(N, 4, 4)`` in the body frame of scene object ``name``.
+
+    The object's asset UID comes from the scene metadata; its grasps from the grasp
+    libraries (user libraries first, then the built-in set's generated grasps).
+    """
     uid = name
     try:
         from molmo_lerobot.plugins import get_plugins
@@ -54,9 +59,10 @@ def object_grasps(env: Any, name: str) -> np.ndarray:
         uid = objects.get(name, {}).get("asset_id", name)
     except LookupError:
         pass
-    if uid not in BUILTIN_OBJECTS:
-        raise ValueError(f"scripted policy: no grasps for object {name!r} (asset {uid!r})")
-    return analytic_grasps(BUILTIN_OBJECTS[uid])
+    try:
+        return get_grasps(uid, robot="franka")
+    except LookupError as exc:
+        raise ValueError(f"scripted policy: no grasps for object {name!r} (asset {uid!r}): {exc}") from None
 
 
 @cache

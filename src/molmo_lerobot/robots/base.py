@@ -65,6 +65,12 @@ class RobotType(ABC):
     #: move group -> default initial positions, used where an episode gives none
     default_init_qpos: dict[str, list[float]]
 
+    def init_qpos(self, group: str, values: Sequence[float]) -> np.ndarray:
+        """An episode's ``robot.init_qpos[group]`` in public units; ``ValueError`` if it does not fit."""
+        if len(values) != self.move_groups[group]:
+            raise ValueError(f"expected {self.move_groups[group]} values, got {len(values)}")
+        return np.asarray(values, dtype=np.float64)
+
     @abstractmethod
     def spec(self) -> mujoco.MjSpec:
         """A standalone spec of the robot with its base at the origin (also used for IK)."""

@@ -201,6 +201,12 @@ class Franka(RobotType):
     #: hand pointing down above the table, fingers along the world y axis
     default_init_qpos = {"arm": [0.0, -0.55, 0.0, -2.4, 0.0, 1.85, 0.785], "gripper": [0.0]}
 
+    def init_qpos(self, group: str, values: Sequence[float]) -> np.ndarray:
+        """Also accepts MolmoSpaces' two finger-joint positions (metres) for the gripper."""
+        if group == "gripper" and len(values) == 2:
+            return np.array([float(np.clip(1.0 - np.mean(values) / FINGER_TRAVEL, 0.0, 1.0))])
+        return super().init_qpos(group, values)
+
     def spec(self) -> mujoco.MjSpec:
         return load_franka_spec()
 

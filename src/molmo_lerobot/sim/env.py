@@ -211,14 +211,16 @@ class Env:
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         init = self.spec.robot.init_qpos
-        unknown = sorted(set(init) - set(self.move_groups))
+        unknown = sorted(g for g, v in init.items() if g not in self.move_groups and v)  # MolmoSpaces: "base": []
         if unknown:
             raise ValueError(f"robot.init_qpos: unknown move group(s) {unknown} (robot has {sorted(self.move_groups)})")
-        for group, dim in self.move_groups.items():
-            values = init.get(group, self.robot_type.default_init_qpos[group])
-            if len(values) != dim:
-                raise ValueError(f"robot.init_qpos[{group!r}]: expected {dim} values, got {len(values)}")
-            self.robot.set_qpos(d, group, np.asarray(values, dtype=np.float64))
+        for group in self.move_groups:
+            values = init.get(group) or self.robot_type.default_init_qpos[group]
+            try:
+                qpos = self.robot_type.init_qpos(group, values)
+            except ValueError as exc:
+                raise ValueError(f"robot.init_qpos[{group!r}]: {exc}") from None
+            self.robot.set_qpos(d, group, qpos)
         for name, pose in self.spec.scene_modifications.object_poses.items():
             self._place(name, np.asarray(pose, dtype=np.float64))
         mujoco.mj_forward(m, d)
