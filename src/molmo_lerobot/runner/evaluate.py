@@ -209,10 +209,11 @@ def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool) -> list[E
         if not run_file.exists():
             raise RunError(f"cannot resume: {run_file} is missing")
         previous = json.loads(run_file.read_text())
+        current = json.loads(json.dumps(run_info))  # compare as stored (JSON turns int keys into strings)
         for key in ("benchmark", "policy", "seed", "horizon", "timing"):
-            if previous.get(key) != run_info.get(key):
+            if previous.get(key) != current.get(key):
                 raise RunError(f"cannot resume {out}: its {key} differs from this run's "
-                               f"({previous.get(key)!r} vs {run_info.get(key)!r})")
+                               f"({previous.get(key)!r} vs {current.get(key)!r})")
         (out / RESULTS_FILE).unlink(missing_ok=True)
         done = _read_episodes(out / EPISODES_FILE)
         _atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))

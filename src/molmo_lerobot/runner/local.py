@@ -42,11 +42,14 @@ def _worker_main(conn: Connection, job: WorkerJob, worker_id: str) -> None:
     try:
         while (item := conn.recv()) is not None:
             conn.send(("result", worker.run(item).to_dict()))
-    except (EOFError, KeyboardInterrupt):
-        pass
+    except (EOFError, BrokenPipeError, ConnectionResetError, KeyboardInterrupt):
+        pass  # EOF / broken pipe: the supervisor is gone (killed); close our outputs and exit quietly
     finally:
         worker.close()
-    conn.send(("closed", None))
+    try:
+        conn.send(("closed", None))
+    except OSError:
+        pass
 
 
 @dataclass

@@ -1,0 +1,218 @@
+"""Merge worker shards into ``output_dir/dataset`` with LeRobot's aggregation, plus the eval records.
+
+Sources are the previous merged dataset (a resumed run) and every finished shard, oldest
+first. Each benchmark episode is stored at most once (a retried episode can sit in two
+shards) and only if its final result has no error. The merged dataset is built in a
+temporary directory, checked (episode count, lengths, ``next.success`` at each episode's
+last frame against the results) and only then swapped into place, so a failed merge
+never leaves a dataset that looks complete.
+
+Layout added to the LeRobot dataset root:
+
+* ``meta/eval/episodes.jsonl``: one record per attempted episode: ``episode_index`` (the
+  dataset episode, or null when not stored, with ``not_recorded``), ``benchmark_episode_index``,
+  house, task, prompt, success, success_once, steps, seed, error, policy, benchmark + sha256;
+* ``meta/eval/info.json``: benchmark, policy, timing, exact fps, torn shards;
+* ``results.json`` (the run summary) and ``README.md`` (card with the score table).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from molmo_lerobot.export.card import make_card
+from molmo_lerobot.export.shards import SHARDS_DIR, list_shards
+from molmo_lerobot.runner.results import EpisodeResult
+
+if TYPE_CHECKING:
+    from molmo_lerobot.export.recorder import LeRobotRecorderFactory
+
+log = logging.getLogger(__name__)
+
+DATASET_DIR = "dataset"
+EVAL_EPISODES = "meta/eval/episodes.jsonl"
+EVAL_INFO = "meta/eval/info.json"
+
+
+class ExportError(RuntimeError):
+    """The merged dataset could not be built or failed its checks; the message says which."""
+
+
+@dataclass
+class _Source:
+    root: Path
+    episodes: list[dict[str, Any]]  # per local episode: {"episode_index": benchmark index, "success": …}
+
+
+def read_eval_records(dataset_root: Path) -> list[dict[str, Any]]:
+    """The ``meta/eval/episodes.jsonl`` records of a merged dataset."""
+    path = Path(dataset_root) / EVAL_EPISODES
+    out = []
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        try:
+            out.append(json.loads(line))
+        except ValueError as exc:
+            raise ExportError(f"{path}:{n}: not a JSON record ({exc})") from None
+    return out
+
+
+def _previous_source(dataset: Path) -> _Source | None:
+    if not (dataset / "meta/info.json").exists() or not (dataset / EVAL_EPISODES).exists():
+        return None
+    stored = sorted((r for r in read_eval_records(dataset) if r.get("episode_index") is not None),
+                    key=lambda r: r["episode_index"])
+    eps = [{"episode_index": r["benchmark_episode_index"], "success": r["success"]} for r in stored]
+    return _Source(dataset, eps)
+
+
+def _choose(sources: list[_Source], by_index: dict[int, EpisodeResult]) -> dict[int, tuple[int, int]]:
+    """benchmark index → (source, local episode): the last copy whose success matches the result."""
+    best: dict[int, tuple[bool, int, int]] = {}
+    for si, src in enumerate(sources):
+        for li, ep in enumerate(src.episodes):
+            r = by_index.get(int(ep["episode_index"]))
+            if r is None or r.error is not None:
+                continue
+            key = (bool(ep.get("success")) == r.success, si, li)
+            if r.episode_index not in best or key > best[r.episode_index]:
+                best[r.episode_index] = key
+    return {i: (k[1], k[2]) for i, k in best.items()}
+
+
+def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any],
+                 factory: LeRobotRecorderFactory) -> Path | None:
+    """Build ``output_dir/dataset`` from the shards; returns its root, or None when nothing was recorded."""
+    from lerobot.datasets.aggregate import aggregate_datasets
+    from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
+
+    output_dir = Path(output_dir)
+    final = output_dir / DATASET_DIR
+    work = output_dir / f".dataset-merge-{factory.session}"
+    shutil.rmtree(work, ignore_errors=True)
+    shards = list_shards(output_dir)
+    torn = [s.root.name for s in shards if not s.complete]
+    for name in torn:
+        log.warning("skipping dataset shard %s: its worker did not finish it (killed or crashed); "
+                    "its episodes are not stored in the dataset", name)
+    sources = [s for s in [_previous_source(final)] if s is not None]
+    sources += [_Source(s.root, s.episodes) for s in shards if s.complete and s.episodes]
+    discarded = {int(d["episode_index"]): d["reason"] for s in shards for d in s.discarded}
+    by_index = {r.episode_index: r for r in results}
+    chosen = _choose(sources, by_index)
+
+    roots: list[Path] = []
+    dataset_index: dict[int, int] = {}
+    for si, src in enumerate(sources):
+        keep = sorted(li for s, li in chosen.values() if s == si)
+        if not keep:
+            continue
+        root = src.root
+        if len(keep) < len(src.episodes):
+            root = _subset(src, keep, work / f"subset-{si}", factory.repo_id)
+        bench_of_local = {li: int(src.episodes[li]["episode_index"]) for li in keep}
+        for li in keep:
+            dataset_index[bench_of_local[li]] = len(dataset_index)
+        roots.append(root)
+
+    if not roots:
+        log.warning("record=true but no episode finished without error: no dataset written")
+        shutil.rmtree(work, ignore_errors=True)
+        return None
+
+    tmp = work / DATASET_DIR
+    try:
+        aggregate_datasets([factory.repo_id] * len(roots), factory.repo_id, roots=roots, aggr_root=tmp)
+    except Exception as exc:
+        raise ExportError(f"merging {len(roots)} dataset shards under {output_dir / SHARDS_DIR} failed: "
+                          f"{type(exc).__name__}: {exc}") from exc
+    records = _eval_records(results, dataset_index, discarded, summary, factory)
+    _write_jsonl(tmp / EVAL_EPISODES, records)
+    info = {
+        "benchmark": summary.get("benchmark"), "policy": factory.policy, "repo_id": factory.repo_id,
+        "policy_dt_ms": factory.policy_dt_ms, "fps_exact": 1000.0 / factory.policy_dt_ms, "fps": factory.fps,
+        "n_attempted": len(results), "n_recorded": len(dataset_index), "torn_shards": torn,
+        "session": factory.session,
+    }
+    (tmp / EVAL_INFO).write_text(json.dumps(info, indent=2) + "\n")
+    (tmp / "results.json").write_text(json.dumps(summary, indent=2) + "\n")
+    meta = LeRobotDatasetMetadata(factory.repo_id, root=tmp)
+    check_dataset(tmp, results)
+    make_card(meta.info, summary, factory.repo_id, len(dataset_index)).save(str(tmp / "README.md"))
+    _swap_into_place(tmp, final, work)
+    shutil.rmtree(output_dir / SHARDS_DIR, ignore_errors=True)
+    shutil.rmtree(work, ignore_errors=True)
+    return final
+
+
+def _subset(src: _Source, keep: list[int], out: Path, repo_id: str) -> Path:
+    """A copy of ``src`` with only the ``keep`` episodes (LeRobot's delete_episodes)."""
+    from lerobot.datasets.dataset_tools import delete_episodes
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    ds = LeRobotDataset(repo_id, root=src.root, video_backend="pyav")
+    drop = [i for i in range(len(src.episodes)) if i not in set(keep)]
+    delete_episodes(ds, drop, output_dir=out, repo_id=repo_id)
+    return out
+
+
+def _eval_records(results: list[EpisodeResult], dataset_index: dict[int, int], discarded: dict[int, str],
+                  summary: dict[str, Any], factory: LeRobotRecorderFactory) -> list[dict[str, Any]]:
+    bench = summary.get("benchmark") or {}
+    records = []
+    for r in sorted(results, key=lambda r: r.episode_index):
+        idx = dataset_index.get(r.episode_index)
+        if idx is not None:
+            why = None
+        elif r.error is not None:
+            why = "episode error"
+        else:
+            why = discarded.get(r.episode_index, "not in any finished shard (its worker was killed or crashed)")
+        records.append({
+            "episode_index": idx, "benchmark_episode_index": r.episode_index, "house_index": r.house_index,
+            "task_cls": r.task_cls, "task_type": r.task_type, "prompt": r.prompt, "success": r.success,
+            "success_once": r.success_once, "steps": r.steps, "seed": r.seed, "error": r.error,
+            "policy": factory.policy, "benchmark": bench.get("name", factory.benchmark),
+            "benchmark_sha256": bench.get("sha256"), "not_recorded": why,
+        })
+    return records
+
+
+def check_dataset(root: Path, results: list[EpisodeResult]) -> None:
+    """Raise :class:`ExportError` unless the stored episodes agree with the eval records and results."""
+    import pyarrow.dataset as pads
+
+    by_index = {r.episode_index: r for r in results}
+    stored = {r["episode_index"]: r for r in read_eval_records(root) if r["episode_index"] is not None}
+    table = pads.dataset(str(root / "data"), format="parquet").to_table(
+        columns=["episode_index", "frame_index", "next.success", "next.done"])
+    frames = table.to_pandas()
+    if set(frames["episode_index"].unique()) != set(stored):
+        raise ExportError(f"{root}: data holds episodes {sorted(frames['episode_index'].unique())[:10]}…, "
+                          f"meta/eval/episodes.jsonl maps {sorted(stored)[:10]}…")
+    for ep, g in frames.groupby("episode_index"):
+        rec = stored[int(ep)]
+        res = by_index[rec["benchmark_episode_index"]]
+        last = g.loc[g["frame_index"].idxmax()]
+        if len(g) != res.steps or bool(last["next.success"]) != res.success or not bool(last["next.done"]):
+            raise ExportError(
+                f"{root}: dataset episode {ep} (benchmark episode {res.episode_index}) has {len(g)} frames, "
+                f"final next.success={bool(last['next.success'])}; the result says {res.steps} steps, "
+                f"success={res.success}")
+
+
+def _write_jsonl(path: Path, records: list[dict[str, Any]]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("".join(json.dumps(r) + "\n" for r in records))
+
+
+def _swap_into_place(tmp: Path, final: Path, work: Path) -> None:
+    old = work / "previous"
+    if final.exists():
+        final.rename(old)
+    tmp.rename(final)
+    shutil.rmtree(old, ignore_errors=True)

@@ -1,0 +1,215 @@
+"""``record=true``: every worker writes its rollouts with LeRobot's own writer; the main process merges.
+
+:class:`LeRobotRecorderFactory` is built from the run config in the main process and
+pickled to the workers. Each worker's :class:`LeRobotRecorder` streams frames into a
+LeRobot v3 dataset shard (``streaming_encoding=True``: video is encoded while the episode
+runs), saves an episode only if it finished without error, and finalizes its shard when
+the worker closes. ``finalize`` then merges the shards into ``output_dir/dataset`` with
+``lerobot.datasets.aggregate.aggregate_datasets``, writes the eval records, the dataset card
+and ``results.json`` into it, and pushes to the Hub when ``push=true``.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from molmo_lerobot.export.frames import FrameLayout
+from molmo_lerobot.export.shards import SHARDS_DIR, new_session, shard_name, write_marker
+from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder, RecorderFactory
+from molmo_lerobot.runner.results import EpisodeResult
+
+log = logging.getLogger(__name__)
+
+
+class RecordConfigError(ValueError):
+    """``record`` / ``push`` / ``hub`` settings are invalid; the message names the key."""
+
+
+def validate_repo_id(repo_id: str) -> str:
+    """A Hub dataset id ``<namespace>/<name>``: a valid namespace id, and valid by the Hub's own rules."""
+    from huggingface_hub.utils import HFValidationError
+    from huggingface_hub.utils import validate_repo_id as hf_validate
+
+    from molmo_lerobot.assets.namespaces import parse_dataset_id
+
+    try:
+        namespace, _ = parse_dataset_id(repo_id)
+        hf_validate(repo_id)
+    except (ValueError, HFValidationError) as exc:
+        raise RecordConfigError(f"hub.repo_id {repo_id!r} is not a valid dataset id: {exc}") from None
+    if namespace is None:
+        raise RecordConfigError(f"hub.repo_id {repo_id!r} must be <namespace>/<name>")
+    return repo_id
+
+
+def dataset_fps(policy_dt_ms: float) -> int:
+    """LeRobot stores integer fps; the exact policy rate goes into ``meta/eval/info.json``."""
+    return max(1, round(1000.0 / float(policy_dt_ms)))
+
+
+@dataclass
+class LeRobotRecorderFactory(RecorderFactory):
+    """Picklable recipe: per-worker shard writers plus the merge/publish step."""
+
+    repo_id: str
+    policy_dt_ms: float
+    benchmark: str
+    policy: str
+    push: bool = False
+    private: bool = False
+    session: str = field(default_factory=new_session)
+    #: finalize a worker's shard after this many episodes (bounds what a killed worker loses)
+    shard_episodes: int = 50
+    #: SVT-AV1 threads per camera stream (``None``: the codec decides)
+    encoder_threads: int | None = 1
+
+    @classmethod
+    def from_config(cls, cfg: dict[str, Any]) -> LeRobotRecorderFactory:
+        """Build from the resolved run config (``record``, ``push``, ``hub``, ``timing`` …)."""
+        bench = str((cfg.get("benchmark") or {}).get("name") or "benchmark")
+        policy = str((cfg.get("policy") or {}).get("name") or "policy")
+        hub = cfg.get("hub") or {}
+        push = bool(cfg.get("push"))
+        repo_id = hub.get("repo_id")
+        if push and not repo_id:
+            raise RecordConfigError("push=true needs hub.repo_id=<namespace>/<name>")
+        if repo_id:
+            validate_repo_id(str(repo_id))
+        else:
+            repo_id = f"local/{_slug(bench)}-{_slug(policy)}"
+        return cls(repo_id=str(repo_id), policy_dt_ms=float(cfg["timing"]["policy_dt_ms"]), benchmark=bench,
+                   policy=policy, push=push, private=bool(hub.get("private", False)))
+
+    @property
+    def fps(self) -> int:
+        return dataset_fps(self.policy_dt_ms)
+
+    def make(self, worker_id: str, output_dir: Path) -> LeRobotRecorder:
+        return LeRobotRecorder(self, worker_id, Path(output_dir))
+
+    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any]) -> None:
+        """Merge the shards into ``output_dir/dataset``; push it when ``push=true`` (failure = warning)."""
+        from molmo_lerobot.export.hub import push_dataset
+        from molmo_lerobot.export.merge import merge_shards
+
+        root = merge_shards(Path(output_dir), results, summary, self)
+        if self.push and root is not None:
+            push_dataset(root, self.repo_id, private=self.private)
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^-\w.]+", "-", text).strip("-.") or "x"
+
+
+class LeRobotRecorder(Recorder):
+    """One worker's writer: frames stream into the current shard; errors are never saved."""
+
+    wants_images = True
+
+    def __init__(self, factory: LeRobotRecorderFactory, worker_id: str, output_dir: Path) -> None:
+        self.factory = factory
+        self.worker_id = worker_id
+        self.shards_dir = output_dir / SHARDS_DIR
+        self._ds: Any = None
+        self._root: Path | None = None
+        self._layout: FrameLayout | None = None
+        self._seq = 0
+        self._saved: list[dict[str, Any]] = []
+        self._discarded: list[dict[str, Any]] = []
+        self._info: EpisodeInfo | None = None
+        self._frames = 0
+
+    # Recorder interface -------------------------------------------------------------
+    def start_episode(self, info: EpisodeInfo) -> None:
+        self._info, self._frames = info, 0
+
+    def record_step(self, obs: dict[str, Any], action: dict[str, Any], reward: float | None,
+                    success: bool, done: bool) -> None:
+        info = self._info
+        if info is None:
+            raise RuntimeError("record_step called before start_episode")
+        if self._frames == 0:
+            layout = FrameLayout.from_step(info, obs, reward)
+            if self._ds is not None and layout != self._layout:
+                self._close_shard()  # cameras/joints changed: a dataset holds one schema
+            if self._ds is None:
+                self._open_shard(layout, info.horizon)
+        assert self._layout is not None
+        self._ds.add_frame(self._layout.frame(obs, action, reward, success, done, info.prompt or info.task_type))
+        self._frames += 1
+
+    def end_episode(self, result: EpisodeResult) -> None:
+        frames, self._frames = self._frames, 0
+        if self._ds is None:
+            return
+        reason = None
+        if result.error is not None:
+            reason = "episode error"
+        elif frames != result.steps:
+            reason = f"recorded {frames} frames for {result.steps} steps"
+        elif dropped := self._dropped_frames():
+            reason = f"video encoder dropped {dropped} frames"
+        if reason is not None:
+            self._ds.clear_episode_buffer()
+            if frames:
+                self._discarded.append({"episode_index": result.episode_index, "reason": reason})
+                if result.error is None:
+                    log.warning("episode %d not recorded: %s", result.episode_index, reason)
+            return
+        try:
+            self._ds.save_episode()
+        except Exception:
+            self._abandon_shard()  # half-saved: leave it torn (no marker) so it is never merged
+            raise
+        self._saved.append({"episode_index": result.episode_index, "seed": result.seed,
+                            "success": result.success, "steps": result.steps})
+        if len(self._saved) >= self.factory.shard_episodes:
+            self._close_shard()
+
+    def close(self) -> None:
+        self._close_shard()
+
+    # Shards ----------------------------------------------------------------------------
+    def _open_shard(self, layout: FrameLayout, horizon: int) -> None:
+        from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+        self.shards_dir.mkdir(parents=True, exist_ok=True)
+        root = self.shards_dir / shard_name(self.factory.session, self.worker_id, self._seq)
+        while root.exists():  # never reuse a directory, whatever left it there
+            self._seq += 1
+            root = self.shards_dir / shard_name(self.factory.session, self.worker_id, self._seq)
+        self._seq += 1
+        self._ds = LeRobotDataset.create(
+            repo_id=self.factory.repo_id, fps=self.factory.fps, features=layout.features(), root=root,
+            robot_type=None, use_videos=True, streaming_encoding=True, video_backend="pyav",
+            # hold a whole episode per camera: the encoder may lag, but never drops a frame
+            encoder_queue_maxsize=max(64, int(horizon) + 1), encoder_threads=self.factory.encoder_threads,
+        )
+        self._root, self._layout = root, layout
+        self._saved, self._discarded = [], []
+
+    def _close_shard(self) -> None:
+        if self._ds is None:
+            return
+        ds, root = self._ds, self._root
+        self._ds = self._root = self._layout = None
+        if ds.has_pending_frames():
+            ds.clear_episode_buffer()
+        ds.finalize()
+        assert root is not None
+        write_marker(root, {"worker_id": self.worker_id, "session": self.factory.session,
+                            "episodes": self._saved, "discarded": self._discarded})
+        self._saved, self._discarded = [], []
+
+    def _abandon_shard(self) -> None:
+        log.warning("dataset shard %s abandoned after a failed save; its episodes will not be stored", self._root)
+        self._ds = self._root = self._layout = None
+        self._saved, self._discarded = [], []
+
+    def _dropped_frames(self) -> int:
+        encoder = getattr(getattr(self._ds, "writer", None), "_streaming_encoder", None)
+        return int(sum((getattr(encoder, "_dropped_frames", None) or {}).values()))

@@ -1,0 +1,62 @@
+"""Weights & Biases logging of a finished run, behind ``wandb.enable=true`` (off by default).
+
+Logs the run config, the overall and per-task scores (summary metrics), a per-episode
+table and ``results.json`` / ``report.html`` as files. Credentials and mode come from
+wandb's own environment (``WANDB_API_KEY``, ``WANDB_MODE=offline`` …). A logging failure
+is a warning; it never fails the run.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+from molmo_lerobot.runner.results import EpisodeResult
+
+log = logging.getLogger(__name__)
+
+EPISODE_COLUMNS = ["episode_index", "house_index", "task", "prompt", "success", "success_once", "steps",
+                   "seed", "duration_s", "error"]
+
+
+def metrics(summary: dict[str, Any]) -> dict[str, float]:
+    """Flat scalar metrics: overall and ``<task>/<metric>`` for every task."""
+    keys = ("success_rate", "success_once_rate", "n_episodes", "n_success", "n_errors")
+    out = {k: summary[k] for k in keys if k in summary}
+    out.update({"ci95_lo": summary.get("ci95", [0, 1])[0], "ci95_hi": summary.get("ci95", [0, 1])[1]})
+    for task, block in (summary.get("per_task") or {}).items():
+        out.update({f"{task}/{k}": block[k] for k in keys if k in block})
+    return out
+
+
+def log_run(output_dir: Path | str, summary: dict[str, Any], results: list[EpisodeResult]) -> bool:
+    """Log the run to W&B if ``summary["config"]["wandb"]["enable"]``; returns whether it was logged."""
+    settings = ((summary.get("config") or {}).get("wandb") or {})
+    if not settings.get("enable"):
+        return False
+    output_dir = Path(output_dir)
+    try:
+        import wandb
+
+        bench = (summary.get("benchmark") or {}).get("name", "benchmark")
+        policy = (summary.get("policy") or {}).get("name", "policy")
+        run = wandb.init(project=settings.get("project") or "molmo-eval", entity=settings.get("entity"),
+                         name=f"{bench}-{policy}-{output_dir.name}", job_type="eval", dir=str(output_dir),
+                         config=summary.get("config") or {}, tags=[str(bench), str(policy)])
+        try:
+            table = wandb.Table(columns=EPISODE_COLUMNS, data=[
+                [r.episode_index, r.house_index, r.task_type or r.task_cls, r.prompt, r.success, r.success_once,
+                 r.steps, r.seed, round(r.duration_s, 3), r.error] for r in results])
+            run.log({"episodes": table, **metrics(summary)})
+            run.summary.update(metrics(summary))
+            for name in ("results.json", "report.html"):
+                if (output_dir / name).is_file():
+                    run.save(str(output_dir / name), base_path=str(output_dir), policy="now")
+        finally:
+            run.finish()
+    except Exception as exc:
+        log.warning("W&B logging failed (the run's results are unaffected): %s: %s", type(exc).__name__,
+                    str(exc).splitlines()[0] if str(exc) else "")
+        return False
+    return True

@@ -1,0 +1,229 @@
+"""LeRobot recording with synthetic rollouts: shards per worker, merge, eval records, torn shards."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
+from molmo_lerobot.export.frames import FrameError, FrameLayout
+from molmo_lerobot.export.merge import EVAL_EPISODES, read_eval_records
+from molmo_lerobot.export.recorder import LeRobotRecorderFactory, RecordConfigError
+from molmo_lerobot.export.shards import SHARDS_DIR, list_shards
+
+CFG = {"benchmark": {"name": "synth_v1"}, "policy": {"name": "scripted"},
+       "timing": {"policy_dt_ms": 66.0}, "hub": {"repo_id": None, "private": False}, "push": False}
+
+
+def _load(root, repo_id):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    return LeRobotDataset(repo_id, root=root, video_backend="pyav")
+
+
+@pytest.fixture(scope="module")
+def two_worker_run(tmp_path_factory):
+    """Two workers; one errored episode, one episode retried after a worker died, one torn shard."""
+    import multiprocessing as mp
+
+    out = tmp_path_factory.mktemp("run")
+    factory = LeRobotRecorderFactory.from_config(CFG)
+    w0 = factory.make("w0g0", out)
+    results = {
+        0: S.run_episode(w0, 0, 10, success_from=5),
+        2: S.run_episode(w0, 2, 8, success_from=3, error="RuntimeError: boom"),
+    }
+    # worker w1g0 saves episodes 1 and 3, then is SIGKILLed: its shard is torn and must be skipped
+    child = mp.get_context("fork").Process(target=S.record_then_die,
+                                           args=(factory, out, "w1g0", [(1, 12, None), (3, 7, 1)]))
+    child.start()
+    child.join(120)
+    assert child.exitcode == -9
+    results[1] = S.run_episode(S.NullRecorder(), 1, 12, success_from=None)
+    w1b = factory.make("w1g1", out)  # the replacement worker reruns episode 3 (the one in flight)
+    results[3] = S.run_episode(w1b, 3, 7, success_from=1)
+    results[4] = S.run_episode(w0, 4, 9, success_from=8)
+    w0.close()
+    w1b.close()
+    ordered = [results[i] for i in sorted(results)]
+    summary = S.summary_for(ordered)
+    shards = list_shards(out)
+    factory.finalize(out, ordered, summary)
+    return out, factory, ordered, summary, shards
+
+
+def test_shards_are_per_worker_and_a_torn_one_is_marked(two_worker_run):
+    _, factory, _, _, shards = two_worker_run
+    names = {s.root.name.split(f"{factory.session}-")[1]: s.complete for s in shards}
+    assert names == {"w0g0-s000": True, "w1g0-s000": False, "w1g1-s000": True}
+
+
+def test_merged_dataset_loads_and_matches_eval_records(two_worker_run):
+    out, factory, results, _, _ = two_worker_run
+    ds = _load(out / "dataset", factory.repo_id)
+    records = read_eval_records(out / "dataset")
+    stored = [r for r in records if r["episode_index"] is not None]
+    # ep 2 errored (never saved); ep 1 and 3 of the torn shard are lost except the rerun of 3
+    assert {r["benchmark_episode_index"] for r in stored} == {0, 3, 4}
+    assert [r["benchmark_episode_index"] for r in records] == [0, 1, 2, 3, 4]
+    assert ds.num_episodes == 3 and ds.fps == 15
+    by_bench = {r.episode_index: r for r in results}
+    for rec in stored:
+        ep = ds.meta.episodes[rec["episode_index"]]
+        assert ep["length"] == by_bench[rec["benchmark_episode_index"]].steps
+        last = ds[ep["dataset_to_index"] - 1]
+        assert bool(last["next.success"]) == rec["success"] == by_bench[rec["benchmark_episode_index"]].success
+        assert bool(last["next.done"])
+        first = ds[ep["dataset_from_index"]]
+        # the video frame is the right episode's first image (brightness encodes the episode)
+        level = (rec["benchmark_episode_index"] * 37) % 250 / 255.0
+        assert float(first["observation.images.exo"].mean()) == pytest.approx(level, abs=0.03)
+        assert first["task"] == "pick up the mug"
+    why = {r["benchmark_episode_index"]: r["not_recorded"] for r in records}
+    assert why[2] == "episode error" and "killed or crashed" in why[1]
+    assert {"seed", "house_index", "success_once", "policy", "benchmark", "benchmark_sha256"} <= set(records[0])
+
+
+def test_feature_names_are_joint_names(two_worker_run):
+    out, factory, _, _, _ = two_worker_run
+    feats = _load(out / "dataset", factory.repo_id).meta.features
+    assert feats["observation.state"]["names"] == ["j1", "j2", "j3", "finger_left", "finger_right"]
+    assert feats["action"]["names"] == ["j1", "j2", "j3", "gripper"]
+    assert feats["observation.images.wrist"]["dtype"] == "video"
+    assert "next.reward" not in feats  # the synthetic task defines no reward
+
+
+def test_results_card_and_cleanup(two_worker_run):
+    out, _, _, summary, _ = two_worker_run
+    root = out / "dataset"
+    assert json.loads((root / "results.json").read_text())["n_episodes"] == summary["n_episodes"] == 5
+    card = (root / "README.md").read_text()
+    assert "| **all** | 5 | 60.0% |" in card and "meta/eval/episodes.jsonl" in card
+    info = json.loads((root / "meta/eval/info.json").read_text())
+    assert info["n_recorded"] == 3 and len(info["torn_shards"]) == 1 and info["fps_exact"] == pytest.approx(15.1515, 1e-3)
+    assert not (out / SHARDS_DIR).exists()
+    assert not list(out.glob(".dataset-merge-*"))
+    assert (root / EVAL_EPISODES).is_file()
+
+
+def test_resume_adds_new_shards_to_the_previous_dataset(two_worker_run, tmp_path):
+    out0, _, results, _, _ = two_worker_run
+    out = tmp_path / "run"
+    shutil.copytree(out0, out)
+    factory = LeRobotRecorderFactory.from_config(CFG)  # a new invocation: new session
+    w = factory.make("w0g0", out)  # same worker id as the first run: must not collide
+    new = S.run_episode(w, 5, 6, success_from=0, reward=False)
+    w.close()
+    everything = [*results, new]
+    factory.finalize(out, everything, S.summary_for(everything))
+    records = read_eval_records(out / "dataset")
+    stored = {r["benchmark_episode_index"]: r["episode_index"] for r in records if r["episode_index"] is not None}
+    assert sorted(stored) == [0, 3, 4, 5] and sorted(stored.values()) == [0, 1, 2, 3]
+    assert _load(out / "dataset", factory.repo_id).num_episodes == 4
+
+
+def test_reward_feature_when_the_task_defines_one(tmp_path):
+    factory = LeRobotRecorderFactory.from_config(CFG)
+    w = factory.make("w0g0", tmp_path)
+    r = S.run_episode(w, 0, 5, success_from=2, reward=True)
+    w.close()
+    factory.finalize(tmp_path, [r], S.summary_for([r]))
+    ds = _load(tmp_path / "dataset", factory.repo_id)
+    assert [float(ds[i]["next.reward"]) for i in range(5)] == [0, 0, 1, 1, 1]
+
+
+def test_all_errors_write_no_dataset(tmp_path):
+    factory = LeRobotRecorderFactory.from_config(CFG)
+    w = factory.make("w0g0", tmp_path)
+    r = S.run_episode(w, 0, 6, success_from=None, error="ValueError: bad action")
+    w.close()
+    factory.finalize(tmp_path, [r], S.summary_for([r]))
+    assert not (tmp_path / "dataset").exists()
+
+
+def test_frame_layout_rejects_mismatched_steps():
+    info = S.info(0, 5)
+    layout = FrameLayout.from_step(info, S.obs(0, 0), None)
+    bad = S.obs(0, 1)
+    bad["images"]["wrist"] = np.zeros((S.H + 1, S.W, 3), np.uint8)
+    with pytest.raises(FrameError, match="observation.images.wrist"):
+        layout.frame(bad, {"arm": np.zeros(3), "gripper": np.zeros(1)}, None, False, False, "t")
+    with pytest.raises(FrameError, match="action: move group 'arm' has 2 values"):
+        layout.frame(S.obs(0, 1), {"arm": np.zeros(2), "gripper": np.zeros(1)}, None, False, False, "t")
+    no_cam = S.obs(0, 0)
+    del no_cam["images"]["exo"]
+    with pytest.raises(FrameError, match="camera 'exo'"):
+        FrameLayout.from_step(info, no_cam, None)
+
+
+@pytest.mark.parametrize(("hub", "push", "match"), [
+    ({"repo_id": None}, True, "needs hub.repo_id"),
+    ({"repo_id": "no-namespace"}, True, "must be <namespace>/<name>"),
+    ({"repo_id": "bad//id"}, True, "not a valid dataset id"),
+    ({"repo_id": "a/b/c"}, False, "not a valid dataset id"),
+])
+def test_hub_settings_are_validated(hub, push, match):
+    with pytest.raises(RecordConfigError, match=match):
+        LeRobotRecorderFactory.from_config({**CFG, "hub": hub, "push": push})
+
+
+def test_default_repo_id_and_pickling():
+    import pickle
+
+    f = LeRobotRecorderFactory.from_config(CFG)
+    assert f.repo_id == "local/synth_v1-scripted" and f.fps == 15
+    assert pickle.loads(pickle.dumps(f)) == f
+
+
+
+def test_a_failed_save_leaves_the_shard_torn_and_never_merged(tmp_path, monkeypatch):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    factory = LeRobotRecorderFactory.from_config(CFG)
+    w = factory.make("w0g0", tmp_path)
+    first = S.run_episode(w, 0, 5, success_from=1)
+
+    def disk_full(self, *args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(LeRobotDataset, "save_episode", disk_full)
+    with pytest.raises(OSError, match="No space"):
+        S.run_episode(w, 1, 5, success_from=1)
+    monkeypatch.undo()
+    w.close()
+    assert [s.complete for s in list_shards(tmp_path)] == [False]
+    factory.finalize(tmp_path, [first], S.summary_for([first]))
+    assert not (tmp_path / "dataset").exists()  # the only shard was torn: nothing to merge
+
+
+def test_shards_rotate_and_merge_in_order(tmp_path):
+    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory.shard_episodes = 2
+    w = factory.make("w0g0", tmp_path)
+    results = [S.run_episode(w, i, 4 + i, success_from=i) for i in range(5)]
+    w.close()
+    assert len(list_shards(tmp_path)) == 3
+    factory.finalize(tmp_path, results, S.summary_for(results))
+    ds = _load(tmp_path / "dataset", factory.repo_id)
+    assert [int(ds.meta.episodes[i]["length"]) for i in range(5)] == [4, 5, 6, 7, 8]
+
+
+def test_an_episode_stored_twice_is_merged_once(tmp_path):
+    """A finished shard holds episode 3, whose result never reached the supervisor; the rerun stores it again."""
+    factory = LeRobotRecorderFactory.from_config(CFG)
+    a = factory.make("w0g0", tmp_path)
+    r2 = S.run_episode(a, 2, 6, success_from=2)
+    S.run_episode(a, 3, 5, success_from=None)  # first attempt: failure recorded in shard A
+    a.close()
+    b = factory.make("w0g1", tmp_path)
+    r3 = S.run_episode(b, 3, 5, success_from=4)  # the attempt whose result counts (success)
+    b.close()
+    factory.finalize(tmp_path, [r2, r3], S.summary_for([r2, r3]))
+    ds = _load(tmp_path / "dataset", factory.repo_id)
+    stored = {r["benchmark_episode_index"]: r["episode_index"] for r in read_eval_records(tmp_path / "dataset")}
+    assert ds.num_episodes == 2 and sorted(stored) == [2, 3]
+    last = ds[int(ds.meta.episodes[stored[3]]["dataset_to_index"]) - 1]
+    assert bool(last["next.success"]) is True  # the copy that matches the result was kept
