@@ -129,3 +129,4 @@ def test_table_format():
         "bb    -           d             2        error: ImportError: no",
     ]
     assert format_table([]).startswith("no plugins installed")
+

@@ -68,6 +68,16 @@ def molmo_config_dirs() -> list[str]:
 
 
 @hookspec
+def molmo_recorders(config: dict[str, Any]) -> list[Any]:
+    """Recorder factories (:class:`~molmo_lerobot.runner.recorders.RecorderFactory`) for this run.
+
+    Called once in the main process with the resolved run config (a plain dict); return an
+    empty list unless the config asks for your recording. Each factory is pickled to every
+    worker and makes one recorder there that sees every step of the one rollout loop.
+    """
+
+
+@hookspec
 def molmo_episode_overrides(episode: EpisodeSpec, config: Any) -> EpisodeSpec | None:
     """Edit an episode before it runs (MolmoSpaces' robot eval overrides).
 

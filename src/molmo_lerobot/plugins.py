@@ -30,6 +30,7 @@ KIND_HOOKS = {
     "molmo_policies": "policy",
     "molmo_config_dirs": "config",
     "molmo_episode_overrides": "override",
+    "molmo_recorders": "recorder",
 }
 
 
@@ -169,6 +170,15 @@ class Plugins:
                 except Exception as exc:
                     rec.status, rec.error = "error", f"molmo_config_dirs() failed: {_one_line(exc)}"
         return dirs
+
+    def recorder_factories(self, config: dict[str, Any]) -> list[Any]:
+        """Every ``molmo_recorders`` implementation's factories for this run config."""
+        factories: list[Any] = []
+        for rec in self.records:
+            fn = getattr(rec.module, "molmo_recorders", None) if rec.status == "ok" else None
+            if fn is not None:
+                factories.extend(fn(config=config) or [])
+        return factories
 
     def apply_episode_overrides(self, episode: Any, config: Any) -> Any:
         """Run every ``molmo_episode_overrides`` implementation in registration order."""

@@ -23,6 +23,7 @@ from pathlib import Path
 import pytest
 
 from molmo_lerobot.config import compose
+from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.runner import evaluate
 from molmo_lerobot.runner.recorders import Recorder, RecorderFactory
 
@@ -69,8 +70,8 @@ def test_export_overhead(tmp_path, monkeypatch):
 
     _run(tmp_path / "warmup", "limit=1", "horizon=5", "record=true")  # warm the file cache and imports
     t_eval, summary = _run(tmp_path / "eval")
-    with monkeypatch.context() as m:
-        m.setattr(evaluate, "_recorder_factories", lambda cfg: [RenderOnlyFactory()])
+    with monkeypatch.context() as m:  # a recorder that only asks for images, through the plugin hook
+        m.setattr(get_plugins(), "recorder_factories", lambda cfg: [RenderOnlyFactory()])
         t_render, _ = _run(tmp_path / "render")
     t_export, _ = _run(tmp_path / "export", "record=true")
 

@@ -76,7 +76,6 @@ def test_latency_echo_policy():
     local, remote = compare(EchoPolicy, 200)
     print(f"\necho policy, 2x224x224 cams: in-process {local:.3f} ms, server {remote:.3f} ms "
           f"(+{remote - local:.2f} ms per call)")
-    assert remote - local < 50
 
 
 def test_latency_tiny_act(tmp_path):
@@ -91,4 +90,3 @@ def test_latency_tiny_act(tmp_path):
     local, remote = compare(lambda: LeRobotPolicy(cfg), 30)
     print(f"\ntiny ACT (CPU, chunk of 4): in-process {local:.2f} ms, server {remote:.2f} ms "
           f"(+{remote - local:.2f} ms per call)")
-    assert remote - local < 100

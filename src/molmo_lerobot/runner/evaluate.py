@@ -23,6 +23,8 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
+from molmo_lerobot.export.report import write_report
+from molmo_lerobot.export.wandb_log import log_run
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.runner.results import EpisodeResult, summarize
@@ -83,16 +85,6 @@ def resolve_benchmark_path(bench_cfg: dict[str, Any]) -> Path:
     return data_path("benchmarks") / str(bench_cfg["name"])
 
 
-def _recorder_factories(cfg: dict[str, Any]) -> list[Any]:
-    """Recorders the run config asks for (each subscribes to the one rollout loop)."""
-    factories: list[Any] = []
-    if cfg.get("record"):
-        from molmo_lerobot.export.recorder import LeRobotRecorderFactory
-
-        factories.append(LeRobotRecorderFactory.from_config(cfg))
-    return factories
-
-
 def _make_executor(cfg: dict[str, Any]) -> Any:
     ex = cfg.get("executor") or {"name": "local"}
     common = dict(timeout_s=float(cfg.get("episode_timeout_s", 900)), retries=int(cfg.get("episode_retries", 1)))
@@ -117,9 +109,13 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     from molmo_lerobot.benchmark.validate import validate_benchmark
 
     cfg = OmegaConf.to_container(config, resolve=True) if isinstance(config, DictConfig) else dict(config)
+    if cfg.get("push") and not cfg.get("record"):
+        print("molmo-eval: push=true records the dataset it pushes (record=true)", file=sys.stderr)
+        cfg["record"] = True
     plugins = get_plugins()
     policy_name = str(cfg["policy"]["name"])
     plugins.policy(policy_name)  # unknown or broken policy plugin: fail before any work
+    recorders = plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
     bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]))
     problems: dict[int, list[str]] = {}
     for p in validate_benchmark(bench, plugins):
@@ -160,7 +156,6 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     results: dict[int, EpisodeResult] = {r.episode_index: r for r in done if r.episode_index in set(indices)}
     episodes_path = out / EPISODES_FILE
     todo = [it for it in items if it.episode_index not in results]
-    recorders = _recorder_factories(cfg)
     t0 = time.perf_counter()
     with open(episodes_path, "a") as log, tqdm(total=len(indices), initial=len(results), disable=not cfg.get("progress", True),
                                               desc=f"{bench.name} · {policy_name}", unit="ep", file=sys.stderr) as bar:
@@ -196,6 +191,8 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     for factory in recorders:
         factory.finalize(out, ordered, summary)
     _atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
+    write_report(out, summary, ordered)
+    log_run(out, summary, ordered)
     return EvalResults(summary=summary, episodes=ordered, output_dir=out)
 
 

@@ -1,0 +1,219 @@
+"""Paired comparison of two runs on the episodes they share (``molmo-compare RUN_A RUN_B``).
+
+Two runs are comparable only if they evaluated the same benchmark (same content sha256);
+episodes are paired by ``episode_index``. An episode that ended in an error counts as a
+failure, as in ``results.json``.
+
+Statistics, per run pair and per task:
+
+* the exact McNemar test: under H0 the discordant pairs split Binomial(b + c, 1/2); the
+  two-sided p-value is ``min(1, 2 * P(X <= min(b, c)))``, computed exactly with integers;
+* the paired difference of success rates ``B - A`` with a 95 % confidence interval by
+  Newcombe's square-and-add method for paired proportions (Newcombe 1998, method 10:
+  Wilson intervals for both rates, combined with the continuity-corrected correlation phi).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections import defaultdict
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from molmo_lerobot.runner.results import wilson_ci
+
+METRICS = {"success": "success at the final step", "success_once": "success at any step"}
+Z95 = 1.959963984540054
+
+
+class CompareError(ValueError):
+    """The runs cannot be compared; the message says which run and why."""
+
+
+@dataclass
+class Run:
+    """A finished run directory: its ``results.json`` header and its episodes by index."""
+
+    path: Path
+    policy: str
+    benchmark: dict[str, Any]
+    seed: Any
+    episodes: dict[int, dict[str, Any]]
+
+
+@dataclass
+class PairedStats:
+    """Paired 2x2 table of A vs B outcomes and the statistics computed from it."""
+
+    n: int
+    both: int
+    only_a: int
+    only_b: int
+    neither: int
+    rate_a: float
+    rate_b: float
+    diff: float  # rate_b - rate_a
+    ci95: tuple[float, float]
+    p_value: float  # exact McNemar, two-sided
+
+
+def load_run(path: str | Path) -> Run:
+    """Read ``results.json`` and ``episodes.jsonl`` of a finished run; refuse anything else."""
+    root = Path(path)
+    results_path = root / "results.json"
+    episodes_path = root / "episodes.jsonl"
+    if not root.is_dir():
+        raise CompareError(f"{root}: not a run directory")
+    if not results_path.exists():
+        raise CompareError(f"{root}: no results.json (unfinished run? complete it with resume=true)")
+    try:
+        results = json.loads(results_path.read_text())
+    except json.JSONDecodeError as exc:
+        raise CompareError(f"{results_path}: not valid JSON ({exc})") from None
+    bench = results.get("benchmark")
+    if not isinstance(bench, dict) or not bench.get("sha256"):
+        raise CompareError(f"{results_path}: field benchmark.sha256 is missing")
+    if not episodes_path.exists():
+        raise CompareError(f"{root}: episodes.jsonl is missing")
+    episodes: dict[int, dict[str, Any]] = {}
+    for lineno, line in enumerate(episodes_path.read_text().splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            ep = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise CompareError(f"{episodes_path}:{lineno}: not valid JSON ({exc})") from None
+        for key in ("episode_index", "success", "success_once"):
+            if key not in ep:
+                raise CompareError(f"{episodes_path}:{lineno}: field {key!r} is missing")
+        episodes[int(ep["episode_index"])] = ep
+    policy = results.get("policy") or {}
+    return Run(root, str(policy.get("name", "?")) if isinstance(policy, dict) else str(policy), bench,
+               results.get("seed"), episodes)
+
+
+def mcnemar_exact(only_a: int, only_b: int) -> float:
+    """Two-sided exact McNemar p-value for ``only_a`` vs ``only_b`` discordant pairs."""
+    n = only_a + only_b
+    if n == 0:
+        return 1.0
+    k = min(only_a, only_b)
+    tail = sum(math.comb(n, i) for i in range(k + 1))
+    return min(1.0, 2 * tail / 2**n)
+
+
+def paired_diff_ci(both: int, only_a: int, only_b: int, neither: int, z: float = Z95) -> tuple[float, float]:
+    """Newcombe square-and-add CI for ``rate_b - rate_a`` on paired outcomes."""
+    n = both + only_a + only_b + neither
+    if n == 0:
+        return (-1.0, 1.0)
+    k_a, k_b = both + only_a, both + only_b
+    p_a, p_b = k_a / n, k_b / n
+    l_a, u_a = wilson_ci(k_a, n, z)
+    l_b, u_b = wilson_ci(k_b, n, z)
+    margins = k_a * (n - k_a) * k_b * (n - k_b)
+    phi = 0.0
+    if margins > 0:
+        cross = both * neither - only_a * only_b
+        if cross > n / 2:
+            phi = (cross - n / 2) / math.sqrt(margins)
+        elif cross < 0:
+            phi = cross / math.sqrt(margins)
+    diff = p_b - p_a
+    lower = diff - math.sqrt(max(0.0, (p_b - l_b) ** 2 + (u_a - p_a) ** 2 - 2 * phi * (p_b - l_b) * (u_a - p_a)))
+    upper = diff + math.sqrt(max(0.0, (u_b - p_b) ** 2 + (p_a - l_a) ** 2 - 2 * phi * (u_b - p_b) * (p_a - l_a)))
+    return (max(-1.0, lower), min(1.0, upper))
+
+
+def paired_stats(pairs: list[tuple[bool, bool]]) -> PairedStats:
+    """Statistics for ``(outcome_a, outcome_b)`` pairs."""
+    both = sum(a and b for a, b in pairs)
+    only_a = sum(a and not b for a, b in pairs)
+    only_b = sum(b and not a for a, b in pairs)
+    neither = len(pairs) - both - only_a - only_b
+    n = len(pairs)
+    rate_a = (both + only_a) / n if n else 0.0
+    rate_b = (both + only_b) / n if n else 0.0
+    return PairedStats(n, both, only_a, only_b, neither, rate_a, rate_b, rate_b - rate_a,
+                       paired_diff_ci(both, only_a, only_b, neither), mcnemar_exact(only_a, only_b))
+
+
+def _outcome(ep: dict[str, Any], metric: str) -> bool:
+    return bool(ep.get(metric)) and ep.get("error") is None
+
+
+def compare_runs(run_a: Run, run_b: Run, metric: str = "success") -> dict[str, Any]:
+    """The comparison report (JSON-serializable); raises :class:`CompareError` if not comparable."""
+    if metric not in METRICS:
+        raise CompareError(f"unknown metric {metric!r} (available: {', '.join(METRICS)})")
+    sha_a, sha_b = run_a.benchmark["sha256"], run_b.benchmark["sha256"]
+    if sha_a != sha_b:
+        raise CompareError(
+            f"refusing to compare: {run_a.path} evaluated benchmark {run_a.benchmark.get('name')!r} "
+            f"(sha256 {sha_a[:12]}…) but {run_b.path} evaluated {run_b.benchmark.get('name')!r} "
+            f"(sha256 {sha_b[:12]}…); a paired comparison needs the same episodes")
+    shared = sorted(set(run_a.episodes) & set(run_b.episodes))
+    if not shared:
+        raise CompareError(f"{run_a.path} and {run_b.path} share no episodes")
+    by_task: dict[str, list[tuple[bool, bool]]] = defaultdict(list)
+    pairs: list[tuple[bool, bool]] = []
+    seed_mismatch = 0
+    for i in shared:
+        ea, eb = run_a.episodes[i], run_b.episodes[i]
+        pair = (_outcome(ea, metric), _outcome(eb, metric))
+        pairs.append(pair)
+        by_task[str(ea.get("task_type") or ea.get("task_cls") or "unknown")].append(pair)
+        seed_mismatch += ea.get("seed") != eb.get("seed")
+    notes = []
+    if seed_mismatch:
+        notes.append(f"{seed_mismatch} shared episodes ran with different episode seeds "
+                     f"(run seeds {run_a.seed!r} vs {run_b.seed!r}): pairs share the scene, not the randomization")
+    only_in = {"a": sorted(set(run_a.episodes) - set(shared)), "b": sorted(set(run_b.episodes) - set(shared))}
+    if only_in["a"] or only_in["b"]:
+        notes.append(f"episodes outside the comparison: {len(only_in['a'])} only in A, {len(only_in['b'])} only in B")
+    return {
+        "benchmark": {"name": run_a.benchmark.get("name"), "sha256": sha_a},
+        "metric": metric,
+        "metric_description": METRICS[metric] + "; an episode with an error counts as a failure",
+        "runs": {
+            key: {"path": str(run.path), "policy": run.policy, "seed": run.seed,
+                  "n_errors": sum(run.episodes[i].get("error") is not None for i in shared)}
+            for key, run in (("a", run_a), ("b", run_b))
+        },
+        "n_shared": len(shared),
+        "only_in": only_in,
+        "overall": asdict(paired_stats(pairs)),
+        "per_task": {task: asdict(paired_stats(ps)) for task, ps in sorted(by_task.items())},
+        "methods": {
+            "difference": "rate_b - rate_a",
+            "ci95": "Newcombe square-and-add for paired proportions (1998, method 10, corrected phi)",
+            "p_value": "exact McNemar test, two-sided (binomial on discordant pairs)",
+        },
+        "notes": notes,
+    }
+
+
+def format_report(report: dict[str, Any]) -> str:
+    """Human-readable report: header, both runs, overall statistics and a per-task table."""
+    o = report["overall"]
+    bench = report["benchmark"]
+    lines = [f"benchmark {bench['name']} (sha256 {bench['sha256'][:12]}…), {report['n_shared']} shared episodes, "
+             f"metric: {report['metric']} ({report['metric_description']})"]
+    for key, rate, k in (("a", o["rate_a"], o["both"] + o["only_a"]), ("b", o["rate_b"], o["both"] + o["only_b"])):
+        run = report["runs"][key]
+        lines.append(f"  {key.upper()}: {run['policy']:<12} {rate:.3f} ({k}/{o['n']})  errors {run['n_errors']}  "
+                     f"{run['path']}")
+    lo, hi = o["ci95"]
+    lines.append(f"  B - A: {o['diff']:+.3f}  95% CI [{lo:+.3f}, {hi:+.3f}] (Newcombe, paired)")
+    lines.append(f"  McNemar exact: {o['only_a']} pairs only A succeeded, {o['only_b']} only B; p = {o['p_value']:.4g}")
+    lines.append("per task:")
+    width = max(4, *(len(t) for t in report["per_task"]))
+    lines.append(f"  {'task':<{width}}  {'n':>5}  {'A':>6}  {'B':>6}  {'B-A':>7}  {'95% CI':<17}  {'p':>8}")
+    for task, s in report["per_task"].items():
+        lo, hi = s["ci95"]
+        lines.append(f"  {task:<{width}}  {s['n']:>5}  {s['rate_a']:>6.3f}  {s['rate_b']:>6.3f}  {s['diff']:>+7.3f}  "
+                     f"[{lo:+.3f}, {hi:+.3f}]  {s['p_value']:>8.4g}")
+    lines.extend(f"note: {n}" for n in report["notes"])
+    return "\n".join(lines)

@@ -1,0 +1,128 @@
+"""molmo-compare: exact McNemar test, Newcombe paired CI, pairing and refusal rules."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+
+import pytest
+
+from molmo_lerobot.cli.compare import main
+from molmo_lerobot.runner.compare import (
+    CompareError,
+    compare_runs,
+    load_run,
+    mcnemar_exact,
+    paired_diff_ci,
+    paired_stats,
+)
+
+SHA = "ab" * 32
+
+
+def _write_run(path, outcomes, sha=SHA, policy="p", seed=0, task=lambda i: "pick", errors=()):
+    """A finished run directory with ``outcomes[i] = (success, success_once)`` per episode index."""
+    path.mkdir(parents=True)
+    rows = [{"episode_index": i, "house_index": i // 2, "task_cls": "x.Pick", "success": s, "success_once": o,
+             "steps": 10, "seed": 1000 * seed + i, "error": "RuntimeError: boom" if i in errors else None,
+             "task_type": task(i)} for i, (s, o) in outcomes.items()]
+    (path / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    (path / "results.json").write_text(json.dumps({"benchmark": {"name": "b", "sha256": sha, "n_episodes": 99},
+                                                   "policy": {"name": policy}, "seed": seed}))
+    return path
+
+
+def test_mcnemar_exact_reference_values():
+    assert mcnemar_exact(1, 7) == 2 * (1 + 8) / 2**8  # Bentur et al. 2009 table: p = 0.0703
+    assert math.isclose(mcnemar_exact(6, 16), 0.052479, abs_tol=1e-6)  # Cavo et al. 2012 table
+    assert mcnemar_exact(0, 0) == 1.0 and mcnemar_exact(5, 5) == 1.0
+    assert mcnemar_exact(3, 9) == mcnemar_exact(9, 3)
+    assert mcnemar_exact(0, 30) == 2 / 2**30
+
+
+def test_newcombe_paired_ci_reference_value():
+    # Cavo et al. 2012 (Fagerland, Lydersen & Laake 2014): A-B = -0.0621, 95% CI -0.1186 to -0.0046;
+    # we report B-A, so the interval flips sign.
+    lo, hi = paired_diff_ci(59, 6, 16, 80)
+    assert math.isclose(lo, 0.0046, abs_tol=5e-5) and math.isclose(hi, 0.1186, abs_tol=5e-5)
+
+
+def test_newcombe_ci_contains_estimate_and_stays_in_range_for_all_small_tables():
+    for cells in itertools.product(range(4), repeat=4):
+        if sum(cells) == 0:
+            continue
+        both, only_a, only_b, neither = cells
+        n = sum(cells)
+        lo, hi = paired_diff_ci(*cells)
+        diff = (only_b - only_a) / n
+        assert -1.0 <= lo < hi <= 1.0 and lo <= diff <= hi, cells
+
+
+def test_paired_stats_table():
+    s = paired_stats([(True, True), (True, False), (False, True), (False, True), (False, False)])
+    assert (s.n, s.both, s.only_a, s.only_b, s.neither) == (5, 1, 1, 2, 1)
+    assert s.rate_a == pytest.approx(0.4) and s.rate_b == pytest.approx(0.6) and s.diff == pytest.approx(0.2)
+    assert s.p_value == 1.0
+
+
+def test_compare_pairs_shared_episodes_with_per_task_table(tmp_path):
+    a = _write_run(tmp_path / "a", {i: (i < 8, i < 9) for i in range(12)}, policy="expert",
+                   task=lambda i: "pick" if i < 6 else "open", errors={7})
+    b = _write_run(tmp_path / "b", {i: (i < 2, i < 2) for i in range(2, 14)}, policy="rand",
+                   task=lambda i: "pick" if i < 6 else "open")
+    rep = compare_runs(load_run(a), load_run(b))
+    assert rep["n_shared"] == 10 and rep["only_in"] == {"a": [0, 1], "b": [12, 13]}
+    o = rep["overall"]
+    # shared 2..11: A succeeds on 2..6 (7 is an error: a failure), B on none
+    assert (o["both"], o["only_a"], o["only_b"], o["neither"]) == (0, 5, 0, 5)
+    assert o["diff"] == pytest.approx(-0.5) and o["p_value"] == pytest.approx(2 / 32)
+    assert rep["per_task"]["pick"]["n"] == 4 and rep["per_task"]["open"]["n"] == 6
+    assert rep["per_task"]["open"]["only_a"] == 1  # episode 6
+    assert rep["runs"]["a"]["n_errors"] == 1
+    assert any("only in A" in n for n in rep["notes"])
+    once = compare_runs(load_run(a), load_run(b), metric="success_once")
+    assert once["overall"]["only_a"] == 6  # episode 8 succeeded at some step; 7 is still an error
+
+
+def test_compare_refuses_different_benchmarks_and_unfinished_runs(tmp_path):
+    a = _write_run(tmp_path / "a", {0: (True, True)})
+    b = _write_run(tmp_path / "b", {0: (True, True)}, sha="cd" * 32)
+    with pytest.raises(CompareError, match="refusing to compare.*sha256 abababababab.*sha256 cdcdcdcdcdcd"):
+        compare_runs(load_run(a), load_run(b))
+    (b / "results.json").unlink()
+    with pytest.raises(CompareError, match="no results.json.*resume=true"):
+        load_run(b)
+    c = _write_run(tmp_path / "c", {5: (True, True)})
+    with pytest.raises(CompareError, match="share no episodes"):
+        compare_runs(load_run(a), load_run(c))
+    (c / "episodes.jsonl").write_text('{"episode_index": 5, "success": true}\n')
+    with pytest.raises(CompareError, match=r"episodes.jsonl:1: field 'success_once' is missing"):
+        load_run(c)
+
+
+def test_cli_text_and_json(tmp_path, capsys):
+    a = _write_run(tmp_path / "a", {i: (i % 2 == 0, True) for i in range(6)}, seed=0)
+    b = _write_run(tmp_path / "b", {i: (True, True) for i in range(6)}, seed=1)
+    assert main([str(a), str(b)]) == 0
+    text = capsys.readouterr().out
+    assert "B - A: +0.500" in text and "McNemar exact" in text and "pick" in text
+    assert "different episode seeds" in text
+    assert main([str(a), str(b), "--json", "--metric", "success_once"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["metric"] == "success_once" and rep["overall"]["diff"] == 0.0
+    (b / "results.json").write_text(json.dumps({"benchmark": {"name": "b", "sha256": "ef" * 32}}))
+    assert main([str(a), str(b)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("molmo-compare: error: refusing to compare") and err.count("\n") == 1
+
+
+@pytest.mark.slow
+def test_compare_two_real_runs(small_bench, tmp_path, eval_config, capsys):
+    run_evaluation = pytest.importorskip("molmo_lerobot.runner.evaluate").run_evaluation
+    run_evaluation(eval_config(small_bench, tmp_path / "random", "policy=random", "workers=2", "horizon=40"))
+    run_evaluation(eval_config(small_bench, tmp_path / "scripted", "policy=scripted", "workers=2"))
+    assert main([str(tmp_path / "random"), str(tmp_path / "scripted"), "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["n_shared"] == 8 and rep["overall"]["diff"] > 0.5
+    assert rep["overall"]["p_value"] < 0.05 and rep["overall"]["ci95"][0] > 0
