@@ -8,6 +8,7 @@ give the same episodes (byte-identical JSON).
 
 from __future__ import annotations
 
+import importlib
 import json
 import math
 import os
@@ -129,9 +130,17 @@ def _episode(scene: ProceduralTabletop, house: int, index: int, seed: int, task:
     }
 
 
+#: task families whose scenes and episodes another module generates (same signature)
+EXTERNAL_GENERATORS = {"open": "molmo_lerobot.benchmark.generate_articulated",
+                       "close": "molmo_lerobot.benchmark.generate_articulated"}
+
+
 def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: int,
                        name: str) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Episodes (JSON-ready EpisodeSpec dicts) and metadata, fully determined by the arguments."""
+    if task in EXTERNAL_GENERATORS:
+        module = importlib.import_module(EXTERNAL_GENERATORS[task])
+        return module.generate_benchmark(task, n_houses, episodes_per_house, seed, name)
     if task not in TASK_CLS:
         raise ValueError(f"generate: unknown task {task!r} (can generate: {', '.join(TASK_CLS)})")
     if n_houses < 1 or episodes_per_house < 1:

@@ -250,10 +250,43 @@ class ScriptedPick(Policy):
         return {g: np.stack([a[g] for a in chunk]) for g in chunk[0]}
 
 
-def make_scripted(config: dict[str, Any]) -> ScriptedPick:
-    return ScriptedPick(config)
+class ScriptedExpert(Policy):
+    """``policy=scripted``: each episode is played by the expert its task type names.
+
+    A task plugin brings its own expert (``TaskType.expert``, a Policy class taking the
+    policy config); this policy only dispatches, keeping one expert instance per task type.
+    """
+
+    needs_images = False
+
+    def __init__(self, config: dict[str, Any]) -> None:
+        self.config = config
+        self.experts: dict[str, Policy] = {}
+        self.current: Policy | None = None
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        from molmo_lerobot.plugins import get_plugins
+
+        task_type = get_plugins().task_type(ctx.spec.task_name)
+        if task_type.name not in self.experts:
+            expert_cls = getattr(task_type, "expert", None)
+            if expert_cls is None:
+                raise ValueError(f"scripted policy: task type {task_type.name!r} has no scripted expert")
+            self.experts[task_type.name] = expert_cls(self.config)
+        self.current = self.experts[task_type.name]
+        self.current.reset(ctx)
+
+    def act(self, obs: Observation) -> Action:
+        if self.current is None:
+            raise RuntimeError("scripted policy: act() before reset()")
+        return self.current.act(obs)
+
+    def close(self) -> None:
+        for expert in self.experts.values():
+            expert.close()
 
 
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
-    return [PolicyType(name="scripted", factory=make_scripted, description="privileged pick expert (IK + grasps)")]
+    return [PolicyType(name="scripted", factory=ScriptedExpert,
+                       description="privileged expert of each episode's task type (IK + grasp library)")]

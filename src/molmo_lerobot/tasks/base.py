@@ -38,6 +38,9 @@ class TaskType(ABC):
     aliases: tuple[str, ...] = ()
     #: horizon used when neither the CLI nor the episode (``task_horizon_sec``) gives one
     default_horizon_sec: float
+    #: the privileged scripted expert for this task (a Policy class built from the policy
+    #: config), played by ``policy=scripted``; ``None`` when the task has none
+    expert: type | None = None
 
     @abstractmethod
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
