@@ -127,6 +127,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     limit = cfg.get("limit")
     indices = list(range(len(bench.episodes)))[: int(limit) if limit is not None else None]
 
+    horizons = {str(k): float(v) for k, v in (cfg.get("horizons") or {}).items()}
     items: list[WorkItem] = []
     errors: list[EpisodeResult] = []
     thresholds: dict[str, dict[str, Any]] = {}
@@ -141,7 +142,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         task_type = plugins.task_type(spec.task_name)
         entry = thresholds.setdefault(task_type.name, {**task_type.thresholds(spec), "horizon_steps": []})
         horizon = resolve_horizon(cfg.get("horizon"), spec.task, task_type.default_horizon_sec,
-                                  cfg["timing"]["policy_dt_ms"])
+                                  cfg["timing"]["policy_dt_ms"], horizons.get(task_type.name))
         if horizon not in entry["horizon_steps"]:
             entry["horizon_steps"].append(horizon)
         items.append(WorkItem(i, raw, seed))
@@ -151,6 +152,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                       "path": str(bench.path)},
         "policy": cfg["policy"], "seed": cfg["seed"], "limit": limit, "horizon": cfg.get("horizon"),
         "timing": cfg["timing"],
+        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera")},
     }
     done = _prepare_output(out, run_info, bool(cfg.get("resume")))
     results: dict[int, EpisodeResult] = {r.episode_index: r for r in done if r.episode_index in set(indices)}
@@ -175,7 +177,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         if todo:
             job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], horizon=cfg.get("horizon"),
                             output_dir=str(out), benchmark_name=bench.name, benchmark_sha256=bench.sha256,
-                            recorders=recorders)
+                            recorders=recorders, horizons=horizons)
             _make_executor(cfg).run(job, todo, record)
     ordered = [results[i] for i in sorted(results)]
     missing = sorted(set(indices) - set(results))
@@ -207,7 +209,7 @@ def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool) -> list[E
             raise RunError(f"cannot resume: {run_file} is missing")
         previous = json.loads(run_file.read_text())
         current = json.loads(json.dumps(run_info))  # compare as stored (JSON turns int keys into strings)
-        for key in ("benchmark", "policy", "seed", "horizon", "timing"):
+        for key in ("benchmark", "policy", "seed", "horizon", "timing", "eval_options"):
             if previous.get(key) != current.get(key):
                 raise RunError(f"cannot resume {out}: its {key} differs from this run's "
                                f"({previous.get(key)!r} vs {current.get(key)!r})")

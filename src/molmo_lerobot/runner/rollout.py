@@ -98,9 +98,11 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
     return RolloutOutcome(success=success, success_once=success_once, steps=horizon)
 
 
-def resolve_horizon(override: int | None, task_spec: Any, default_sec: float, policy_dt_ms: float) -> int:
-    """Policy steps: CLI override, else the episode's ``task_horizon_sec``, else the task default."""
+def resolve_horizon(override: int | None, task_spec: Any, default_sec: float, policy_dt_ms: float,
+                    task_sec: float | None = None) -> int:
+    """Policy steps: CLI override (steps), else the run's per-task horizon (``task_sec``), else
+    the episode's ``task_horizon_sec``, else the task type's default."""
     if override is not None:
         return int(override)
-    seconds = getattr(task_spec, "task_horizon_sec", None) or default_sec
+    seconds = task_sec or getattr(task_spec, "task_horizon_sec", None) or default_sec
     return max(1, int(round(float(seconds) * 1000.0 / policy_dt_ms)))

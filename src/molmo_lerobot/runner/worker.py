@@ -39,6 +39,7 @@ class WorkerJob:
     benchmark_name: str
     benchmark_sha256: str
     recorders: list[RecorderFactory] = field(default_factory=list)
+    horizons: dict[str, float] = field(default_factory=dict)
 
 
 class EpisodeWorker:
@@ -71,7 +72,7 @@ class EpisodeWorker:
             spec = EpisodeSpec.model_validate(item.spec)
             task_type = self.plugins.task_type(spec.task_name)
             horizon = resolve_horizon(self.job.horizon, spec.task, task_type.default_horizon_sec,
-                                      self.timing.policy_dt_ms)
+                                      self.timing.policy_dt_ms, self.job.horizons.get(task_type.name))
             prompt = spec.language.task_description if spec.language else ""
             env = make_env(spec, self.timing, self.plugins)
             try:

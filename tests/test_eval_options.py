@@ -1,0 +1,126 @@
+"""Eval-time options: custom object swap, camera overrides and randomization, per-task horizons,
+episode overrides from plugins, and robots no plugin provides."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from molmo_lerobot import hookimpl
+from molmo_lerobot.benchmark.load import load_benchmark
+from molmo_lerobot.config import compose
+from molmo_lerobot.overrides import OverrideError, molmo_episode_overrides
+from molmo_lerobot.paths import data_path
+from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.runner.evaluate import run_evaluation
+from molmo_lerobot.sim.env import Timing, make_env
+
+CUSTOM_MJCF = """<mujoco><worldbody><body name="thing"><freejoint/>
+<geom type="box" size="0.025 0.025 0.04" rgba="0.1 0.8 0.2 1" mass="0.1"/></body></worldbody></mujoco>"""
+
+
+@pytest.fixture(scope="module")
+def episode():
+    return load_benchmark(data_path("benchmarks") / "pick_v1").episodes[0]
+
+
+@pytest.fixture
+def custom_mjcf(tmp_path):
+    path = tmp_path / "thing.xml"
+    path.write_text(CUSTOM_MJCF)
+    return path
+
+
+def _rows(out: Path) -> list[dict]:
+    return [json.loads(x) for x in (out / "episodes.jsonl").read_text().splitlines()]
+
+
+def test_custom_object_replaces_the_target_keeping_its_pose(episode, custom_mjcf):
+    old = episode.task.pickup_obj_name
+    old_pose = episode.scene_modifications.object_poses[old]
+    new = molmo_episode_overrides(episode, {"custom_object": {"path": str(custom_mjcf), "name": "thing",
+                                                              "description": "pick up the green box"}})
+    assert new.task.pickup_obj_name == "thing" and old in new.scene_modifications.removed_objects
+    pose = new.scene_modifications.object_poses["thing"]
+    assert pose[:2] == old_pose[:2] and pose[3:] == old_pose[3:]
+    assert new.language.task_description == "pick up the green box"
+    env = make_env(new, Timing(), get_plugins())
+    env.reset(0)
+    mujoco_body = env.body_pose("thing")
+    table_top = get_plugins().scene_dataset(new.scene_dataset).metadata(new.house_index)["table_height"]
+    assert mujoco_body[2] == pytest.approx(table_top + 0.04, abs=2e-3)  # resting on the table, not in it
+    with pytest.raises(ValueError, match=f"no body '{old}'"):
+        env.body_id(old)
+    env.close()
+
+
+def test_custom_object_errors_are_clear(episode, tmp_path):
+    with pytest.raises(OverrideError, match="custom_object.path: no MJCF file"):
+        molmo_episode_overrides(episode, {"custom_object": {"path": str(tmp_path / "missing.xml")}})
+    with pytest.raises(OverrideError, match="camera.overrides: no camera 'nope'"):
+        molmo_episode_overrides(episode, {"camera": {"overrides": {"nope": {"fov": 10}}}})
+
+
+def test_camera_randomization_is_seeded_by_the_episode(episode):
+    a = molmo_episode_overrides(episode, {"camera": {"randomization": 2}})
+    b = molmo_episode_overrides(episode, {"camera": {"randomization": 2}})
+    assert a.cameras == b.cameras  # same episode -> same cameras, in any run or worker
+    assert [c.fov for c in a.cameras] != [c.fov for c in episode.cameras]
+    exo0, exo2 = episode.cameras[0], a.cameras[0]
+    assert 0 < np.linalg.norm(np.subtract(exo2.pos, exo0.pos)) <= 0.04 * np.sqrt(3) + 1e-9
+    assert molmo_episode_overrides(episode, {"camera": {"randomization": 0}}) is None
+    env0, env2 = make_env(episode, Timing(), get_plugins()), make_env(a, Timing(), get_plugins())
+    env0.reset(0)
+    env2.reset(0)
+    assert not np.array_equal(env0.render(exo0.name), env2.render(exo0.name))
+    env0.close()
+    env2.close()
+
+
+def test_options_change_the_run_and_are_recorded(tmp_path, custom_mjcf):
+    out = tmp_path / "run"
+    res = run_evaluation(compose([
+        "policy=random", "workers=1", "limit=2", f"output_dir={out}", "progress=false",
+        f"custom_object.path={custom_mjcf}", "custom_object.name=thing", "camera.randomization=1",
+        "+camera.overrides.exterior.fov=50", "+horizons.pick=1.0"]))
+    assert res.summary["n_errors"] == 0
+    results = json.loads((out / "results.json").read_text())
+    opts = results["eval_options"]
+    assert opts["custom_object"]["path"] == str(custom_mjcf) and opts["camera"]["randomization"] == 1
+    assert opts["horizons"] == {"pick": 1.0}
+    assert results["thresholds"]["pick"]["horizon_steps"] == [15]  # 1 s at 66 ms
+    assert all(r["steps"] == 15 for r in _rows(out))
+
+
+class _RobotOverride:
+    """A robot eval override as a third-party plugin would ship it."""
+
+    @hookimpl
+    def molmo_episode_overrides(self, episode, config):
+        init = dict(episode.robot.init_qpos, gripper=[1.0])
+        return episode.model_copy(update={
+            "robot": episode.robot.model_copy(update={"init_qpos": init}),
+            "language": episode.language.model_copy(update={"task_description": "overridden"})})
+
+
+def test_plugin_episode_overrides_apply(tmp_path, monkeypatch):
+    plugins = get_plugins()
+    monkeypatch.setattr(plugins, "records", list(plugins.records))
+    plugins.add(_RobotOverride(), "robot_override")
+    run_evaluation(compose(["policy=random", "workers=1", "limit=1", "horizon=2", f"output_dir={tmp_path}",
+                            "progress=false"]))
+    assert [r["prompt"] for r in _rows(tmp_path)] == ["overridden"]
+
+
+def test_robots_without_a_plugin_are_errors_not_crashes(tmp_path):
+    """MolmoSpaces door/nav episodes need a mobile robot: each is counted as an error with the reason."""
+    bench = Path(__file__).parent / "data" / "molmospaces" / "mixed_tasks"
+    res = run_evaluation(compose(["policy=random", "workers=1", f"benchmark.path={bench}", "horizon=2",
+                                  f"output_dir={tmp_path}", "progress=false"]))
+    rows = _rows(tmp_path)
+    assert len(rows) == res.summary["n_episodes"] == len(load_benchmark(bench).episodes)
+    mobile = [r for r in rows if "no robot plugin provides 'rby1" in (r["error"] or "")]
+    assert mobile and all(not r["success"] for r in mobile)
