@@ -60,7 +60,8 @@ def raw_loop(n: int, policy_name: str) -> tuple[float, int, int, int]:
         env.reset(seed)
         task = task_type.create(spec, env)
         m, d = env.model, env.data
-        renderer = mujoco.Renderer(m, height=spec.img_resolution[1], width=spec.img_resolution[0])
+        renderer = mujoco.Renderer(m, height=spec.img_resolution[1], width=spec.img_resolution[0]) \
+            if policy.needs_images else None
         policy.reset(EpisodeContext(spec=spec, episode_index=i, seed=seed, prompt=spec.language.task_description,
                                     move_groups=env.move_groups, policy_dt_s=timing.policy_dt_s, env=env))
         task.setup()
@@ -89,7 +90,8 @@ def raw_loop(n: int, policy_name: str) -> tuple[float, int, int, int]:
                 mujoco.mj_step(m, d, nstep=timing.substeps)
             task.success()
             steps += 1
-        renderer.close()
+        if renderer is not None:
+            renderer.close()
     return time.perf_counter() - t0, steps, renders, calls
 
 
