@@ -19,6 +19,7 @@ def hub_standin(tmp_path_factory, monkeypatch):
     the client's HTTP session to the stand-in, so nothing reaches the network.
     """
     import huggingface_hub.constants as hfc
+    import huggingface_hub.hf_api as hf_api
     from huggingface_hub import set_client_factory
     from huggingface_hub.utils._http import default_client_factory
 
@@ -28,6 +29,7 @@ def hub_standin(tmp_path_factory, monkeypatch):
                            "HF_HUB_CACHE": str(cache), "HF_HUB_DISABLE_TELEMETRY": "1"}.items():
             monkeypatch.setenv(key, value)
         monkeypatch.setattr(hfc, "ENDPOINT", hub.endpoint)
+        monkeypatch.setattr(hf_api.api, "endpoint", hub.endpoint)  # the client behind huggingface_hub.upload_file & co
         monkeypatch.setattr(hfc, "HUGGINGFACE_CO_URL_TEMPLATE", hub.endpoint + "/{repo_id}/resolve/{revision}/{filename}")
         monkeypatch.setattr(hfc, "HF_HUB_DISABLE_XET", True)
         monkeypatch.setattr(hfc, "HF_HUB_OFFLINE", False)
