@@ -141,8 +141,12 @@ class AssetCatalog:
 
 @cache
 def default_catalog() -> AssetCatalog:
-    """The process-wide catalog (built-ins registered); user libraries are added at runtime."""
-    return AssetCatalog()
+    """The process-wide catalog (built-in and articulated objects); user libraries are added at runtime."""
+    from molmo_lerobot.assets.articulated import ArticulatedAssetLibrary
+
+    catalog = AssetCatalog()
+    catalog.register_library(ArticulatedAssetLibrary(), first=False)
+    return catalog
 
 
 def annotation(uid: str) -> dict:
