@@ -253,3 +253,137 @@ def analytic_grasps(obj: BuiltinObject) -> np.ndarray:
     if not grasps:
         raise ValueError(f"object {obj.uid!r}: no grasp fits a {MAX_GRASP_WIDTH} m wide gripper")
     return np.stack(grasps).astype(np.float64)
+
+
+# Receptacles ---------------------------------------------------------------------------------
+
+RECEPTACLE_SHAPES = ("bowl", "plate", "tray", "box")
+
+
+@dataclass(frozen=True)
+class BuiltinReceptacle:
+    """A receptacle: one free body ``uid`` with a base geom and a ring of rim geoms.
+
+    ``shape`` is ``"bowl"`` / ``"plate"`` (round base, rim of ``RIM_SEGMENTS`` boxes) or
+    ``"tray"`` / ``"box"`` (rectangular base, four walls). ``half_size`` is the outer half
+    extent (x, y) of the footprint (radius twice for round ones), ``base_half_height`` the
+    half thickness of the base and ``rim_height`` the wall height above the base.
+    Receptacles are never grasped, so they have no grasps.
+    """
+
+    uid: str
+    category: str
+    shape: str
+    half_size: tuple[float, float]
+    base_half_height: float
+    rim_height: float
+    rgba: tuple[float, float, float, float]
+    mass: float
+    description: str
+    synset: str
+    receptacle: bool = True
+
+    #: wall thickness, and the number of rim segments of round receptacles
+    WALL = 0.005
+    RIM_SEGMENTS = 16
+
+    def __post_init__(self) -> None:
+        if self.shape not in RECEPTACLE_SHAPES:
+            raise ValueError(f"receptacle {self.uid!r}: shape {self.shape!r} is not one of {RECEPTACLE_SHAPES}")
+        if min(*self.half_size, self.base_half_height, self.rim_height, self.mass) <= 0:
+            raise ValueError(f"receptacle {self.uid!r}: sizes and mass must be positive")
+
+    @property
+    def round(self) -> bool:
+        return self.shape in ("bowl", "plate")
+
+    @property
+    def half_extents(self) -> tuple[float, float, float]:
+        """Half extents of the bounding box; the body origin is at its centre."""
+        return (self.half_size[0], self.half_size[1], self.base_half_height + self.rim_height / 2)
+
+    @property
+    def inner_half_size(self) -> tuple[float, float]:
+        """Half extents (x, y) of the free floor inside the rim."""
+        return (self.half_size[0] - 2 * self.WALL, self.half_size[1] - 2 * self.WALL)
+
+    @property
+    def color(self) -> str:
+        return self.description.split()[0]
+
+    def geoms(self) -> list[tuple[str, str, tuple[float, ...], tuple[float, float, float], float]]:
+        """``(suffix, type, size, pos, yaw)`` of every geom, in the body frame."""
+        hz = self.half_extents[2]
+        base_z = -hz + self.base_half_height
+        wall_hz = self.rim_height / 2
+        wall_z = -hz + 2 * self.base_half_height + wall_hz
+        w = self.WALL
+        if self.round:
+            r = self.half_size[0]
+            out = [("_base", "cylinder", (r, self.base_half_height), (0.0, 0.0, base_z), 0.0)]
+            half_len = (r - w) * np.tan(np.pi / self.RIM_SEGMENTS) + w
+            for k in range(self.RIM_SEGMENTS):
+                a = 2 * np.pi * k / self.RIM_SEGMENTS
+                pos = ((r - w) * np.cos(a), (r - w) * np.sin(a), wall_z)
+                out.append((f"_rim{k}", "box", (w, half_len, wall_hz), pos, float(a)))
+            return out
+        hx, hy = self.half_size
+        out = [("_base", "box", (hx, hy, self.base_half_height), (0.0, 0.0, base_z), 0.0)]
+        out += [(f"_wall{k}", "box", (w, hy, wall_hz), (s * (hx - w), 0.0, wall_z), 0.0)
+                for k, s in enumerate((1.0, -1.0))]
+        out += [(f"_wall{k + 2}", "box", (hx - 2 * w, w, wall_hz), (0.0, s * (hy - w), wall_z), 0.0)
+                for k, s in enumerate((1.0, -1.0))]
+        return out
+
+    def metadata(self) -> dict:
+        """The asset-library metadata document (MolmoSpaces' fields, plus ``receptacle``)."""
+        hx, hy, hz = self.half_extents
+        words = self.description.split()
+        return {
+            "assetId": self.uid,
+            "category": self.category,
+            "description": self.description,
+            "description_long": f"a {self.description} (receptacle, {self.mass * 1000:.0f} g)",
+            "description_short": {"one_word": words[-1], "two_words": " ".join(words[-2:]),
+                                  "three_words": " ".join(words[-3:])},
+            "synset": self.synset,
+            "mass": self.mass,
+            "boundingBox": {"x": round(2 * hx, 6), "y": round(2 * hy, 6), "z": round(2 * hz, 6)},
+            "receptacle": True,
+        }
+
+    def mjcf(self) -> str:
+        """A standalone MJCF document: one free body ``uid`` holding base and rim geoms."""
+        n = len(self.geoms())
+        rgba = " ".join(f"{v:g}" for v in self.rgba)
+        lines = []
+        for suffix, kind, size, pos, yaw in self.geoms():
+            quat = f"{np.cos(yaw / 2):.9g} 0 0 {np.sin(yaw / 2):.9g}"
+            lines.append(
+                f'      <geom name="{self.uid}{suffix}" type="{kind}" size="{" ".join(f"{v:.9g}" for v in size)}" '
+                f'pos="{" ".join(f"{v:.9g}" for v in pos)}" quat="{quat}" rgba="{rgba}" mass="{self.mass / n:.9g}" '
+                'friction="1.0 0.01 0.001" condim="4" contype="1" conaffinity="1"/>')
+        return (f'<mujoco model="{self.uid}">\n  <worldbody>\n    <body name="{self.uid}">\n'
+                f'      <freejoint name="{self.uid}_free"/>\n' + "\n".join(lines) + "\n"
+                "    </body>\n  </worldbody>\n</mujoco>\n")
+
+
+_RECEPTACLE_KINDS = {  # category -> (shape, half_size, base half height, rim height, mass, material, synset)
+    "bowl": ("bowl", (0.075, 0.075), 0.004, 0.035, 0.25, "ceramic", "bowl.n.03"),
+    "plate": ("plate", (0.09, 0.09), 0.004, 0.014, 0.3, "ceramic", "plate.n.04"),
+    "tray": ("tray", (0.095, 0.08), 0.004, 0.02, 0.3, "plastic", "tray.n.01"),
+    "box": ("box", (0.075, 0.075), 0.004, 0.045, 0.25, "cardboard", "box.n.01"),
+}
+_RECEPTACLE_COLORS = {"red": RED, "green": GREEN, "blue": BLUE, "yellow": YELLOW, "white": WHITE}
+
+BUILTIN_RECEPTACLES: dict[str, BuiltinReceptacle] = {
+    f"builtin_{color}_{category}": BuiltinReceptacle(f"builtin_{color}_{category}", category, shape, size, base, rim,
+                                                     rgba, mass, f"{color} {material} {category}", synset)
+    for category, (shape, size, base, rim, mass, material, synset) in _RECEPTACLE_KINDS.items()
+    for color, rgba in _RECEPTACLE_COLORS.items()
+}
+
+#: colours the color task paints receptacles with (name -> rgba)
+PAINT_COLORS: dict[str, tuple[float, float, float, float]] = {
+    "red": RED, "green": GREEN, "blue": BLUE, "yellow": YELLOW, "orange": ORANGE, "purple": PURPLE, "white": WHITE,
+}

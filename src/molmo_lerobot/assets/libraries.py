@@ -90,14 +90,14 @@ class AssetLibrary(ABC):
 
 
 class BuiltinAssetLibrary(AssetLibrary):
-    """The built-in primitive objects (``molmo_lerobot.assets.builtin``) as an asset library."""
+    """The built-in primitive objects and receptacles (``molmo_lerobot.assets.builtin``) as an asset library."""
 
     name = "builtin"
 
     def __init__(self) -> None:
-        from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
+        from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES
 
-        self.objects = BUILTIN_OBJECTS
+        self.objects = {**BUILTIN_OBJECTS, **BUILTIN_RECEPTACLES}
         self._grasps = BuiltinGraspLibrary()
 
     def uids(self) -> Iterator[str]:

@@ -2,8 +2,11 @@
 
 ``generate_benchmark`` draws houses and, per episode, a collision-free layout of every
 house object inside the robot's workspace, the object to pick, the robot's start pose
-(small joint jitter) and the exocentric camera (small jitter). The same arguments always
-give the same episodes (byte-identical JSON).
+(small joint jitter) and the exocentric camera (small jitter). The pick-and-place family
+(``pick_and_place``, ``pick_and_place_next_to``, ``pick_and_place_color``) also brings one
+or two of the house's receptacles into the workspace and picks the one to place at (next
+to); the colour task repaints two receptacles of one category in distinct colours. The
+same arguments always give the same episodes (byte-identical JSON).
 """
 
 from __future__ import annotations
@@ -19,13 +22,29 @@ from typing import Any
 
 import numpy as np
 
-from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BuiltinObject
+from molmo_lerobot.assets.builtin import (
+    BUILTIN_OBJECTS,
+    BUILTIN_RECEPTACLES,
+    PAINT_COLORS,
+    BuiltinObject,
+    BuiltinReceptacle,
+)
 from molmo_lerobot.cameras.base import look_rotation, mat_to_quat
 from molmo_lerobot.robots.franka import Franka
 from molmo_lerobot.sim.tabletop import ProceduralTabletop
 
 GENERATOR_VERSION = 1
-TASK_CLS = {"pick": "molmo_lerobot.tasks.pick.PickTask"}
+TASK_CLS = {"pick": "molmo_lerobot.tasks.pick.PickTask",
+            "pick_and_place": "molmo_lerobot.tasks.pick_and_place.PickAndPlaceTask",
+            "pick_and_place_next_to": "molmo_lerobot.tasks.pick_and_place.PickAndPlaceNextToTask",
+            "pick_and_place_color": "molmo_lerobot.tasks.pick_and_place.PickAndPlaceColorTask"}
+PLACE_HORIZON_SEC = 40.0
+#: next-to episodes start with the object's bounding circle at least this far from the receptacle's
+NEXT_TO_START_GAP = 0.12
+#: extra free space around the object to pick in place episodes (room for the open hand)
+PICK_CLEARANCE = 0.04
+#: free disc kept beside the receptacle in next-to episodes: object footprint + this margin
+NEXT_TO_SPOT_MARGIN = 0.03
 IMG_RESOLUTION = (224, 224)
 #: free space kept between the bounding circles of neighbouring objects (room for fingers)
 MIN_GAP = 0.05
@@ -100,7 +119,7 @@ def _cameras(table_height: float, rng: np.random.Generator) -> list[dict[str, An
 def _episode(scene: ProceduralTabletop, house: int, index: int, seed: int, task: str) -> dict[str, Any]:
     rng = np.random.default_rng([seed, house, index])
     meta = scene.metadata(house)
-    objects = [BUILTIN_OBJECTS[o["asset_id"]] for o in meta["objects"].values()]
+    objects = [BUILTIN_OBJECTS[o["asset_id"]] for o in meta["objects"].values() if not o["receptacle"]]
     poses = _layout(objects, meta["placement_region"], rng)
     target = objects[int(rng.integers(len(objects)))]
     robot = Franka()
@@ -130,6 +149,144 @@ def _episode(scene: ProceduralTabletop, house: int, index: int, seed: int, task:
     }
 
 
+def _receptacle_footprint(rec: BuiltinReceptacle, yaw: float) -> tuple[list[float], float, float]:
+    """Orientation, footprint radius and centre height of a receptacle standing on a table."""
+    hx, hy, hz = rec.half_extents
+    return _yaw_quat(yaw), (hx if rec.round else math.hypot(hx, hy)), hz
+
+
+def _fits(obj: BuiltinObject, rec: BuiltinReceptacle) -> bool:
+    """Whether ``obj``'s resting footprint fits inside the receptacle's rim."""
+    return _resting(obj, 0.0)[1] <= min(rec.inner_half_size)
+
+
+def _place_layout(receptacles: list[BuiltinReceptacle], objects: list[BuiltinObject], region: dict[str, Any],
+                  rng: np.random.Generator, next_to: bool, fixed: list[tuple[float, float, float]],
+                  pick_clearance: float) -> dict[str, list[float]] | None:
+    """Poses for ``receptacles`` then ``objects`` (the first is the one to pick), or None if they do not fit.
+
+    Footprints stay MIN_GAP apart from each other and from the ``fixed`` discs (x, y, radius),
+    and ``pick_clearance`` more around the object to pick.
+    ``next_to``: keep a free disc beside the first receptacle for the object, and start the
+    object at least :data:`NEXT_TO_START_GAP` from that receptacle.
+    """
+    items = [(r, *_receptacle_footprint(r, float(rng.uniform(-math.pi, math.pi)))) for r in receptacles]
+    items += [(o, *_resting(o, float(rng.uniform(-math.pi, math.pi)))) for o in objects]
+    pick, quat, pick_radius, height = items[len(receptacles)]
+    items[len(receptacles)] = (pick, quat, pick_radius + pick_clearance, height)
+    for _ in range(_MAX_TRIES // 4):
+        placed: list[tuple[float, float, float]] = []
+        poses: dict[str, list[float]] = {}
+        for k, (item, quat, radius, height) in enumerate(items):
+            for _ in range(50):
+                x, y = float(rng.uniform(*region["x"])), float(rng.uniform(*region["y"]))
+                ok = all(math.hypot(x - px, y - py) >= radius + pr + MIN_GAP for px, py, pr in placed + fixed)
+                if ok and next_to and k == len(receptacles):
+                    rx, ry, rr = placed[0]
+                    ok = math.hypot(x - rx, y - ry) >= rr + radius + NEXT_TO_START_GAP
+                if ok:
+                    break
+            else:
+                break
+            placed.append((x, y, radius))
+            poses[item.uid] = [_r(x), _r(y), _r(region["z"] + height)] + [_r(q) for q in quat]
+            if next_to and k == 0:  # the free spot beside the receptacle, inside the workspace
+                for _ in range(50):
+                    a = float(rng.uniform(-math.pi, math.pi))
+                    d = radius + pick_radius + NEXT_TO_SPOT_MARGIN
+                    sx, sy = x + d * math.cos(a), y + d * math.sin(a)
+                    if region["x"][0] <= sx <= region["x"][1] and region["y"][0] <= sy <= region["y"][1]:
+                        placed.append((sx, sy, pick_radius + NEXT_TO_SPOT_MARGIN))
+                        break
+                else:
+                    break
+        if len(poses) == len(items):
+            return poses
+    return None
+
+
+def _article(rec: BuiltinReceptacle) -> str:
+    return "on" if rec.shape in ("plate", "tray") else "in"
+
+
+def _place_episode(scene: ProceduralTabletop, house: int, index: int, seed: int, task: str) -> dict[str, Any]:
+    """One pick-and-place / next-to / colour episode (see the module docstring)."""
+    rng = np.random.default_rng([seed, house, index])
+    meta = scene.metadata(house)
+    objects = [BUILTIN_OBJECTS[o["asset_id"]] for o in meta["objects"].values() if not o["receptacle"]]
+    receptacles = [BUILTIN_RECEPTACLES[o["asset_id"]] for o in meta["objects"].values() if o["receptacle"]]
+    if task == "pick_and_place_color":  # the two of one category, told apart by paint only
+        pair = [receptacles[k] for k in rng.permutation(2)]
+        in_scene, target = pair, pair[0]
+        paints = [list(PAINT_COLORS)[k] for k in rng.choice(len(PAINT_COLORS), 2, replace=False)]
+    else:
+        order = [receptacles[k] for k in rng.permutation(len(receptacles))]
+        target = order[0]
+        in_scene = order[:1] if task == "pick_and_place_next_to" else order[:2]
+    candidates = [o for o in objects if task == "pick_and_place_next_to" or _fits(o, target)]
+    pick = candidates[int(rng.integers(len(candidates)))]
+    others = [objects[k] for k in rng.permutation(len(objects)) if objects[k] is not pick]
+    defaults = {uid: o["default_pose"] for uid, o in meta["objects"].items()}
+    # distractors that do not fit stay in the house's default row; room around the object comes first
+    for clearance, n in ((c, n) for c in (PICK_CLEARANCE, 0.0) for n in range(len(others), -1, -1)):
+        rest = {o.uid: [_r(v) for v in defaults[o.uid]] for o in others[n:]}
+        fixed = [(p[0], p[1], _resting(BUILTIN_OBJECTS[uid], 0.0)[1]) for uid, p in rest.items()]
+        poses = _place_layout(in_scene, [pick, *others[:n]], meta["placement_region"], rng,
+                              task == "pick_and_place_next_to", fixed, clearance)
+        if poses is not None:
+            poses.update(rest)
+            break
+    else:
+        raise RuntimeError(f"house {house}: could not lay out {pick.uid} and {[r.uid for r in in_scene]}")
+    robot = Franka()
+    arm = np.asarray(robot.default_init_qpos["arm"]) + rng.uniform(-0.05, 0.05, 7)
+    cameras = _cameras(meta["table_height"], rng)
+    phrase = f"the {pick.color} {pick.category}"
+    task_spec: dict[str, Any] = {
+        "task_cls": TASK_CLS[task],
+        "task_type": task,
+        "robot_base_pose": [_r(v) for v in meta["robot_base_pose"]],
+        "pickup_obj_name": pick.uid,
+        "pickup_obj_start_pose": poses[pick.uid],
+        "place_receptacle_name": target.uid,
+        "place_receptacle_start_pose": poses[target.uid],
+        "receptacle_supported_weight_frac": 0.5,
+        "max_place_receptacle_pos_displacement": 0.15,
+        "max_place_receptacle_rot_displacement": _r(math.radians(60)),
+    }
+    if task == "pick_and_place_color":
+        colors = dict(zip((r.uid for r in pair), paints, strict=True))
+        task_spec["object_colors"] = {uid: list(PAINT_COLORS[c]) for uid, c in colors.items()}
+        task_spec["other_receptacle_names"] = [pair[1].uid]
+        task_spec["other_receptacle_start_poses"] = {pair[1].uid: poses[pair[1].uid]}
+        where = f"the {colors[target.uid]} {target.category}"
+        instruction = f"put {phrase} {_article(target)} {where}"
+    elif task == "pick_and_place_next_to":
+        task_spec["min_surface_to_surface_gap"] = 0.0
+        task_spec["max_surface_to_surface_gap"] = 0.05
+        where = f"the {target.color} {target.category}"
+        instruction = f"put {phrase} next to {where}"
+    else:
+        where = f"the {target.color} {target.category}"
+        instruction = f"put {phrase} {_article(target)} {where}"
+    task_spec["task_horizon_sec"] = PLACE_HORIZON_SEC
+    return {
+        "house_index": house,
+        "scene_dataset": scene.name,
+        "data_split": "val",
+        "seed": int(rng.integers(2**31 - 1)),
+        "robot": {"robot_name": robot.name,
+                  "init_qpos": {"arm": [_r(q) for q in arm], "gripper": list(robot.default_init_qpos["gripper"])}},
+        "img_resolution": list(IMG_RESOLUTION),
+        "cameras": cameras,
+        "scene_modifications": {"added_objects": {}, "object_poses": poses, "removed_objects": []},
+        "task": task_spec,
+        "task_relevant_objects": [pick.uid, *(r.uid for r in in_scene if r is target or task.endswith("color"))],
+        "language": {"task_description": instruction,
+                     "referral_expressions": {"pickup_obj_name": phrase, "place_receptacle_name": where}},
+    }
+
+
 #: task families whose scenes and episodes another module generates (same signature)
 EXTERNAL_GENERATORS = {"open": "molmo_lerobot.benchmark.generate_articulated",
                        "close": "molmo_lerobot.benchmark.generate_articulated"}
@@ -150,8 +307,13 @@ def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: 
         raise ValueError(f"generate: n_houses {n_houses} exceeds the {scene.n_houses()} procedural houses")
     houses = sorted(int(h) for h in np.random.default_rng([seed, 0x4855]).choice(scene.n_houses(), n_houses,
                                                                                     replace=False))
-    episodes = [_episode(scene, h, i, seed, task) for h in houses for i in range(episodes_per_house)]
+    make = _episode if task == "pick" else _place_episode
+    episodes = [make(scene, h, i, seed, task) for h in houses for i in range(episodes_per_house)]
     categories = Counter(BUILTIN_OBJECTS[e["task"]["pickup_obj_name"]].category for e in episodes)
+    extra = {}
+    if task != "pick":
+        extra["receptacle_category_counts"] = dict(sorted(Counter(
+            BUILTIN_RECEPTACLES[e["task"]["place_receptacle_name"]].category for e in episodes).items()))
     metadata = {
         "name": name,
         "description": f"{task} on the procedural tabletop: {n_houses} houses x {episodes_per_house} episodes, "
@@ -160,6 +322,7 @@ def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: 
         "num_houses": n_houses,
         "task_cls_counts": dict(Counter(e["task"]["task_cls"] for e in episodes)),
         "object_category_counts": dict(sorted(categories.items())),
+        **extra,
         "robot_counts": dict(Counter(e["robot"]["robot_name"] for e in episodes)),
         "house_counts": {str(h): episodes_per_house for h in houses},
         "camera_system_class": "standard",

@@ -277,7 +277,12 @@ _SPEC_TAGS = {cls: name for name, cls in reversed(TASK_SPECS.items())}
 
 
 #: Our own task classes (benchmarks made by ``molmo-bench generate``) -> task type name.
-NATIVE_TASK_CLS: dict[str, str] = {"molmo_lerobot.tasks.pick.PickTask": "pick"}
+NATIVE_TASK_CLS: dict[str, str] = {
+    "molmo_lerobot.tasks.pick.PickTask": "pick",
+    "molmo_lerobot.tasks.pick_and_place.PickAndPlaceTask": "pick_and_place",
+    "molmo_lerobot.tasks.pick_and_place.PickAndPlaceNextToTask": "pick_and_place_next_to",
+    "molmo_lerobot.tasks.pick_and_place.PickAndPlaceColorTask": "pick_and_place_color",
+}
 
 
 def task_spec_model(task_cls: Any, task_type: Any = None) -> type[BaseTaskSpec]:

@@ -1,10 +1,13 @@
 """The procedural tabletop scene dataset (``procedural_tabletop``), a scene plugin.
 
 House ``i`` is generated from a random stream seeded by ``i`` alone: floor and table
-colours, table size and height, light directions, and 4–6 objects from the built-in set
-(no two with the same colour and category, so "the red mug" names exactly one). The
+colours, table size and height, light directions, 4–6 objects from the built-in set
+(no two with the same colour and category, so "the red mug" names exactly one) and three
+receptacles (two of one category in different colours, one of another category). The
 robot stands at the near edge of the table, on its top surface, facing +x. Objects start
-in a default row at the far side; episodes place them with ``object_poses``.
+in a default row at the far side, receptacles parked on the table's side strips outside
+the robot's workspace; episodes place them with ``object_poses``. Receptacles are drawn
+after everything else, so adding them left the rest of every house unchanged.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BuiltinObject
+from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES, BuiltinObject, BuiltinReceptacle
 from molmo_lerobot.sim.scenes import SceneDataset, attach_mjcf
 
 #: salt that keeps house streams apart from every other use of the house index
@@ -51,7 +54,18 @@ def _layout(house_index: int) -> dict[str, Any]:
         if len(chosen) == n_objects:
             break
     return {"height": height, "half_x": half_x, "half_y": half_y, "floor": floor, "table": table, "wall": wall,
-            "light_az": light_az, "objects": chosen}
+            "light_az": light_az, "objects": chosen, "receptacles": _receptacles(rng)}
+
+
+def _receptacles(rng: np.random.Generator) -> list[BuiltinReceptacle]:
+    """Two receptacles of one category (different colours) and one of another category."""
+    by_category: dict[str, list[BuiltinReceptacle]] = {}
+    for rec in BUILTIN_RECEPTACLES.values():
+        by_category.setdefault(rec.category, []).append(rec)
+    categories = sorted(by_category)
+    first, second = (categories[k] for k in rng.choice(len(categories), 2, replace=False))
+    pair = [by_category[first][k] for k in rng.choice(len(by_category[first]), 2, replace=False)]
+    return [*pair, by_category[second][int(rng.integers(len(by_category[second])))]]
 
 
 class ProceduralTabletop(SceneDataset):
@@ -81,10 +95,23 @@ class ProceduralTabletop(SceneDataset):
             "placement_region": {"x": list(self.REGION_X), "y": list(self.REGION_Y), "z": lay["height"]},
             "objects": {
                 obj.uid: {"asset_id": obj.uid, "category": obj.category, "color": obj.color,
-                          "description": obj.description, "default_pose": pose}
-                for obj, pose in zip(lay["objects"], self._default_poses(lay), strict=True)
+                          "description": obj.description, "default_pose": pose,
+                          "receptacle": isinstance(obj, BuiltinReceptacle)}
+                for obj, pose in self._placements(lay)
             },
         }
+
+    def _placements(self, lay: dict[str, Any]) -> list[tuple[BuiltinObject | BuiltinReceptacle, list[float]]]:
+        """Every object and receptacle of a house with its default pose (objects first)."""
+        return [*zip(lay["objects"], self._default_poses(lay), strict=True),
+                *zip(lay["receptacles"], self._parking_poses(lay), strict=True)]
+
+    def _parking_poses(self, lay: dict[str, Any]) -> list[list[float]]:
+        """Receptacles on the table's side strips, clear of :attr:`REGION_Y` and the default row."""
+        y = lay["half_y"] - 0.11
+        spots = [(0.38, y), (0.38, -y), (0.6, y)]
+        return [[x, sy, lay["height"] + rec.half_extents[2], 1.0, 0.0, 0.0, 0.0]
+                for rec, (x, sy) in zip(lay["receptacles"], spots, strict=True)]
 
     def _default_poses(self, lay: dict[str, Any]) -> list[list[float]]:
         """A row along y near the far table edge, each object resting on the table."""
@@ -122,7 +149,7 @@ class ProceduralTabletop(SceneDataset):
                      dir=[math.cos(az), -math.sin(az), -1.5], diffuse=[0.7, 0.7, 0.7], castshadow=False)
         wb.add_light(name="fill", pos=[cx, 0.0, h + 2.5], dir=[0.0, 0.0, -1.0], diffuse=[0.3, 0.3, 0.3],
                      castshadow=False)
-        for obj, pose in zip(lay["objects"], self._default_poses(lay), strict=True):
+        for obj, pose in self._placements(lay):
             attach_mjcf(world, obj.mjcf(), obj.uid, pos=pose[:3], quat=pose[3:], source=f"house {house_index}")
         return world
 

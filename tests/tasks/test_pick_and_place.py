@@ -1,0 +1,274 @@
+"""The pick-and-place family's success rules on constructed simulator states."""
+
+from __future__ import annotations
+
+import copy
+import math
+import os
+
+import mujoco
+import numpy as np
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES  # noqa: E402
+from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
+from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
+from molmo_lerobot.plugins import get_plugins  # noqa: E402
+from molmo_lerobot.robots.franka import FINGER_TRAVEL  # noqa: E402
+from molmo_lerobot.sim.env import Timing, make_env  # noqa: E402
+from molmo_lerobot.tasks.pick_and_place import polygon_gap  # noqa: E402
+
+
+def _episode(task: str, seed: int = 3) -> dict:
+    return generate_benchmark(task, 1, 1, seed, "test")[0][0]
+
+
+def _make(raw: dict):
+    plugins = get_plugins()
+    spec = EpisodeSpec.model_validate(raw)
+    env = make_env(spec, Timing(), plugins)
+    env.reset(0)
+    task = plugins.task_type(spec.task_name).create(spec, env)
+    task.setup()
+    return env, task
+
+
+@pytest.fixture
+def pnp():
+    env, task = _make(_episode("pick_and_place"))
+    yield env, task
+    env.close()
+
+
+@pytest.fixture
+def next_to():
+    env, task = _make(_episode("pick_and_place_next_to"))
+    yield env, task
+    env.close()
+
+
+def _hold(env) -> dict:
+    return {"arm": env.robot.targets(env.data, "arm"), "gripper": np.zeros(1)}
+
+
+def _settle(env, steps: int = 8) -> None:
+    for _ in range(steps):
+        env.step(_hold(env))
+
+
+def _clear_table(env, keep: set[str]) -> None:
+    """Move every other object and receptacle onto the floor, far from the table."""
+    names = [n for n in {**BUILTIN_OBJECTS, **BUILTIN_RECEPTACLES} if n not in keep
+             and mujoco.mj_name2id(env.model, mujoco.mjtObj.mjOBJ_BODY, n) >= 0]
+    for k, name in enumerate(names):
+        env._place(name, np.array([-1.0 - 0.3 * k, 1.5, 0.2, 1, 0, 0, 0]))
+    mujoco.mj_forward(env.model, env.data)
+
+
+def _put_in_receptacle(env, task) -> None:
+    """Drop the object upright into the middle of the receptacle and let it settle."""
+    rec = env.body_pose(task.receptacle_name)
+    base_top = rec[2] - BUILTIN_RECEPTACLES[task.receptacle_name].half_extents[2] + 0.008
+    obj = BUILTIN_OBJECTS[task.object_name]
+    lying = obj.shape == "capsule"
+    quat = [math.cos(math.pi / 4), 0, math.sin(math.pi / 4), 0] if lying else [1, 0, 0, 0]
+    height = obj.half_extents[0] if lying else obj.half_extents[2]
+    env._place(task.object_name, np.array([rec[0], rec[1], base_top + height + 0.002, *quat]))
+    mujoco.mj_forward(env.model, env.data)
+    _settle(env)
+
+
+def test_start_state_is_not_success(pnp, next_to):
+    for env, task in (pnp, next_to):
+        _settle(env, 2)
+        assert not task.success() and task.reward() == 0.0
+        assert task.support_fraction() == 0.0
+        assert task.support_fraction(env.subtree_bodies("table")) == pytest.approx(1.0, abs=0.02)
+    assert next_to[1].gap() > 0.1  # generated next-to episodes start well apart
+
+
+def test_resting_in_the_receptacle_succeeds(pnp):
+    env, task = pnp
+    _put_in_receptacle(env, task)
+    assert task.support_fraction() == pytest.approx(1.0, abs=0.02)
+    assert not task.robot_touching() and task.success() and task.reward() == 1.0
+
+
+@pytest.mark.parametrize("lift,ok", [(0.45, True), (0.55, False)])
+def test_support_fraction_threshold(pnp, lift, ok):
+    """An upward push of ``lift`` x weight on the object leaves 1 - lift for the receptacle to carry."""
+    env, task = pnp
+    _put_in_receptacle(env, task)
+    body = env.body_id(task.object_name)
+    env.data.xfrc_applied[body, 2] = lift * env.model.body_subtreemass[body] * 9.81
+    _settle(env, 4)
+    assert task.support_fraction() == pytest.approx(1.0 - lift, abs=0.02)
+    assert task.success() is ok
+
+
+def test_robot_still_touching_fails(pnp):
+    env, task = pnp
+    _clear_table(env, {task.object_name, task.receptacle_name})
+    site = env.robot.tcp_site
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, env.data.site_xmat[site])
+    env._place(task.object_name, np.concatenate([env.data.site_xpos[site], quat]))
+    width = 2 * BUILTIN_OBJECTS[task.object_name].half_extents[1]
+    env.robot.set_qpos(env.data, "gripper", [1.0 - (width / 2 - 0.002) / FINGER_TRAVEL])
+    mujoco.mj_forward(env.model, env.data)
+    bottom = env.data.xpos[env.body_id(task.object_name)][2] - BUILTIN_OBJECTS[task.object_name].half_extents[2]
+    # the receptacle's floor right under the held object (1 mm overlap), so both touch it
+    rec = BUILTIN_RECEPTACLES[task.receptacle_name]
+    pos = env.data.xpos[env.body_id(task.object_name)]
+    env._place(task.receptacle_name, np.array([pos[0], pos[1], bottom + 0.001 + rec.half_extents[2]
+                                               - 2 * rec.base_half_height, 1, 0, 0, 0]))
+    mujoco.mj_forward(env.model, env.data)
+    task.setup()
+    assert task.robot_touching() and task.support_fraction() >= 0.5 and task.receptacle_in_place()
+    assert not task.success()
+
+
+def test_receptacle_displacement_limits(pnp):
+    env, task = pnp
+    _put_in_receptacle(env, task)
+    now = env.data.xpos[env.body_id(task.receptacle_name)].copy()
+    task.start_pos = now - np.array([0.14, 0.0, 0.0])
+    assert task.success()
+    task.start_pos = now - np.array([0.0, 0.16, 0.0])
+    assert not task.success()
+    task.start_pos = now
+    up = env.data.xmat[env.body_id(task.receptacle_name)].reshape(3, 3)[:, 2]
+    for deg, ok in ((59.0, True), (61.0, False)):
+        a = math.radians(deg)
+        axis = np.cross(up, [1.0, 0.0, 0.0])
+        axis /= np.linalg.norm(axis)
+        task.start_up = up * math.cos(a) + np.cross(axis, up) * math.sin(a)
+        assert task.success() is ok, deg
+
+
+def test_yaw_is_ignored(pnp):
+    env, task = pnp
+    _put_in_receptacle(env, task)
+    task.setup()  # start = the settled state, then turn receptacle and object together
+    rec = env.body_id(task.receptacle_name)
+    centre = env.data.xpos[rec].copy()
+    yaw = np.array([math.cos(0.5), 0, 0, math.sin(0.5)])  # a 1 rad turn about the vertical
+    for name in (task.receptacle_name, task.object_name):
+        pose = env.body_pose(name)
+        rel = pose[:3] - centre
+        rot = np.array([[math.cos(1), -math.sin(1), 0], [math.sin(1), math.cos(1), 0], [0, 0, 1]])
+        quat = np.zeros(4)
+        mujoco.mju_mulQuat(quat, yaw, pose[3:])
+        env._place(name, np.concatenate([centre + rot @ rel, quat]))
+    mujoco.mj_forward(env.model, env.data)
+    moved, tilted = task.receptacle_displacement()
+    assert moved < 1e-6 and tilted < 1e-6 and task.success()
+
+
+def test_polygon_gap():
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
+    assert polygon_gap(square, square + [0.5, 0.5]) == 0.0
+    assert polygon_gap(square, square + [1.25, 0.0]) == pytest.approx(0.25)
+    assert polygon_gap(square, square + [2.0, 2.0]) == pytest.approx(math.sqrt(2))
+
+
+def _beside(env, task, gap: float) -> float:
+    """Put the object on the table beside the receptacle with XY surface gap ``gap``; return the settled gap."""
+    rec = env.body_pose(task.receptacle_name)
+    obj = env.body_pose(task.object_name)
+    direction = np.array([0.0, -1.0 if rec[1] > 0 else 1.0])  # towards the table's middle
+    dist = 0.15
+    for _ in range(5):
+        env._place(task.object_name, np.array([*(rec[:2] + dist * direction), obj[2], *obj[3:]]))
+        mujoco.mj_forward(env.model, env.data)
+        dist += gap - task.gap()
+    _settle(env, 3)
+    return task.gap()
+
+
+@pytest.mark.parametrize("gap,ok", [(0.055, True), (0.066, False), (0.0, True)])
+def test_next_to_gap(next_to, gap, ok):
+    env, task = next_to
+    _clear_table(env, {task.object_name, task.receptacle_name})
+    measured = _beside(env, task, gap)
+    assert measured == pytest.approx(gap, abs=0.002)
+    assert task.success() is ok
+
+
+def test_next_to_gap_bounds_and_tolerance(next_to):
+    env, task = next_to
+    _clear_table(env, {task.object_name, task.receptacle_name})
+    g = _beside(env, task, 0.03)
+    assert task.success()
+    task.max_gap = g - 0.01 + 0.0005  # max + 0.01 tolerance just above the gap
+    assert task.success()
+    task.max_gap = g - 0.01 - 0.0005
+    assert not task.success()
+    task.max_gap, task.min_gap = 0.05, g + 0.0005
+    assert not task.success()
+
+
+def test_next_to_inside_the_receptacle_fails(next_to):
+    env, task = next_to
+    _put_in_receptacle(env, task)
+    assert task.gap() == 0.0 and not task.success()  # supported by the receptacle, not the table
+
+
+def test_thresholds_defaults_and_overrides():
+    plugins = get_plugins()
+    raw = _episode("pick_and_place_next_to")
+    tt = plugins.task_type("pick_and_place_next_to")
+    assert plugins.task_type("molmo_spaces.tasks.pick_and_place_next_to_task.PickAndPlaceNextToTask") is tt
+    assert plugins.task_type(raw["task"]["task_cls"]) is tt and tt.default_horizon_sec == 40.0
+    stripped = copy.deepcopy(raw)
+    for field in ("receptacle_supported_weight_frac", "max_place_receptacle_pos_displacement",
+                  "max_place_receptacle_rot_displacement", "min_surface_to_surface_gap"):
+        del stripped["task"][field]
+    stripped["task"]["max_surface_to_surface_gap"] = None  # null means the default
+    assert tt.thresholds(EpisodeSpec.model_validate(stripped)) == {
+        "receptacle_supported_weight_frac": 0.5, "max_place_receptacle_pos_displacement": 0.15,
+        "max_place_receptacle_rot_displacement": pytest.approx(math.radians(60)),
+        "min_surface_to_surface_gap": 0.0, "max_surface_to_surface_gap": 0.05, "surface_gap_tolerance": 0.01}
+    raw["task"]["receptacle_supported_weight_frac"] = 0.8
+    assert tt.thresholds(EpisodeSpec.model_validate(raw))["receptacle_supported_weight_frac"] == 0.8
+    for name in ("pick_and_place", "pick_and_place_color"):
+        assert plugins.task_type(name).default_horizon_sec == 40.0
+
+
+def test_color_task_paints_and_needs_the_named_receptacle():
+    raw = _episode("pick_and_place_color")
+    colors = raw["task"]["object_colors"]
+    assert len(colors) == 2 and len({tuple(c) for c in colors.values()}) == 2
+    env, task = _make(raw)
+    try:
+        m = env.model
+        for name, rgba in colors.items():
+            geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] == env.body_id(name)]
+            assert geoms and all(np.allclose(m.geom_rgba[g], rgba) for g in geoms)
+        spec = EpisodeSpec.model_validate(raw)
+        fresh = make_env(spec, Timing(), get_plugins())  # same cached model: the paint must not leak
+        g0 = next(g for g in range(m.ngeom) if m.geom_bodyid[g] == env.body_id(task.receptacle_name))
+        assert not np.allclose(fresh.model.geom_rgba[g0], colors[task.receptacle_name])
+        fresh.close()
+        other = raw["task"]["other_receptacle_names"][0]
+        task.receptacle_name, keep = other, task.receptacle_name
+        _put_in_receptacle(env, task)  # into the other colour's receptacle
+        task.receptacle_name = keep
+        assert not task.success()
+    finally:
+        env.close()
+
+
+def test_bad_receptacle_is_named():
+    raw = _episode("pick_and_place")
+    raw["task"]["place_receptacle_name"] = "unicorn"
+    spec = EpisodeSpec.model_validate(raw)
+    env = make_env(spec, Timing(), get_plugins())
+    try:
+        env.reset(0)
+        with pytest.raises(ValueError, match="task.place_receptacle_name: no body 'unicorn'"):
+            get_plugins().task_type("pick_and_place").create(spec, env)
+    finally:
+        env.close()
