@@ -12,7 +12,7 @@ from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES, P
 from molmo_lerobot.benchmark.generate import NEXT_TO_START_GAP, _receptacle_footprint, _resting, generate_benchmark
 from molmo_lerobot.benchmark.schema import EpisodeSpec
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.sim.tabletop import ProceduralTabletop
+from molmo_lerobot.sim.tabletop import ProceduralTabletop, ProceduralTabletopReceptacles
 
 SHIPPED = {"pick_and_place_v1": "pick_and_place", "next_to_v1": "pick_and_place_next_to",
            "color_v1": "pick_and_place_color"}
@@ -35,8 +35,11 @@ def test_receptacle_compiles_with_its_mass_and_footprint(rec):
 
 
 def test_houses_hold_receptacles_outside_the_workspace():
-    scene = ProceduralTabletop()
+    scene = ProceduralTabletopReceptacles()
     for house in (0, 7, 150):
+        plain = ProceduralTabletop().metadata(house)["objects"]
+        assert not any(o["receptacle"] for o in plain.values())  # pick_v1's scenes stay as they were
+        assert set(plain) < set(scene.metadata(house)["objects"])
         meta = scene.metadata(house)
         recs = [o for o in meta["objects"].values() if o["receptacle"]]
         assert len(recs) == 3 and recs[0]["category"] == recs[1]["category"] != recs[2]["category"]

@@ -31,7 +31,7 @@ from molmo_lerobot.assets.builtin import (
 )
 from molmo_lerobot.cameras.base import look_rotation, mat_to_quat
 from molmo_lerobot.robots.franka import Franka
-from molmo_lerobot.sim.tabletop import ProceduralTabletop
+from molmo_lerobot.sim.tabletop import ProceduralTabletop, ProceduralTabletopReceptacles
 
 GENERATOR_VERSION = 1
 TASK_CLS = {"pick": "molmo_lerobot.tasks.pick.PickTask",
@@ -302,7 +302,7 @@ def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: 
         raise ValueError(f"generate: unknown task {task!r} (can generate: {', '.join(TASK_CLS)})")
     if n_houses < 1 or episodes_per_house < 1:
         raise ValueError("generate: n_houses and episodes_per_house must be at least 1")
-    scene = ProceduralTabletop()
+    scene = ProceduralTabletop() if task == "pick" else ProceduralTabletopReceptacles()
     if n_houses > scene.n_houses():
         raise ValueError(f"generate: n_houses {n_houses} exceeds the {scene.n_houses()} procedural houses")
     houses = sorted(int(h) for h in np.random.default_rng([seed, 0x4855]).choice(scene.n_houses(), n_houses,

@@ -3,7 +3,8 @@
 House ``i`` is generated from a random stream seeded by ``i`` alone: floor and table
 colours, table size and height, light directions, 4–6 objects from the built-in set
 (no two with the same colour and category, so "the red mug" names exactly one) and three
-receptacles (two of one category in different colours, one of another category). The
+receptacles (two of one category in different colours, one of another category), placed
+only in ``procedural_tabletop_receptacles``. The
 robot stands at the near edge of the table, on its top surface, facing +x. Objects start
 in a default row at the far side, receptacles parked on the table's side strips outside
 the robot's workspace; episodes place them with ``object_poses``. Receptacles are drawn
@@ -73,6 +74,9 @@ class ProceduralTabletop(SceneDataset):
 
     name = "procedural_tabletop"
     aliases = ("tabletop",)
+    #: whether houses include their three receptacles (a separate, named scene dataset, so
+    #: that adding receptacles never changed the scenes of benchmarks made without them)
+    WITH_RECEPTACLES = False
     #: table x extent starts this far behind the robot base
     TABLE_BACK = 0.2
     #: where objects may be placed, relative to the robot base (x forward, y left)
@@ -102,9 +106,12 @@ class ProceduralTabletop(SceneDataset):
         }
 
     def _placements(self, lay: dict[str, Any]) -> list[tuple[BuiltinObject | BuiltinReceptacle, list[float]]]:
-        """Every object and receptacle of a house with its default pose (objects first)."""
-        return [*zip(lay["objects"], self._default_poses(lay), strict=True),
-                *zip(lay["receptacles"], self._parking_poses(lay), strict=True)]
+        """Every object (and receptacle, where the dataset has them) of a house with its default pose."""
+        placed: list[tuple[BuiltinObject | BuiltinReceptacle, list[float]]] = [
+            *zip(lay["objects"], self._default_poses(lay), strict=True)]
+        if self.WITH_RECEPTACLES:
+            placed += zip(lay["receptacles"], self._parking_poses(lay), strict=True)
+        return placed
 
     def _parking_poses(self, lay: dict[str, Any]) -> list[list[float]]:
         """Receptacles on the table's side strips, clear of :attr:`REGION_Y` and the default row."""
@@ -154,6 +161,14 @@ class ProceduralTabletop(SceneDataset):
         return world
 
 
+class ProceduralTabletopReceptacles(ProceduralTabletop):
+    """The same houses plus three receptacles each (pick-and-place, next-to, color)."""
+
+    name = "procedural_tabletop_receptacles"
+    aliases = ()
+    WITH_RECEPTACLES = True
+
+
 @hookimpl
 def molmo_scene_datasets() -> list[SceneDataset]:
-    return [ProceduralTabletop()]
+    return [ProceduralTabletop(), ProceduralTabletopReceptacles()]
