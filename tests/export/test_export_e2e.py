@@ -1,4 +1,5 @@
-"""End to end on pick_v1: a multi-worker recorded eval, the report, and the eval → train → eval loop."""
+"""End to end on pick_v1: a multi-worker recorded eval (default run), the report, and the
+eval → train → eval loop (slow)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,6 @@ from molmo_lerobot.export.merge import read_eval_records
 from molmo_lerobot.export.report import write_report
 from molmo_lerobot.runner.evaluate import run_evaluation
 
-pytestmark = pytest.mark.slow
 REPO_ID = "local/pick_v1-scripted"
 
 
@@ -52,6 +52,7 @@ def test_multi_worker_recording_loads_and_agrees_with_episodes_jsonl(recorded):
     assert page.count("<video") == 8
 
 
+@pytest.mark.slow
 def test_act_trains_on_the_export_and_its_checkpoint_evaluates(recorded, tmp_path):
     out, _ = recorded
     train = tmp_path / "train"
