@@ -1,7 +1,7 @@
 """Ray actors vs the local process pool on one machine: episodes per second (target ratio >= 0.9).
 
 Run with ``pytest -m perf tests/perf/test_ray_throughput.py -s``. Both executors run the
-same 16 scripted-expert episodes on 2 workers; each is timed three times (alternating) and
+same scripted-expert episodes (16, or ``MOLMO_PERF_EPISODES``) on 2 workers; each is timed three times (alternating) and
 the best wall time kept. "warm" Ray joins a cluster started beforehand (a cluster normally
 outlives one run); "cold" includes starting the local cluster (``ray.init``).
 """
@@ -9,6 +9,7 @@ outlives one run); "cold" includes starting the local cluster (``ray.init``).
 from __future__ import annotations
 
 import json
+import os
 import time
 
 import pytest
@@ -16,7 +17,7 @@ import pytest
 from molmo_lerobot.config import compose
 from molmo_lerobot.runner.evaluate import run_evaluation
 
-N_EPISODES = 16
+N_EPISODES = 4 * (int(os.environ.get("MOLMO_PERF_EPISODES", "16")) // 4)
 WORKERS = 2
 REPS = 3  # alternating; the best wall time of each is kept (the machine is shared and noisy)
 
@@ -25,7 +26,7 @@ REPS = 3  # alternating; the best wall time of each is kept (the machine is shar
 def bench16(tmp_path_factory):
     from molmo_lerobot.benchmark.generate import generate_benchmark, write_benchmark
 
-    episodes, metadata = generate_benchmark("pick", 4, 4, seed=11, name="pick_perf")
+    episodes, metadata = generate_benchmark("pick", 4, N_EPISODES // 4, seed=11, name="pick_perf")
     return write_benchmark(tmp_path_factory.mktemp("bench") / "pick_perf", episodes, metadata)
 
 
