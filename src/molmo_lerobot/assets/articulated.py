@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import importlib.util
 import math
-from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -30,7 +29,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.assets.grasps import GraspLibrary
-from molmo_lerobot.assets.libraries import AssetLibrary, UidLocation
+from molmo_lerobot.assets.libraries import ObjectTableLibrary
 
 ROBOT = "franka"  # the analytic handle grasps are sized for the Franka hand
 
@@ -279,35 +278,8 @@ class ArticulatedGraspLibrary(GraspLibrary):
         return got
 
 
-class ArticulatedAssetLibrary(AssetLibrary):
+class ArticulatedAssetLibrary(ObjectTableLibrary):
     """The articulated objects above as an asset library (name ``articulated``)."""
 
-    name = "articulated"
-
     def __init__(self) -> None:
-        self.objects = ARTICULATED_OBJECTS
-        self._grasps = ArticulatedGraspLibrary()
-
-    def uids(self) -> Iterator[str]:
-        return iter(sorted(self.objects))
-
-    def __contains__(self, uid: object) -> bool:
-        return uid in self.objects
-
-    def metadata(self, uid: str) -> dict:
-        if uid not in self.objects:
-            raise self._unknown(uid)
-        return self.objects[uid].metadata()
-
-    def locate(self, uid: str) -> UidLocation:
-        if uid not in self.objects:
-            raise self._unknown(uid)
-        return UidLocation(self.name, None, None)
-
-    def mjcf(self, uid: str) -> str:
-        if uid not in self.objects:
-            raise self._unknown(uid)
-        return self.objects[uid].mjcf()
-
-    def grasp_library(self) -> GraspLibrary:
-        return self._grasps
+        super().__init__("articulated", ARTICULATED_OBJECTS, ArticulatedGraspLibrary())

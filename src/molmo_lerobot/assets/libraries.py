@@ -22,9 +22,10 @@ import os
 import shutil
 import uuid
 from abc import ABC, abstractmethod
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import lmdb
 import numpy as np
@@ -89,16 +90,13 @@ class AssetLibrary(ABC):
         return AssetError(f"library {self.name!r} has no UID {uid!r}")
 
 
-class BuiltinAssetLibrary(AssetLibrary):
-    """The built-in primitive objects and receptacles (``molmo_lerobot.assets.builtin``) as an asset library."""
+class ObjectTableLibrary(AssetLibrary):
+    """An asset library over an in-memory table of objects (each with ``metadata()`` and ``mjcf()``)."""
 
-    name = "builtin"
-
-    def __init__(self) -> None:
-        from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES
-
-        self.objects = {**BUILTIN_OBJECTS, **BUILTIN_RECEPTACLES}
-        self._grasps = BuiltinGraspLibrary()
+    def __init__(self, name: str, objects: Mapping[str, Any], grasps: GraspLibrary) -> None:
+        self.name = name
+        self.objects = objects
+        self._grasps = grasps
 
     def uids(self) -> Iterator[str]:
         return iter(sorted(self.objects))
@@ -106,23 +104,32 @@ class BuiltinAssetLibrary(AssetLibrary):
     def __contains__(self, uid: object) -> bool:
         return uid in self.objects
 
-    def metadata(self, uid: str) -> dict:
+    def _get(self, uid: str) -> Any:
         if uid not in self.objects:
             raise self._unknown(uid)
-        return self.objects[uid].metadata()
+        return self.objects[uid]
+
+    def metadata(self, uid: str) -> dict:
+        return self._get(uid).metadata()
 
     def locate(self, uid: str) -> UidLocation:
-        if uid not in self.objects:
-            raise self._unknown(uid)
+        self._get(uid)
         return UidLocation(self.name, None, None)
 
     def mjcf(self, uid: str) -> str:
-        if uid not in self.objects:
-            raise self._unknown(uid)
-        return self.objects[uid].mjcf()
+        return self._get(uid).mjcf()
 
     def grasp_library(self) -> GraspLibrary:
         return self._grasps
+
+
+class BuiltinAssetLibrary(ObjectTableLibrary):
+    """The built-in primitive objects and receptacles (``molmo_lerobot.assets.builtin``)."""
+
+    def __init__(self) -> None:
+        from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES
+
+        super().__init__("builtin", {**BUILTIN_OBJECTS, **BUILTIN_RECEPTACLES}, BuiltinGraspLibrary())
 
 
 def _read_json(path: Path) -> dict:
