@@ -37,7 +37,7 @@ def _check_faults(res, markers):
 
 def test_local_pool_isolates_crashes_hangs_and_errors(faulty_policy, small_bench, tmp_path, eval_config):
     cfg = eval_config(small_bench, tmp_path / "run", "policy=faulty", "workers=2", "horizon=3",
-                      "episode_timeout_s=2.5", FAULTS, f"policy.marker_dir={faulty_policy.marker_dir}")
+                      "episode_timeout_s=5", FAULTS, f"policy.marker_dir={faulty_policy.marker_dir}")
     res = run_evaluation(cfg)
     _check_faults(res, faulty_policy.marker_dir)
     assert "signal SIGKILL" in {r.episode_index: r for r in res.episodes}[1].error
@@ -47,7 +47,7 @@ def test_local_pool_isolates_crashes_hangs_and_errors(faulty_policy, small_bench
 @pytest.mark.slow
 def test_ray_actors_isolate_crashes_hangs_and_errors(faulty_policy, small_bench, tmp_path, eval_config):
     cfg = eval_config(small_bench, tmp_path / "run", "policy=faulty", "executor=ray", "workers=2", "horizon=3",
-                      "episode_timeout_s=2.5", FAULTS, f"policy.marker_dir={faulty_policy.marker_dir}")
+                      "episode_timeout_s=5", FAULTS, f"policy.marker_dir={faulty_policy.marker_dir}")
     _check_faults(run_evaluation(cfg), faulty_policy.marker_dir)
 
 
