@@ -95,6 +95,15 @@ def test_options_change_the_run_and_are_recorded(tmp_path, custom_mjcf):
     assert all(r["steps"] == 15 for r in _rows(out))
 
 
+def test_an_override_that_cannot_apply_fails_only_its_episodes(tmp_path, custom_mjcf):
+    res = run_evaluation(compose(["policy=random", "benchmark=open_v1", "workers=1", "limit=2", "horizon=2",
+                                  f"custom_object.path={custom_mjcf}", f"output_dir={tmp_path / 'run'}",
+                                  "progress=false"]))
+    assert res.summary["n_episodes"] == 2 and res.summary["n_errors"] == 2
+    assert all("episode override failed: OverrideError: custom_object:" in r["error"]
+               for r in _rows(tmp_path / "run"))
+
+
 class _RobotOverride:
     """A robot eval override as a third-party plugin would ship it."""
 

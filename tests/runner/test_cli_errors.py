@@ -14,6 +14,7 @@ from molmo_lerobot.cli.eval import main
         (["benchmark=nope"], "unknown benchmark 'nope'"),
         (["wokers=3"], "Could not override 'wokers'"),
         (["executor=slurm"], "unknown executor 'slurm'"),
+        (["workers=0"], "workers must be at least 1, got 0"),
     ],
 )
 def test_bad_config_is_one_clear_line(args, needle, capsys, tmp_path):

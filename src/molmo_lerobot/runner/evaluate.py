@@ -87,6 +87,8 @@ def resolve_benchmark_path(bench_cfg: dict[str, Any]) -> Path:
 
 def _make_executor(cfg: dict[str, Any]) -> Any:
     ex = cfg.get("executor") or {"name": "local"}
+    if int(cfg["workers"]) < 1:
+        raise RunError(f"workers must be at least 1, got {cfg['workers']}")
     common = dict(timeout_s=float(cfg.get("episode_timeout_s", 900)), retries=int(cfg.get("episode_retries", 1)))
     if ex["name"] == "local":
         from molmo_lerobot.runner.local import LocalExecutor
@@ -116,6 +118,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     policy_name = str(cfg["policy"]["name"])
     plugins.policy(policy_name)  # unknown or broken policy plugin: fail before any work
     recorders = plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
+    executor = _make_executor(cfg)
     bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]))
     problems: dict[int, list[str]] = {}
     for p in validate_benchmark(bench, plugins):
@@ -132,7 +135,14 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     errors: list[EpisodeResult] = []
     thresholds: dict[str, dict[str, Any]] = {}
     for i in indices:
-        spec = plugins.apply_episode_overrides(bench.episodes[i], cfg)
+        try:
+            spec = plugins.apply_episode_overrides(bench.episodes[i], cfg)
+        except Exception as exc:  # an override that cannot apply to this episode fails it, not the run
+            original = bench.episodes[i]
+            errors.append(EpisodeResult.failed(i, original.house_index, original.task.task_cls,
+                                               episode_seed(cfg["seed"], original.model_dump(mode="json")),
+                                               f"episode override failed: {type(exc).__name__}: {exc}"))
+            continue
         raw = spec.model_dump(mode="json", exclude_unset=False)
         seed = episode_seed(cfg["seed"], raw)
         if i in problems:
@@ -178,7 +188,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
             job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], horizon=cfg.get("horizon"),
                             output_dir=str(out), benchmark_name=bench.name, benchmark_sha256=bench.sha256,
                             recorders=recorders, horizons=horizons)
-            _make_executor(cfg).run(job, todo, record)
+            executor.run(job, todo, record)
     ordered = [results[i] for i in sorted(results)]
     missing = sorted(set(indices) - set(results))
     if missing:
@@ -189,7 +199,6 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         executor=(cfg.get("executor") or {}).get("name", "local"), output_dir=str(out),
         started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=cfg,
     )
-    summary["benchmark"]["n_episodes"] = len(bench.episodes)
     for factory in recorders:
         factory.finalize(out, ordered, summary)
     _atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
