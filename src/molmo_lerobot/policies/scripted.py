@@ -111,8 +111,10 @@ def _min_jerk(n: int) -> np.ndarray:
     return 10 * s**3 - 15 * s**4 + 6 * s**5
 
 
-class ScriptedPick(Policy):
-    """Pick expert: see the module docstring. Config: ``chunk`` (steps per action chunk), ``speed`` (rad/s)."""
+class PhasedExpert(Policy):
+    """Base of the scripted experts: a list of phases, each planned into queued joint targets
+    when the queue runs dry, played out in chunks. Config: ``chunk`` (steps per action chunk),
+    ``speed`` (rad/s)."""
 
     needs_images = False
 
@@ -122,19 +124,56 @@ class ScriptedPick(Policy):
         if self.chunk < 1 or self.speed <= 0:
             raise ValueError("scripted policy: chunk must be >= 1 and speed > 0")
 
-    def reset(self, ctx: EpisodeContext) -> None:
+    def _start(self, ctx: EpisodeContext, phases: list[str]) -> Any:
+        """Per-episode state every script shares; returns the (privileged) environment."""
         if ctx.env is None:
             raise ValueError("scripted policy needs privileged simulator access (ctx.env)")
         env = self.env = ctx.env
         self.dt = ctx.policy_dt_s
-        self.target = env.spec.task.pickup_obj_name
         self.ik = IKSolver(env.robot_type, env.spec.robot.robot_name,
                            tuple(float(v) for v in env.spec.task.robot_base_pose))
-        self.phases = ["approach", "descend", "close", "lift", "hold"]
+        self.phases = list(phases)
         self.queue: list[Action] = []
         self.grasp_local: np.ndarray | None = None
         self.q_cmd = env.robot.targets(env.data, "arm")
         self.g_cmd = float(env.robot.targets(env.data, "gripper")[0])
+        return env
+
+    def _plan(self, phase: str) -> None:
+        """Queue the actions of ``phase`` (the last phase repeats until the episode ends)."""
+        raise NotImplementedError
+
+    def _tcp_T(self) -> np.ndarray:
+        """Current world pose of the gripper TCP as a 4x4 matrix."""
+        site = self.env.robot.tcp_site
+        T = np.eye(4)
+        T[:3, :3] = self.env.data.site_xmat[site].reshape(3, 3)
+        T[:3, 3] = self.env.data.site_xpos[site]
+        return T
+
+    def _move(self, q_goal: np.ndarray, gripper: float, min_time: float) -> None:
+        """Queue a smooth joint-space move from the last command to ``q_goal``."""
+        dq = np.max(np.abs(q_goal - self.q_cmd))
+        n = max(1, int(np.ceil(max(min_time, dq / self.speed) / self.dt)))
+        for s in _min_jerk(n):
+            self.queue.append({"arm": self.q_cmd + s * (q_goal - self.q_cmd),
+                               "gripper": np.array([self.g_cmd + s * (gripper - self.g_cmd)])})
+        self.q_cmd, self.g_cmd = q_goal.copy(), gripper
+
+    def act(self, obs: Observation) -> Action:
+        while not self.queue:
+            phase = self.phases[0] if len(self.phases) == 1 else self.phases.pop(0)
+            self._plan(phase)
+        chunk, self.queue = self.queue[: self.chunk], self.queue[self.chunk:]
+        return {g: np.stack([a[g] for a in chunk]) for g in chunk[0]}
+
+
+class ScriptedPick(PhasedExpert):
+    """Pick expert: see the module docstring."""
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        env = self._start(ctx, ["approach", "descend", "close", "lift", "hold"])
+        self.target = env.spec.task.pickup_obj_name
 
     # Planning -----------------------------------------------------------------------------------
     def _object_T(self) -> np.ndarray:
@@ -195,15 +234,6 @@ class ScriptedPick(Policy):
         return float(min(T_obj[2, 3] + m.geom_pos[g][2] - m.geom_rbound[g] for g in geoms)
                      if m.body_geomnum[b] else T_obj[2, 3])
 
-    def _move(self, q_goal: np.ndarray, gripper: float, min_time: float) -> None:
-        """Queue a smooth joint-space move from the last command to ``q_goal``."""
-        dq = np.max(np.abs(q_goal - self.q_cmd))
-        n = max(1, int(np.ceil(max(min_time, dq / self.speed) / self.dt)))
-        for s in _min_jerk(n):
-            self.queue.append({"arm": self.q_cmd + s * (q_goal - self.q_cmd),
-                               "gripper": np.array([self.g_cmd + s * (gripper - self.g_cmd)])})
-        self.q_cmd, self.g_cmd = q_goal.copy(), gripper
-
     def _line(self, T_from: np.ndarray, T_to: np.ndarray, q_seed: np.ndarray, gripper: float, duration: float,
               points: int = 4) -> None:
         """Queue a straight TCP line (IK at ``points`` via-points, fixed orientation)."""
@@ -232,23 +262,12 @@ class ScriptedPick(Policy):
             self._move(self.q_cmd, 1.0, 0.5)
             self._move(self.q_cmd, 1.0, 0.2)
         elif phase == "lift":
-            site = env.robot.tcp_site
-            T_now = np.eye(4)
-            T_now[:3, :3] = env.data.site_xmat[site].reshape(3, 3)
-            T_now[:3, 3] = env.data.site_xpos[site]
+            T_now = self._tcp_T()
             T_up = T_now.copy()
             T_up[2, 3] += LIFT_HEIGHT
             self._line(T_now, T_up, self.q_cmd, 1.0, 1.2)
         else:  # hold
             self._move(self.q_cmd, 1.0, self.chunk * self.dt)
-
-    def act(self, obs: Observation) -> Action:
-        while not self.queue:
-            phase = self.phases[0] if len(self.phases) == 1 else self.phases.pop(0)
-            self._plan(phase)
-        chunk, self.queue = self.queue[: self.chunk], self.queue[self.chunk:]
-        return {g: np.stack([a[g] for a in chunk]) for g in chunk[0]}
-
 
 class ScriptedExpert(Policy):
     """``policy=scripted``: each episode is played by the expert its task type names.

@@ -15,14 +15,12 @@ Open drives the joint to :data:`OPEN_GOAL` of its range, close to fully closed.
 
 from __future__ import annotations
 
-from typing import Any
-
 import mujoco
 import numpy as np
 
 from molmo_lerobot.assets.grasps import get_grasps
-from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
-from molmo_lerobot.policies.scripted import IKSolver, _min_jerk
+from molmo_lerobot.policies.base import EpisodeContext
+from molmo_lerobot.policies.scripted import PhasedExpert
 
 PREGRASP_DISTANCE = 0.10
 #: opening fraction the expert drives to when opening (the success threshold is 0.2 by default)
@@ -41,23 +39,12 @@ PLAN_CHECKS = 4
 MIN_APPROACH_COS = 0.5
 
 
-class ScriptedArticulated(Policy):
-    """Open/close expert: see the module docstring. Config: ``chunk`` (steps per chunk), ``speed`` (rad/s)."""
-
-    needs_images = False
-
-    def __init__(self, config: dict[str, Any]) -> None:
-        self.chunk = int(config.get("chunk", 12))
-        self.speed = float(config.get("speed", 1.0))
-        if self.chunk < 1 or self.speed <= 0:
-            raise ValueError("scripted policy: chunk must be >= 1 and speed > 0")
+class ScriptedArticulated(PhasedExpert):
+    """Open/close expert: see the module docstring."""
 
     def reset(self, ctx: EpisodeContext) -> None:
-        if ctx.env is None:
-            raise ValueError("scripted policy needs privileged simulator access (ctx.env)")
-        env = self.env = ctx.env
+        env = self._start(ctx, ["approach", "insert", "close", "articulate", "release", "retreat", "hold"])
         task = env.spec.task
-        self.dt = ctx.policy_dt_s
         self.mode = env.spec.task_name
         self.object_name = task.pickup_obj_name
         m = env.model
@@ -76,13 +63,6 @@ class ScriptedArticulated(Policy):
         full = float(hi if abs(hi) >= abs(lo) else lo)  # the fully open end (closed is 0)
         self.q_goal = full * (OPEN_GOAL[self.kind] if self.mode == "open" else CLOSE_GOAL)
         self.scratch = mujoco.MjData(m)
-        self.ik = IKSolver(env.robot_type, env.spec.robot.robot_name,
-                           tuple(float(v) for v in task.robot_base_pose))
-        self.phases = ["approach", "insert", "close", "articulate", "release", "retreat", "hold"]
-        self.queue: list[Action] = []
-        self.grasp_local: np.ndarray | None = None
-        self.q_cmd = env.robot.targets(env.data, "arm")
-        self.g_cmd = float(env.robot.targets(env.data, "gripper")[0])
 
     # Geometry -----------------------------------------------------------------------------------
     def _uid(self) -> str:
@@ -104,13 +84,6 @@ class ScriptedArticulated(Policy):
         T = np.eye(4)
         T[:3, :3] = d.xmat[self.body].reshape(3, 3)
         T[:3, 3] = d.xpos[self.body]
-        return T
-
-    def _tcp_T(self) -> np.ndarray:
-        site = self.env.robot.tcp_site
-        T = np.eye(4)
-        T[:3, :3] = self.env.data.site_xmat[site].reshape(3, 3)
-        T[:3, 3] = self.env.data.site_xpos[site]
         return T
 
     def _choose_grasp(self) -> tuple[np.ndarray, np.ndarray]:
@@ -160,15 +133,6 @@ class ScriptedArticulated(Policy):
         return [self._body_T(q0 + (self.q_goal - q0) * k / n) @ grasp_local for k in range(1, n + 1)]
 
     # Queueing -----------------------------------------------------------------------------------
-    def _move(self, q_goal: np.ndarray, gripper: float, min_time: float) -> None:
-        """Queue a smooth joint-space move from the last command to ``q_goal``."""
-        dq = np.max(np.abs(q_goal - self.q_cmd))
-        n = max(1, int(np.ceil(max(min_time, dq / self.speed) / self.dt)))
-        for s in _min_jerk(n):
-            self.queue.append({"arm": self.q_cmd + s * (q_goal - self.q_cmd),
-                               "gripper": np.array([self.g_cmd + s * (gripper - self.g_cmd)])})
-        self.q_cmd, self.g_cmd = q_goal.copy(), gripper
-
     def _via(self, poses: list[np.ndarray], gripper: float, duration: float, partial: bool = False) -> None:
         """Queue IK via-points through ``poses`` (world TCP poses), ``duration`` seconds in all.
 
@@ -221,10 +185,3 @@ class ScriptedArticulated(Policy):
             self._line(T_now, T_back, 0.0, 0.8, points=2)
         else:  # hold
             self._move(self.q_cmd, self.g_cmd, self.chunk * self.dt)
-
-    def act(self, obs: Observation) -> Action:
-        while not self.queue:
-            phase = self.phases[0] if len(self.phases) == 1 else self.phases.pop(0)
-            self._plan(phase)
-        chunk, self.queue = self.queue[: self.chunk], self.queue[self.chunk:]
-        return {g: np.stack([a[g] for a in chunk]) for g in chunk[0]}
