@@ -309,27 +309,36 @@ def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: 
                                                                                     replace=False))
     make = _episode if task == "pick" else _place_episode
     episodes = [make(scene, h, i, seed, task) for h in houses for i in range(episodes_per_house)]
-    categories = Counter(BUILTIN_OBJECTS[e["task"]["pickup_obj_name"]].category for e in episodes)
     extra = {}
     if task != "pick":
         extra["receptacle_category_counts"] = dict(sorted(Counter(
             BUILTIN_RECEPTACLES[e["task"]["place_receptacle_name"]].category for e in episodes).items()))
-    metadata = {
+    description = (f"{task} on the procedural tabletop: {n_houses} houses x {episodes_per_house} episodes, "
+                   f"Franka Panda, exocentric + wrist camera (generator v{GENERATOR_VERSION}, seed {seed})")
+    return episodes, benchmark_metadata(name, task, description, episodes, houses, episodes_per_house, seed,
+                                        BUILTIN_OBJECTS, GENERATOR_VERSION, **extra)
+
+
+def benchmark_metadata(name: str, task: str, description: str, episodes: list[dict[str, Any]], houses: list[int],
+                       episodes_per_house: int, seed: int, objects: dict[str, Any], version: int,
+                       **extra: Any) -> dict[str, Any]:
+    """``benchmark_metadata.json`` of a generated benchmark (``objects`` maps target UIDs to assets,
+    ``version`` is the generator's)."""
+    categories = Counter(objects[e["task"]["pickup_obj_name"]].category for e in episodes)
+    return {
         "name": name,
-        "description": f"{task} on the procedural tabletop: {n_houses} houses x {episodes_per_house} episodes, "
-                       f"Franka Panda, exocentric + wrist camera (generator v{GENERATOR_VERSION}, seed {seed})",
+        "description": description,
         "num_episodes": len(episodes),
-        "num_houses": n_houses,
+        "num_houses": len(houses),
         "task_cls_counts": dict(Counter(e["task"]["task_cls"] for e in episodes)),
         "object_category_counts": dict(sorted(categories.items())),
         **extra,
         "robot_counts": dict(Counter(e["robot"]["robot_name"] for e in episodes)),
         "house_counts": {str(h): episodes_per_house for h in houses},
         "camera_system_class": "standard",
-        "generator": {"task": task, "n_houses": n_houses, "episodes_per_house": episodes_per_house, "seed": seed,
-                      "version": GENERATOR_VERSION},
+        "generator": {"task": task, "n_houses": len(houses), "episodes_per_house": episodes_per_house, "seed": seed,
+                      "version": version},
     }
-    return episodes, metadata
 
 
 def _write_atomic(path: Path, obj: Any) -> None:

@@ -10,7 +10,6 @@ MolmoSpaces' ``OpeningTask`` class with ``task_type`` open/close. Same arguments
 
 from __future__ import annotations
 
-from collections import Counter
 from functools import cache
 from typing import Any
 
@@ -18,7 +17,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.assets.articulated import ARTICULATED_OBJECTS
-from molmo_lerobot.benchmark.generate import IMG_RESOLUTION, _cameras, _r
+from molmo_lerobot.benchmark.generate import IMG_RESOLUTION, _cameras, _r, benchmark_metadata
 from molmo_lerobot.robots.franka import Franka
 from molmo_lerobot.sim.articulated import ArticulatedTabletop
 
@@ -143,20 +142,8 @@ def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: 
             break
     houses.sort()
     episodes = [_episode(scene, h, i, seed, task) for h in houses for i in range(episodes_per_house)]
-    categories = Counter(ARTICULATED_OBJECTS[e["task"]["pickup_obj_name"]].category for e in episodes)
-    metadata = {
-        "name": name,
-        "description": f"{task} articulated objects on the articulated tabletop: {n_houses} houses x "
-                       f"{episodes_per_house} episodes, Franka Panda, exocentric + wrist camera "
-                       f"(generator v{GENERATOR_VERSION}, seed {seed})",
-        "num_episodes": len(episodes),
-        "num_houses": n_houses,
-        "task_cls_counts": dict(Counter(e["task"]["task_cls"] for e in episodes)),
-        "object_category_counts": dict(sorted(categories.items())),
-        "robot_counts": dict(Counter(e["robot"]["robot_name"] for e in episodes)),
-        "house_counts": {str(h): episodes_per_house for h in houses},
-        "camera_system_class": "standard",
-        "generator": {"task": task, "n_houses": n_houses, "episodes_per_house": episodes_per_house, "seed": seed,
-                      "version": GENERATOR_VERSION},
-    }
-    return episodes, metadata
+    description = (f"{task} articulated objects on the articulated tabletop: {n_houses} houses x "
+                   f"{episodes_per_house} episodes, Franka Panda, exocentric + wrist camera "
+                   f"(generator v{GENERATOR_VERSION}, seed {seed})")
+    return episodes, benchmark_metadata(name, task, description, episodes, houses, episodes_per_house, seed,
+                                        ARTICULATED_OBJECTS, GENERATOR_VERSION)
