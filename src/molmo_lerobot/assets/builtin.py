@@ -65,22 +65,7 @@ class BuiltinObject:
 
     def metadata(self) -> dict:
         """The asset-library metadata document (MolmoSpaces' fields)."""
-        hx, hy, hz = self.half_extents
-        words = self.description.split()
-        return {
-            "assetId": self.uid,
-            "category": self.category,
-            "description": self.description,
-            "description_long": f"a {self.description} ({self.shape} primitive, {self.mass * 1000:.0f} g)",
-            "description_short": {
-                "one_word": words[-1],
-                "two_words": " ".join(words[-2:]),
-                "three_words": " ".join(words[-3:]),
-            },
-            "synset": self.synset,
-            "mass": self.mass,
-            "boundingBox": {"x": round(2 * hx, 6), "y": round(2 * hy, 6), "z": round(2 * hz, 6)},
-        }
+        return _metadata_doc(self, f"{self.shape} primitive")
 
     def mjcf(self) -> str:
         """A standalone MJCF document: one free body ``uid`` with its geom."""
@@ -337,20 +322,7 @@ class BuiltinReceptacle:
 
     def metadata(self) -> dict:
         """The asset-library metadata document (MolmoSpaces' fields, plus ``receptacle``)."""
-        hx, hy, hz = self.half_extents
-        words = self.description.split()
-        return {
-            "assetId": self.uid,
-            "category": self.category,
-            "description": self.description,
-            "description_long": f"a {self.description} (receptacle, {self.mass * 1000:.0f} g)",
-            "description_short": {"one_word": words[-1], "two_words": " ".join(words[-2:]),
-                                  "three_words": " ".join(words[-3:])},
-            "synset": self.synset,
-            "mass": self.mass,
-            "boundingBox": {"x": round(2 * hx, 6), "y": round(2 * hy, 6), "z": round(2 * hz, 6)},
-            "receptacle": True,
-        }
+        return {**_metadata_doc(self, "receptacle"), "receptacle": True}
 
     def mjcf(self) -> str:
         """A standalone MJCF document: one free body ``uid`` holding base and rim geoms."""
@@ -375,6 +347,26 @@ _RECEPTACLE_KINDS = {  # category -> (shape, half_size, base half height, rim he
     "box": ("box", (0.075, 0.075), 0.004, 0.045, 0.25, "cardboard", "box.n.01"),
 }
 _RECEPTACLE_COLORS = {"red": RED, "green": GREEN, "blue": BLUE, "yellow": YELLOW, "white": WHITE}
+
+def _metadata_doc(obj: BuiltinObject | BuiltinReceptacle, kind: str) -> dict:
+    """MolmoSpaces' asset metadata fields for a built-in primitive asset."""
+    hx, hy, hz = obj.half_extents
+    words = obj.description.split()
+    return {
+        "assetId": obj.uid,
+        "category": obj.category,
+        "description": obj.description,
+        "description_long": f"a {obj.description} ({kind}, {obj.mass * 1000:.0f} g)",
+        "description_short": {
+            "one_word": words[-1],
+            "two_words": " ".join(words[-2:]),
+            "three_words": " ".join(words[-3:]),
+        },
+        "synset": obj.synset,
+        "mass": obj.mass,
+        "boundingBox": {"x": round(2 * hx, 6), "y": round(2 * hy, 6), "z": round(2 * hz, 6)},
+    }
+
 
 BUILTIN_RECEPTACLES: dict[str, BuiltinReceptacle] = {
     f"builtin_{color}_{category}": BuiltinReceptacle(f"builtin_{color}_{category}", category, shape, size, base, rim,

@@ -24,7 +24,7 @@ import numpy as np
 from molmo_lerobot import hookimpl
 from molmo_lerobot.assets.articulated import ARTICULATED_OBJECTS, ArticulatedObject
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
-from molmo_lerobot.sim.scenes import SceneDataset, attach_mjcf
+from molmo_lerobot.sim.scenes import SceneDataset, attach_mjcf, room_spec
 
 _SALT = 0xA471C
 N_HOUSES = 1000
@@ -110,12 +110,8 @@ class ArticulatedTabletop(SceneDataset):
     def build(self, house_index: int) -> mujoco.MjSpec:
         self.check_house(house_index)
         lay = _layout(house_index)
-        world = mujoco.MjSpec()
-        world.modelname = f"{self.name}_{house_index}"
-        world.visual.headlight.ambient = [0.35, 0.35, 0.35]
-        world.visual.headlight.diffuse = [0.4, 0.4, 0.4]
+        world = room_spec(f"{self.name}_{house_index}", lay["floor"])
         wb = world.worldbody
-        wb.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3.0, 3.0, 0.05], rgba=[*lay["floor"], 1.0])
         h, top = lay["height"], 0.02
         hx, cx = (TABLE_X[1] - TABLE_X[0]) / 2, (TABLE_X[1] + TABLE_X[0]) / 2
         table = wb.add_body(name="table", pos=[cx, 0.0, 0.0])

@@ -41,6 +41,17 @@ class SceneDataset(ABC):
             raise ValueError(f"scene dataset {self.name!r}: house_index {house_index} out of range ({bound})")
 
 
+def room_spec(model_name: str, floor_rgb: Any) -> mujoco.MjSpec:
+    """An empty world every procedural scene starts from: headlight and a floor of ``floor_rgb``."""
+    world = mujoco.MjSpec()
+    world.modelname = model_name
+    world.visual.headlight.ambient = [0.35, 0.35, 0.35]
+    world.visual.headlight.diffuse = [0.4, 0.4, 0.4]
+    world.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3.0, 3.0, 0.05],
+                             rgba=[*floor_rgb, 1.0])
+    return world
+
+
 def attach_mjcf(world: mujoco.MjSpec, xml: str, body_name: str, pos=(0.0, 0.0, 0.0), quat=(1.0, 0.0, 0.0, 0.0),
                 source: str = "object") -> None:
     """Attach the first top-level body of an MJCF document to ``world``, renamed ``body_name``.

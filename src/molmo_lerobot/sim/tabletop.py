@@ -21,7 +21,7 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES, BuiltinObject, BuiltinReceptacle
-from molmo_lerobot.sim.scenes import SceneDataset, attach_mjcf
+from molmo_lerobot.sim.scenes import SceneDataset, attach_mjcf, room_spec
 
 #: salt that keeps house streams apart from every other use of the house index
 _SALT = 0x7AB1E
@@ -131,13 +131,8 @@ class ProceduralTabletop(SceneDataset):
     def build(self, house_index: int) -> mujoco.MjSpec:
         self.check_house(house_index)
         lay = _layout(house_index)
-        world = mujoco.MjSpec()
-        world.modelname = f"{self.name}_{house_index}"
-        world.visual.headlight.ambient = [0.35, 0.35, 0.35]
-        world.visual.headlight.diffuse = [0.4, 0.4, 0.4]
+        world = room_spec(f"{self.name}_{house_index}", lay["floor"])
         wb = world.worldbody
-        wb.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3.0, 3.0, 0.05],
-                    rgba=[*lay["floor"], 1.0])
         wb.add_geom(name="wall", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.02, 2.5, 1.4], pos=[2.2, 0.0, 1.4],
                     rgba=[*lay["wall"], 1.0], contype=0, conaffinity=0)
         h, hx, hy = lay["height"], lay["half_x"], lay["half_y"]
