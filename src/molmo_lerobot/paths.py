@@ -1,7 +1,9 @@
-"""Where shipped data lives: inside the wheel (``_data/``) or at the repository root (editable)."""
+"""Where data lives: ours (the wheel's ``_data/``, or the repository root when editable) and
+assets inside installed registry packages."""
 
 from __future__ import annotations
 
+import importlib.util
 from pathlib import Path
 
 _PKG = Path(__file__).resolve().parent
@@ -13,3 +15,15 @@ def data_path(name: str) -> Path:
         if candidate.is_dir():
             return candidate
     raise FileNotFoundError(f"shipped directory {name!r} not found next to {_PKG}")
+
+
+def package_asset_dir(package: str, *parts: str, marker: str, what: str) -> Path:
+    """``parts`` inside the installed ``package``, checked to hold ``marker``; ``what`` names who needs it."""
+    found = importlib.util.find_spec(package)
+    if found is None or not found.submodule_search_locations:
+        dist = package.replace("_", "-")
+        raise FileNotFoundError(f"{what}: the {dist!r} package is not installed (pip install {dist})")
+    path = Path(next(iter(found.submodule_search_locations))).joinpath(*parts)
+    if not (path / marker).exists():
+        raise FileNotFoundError(f"{what}: assets not found at {path} ({package} layout changed?)")
+    return path

@@ -19,7 +19,6 @@ child body (the moving part): ``+z`` approaches the handle from the front (local
 
 from __future__ import annotations
 
-import importlib.util
 import math
 from dataclasses import dataclass
 from functools import cache
@@ -30,6 +29,7 @@ import numpy as np
 
 from molmo_lerobot.assets.grasps import GraspLibrary
 from molmo_lerobot.assets.libraries import ObjectTableLibrary
+from molmo_lerobot.paths import package_asset_dir
 
 ROBOT = "franka"  # the analytic handle grasps are sized for the Franka hand
 
@@ -108,13 +108,8 @@ class ArticulatedObject:
 
 def kitchen_asset_dir() -> Path:
     """``kitchen_assets`` inside the installed gymnasium-robotics package."""
-    found = importlib.util.find_spec("gymnasium_robotics")
-    if found is None or not found.submodule_search_locations:
-        raise FileNotFoundError("the kitchen articulated objects need the 'gymnasium-robotics' package")
-    path = Path(next(iter(found.submodule_search_locations))) / "envs" / "assets" / "kitchen_franka" / "kitchen_assets"
-    if not (path / "item_assets").is_dir():
-        raise FileNotFoundError(f"kitchen assets not found at {path} (gymnasium-robotics layout changed?)")
-    return path
+    return package_asset_dir("gymnasium_robotics", "envs", "assets", "kitchen_franka", "kitchen_assets",
+                             marker="item_assets", what="the kitchen articulated objects")
 
 
 @cache

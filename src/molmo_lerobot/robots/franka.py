@@ -18,7 +18,6 @@ Move groups: ``arm`` (7 joint positions, rad) and ``gripper`` (1 value, 0 open â
 
 from __future__ import annotations
 
-import importlib.util
 import math
 from collections.abc import Sequence
 from functools import cache
@@ -29,6 +28,7 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.molmospaces import FRANKA_ROBOT_NAMES
+from molmo_lerobot.paths import package_asset_dir
 from molmo_lerobot.robots.base import RobotHandle, RobotType
 
 PREFIX = "robot/"
@@ -45,13 +45,8 @@ ARM_KV = (450.0, 450.0, 350.0, 350.0, 200.0, 200.0, 200.0)
 
 def franka_asset_dir() -> Path:
     """Directory of the Franka MJCF files inside the installed gymnasium-robotics package."""
-    found = importlib.util.find_spec("gymnasium_robotics")
-    if found is None or not found.submodule_search_locations:
-        raise FileNotFoundError("the Franka robot needs the 'gymnasium-robotics' package (pip install gymnasium-robotics)")
-    path = Path(next(iter(found.submodule_search_locations))) / "envs" / "assets" / "kitchen_franka" / "franka_assets"
-    if not (path / "chain.xml").is_file():
-        raise FileNotFoundError(f"Franka assets not found at {path} (gymnasium-robotics layout changed?)")
-    return path
+    return package_asset_dir("gymnasium_robotics", "envs", "assets", "kitchen_franka", "franka_assets",
+                             marker="chain.xml", what="the Franka robot")
 
 
 @cache
