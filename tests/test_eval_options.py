@@ -60,6 +60,8 @@ def test_custom_object_replaces_the_target_keeping_its_pose(episode, custom_mjcf
 def test_custom_object_errors_are_clear(episode, tmp_path):
     with pytest.raises(OverrideError, match="custom_object.path: no MJCF file"):
         molmo_episode_overrides(episode, {"custom_object": {"path": str(tmp_path / "missing.xml")}})
+    with pytest.raises(OverrideError, match="camera.randomization must be 0-3, got 5"):
+        molmo_episode_overrides(episode, {"camera": {"randomization": 5}})
     with pytest.raises(OverrideError, match="camera.overrides: no camera 'nope'"):
         molmo_episode_overrides(episode, {"camera": {"overrides": {"nope": {"fov": 10}}}})
 

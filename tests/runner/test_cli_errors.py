@@ -15,6 +15,8 @@ from molmo_lerobot.cli.eval import main
         (["wokers=3"], "Could not override 'wokers'"),
         (["executor=slurm"], "unknown executor 'slurm'"),
         (["workers=0"], "workers must be at least 1, got 0"),
+        (["+horizons.pick=soon"], "horizons.pick: expected a positive number of seconds, got 'soon'"),
+        (["+horizons.pick=-2"], "horizons.pick: expected a positive number of seconds, got -2"),
     ],
 )
 def test_bad_config_is_one_clear_line(args, needle, capsys, tmp_path):

@@ -85,6 +85,19 @@ def resolve_benchmark_path(bench_cfg: dict[str, Any]) -> Path:
     return data_path("benchmarks") / str(bench_cfg["name"])
 
 
+def _task_horizons(raw: dict[str, Any]) -> dict[str, float]:
+    """``horizons.<task>`` in seconds, each a positive number."""
+    out: dict[str, float] = {}
+    for task, value in raw.items():
+        try:
+            out[str(task)] = float(value)
+        except (TypeError, ValueError):
+            out[str(task)] = float("nan")
+        if not out[str(task)] > 0:
+            raise RunError(f"horizons.{task}: expected a positive number of seconds, got {value!r}")
+    return out
+
+
 def _make_executor(cfg: dict[str, Any]) -> Any:
     ex = cfg.get("executor") or {"name": "local"}
     if int(cfg["workers"]) < 1:
@@ -130,7 +143,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     limit = cfg.get("limit")
     indices = list(range(len(bench.episodes)))[: int(limit) if limit is not None else None]
 
-    horizons = {str(k): float(v) for k, v in (cfg.get("horizons") or {}).items()}
+    horizons = _task_horizons(cfg.get("horizons") or {})
     items: list[WorkItem] = []
     errors: list[EpisodeResult] = []
     thresholds: dict[str, dict[str, Any]] = {}
