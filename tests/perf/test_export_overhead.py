@@ -1,16 +1,17 @@
 """Export overhead, measured in one run (``pytest -m perf -s tests/perf/test_export_overhead.py``).
 
-Three ``run_evaluation`` runs of the same pick_v1 episodes (scripted expert, workers=2):
+Four ``run_evaluation`` runs of the same pick_v1 episodes (scripted expert, workers=2):
 
 * ``eval``: no recorder. The scripted expert needs no images, so nothing is rendered;
 * ``render``: a recorder that only asks for images, so every step renders every camera
   (what any image-based policy or video recording pays anyway) and keeps nothing;
-* ``export``: ``record=true``: every step rendered, streamed into per-worker LeRobot shards
-  (AV1 streaming encoding), merged into ``output_dir/dataset`` at the end.
+* ``export``: ``record=true`` with the default ``video`` settings (h264): every step
+  rendered, streamed into per-worker LeRobot shards, merged into ``output_dir/dataset``;
+* ``export_av1``: the same with ``video.vcodec=libsvtav1`` (LeRobot's default codec).
 
 Reported: export/eval and export/render wall-time ratios (target <= 1.15 against the
-rendering eval). Figures are printed and appended to ``runs/perf.jsonl``; nothing is
-asserted about speed, only that the exported dataset is complete.
+rendering eval) and the size of the videos. Figures are printed and appended to
+``runs/perf.jsonl``; nothing is asserted about speed, only that the datasets are complete.
 """
 
 from __future__ import annotations
@@ -74,18 +75,23 @@ def test_export_overhead(tmp_path, monkeypatch):
         m.setattr(get_plugins(), "recorder_factories", lambda cfg: [RenderOnlyFactory()])
         t_render, _ = _run(tmp_path / "render")
     t_export, _ = _run(tmp_path / "export", "record=true")
+    t_av1, _ = _run(tmp_path / "export_av1", "record=true", "video.vcodec=libsvtav1")
 
-    ds = LeRobotDataset("local/pick_v1-scripted", root=tmp_path / "export" / "dataset", video_backend="pyav")
-    ok = N_EPISODES - summary["n_errors"]
-    assert ds.num_episodes == ok
-    steps = sum(json.loads(line)["steps"] for line in (tmp_path / "export" / "episodes.jsonl").read_text().splitlines())
-    assert ds.num_frames == steps
+    steps = sum(json.loads(line)["steps"] for line in (tmp_path / "eval" / "episodes.jsonl").read_text().splitlines())
+    mb = {}
+    for name in ("export", "export_av1"):
+        root = tmp_path / name / "dataset"
+        ds = LeRobotDataset("local/pick_v1-scripted", root=root, video_backend="pyav")
+        assert ds.num_episodes == N_EPISODES - summary["n_errors"] and ds.num_frames == steps
+        mb[name] = round(sum(p.stat().st_size for p in (root / "videos").rglob("*.mp4")) / 2**20, 2)
 
     figures = {
         "benchmark": "export_overhead", "episodes": N_EPISODES, "workers": WORKERS, "frames": ds.num_frames,
         "cameras": len(ds.meta.video_keys), "eval_s": round(t_eval, 2), "render_s": round(t_render, 2),
         "export_s": round(t_export, 2), "export_over_eval": round(t_export / t_eval, 3),
         "export_over_render": round(t_export / t_render, 3), "target_export_over_render": 1.15,
+        "export_av1_s": round(t_av1, 2), "export_av1_over_render": round(t_av1 / t_render, 3),
+        "video_mb": mb["export"], "video_av1_mb": mb["export_av1"],
     }
     line = json.dumps(figures)
     print("\n" + line)

@@ -17,6 +17,10 @@ from molmo_lerobot.cli.eval import main
         (["workers=0"], "workers must be at least 1, got 0"),
         (["+horizons.pick=soon"], "horizons.pick: expected a positive number of seconds, got 'soon'"),
         (["+horizons.pick=-2"], "horizons.pick: expected a positive number of seconds, got -2"),
+        (["push=true", "hub.repo_id=bad/na//me"], "hub.repo_id 'bad/na//me' is not a valid dataset id"),
+        (["push=true"], "push=true needs hub.repo_id=<namespace>/<name>"),
+        (["record=true", "video.vcodec=divx"], "video: vcodec='divx'"),
+        (["record=true", "video.g=0"], "video.g: expected a positive integer or null, got 0"),
     ],
 )
 def test_bad_config_is_one_clear_line(args, needle, capsys, tmp_path):

@@ -3,8 +3,9 @@
 :class:`LeRobotRecorderFactory` is built from the run config in the main process and
 pickled to the workers. Each worker's :class:`LeRobotRecorder` streams frames into a
 LeRobot v3 dataset shard (``streaming_encoding=True``: video is encoded while the episode
-runs), saves an episode only if it finished without error, and finalizes its shard when
-the worker closes. ``finalize`` then merges the shards into ``output_dir/dataset`` with
+runs, by :mod:`molmo_lerobot.export.video` with the run's ``video`` settings), saves an
+episode only if it finished without error, and finalizes its shard when the worker closes.
+``finalize`` then merges the shards into ``output_dir/dataset`` with
 ``lerobot.datasets.aggregate.aggregate_datasets``, writes the eval records, the dataset card
 and ``results.json`` into it, and pushes to the Hub when ``push=true``.
 """
@@ -17,15 +18,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from molmo_lerobot.config import ConfigError
 from molmo_lerobot.export.frames import FrameLayout
 from molmo_lerobot.export.shards import SHARDS_DIR, new_session, shard_name, write_marker
+from molmo_lerobot.export.video import RecordingDataset, VideoConfigError, VideoSettings
 from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder, RecorderFactory
 from molmo_lerobot.runner.results import EpisodeResult
 
 log = logging.getLogger(__name__)
 
 
-class RecordConfigError(ValueError):
+class RecordConfigError(ConfigError):
     """``record`` / ``push`` / ``hub`` settings are invalid; the message names the key."""
 
 
@@ -64,12 +67,11 @@ class LeRobotRecorderFactory(RecorderFactory):
     session: str = field(default_factory=new_session)
     #: finalize a worker's shard after this many episodes (bounds what a killed worker loses)
     shard_episodes: int = 50
-    #: SVT-AV1 threads per camera stream (``None``: the codec decides)
-    encoder_threads: int | None = 1
+    video: VideoSettings = field(default_factory=VideoSettings)
 
     @classmethod
     def from_config(cls, cfg: dict[str, Any]) -> LeRobotRecorderFactory:
-        """Build from the resolved run config (``record``, ``push``, ``hub``, ``timing`` …)."""
+        """Build from the resolved run config (``record``, ``push``, ``hub``, ``video``, ``timing`` …)."""
         bench = str((cfg.get("benchmark") or {}).get("name") or "benchmark")
         policy = str((cfg.get("policy") or {}).get("name") or "policy")
         hub = cfg.get("hub") or {}
@@ -81,8 +83,12 @@ class LeRobotRecorderFactory(RecorderFactory):
             validate_repo_id(str(repo_id))
         else:
             repo_id = f"local/{_slug(bench)}-{_slug(policy)}"
+        try:
+            video = VideoSettings.from_config(cfg.get("video"))
+        except VideoConfigError as exc:
+            raise RecordConfigError(str(exc)) from None
         return cls(repo_id=str(repo_id), policy_dt_ms=float(cfg["timing"]["policy_dt_ms"]), benchmark=bench,
-                   policy=policy, push=push, private=bool(hub.get("private", False)))
+                   policy=policy, push=push, private=bool(hub.get("private", False)), video=video)
 
     @property
     def fps(self) -> int:
@@ -151,8 +157,6 @@ class LeRobotRecorder(Recorder):
             reason = "episode error"
         elif frames != result.steps:
             reason = f"recorded {frames} frames for {result.steps} steps"
-        elif dropped := self._dropped_frames():
-            reason = f"video encoder dropped {dropped} frames"
         if reason is not None:
             self._ds.clear_episode_buffer()
             if frames:
@@ -175,19 +179,19 @@ class LeRobotRecorder(Recorder):
 
     # Shards ----------------------------------------------------------------------------
     def _open_shard(self, layout: FrameLayout, horizon: int) -> None:
-        from lerobot.datasets.lerobot_dataset import LeRobotDataset
-
         self.shards_dir.mkdir(parents=True, exist_ok=True)
         root = self.shards_dir / shard_name(self.factory.session, self.worker_id, self._seq)
         while root.exists():  # never reuse a directory, whatever left it there
             self._seq += 1
             root = self.shards_dir / shard_name(self.factory.session, self.worker_id, self._seq)
         self._seq += 1
-        self._ds = LeRobotDataset.create(
+        video = self.factory.video
+        self._ds = RecordingDataset.create(
             repo_id=self.factory.repo_id, fps=self.factory.fps, features=layout.features(), root=root,
             robot_type=None, use_videos=True, streaming_encoding=True, video_backend="pyav",
-            # hold a whole episode per camera: the encoder may lag, but never drops a frame
-            encoder_queue_maxsize=max(64, int(horizon) + 1), encoder_threads=self.factory.encoder_threads,
+            rgb_encoder=video.encoder_config(), encoder_threads=video.encoder_threads,
+            # room for a whole episode per camera: the encoder may lag behind the rollout
+            encoder_queue_maxsize=max(64, int(horizon) + 1),
         )
         self._root, self._layout = root, layout
         self._saved, self._discarded = [], []
@@ -209,7 +213,3 @@ class LeRobotRecorder(Recorder):
         log.warning("dataset shard %s abandoned after a failed save; its episodes will not be stored", self._root)
         self._ds = self._root = self._layout = None
         self._saved, self._discarded = [], []
-
-    def _dropped_frames(self) -> int:
-        encoder = getattr(getattr(self._ds, "writer", None), "_streaming_encoder", None)
-        return int(sum((getattr(encoder, "_dropped_frames", None) or {}).values()))
