@@ -99,12 +99,20 @@ def test_bad_frames_and_encoder_failures_are_reported(tmp_path):
     assert list(tmp_path.iterdir()) == []  # nothing half-written is left for the writer to pick up
 
 
+@pytest.mark.skipif(__import__("torch").cuda.is_available(), reason="an NVIDIA GPU can run NVENC")
+def test_a_codec_this_machine_cannot_run_fails_before_the_run():
+    # PyAV ships NVENC, so LeRobot accepts it (and vcodec=auto may pick it); without a GPU it cannot open
+    with pytest.raises(VideoConfigError, match="h264_nvenc.*cannot encode on this machine"):
+        VideoSettings.from_config({"vcodec": "h264_nvenc"})
+
+
 def test_settings_defaults_follow_the_codec():
     h264 = VideoSettings.from_config({"vcodec": "h264"}).encoder_config()
     assert (h264.vcodec, h264.crf, h264.preset, h264.g) == ("h264", 18, "veryfast", 2)
     av1 = VideoSettings.from_config({"vcodec": "libsvtav1", "g": 8}).encoder_config()
     assert (av1.vcodec, av1.crf, av1.preset, av1.g) == ("libsvtav1", 30, 12, 8)
     assert VideoSettings.from_config({"vcodec": "h264", "crf": 25}).encoder_config().crf == 25
+
 
 
 @pytest.mark.parametrize("block, match", [

@@ -102,9 +102,21 @@ class LeRobotRecorderFactory(RecorderFactory):
         from molmo_lerobot.export.hub import push_dataset
         from molmo_lerobot.export.merge import merge_shards
 
+        quiet_libraries()
         root = merge_shards(Path(output_dir), results, summary, self)
         if self.push and root is not None:
             push_dataset(root, self.repo_id, private=self.private)
+
+
+def quiet_libraries() -> None:
+    """FFmpeg prints errors only (LeRobot's video helpers reinstate FFmpeg's stderr logger at
+    INFO: codec banners for every episode), and ``datasets`` draws no per-episode progress
+    bars under the run's own."""
+    import av
+    import datasets
+
+    av.logging.set_libav_level(av.logging.ERROR)
+    datasets.disable_progress_bars()
 
 
 def _slug(text: str) -> str:
@@ -117,6 +129,7 @@ class LeRobotRecorder(Recorder):
     wants_images = True
 
     def __init__(self, factory: LeRobotRecorderFactory, worker_id: str, output_dir: Path) -> None:
+        quiet_libraries()
         self.factory = factory
         self.worker_id = worker_id
         self.shards_dir = output_dir / SHARDS_DIR

@@ -10,7 +10,8 @@ The encoder differs from LeRobot's own ``StreamingVideoEncoder`` in two ways:
 
 * image statistics are exact per-channel histograms of the uint8 frames (:class:`PixelStats`,
   ``np.bincount``), where LeRobot updates a 5000-bin float histogram with ``np.histogram``
-  on every frame: 4.9 ms per 224x224 frame against about 0.3 ms, per camera;
+  on every frame: 5.2 ms against 0.5 ms per 224x224 camera frame
+  (``tests/perf/test_video_codecs.py``);
 * a full frame queue makes the rollout wait instead of dropping the frame, so a recording
   never has holes.
 
@@ -20,6 +21,7 @@ threads) turned into LeRobot's ``RGBEncoderConfig``; codec options are LeRobot's
 
 from __future__ import annotations
 
+import io
 import queue
 import shutil
 import tempfile
@@ -35,13 +37,11 @@ from lerobot.configs.video import RGBEncoderConfig
 from lerobot.datasets.compute_stats import DEFAULT_QUANTILES
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-#: quality and speed when the config leaves them null. h264 crf 18 matches the picture quality
-#: of LeRobot's default AV1 (crf 30) on our 224x224 renders (PSNR within 0.1 dB) with files
-#: about 28 % larger and about a quarter of the encoding CPU. Other codecs use LeRobot's defaults.
-CODEC_DEFAULTS: dict[str, dict[str, Any]] = {
-    "h264": {"crf": 18, "preset": "veryfast"},
-    "libsvtav1": {"crf": 30, "preset": 12},
-}
+#: h264 quality and speed when the config leaves them null: crf 18 matches the picture quality
+#: of LeRobot's default AV1 (crf 30) on our 224x224 renders (42.0 dB PSNR both) with files
+#: 28 % larger and a quarter of the encoding CPU (``tests/perf/test_video_codecs.py``).
+#: Other codecs (``auto`` included) get LeRobot's own defaults.
+H264_DEFAULTS: dict[str, Any] = {"crf": 18, "preset": "veryfast"}
 
 
 class VideoConfigError(ValueError):
@@ -70,19 +70,37 @@ class VideoSettings:
             if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
                 raise VideoConfigError(f"video.{key}: expected a positive integer or null, got {value!r}")
         settings = cls(**block)
-        settings.encoder_config()  # LeRobot validates codec, pixel format and options with PyAV
+        settings.probe()
         return settings
 
     def encoder_config(self) -> RGBEncoderConfig:
         """LeRobot's ``RGBEncoderConfig`` for these settings (raises :class:`VideoConfigError`)."""
-        defaults = CODEC_DEFAULTS.get(self.vcodec, {})
-        crf = defaults.get("crf") if self.crf is None else self.crf
-        preset = defaults.get("preset") if self.preset is None else self.preset
+        kwargs: dict[str, Any] = {"vcodec": self.vcodec, "g": self.g}
+        if self.vcodec == "h264":
+            kwargs |= H264_DEFAULTS
+        kwargs |= {k: v for k in ("crf", "preset") if (v := getattr(self, k)) is not None}
         try:
-            return RGBEncoderConfig(vcodec=self.vcodec, crf=crf, g=self.g, preset=preset)
+            return RGBEncoderConfig(**kwargs)
         except (ValueError, TypeError) as exc:
-            raise VideoConfigError(f"video: vcodec={self.vcodec!r} crf={crf!r} g={self.g!r} preset={preset!r}: "
-                                   f"{exc}") from None
+            given = " ".join(f"{k}={v!r}" for k, v in kwargs.items())
+            raise VideoConfigError(f"video: {given}: {exc}") from None
+
+
+    def probe(self) -> None:
+        """Encode one small frame in memory, so a codec that is compiled in but cannot run here
+        (``h264_nvenc`` without an NVIDIA GPU, which ``auto`` may pick) fails before the run."""
+        config = self.encoder_config()  # LeRobot checks codec name, pixel format and options
+        frame = av.VideoFrame.from_ndarray(np.zeros((64, 64, 3), np.uint8), format="rgb24")
+        try:
+            with av.open(io.BytesIO(), "w", format="mp4") as container:
+                stream = container.add_stream(config.vcodec, 15,
+                                              options=config.get_codec_options(self.encoder_threads, as_strings=True))
+                stream.pix_fmt, stream.width, stream.height = config.pix_fmt, 64, 64
+                container.mux(stream.encode(frame))
+                container.mux(stream.encode())
+        except Exception as exc:
+            raise VideoConfigError(f"video: vcodec={self.vcodec!r} (encoder {config.vcodec}) cannot encode on "
+                                   f"this machine: {exc}") from None
 
 
 class PixelStats:
