@@ -93,14 +93,21 @@ class VideoSettings:
         frame = av.VideoFrame.from_ndarray(np.zeros((64, 64, 3), np.uint8), format="rgb24")
         try:
             with av.open(io.BytesIO(), "w", format="mp4") as container:
-                stream = container.add_stream(config.vcodec, 15,
-                                              options=config.get_codec_options(self.encoder_threads, as_strings=True))
-                stream.pix_fmt, stream.width, stream.height = config.pix_fmt, 64, 64
+                stream = add_video_stream(container, config, self.encoder_threads, 15, 64, 64)
                 container.mux(stream.encode(frame))
                 container.mux(stream.encode())
         except Exception as exc:
             raise VideoConfigError(f"video: vcodec={self.vcodec!r} (encoder {config.vcodec}) cannot encode on "
                                    f"this machine: {exc}") from None
+
+
+def add_video_stream(container: Any, config: RGBEncoderConfig, threads: int | None, fps: int,
+                     height: int, width: int) -> Any:
+    """A video stream on an open PyAV output ``container``, with LeRobot's codec options for ``config``."""
+    stream = container.add_stream(config.vcodec, fps, options=config.get_codec_options(threads, as_strings=True))
+    stream.pix_fmt, stream.width, stream.height = config.pix_fmt, width, height
+    stream.time_base = Fraction(1, fps)
+    return stream
 
 
 class PixelStats:
@@ -169,13 +176,14 @@ class _CameraStream(threading.Thread):
                 continue  # keep draining so a producer blocked on put() is released
             try:
                 if container is None:
-                    container, stream = self._open(frame.shape[0], frame.shape[1])
+                    container = av.open(str(self.path), "w")
+                    stream = add_video_stream(container, self.encoder, self.threads, self.fps, *frame.shape[:2])
                 video_frame = av.VideoFrame.from_ndarray(frame, format="rgb24")
                 video_frame.pts = self.encoded
                 container.mux(stream.encode(video_frame))
                 self.stats.update(frame)
                 self.encoded += 1
-            except BaseException as exc:  # reported by finish(); the queue keeps draining
+            except BaseException as exc:  # reported by finish_episode(); the queue keeps draining
                 self.error = exc
         try:
             if container is not None:
@@ -184,15 +192,6 @@ class _CameraStream(threading.Thread):
                 container.close()
         except BaseException as exc:
             self.error = self.error or exc
-
-    def _open(self, height: int, width: int) -> tuple[Any, Any]:
-        container = av.open(str(self.path), "w")
-        stream = container.add_stream(self.encoder.vcodec, self.fps,
-                                      options=self.encoder.get_codec_options(self.threads, as_strings=True))
-        stream.pix_fmt = self.encoder.pix_fmt
-        stream.width, stream.height = width, height
-        stream.time_base = Fraction(1, self.fps)
-        return container, stream
 
 
 class CameraStreamEncoder:
