@@ -116,6 +116,22 @@ def _cameras(table_height: float, rng: np.random.Generator) -> list[dict[str, An
     return [exo, wrist]
 
 
+def episode_base(house: int, scene_dataset: str, seed: int, robot: Franka, arm: np.ndarray,
+                 cameras: list[dict[str, Any]], poses: dict[str, list[float]]) -> dict[str, Any]:
+    """The fields every generated episode has before its ``task``, in schema order."""
+    return {
+        "house_index": house,
+        "scene_dataset": scene_dataset,
+        "data_split": "val",
+        "seed": seed,
+        "robot": {"robot_name": robot.name,
+                  "init_qpos": {"arm": [_r(q) for q in arm], "gripper": list(robot.default_init_qpos["gripper"])}},
+        "img_resolution": list(IMG_RESOLUTION),
+        "cameras": cameras,
+        "scene_modifications": {"added_objects": {}, "object_poses": poses, "removed_objects": []},
+    }
+
+
 def _episode(scene: ProceduralTabletop, house: int, index: int, seed: int, task: str) -> dict[str, Any]:
     rng = np.random.default_rng([seed, house, index])
     meta = scene.metadata(house)
@@ -125,16 +141,10 @@ def _episode(scene: ProceduralTabletop, house: int, index: int, seed: int, task:
     robot = Franka()
     arm = np.asarray(robot.default_init_qpos["arm"]) + rng.uniform(-0.05, 0.05, 7)
     phrase = f"the {target.color} {target.category}"
+    # arguments are evaluated in order: the episode seed is drawn before the cameras
     return {
-        "house_index": house,
-        "scene_dataset": scene.name,
-        "data_split": "val",
-        "seed": int(rng.integers(2**31 - 1)),
-        "robot": {"robot_name": robot.name,
-                  "init_qpos": {"arm": [_r(q) for q in arm], "gripper": list(robot.default_init_qpos["gripper"])}},
-        "img_resolution": list(IMG_RESOLUTION),
-        "cameras": _cameras(meta["table_height"], rng),
-        "scene_modifications": {"added_objects": {}, "object_poses": poses, "removed_objects": []},
+        **episode_base(house, scene.name, int(rng.integers(2**31 - 1)), robot, arm,
+                       _cameras(meta["table_height"], rng), poses),
         "task": {
             "task_cls": TASK_CLS[task],
             "task_type": task,
@@ -271,15 +281,7 @@ def _place_episode(scene: ProceduralTabletop, house: int, index: int, seed: int,
         instruction = f"put {phrase} {_article(target)} {where}"
     task_spec["task_horizon_sec"] = PLACE_HORIZON_SEC
     return {
-        "house_index": house,
-        "scene_dataset": scene.name,
-        "data_split": "val",
-        "seed": int(rng.integers(2**31 - 1)),
-        "robot": {"robot_name": robot.name,
-                  "init_qpos": {"arm": [_r(q) for q in arm], "gripper": list(robot.default_init_qpos["gripper"])}},
-        "img_resolution": list(IMG_RESOLUTION),
-        "cameras": cameras,
-        "scene_modifications": {"added_objects": {}, "object_poses": poses, "removed_objects": []},
+        **episode_base(house, scene.name, int(rng.integers(2**31 - 1)), robot, arm, cameras, poses),
         "task": task_spec,
         "task_relevant_objects": [pick.uid, *(r.uid for r in in_scene if r is target or task.endswith("color"))],
         "language": {"task_description": instruction,

@@ -17,7 +17,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.assets.articulated import ARTICULATED_OBJECTS
-from molmo_lerobot.benchmark.generate import IMG_RESOLUTION, _cameras, _r, benchmark_metadata
+from molmo_lerobot.benchmark.generate import _cameras, _r, benchmark_metadata, episode_base
 from molmo_lerobot.robots.franka import Franka
 from molmo_lerobot.sim.articulated import ArticulatedTabletop
 
@@ -95,16 +95,10 @@ def _episode(scene: ArticulatedTabletop, house: int, index: int, seed: int, task
     wrist = [c for c in _cameras(meta["table_height"], rng) if c["name"] == "wrist"]
     phrase = _phrase(uid, joint, meta)
     obj_meta = meta["objects"][uid]
+    # arguments are evaluated in order: the episode seed is drawn before the exterior camera
     return {
-        "house_index": house,
-        "scene_dataset": scene.name,
-        "data_split": "val",
-        "seed": int(rng.integers(2**31 - 1)),
-        "robot": {"robot_name": robot.name,
-                  "init_qpos": {"arm": [_r(q) for q in arm], "gripper": list(robot.default_init_qpos["gripper"])}},
-        "img_resolution": list(IMG_RESOLUTION),
-        "cameras": [_exterior(meta["table_height"], rng), *wrist],
-        "scene_modifications": {"added_objects": {}, "object_poses": {}, "removed_objects": []},
+        **episode_base(house, scene.name, int(rng.integers(2**31 - 1)), robot, arm,
+                       [_exterior(meta["table_height"], rng), *wrist], {}),
         "task": {
             "task_cls": TASK_CLS,
             "task_type": task,
