@@ -21,7 +21,7 @@ from typing import Any
 from molmo_lerobot.config import ConfigError
 from molmo_lerobot.export.frames import FrameLayout
 from molmo_lerobot.export.shards import SHARDS_DIR, new_session, shard_name, write_marker
-from molmo_lerobot.export.video import RecordingDataset, VideoConfigError, VideoSettings
+from molmo_lerobot.export.video import RecordingDataset, VideoSettings
 from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder, RecorderFactory
 from molmo_lerobot.runner.results import EpisodeResult
 
@@ -83,12 +83,9 @@ class LeRobotRecorderFactory(RecorderFactory):
             validate_repo_id(str(repo_id))
         else:
             repo_id = f"local/{_slug(bench)}-{_slug(policy)}"
-        try:
-            video = VideoSettings.from_config(cfg.get("video"))
-        except VideoConfigError as exc:
-            raise RecordConfigError(str(exc)) from None
         return cls(repo_id=str(repo_id), policy_dt_ms=float(cfg["timing"]["policy_dt_ms"]), benchmark=bench,
-                   policy=policy, push=push, private=bool(hub.get("private", False)), video=video)
+                   policy=policy, push=push, private=bool(hub.get("private", False)),
+                   video=VideoSettings.from_config(cfg.get("video")))
 
     @property
     def fps(self) -> int:

@@ -37,6 +37,8 @@ from lerobot.configs.video import RGBEncoderConfig
 from lerobot.datasets.compute_stats import DEFAULT_QUANTILES
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
+from molmo_lerobot.config import ConfigError
+
 #: h264 quality and speed when the config leaves them null: crf 18 matches the picture quality
 #: of LeRobot's default AV1 (crf 30) on our 224x224 renders (42.0 dB PSNR both) with files
 #: 28 % larger and a quarter of the encoding CPU (``tests/perf/test_video_codecs.py``).
@@ -44,7 +46,7 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 H264_DEFAULTS: dict[str, Any] = {"crf": 18, "preset": "veryfast"}
 
 
-class VideoConfigError(ValueError):
+class VideoConfigError(ConfigError):
     """The ``video`` block is invalid; the message names the key."""
 
 
