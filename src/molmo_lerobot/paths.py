@@ -27,3 +27,16 @@ def package_asset_dir(package: str, *parts: str, marker: str, what: str) -> Path
     if not (path / marker).exists():
         raise FileNotFoundError(f"{what}: assets not found at {path} ({package} layout changed?)")
     return path
+
+
+#: Where ``molmo-resources install --preset molmospaces`` puts MolmoSpaces' data when no
+#: ``MLSPACES_ASSETS_DIR`` is set (their layout: ``scenes/``, ``objects/``, ``grasps/``, ``robots/``).
+DEFAULT_MOLMOSPACES_ASSETS_DIR = Path("~/.cache/molmo_lerobot/molmospaces/assets")
+
+
+def molmospaces_assets_dir(configured: str | Path | None = None) -> Path:
+    """MolmoSpaces' assets dir: ``configured``, else ``$MLSPACES_ASSETS_DIR``, else our install dir."""
+    import os
+
+    value = configured or os.environ.get("MLSPACES_ASSETS_DIR") or DEFAULT_MOLMOSPACES_ASSETS_DIR
+    return Path(value).expanduser()
