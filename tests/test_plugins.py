@@ -59,7 +59,7 @@ def test_broken_plugins_are_recorded_and_the_rest_works(broken_dist, monkeypatch
     assert (rec["ur5"].status, rec["ur5"].error) == ("error", "RuntimeError: ur5 driver missing")
     assert rec["ur5"].distribution == "brokenbots" and rec["ur5"].version == "0.1"
     assert plugins.robot("gb").name == "goodbot"
-    assert plugins.robot("franka_droid").name == "franka"  # built-ins unaffected
+    assert plugins.robot("franka_droid").name == "franka_droid"  # built-ins unaffected (Robotiq, never the Panda)
     assert rec["kuka"].status == "error" and "molmo_robots() failed: RuntimeError: kuka meshes not found" in rec["kuka"].error
 
 

@@ -28,6 +28,7 @@ KIND_HOOKS = {
     "molmo_camera_systems": "camera",
     "molmo_scene_datasets": "scene",
     "molmo_policies": "policy",
+    "molmo_experts": "expert",
     "molmo_config_dirs": "config",
     "molmo_episode_overrides": "override",
     "molmo_recorders": "recorder",
@@ -156,6 +157,10 @@ class Plugins:
 
     def policy(self, name: str) -> Any:
         return self._get("molmo_policies", name)
+
+    def expert(self, task_type: str) -> Any:
+        """The scripted expert registered for a task type (by the task type's name)."""
+        return self._get("molmo_experts", task_type)
 
     def names(self, kind: str) -> list[str]:
         hook = next(h for h, k in KIND_HOOKS.items() if k == kind)

@@ -14,7 +14,8 @@ from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
 from molmo_lerobot.plugins import get_plugins  # noqa: E402
 from molmo_lerobot.policies.base import EpisodeContext  # noqa: E402
 from molmo_lerobot.runner.rollout import rollout  # noqa: E402
-from molmo_lerobot.sim.env import Timing, make_env  # noqa: E402
+from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
+from molmo_lerobot.sim.env import Timing  # noqa: E402
 
 HORIZON = 100  # the script needs about 60 policy steps; 100 also checks that the hold lasts
 
@@ -29,7 +30,7 @@ def _run(raw, policy_name, horizon=HORIZON, config=None):
     spec = EpisodeSpec.model_validate(raw)
     timing = Timing()
     policy = plugins.policy(policy_name).factory({"name": policy_name, **(config or {})})
-    env = make_env(spec, timing, plugins)
+    env = build_env(spec, timing, plugins)
     try:
         env.reset(spec.seed)
         task = plugins.task_type(spec.task.task_cls).create(spec, env)
@@ -52,7 +53,7 @@ def test_scripted_returns_chunks_without_images(episodes):
     spec = EpisodeSpec.model_validate(episodes[0])
     policy = plugins.policy("scripted").factory({"name": "scripted", "chunk": 5})
     assert policy.needs_images is False
-    env = make_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), plugins)
     try:
         env.reset(0)
         policy.reset(EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=env.move_groups,

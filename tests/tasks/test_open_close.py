@@ -12,7 +12,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from molmo_lerobot.benchmark.generate_articulated import generate_benchmark  # noqa: E402
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
 from molmo_lerobot.plugins import get_plugins  # noqa: E402
-from molmo_lerobot.sim.env import Timing, make_env  # noqa: E402
+from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
+from molmo_lerobot.sim.env import Timing  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -33,7 +34,7 @@ def close_episodes():
 def _setup(plugins, raw: dict, **task_update):
     raw = {**raw, "task": {**raw["task"], **task_update}}
     spec = EpisodeSpec.model_validate(raw)
-    env = make_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), plugins)
     env.reset(0)
     task = plugins.task_type(spec.task_name).create(spec, env)
     task.setup()
@@ -54,7 +55,7 @@ def test_open_and_close_resolve_from_molmospaces_opening_task(plugins, open_epis
     assert o.task.task_cls == c.task.task_cls == "molmo_spaces.tasks.opening_tasks.OpeningTask"
     assert plugins.task_type(o.task_name).name == "open" and plugins.task_type(c.task_name).name == "close"
     assert plugins.task_type("close").thresholds(c) == {"task_success_threshold": 0.2}
-    assert plugins.task_type("close").expert.__name__ == "ScriptedArticulated"
+    assert plugins.expert("close").factory.__name__ == "ScriptedArticulated"
 
 
 @pytest.mark.parametrize("fraction, expected", [(0.19, False), (0.21, True)])

@@ -17,7 +17,8 @@ from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
 from molmo_lerobot.plugins import get_plugins  # noqa: E402
 from molmo_lerobot.robots.franka import FINGER_TRAVEL  # noqa: E402
-from molmo_lerobot.sim.env import Timing, make_env  # noqa: E402
+from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
+from molmo_lerobot.sim.env import Timing  # noqa: E402
 from molmo_lerobot.tasks.pick_and_place import polygon_gap  # noqa: E402
 
 
@@ -28,7 +29,7 @@ def _episode(task: str, seed: int = 3) -> dict:
 def _make(raw: dict):
     plugins = get_plugins()
     spec = EpisodeSpec.model_validate(raw)
-    env = make_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), plugins)
     env.reset(0)
     task = plugins.task_type(spec.task_name).create(spec, env)
     task.setup()
@@ -248,7 +249,7 @@ def test_color_task_paints_and_needs_the_named_receptacle():
             geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] == env.body_id(name)]
             assert geoms and all(np.allclose(m.geom_rgba[g], rgba) for g in geoms)
         spec = EpisodeSpec.model_validate(raw)
-        fresh = make_env(spec, Timing(), get_plugins())  # same cached model: the paint must not leak
+        fresh = build_env(spec, Timing(), get_plugins())  # same cached model: the paint must not leak
         g0 = next(g for g in range(m.ngeom) if m.geom_bodyid[g] == env.body_id(task.receptacle_name))
         assert not np.allclose(fresh.model.geom_rgba[g0], colors[task.receptacle_name])
         fresh.close()
@@ -265,7 +266,7 @@ def test_bad_receptacle_is_named():
     raw = _episode("pick_and_place")
     raw["task"]["place_receptacle_name"] = "unicorn"
     spec = EpisodeSpec.model_validate(raw)
-    env = make_env(spec, Timing(), get_plugins())
+    env = build_env(spec, Timing(), get_plugins())
     try:
         env.reset(0)
         with pytest.raises(ValueError, match="task.place_receptacle_name: no body 'unicorn'"):

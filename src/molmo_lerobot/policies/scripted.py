@@ -117,6 +117,7 @@ class PhasedExpert(Policy):
     ``speed`` (rad/s)."""
 
     needs_images = False
+    privileged = True
 
     def __init__(self, config: dict[str, Any]) -> None:
         self.chunk = int(config.get("chunk", 12))
@@ -270,13 +271,14 @@ class ScriptedPick(PhasedExpert):
             self._move(self.q_cmd, 1.0, self.chunk * self.dt)
 
 class ScriptedExpert(Policy):
-    """``policy=scripted``: each episode is played by the expert its task type names.
+    """``policy=scripted``: each episode is played by the expert registered for its task type.
 
-    A task plugin brings its own expert (``TaskType.expert``, a Policy class taking the
-    policy config); this policy only dispatches, keeping one expert instance per task type.
+    Experts register through the ``molmo_experts`` hook (a PolicyType named after the task
+    type it serves); this policy only dispatches, keeping one expert instance per task type.
     """
 
     needs_images = False
+    privileged = True
 
     def __init__(self, config: dict[str, Any]) -> None:
         self.config = config
@@ -286,12 +288,14 @@ class ScriptedExpert(Policy):
     def reset(self, ctx: EpisodeContext) -> None:
         from molmo_lerobot.plugins import get_plugins
 
-        task_type = get_plugins().task_type(ctx.spec.task_name)
+        plugins = get_plugins()
+        task_type = plugins.task_type(ctx.spec.task_name)
         if task_type.name not in self.experts:
-            expert_cls = getattr(task_type, "expert", None)
-            if expert_cls is None:
-                raise ValueError(f"scripted policy: task type {task_type.name!r} has no scripted expert")
-            self.experts[task_type.name] = expert_cls(self.config)
+            try:
+                expert = plugins.expert(task_type.name)
+            except LookupError:
+                raise ValueError(f"scripted policy: no scripted expert serves task type {task_type.name!r}") from None
+            self.experts[task_type.name] = expert.factory(self.config)
         self.current = self.experts[task_type.name]
         self.current.reset(ctx)
 
@@ -303,6 +307,18 @@ class ScriptedExpert(Policy):
     def close(self) -> None:
         for expert in self.experts.values():
             expert.close()
+
+
+@hookimpl
+def molmo_experts() -> list[PolicyType]:
+    from molmo_lerobot.policies.scripted_articulated import ScriptedArticulated
+    from molmo_lerobot.policies.scripted_place import ScriptedPlace
+
+    return [PolicyType(name="pick", factory=ScriptedPick, description="grasp library + IK, lift"),
+            PolicyType(name="pick_and_place", aliases=("pick_and_place_next_to", "pick_and_place_color"),
+                       factory=ScriptedPlace, description="pick, carry, place, release"),
+            PolicyType(name="open", aliases=("close",), factory=ScriptedArticulated,
+                       description="grasp the handle, move it along the joint")]
 
 
 @hookimpl

@@ -175,7 +175,8 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                       "path": str(bench.path)},
         "policy": cfg["policy"], "seed": cfg["seed"], "limit": limit, "horizon": cfg.get("horizon"),
         "timing": cfg["timing"],
-        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera")},
+        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
+                         "end_on_success": bool(cfg.get("end_on_success", False))},
     }
     done = _prepare_output(out, run_info, bool(cfg.get("resume")))
     results: dict[int, EpisodeResult] = {r.episode_index: r for r in done if r.episode_index in set(indices)}
@@ -200,7 +201,9 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         if todo:
             job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], horizon=cfg.get("horizon"),
                             output_dir=str(out), benchmark_name=bench.name, benchmark_sha256=bench.sha256,
-                            recorders=recorders, horizons=horizons)
+                            recorders=recorders, horizons=horizons,
+                            camera_system=(cfg.get("camera") or {}).get("system"),
+                            end_on_success=bool(cfg.get("end_on_success", False)))
             executor.run(job, todo, record)
     ordered = [results[i] for i in sorted(results)]
     missing = sorted(set(indices) - set(results))

@@ -40,6 +40,8 @@ class WorkerJob:
     benchmark_sha256: str
     recorders: list[RecorderFactory] = field(default_factory=list)
     horizons: dict[str, float] = field(default_factory=dict)
+    camera_system: str | None = None
+    end_on_success: bool = False
 
 
 class EpisodeWorker:
@@ -61,7 +63,7 @@ class EpisodeWorker:
     def run(self, item: WorkItem) -> EpisodeResult:
         """Run one episode; any exception becomes this episode's recorded error."""
         from molmo_lerobot.benchmark.schema import EpisodeSpec
-        from molmo_lerobot.sim.env import make_env
+        from molmo_lerobot.runner.episode_env import build_env
 
         t0 = time.perf_counter()
         raw_task = item.spec.get("task") or {}
@@ -74,13 +76,14 @@ class EpisodeWorker:
             horizon = resolve_horizon(self.job.horizon, spec.task, task_type.default_horizon_sec,
                                       self.timing.policy_dt_ms, self.job.horizons.get(task_type.name))
             prompt = spec.language.task_description if spec.language else ""
-            env = make_env(spec, self.timing, self.plugins)
+            env = build_env(spec, self.timing, self.plugins, self.job.camera_system)
             try:
                 env.reset(item.seed)
                 task = task_type.create(spec, env)
                 ctx = EpisodeContext(
                     spec=spec, episode_index=item.episode_index, seed=item.seed, prompt=prompt,
-                    move_groups=dict(env.move_groups), policy_dt_s=self.timing.policy_dt_ms / 1000.0, env=env,
+                    move_groups=dict(env.move_groups), policy_dt_s=self.timing.policy_dt_ms / 1000.0,
+                    env=env if self.policy.privileged else None,
                 )
                 info = EpisodeInfo(
                     episode_index=item.episode_index, house_index=house, seed=item.seed, prompt=prompt,
@@ -90,13 +93,16 @@ class EpisodeWorker:
                     extra={"task_cls": task_cls, "policy": self.policy_name,
                            "benchmark": self.job.benchmark_name, "benchmark_sha256": self.job.benchmark_sha256},
                 )
-                outcome = rollout(env, task, self.policy, ctx, horizon, self.recorders, info, self.policy_name)
+                outcome = rollout(env, task, self.policy, ctx, horizon, self.recorders, info, self.policy_name,
+                                  end_on_success=self.job.end_on_success)
             finally:
                 env.close()
             result = EpisodeResult(
                 episode_index=item.episode_index, house_index=house, task_cls=task_cls,
                 success=outcome.success, success_once=outcome.success_once, steps=outcome.steps,
                 seed=item.seed, task_type=task_type.name, prompt=prompt, horizon=horizon,
+                extra={"ended_by": outcome.ended_by, "end_on_success": self.job.end_on_success,
+                       "success_any_step": outcome.success_any_step, "camera_system": env.camera_system},
             )
         except Exception as exc:
             result = EpisodeResult.failed(item.episode_index, house, task_cls, item.seed, _describe(exc))

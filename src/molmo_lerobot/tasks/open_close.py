@@ -114,12 +114,6 @@ class _OpenCloseType(TaskType):
     mode: str
     default_horizon_sec = 15.0
 
-    @property
-    def expert(self) -> type:
-        from molmo_lerobot.policies.scripted_articulated import ScriptedArticulated
-
-        return ScriptedArticulated
-
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
         return {"task_success_threshold": float(getattr(spec.task, "task_success_threshold", DEFAULT_THRESHOLD))}
 

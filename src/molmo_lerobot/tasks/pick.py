@@ -58,12 +58,6 @@ class PickTaskType(TaskType):
     aliases = ("molmo_lerobot.tasks.pick.PickTask", *task_aliases("pick"))
     default_horizon_sec = 20.0
 
-    @property
-    def expert(self) -> type:
-        from molmo_lerobot.policies.scripted import ScriptedPick
-
-        return ScriptedPick
-
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
         return {"succ_pos_threshold": float(getattr(spec.task, "succ_pos_threshold", DEFAULT_SUCC_POS_THRESHOLD))}
 

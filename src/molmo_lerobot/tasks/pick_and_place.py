@@ -280,12 +280,6 @@ class _PlaceFamily(TaskType):
     spec_model: type = PickAndPlaceTaskSpec
     fields: tuple[str, ...] = _PLACE_FIELDS
 
-    @property
-    def expert(self) -> type:
-        from molmo_lerobot.policies.scripted_place import ScriptedPlace
-
-        return ScriptedPlace
-
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
         return _resolved(spec, self.fields, self.spec_model)
 
