@@ -5,8 +5,8 @@
 * ``wrist_camera``: the robot's own ``gripper/wrist_camera`` (on ``gripper/base``), fov 56.74°;
 * ``exo_camera_1``: DROID's left shoulder camera, fixed to ``fr3_link0`` at
   ``[0.1, 0.57, 0.66]``, fov 71° (MolmoSpaces' placement);
-* ``exo_camera_2``: the right shoulder camera, its mirror image ``[0.1, -0.57, 0.66]``
-  (MolmoSpaces keeps this one commented out; DROID has both).
+* ``exo_camera_2``: the right shoulder camera, its mirror image in the x-z plane
+  (MolmoSpaces keeps a right shoulder camera commented out; DROID has both).
 
 ``FrankaRandomizedDroidCameraSystem`` (alias ``droid_randomized``): MolmoSpaces' randomized
 variant — the wrist camera with fov noise ±4°, position noise (±15/±5/±10 mm in the camera
@@ -35,10 +35,21 @@ from molmo_lerobot.cameras.base import CameraSystem, episode_rng, look_rotation,
 
 WRIST_MJCF_NAME = "gripper/wrist_camera"
 ARM_ROOT = "fr3_link0"
+LEFT_SHOULDER = ((0.1, 0.57, 0.66), (-0.3633, -0.1241, 0.4263, 0.8191))
+
+
+def _mirrored(offset: Sequence[float], quat: Sequence[float]) -> tuple[tuple[float, ...], list[float]]:
+    """The same camera mirrored in the base's x-z plane (left shoulder -> right shoulder)."""
+    rot = Rotation.from_quat(np.asarray(quat, dtype=np.float64), scalar_first=True).as_matrix()
+    flip = np.array([1.0, -1.0, 1.0])
+    forward, up = -rot[:, 2] * flip, rot[:, 1] * flip
+    return tuple(np.asarray(offset) * flip), mat_to_quat(look_rotation(forward, up))
+
+
 #: (name, offset in fr3_link0's frame, wxyz camera quaternion in that frame, fov)
 SHOULDER_CAMERAS = (
-    ("exo_camera_1", (0.1, 0.57, 0.66), (-0.3633, -0.1241, 0.4263, 0.8191), 71.0),
-    ("exo_camera_2", (0.1, -0.57, 0.66), (0.8190819, -0.42629058, 0.12409726, -0.36329197), 71.0),
+    ("exo_camera_1", *LEFT_SHOULDER, 71.0),
+    ("exo_camera_2", *_mirrored(*LEFT_SHOULDER), 71.0),
 )
 FIXED_WRIST_FOV = 56.74
 RANDOM_WRIST_FOV, RANDOM_WRIST_FOV_NOISE = 52.0, (-4.0, 4.0)

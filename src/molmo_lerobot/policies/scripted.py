@@ -60,9 +60,24 @@ def object_grasps(env: Any, name: str) -> np.ndarray:
     except LookupError:
         pass
     try:
-        return get_grasps(uid, robot="franka")
+        return robot_grasps(uid, env.spec.robot.robot_name)
     except LookupError as exc:
         raise ValueError(f"scripted policy: no grasps for object {name!r} (asset {uid!r}): {exc}") from None
+
+
+#: the robot whose grasps stand in for any other (MolmoSpaces' unified gripper TCP convention:
+#: a grasp pose is the TCP pose, +z approach, fingers along ±y, so it transfers between grippers)
+FALLBACK_GRASP_ROBOT = "franka"
+
+
+def robot_grasps(uid: str, robot: str, joint: str | None = None) -> np.ndarray:
+    """Grasps of ``uid`` for ``robot``, else those made for :data:`FALLBACK_GRASP_ROBOT`."""
+    try:
+        return get_grasps(uid, robot=robot, joint=joint)
+    except LookupError:
+        if robot == FALLBACK_GRASP_ROBOT:
+            raise
+        return get_grasps(uid, robot=FALLBACK_GRASP_ROBOT, joint=joint)
 
 
 @cache

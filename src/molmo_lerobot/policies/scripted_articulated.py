@@ -18,9 +18,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from molmo_lerobot.assets.grasps import get_grasps
 from molmo_lerobot.policies.base import EpisodeContext
-from molmo_lerobot.policies.scripted import PhasedExpert
+from molmo_lerobot.policies.scripted import PhasedExpert, robot_grasps
 
 PREGRASP_DISTANCE = 0.10
 #: opening fraction the expert drives to when opening (the success threshold is 0.2 by default)
@@ -90,7 +89,7 @@ class ScriptedArticulated(PhasedExpert):
         """(grasp pose in the moving body's frame, pre-grasp arm q) for the first reachable candidate."""
         uid = self._uid()
         try:
-            local = get_grasps(uid, robot="franka", joint=self.local_joint)
+            local = robot_grasps(uid, self.env.spec.robot.robot_name, joint=self.local_joint)
         except LookupError as exc:
             raise ValueError(f"scripted policy: no handle grasps for {uid!r} joint {self.local_joint!r}: "
                              f"{exc}") from None
