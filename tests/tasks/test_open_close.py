@@ -95,18 +95,21 @@ def test_custom_threshold_is_used_and_reported(plugins, open_episodes):
     assert plugins.task_type("open").thresholds(spec) == {"task_success_threshold": 0.5}
 
 
-def test_start_state_per_joint_list(plugins, open_episodes):
+def test_start_state_list_gives_the_named_joint_its_first_value(plugins, open_episodes):
+    """MolmoSpaces reads ``joint_start_position[0]`` and sets ``joint_name`` only."""
     raw = next(e for e in open_episodes if e["task"]["pickup_obj_name"] == "kitchen_hinge_cabinet")
-    _, env, task = _setup(plugins, raw, joint_start_position=[-0.5, 0.25])
-    m = env.model
-    qs = [float(env.data.qpos[m.jnt_qposadr[j]]) for j in task.joints]
-    assert qs == pytest.approx([-0.5, 0.25])
+    spec, env, task = _setup(plugins, raw, joint_start_position=[-0.3, 9.0])  # the second value is ignored
+    m, q = env.model, -0.3
+    qs = {m.joint(j).name: float(env.data.qpos[m.jnt_qposadr[j]]) for j in task.joints}
+    assert qs.pop(m.joint(task.joint).name) == pytest.approx(q)
+    assert all(v == 0.0 for v in qs.values())
 
 
 @pytest.mark.parametrize("update, message", [
     ({"joint_name": "kitchen_microwave/nope"}, "task.joint_name: no joint"),
     ({"joint_start_position": 5.0}, "task.joint_start_position: 5.0 outside the range"),
-    ({"joint_start_position": [0.0, 0.0, 0.0]}, "task.joint_start_position: 3 values"),
+    ({"joint_start_position": []}, "task.joint_start_position: empty list"),
+    ({"joint_index": 7}, "task.joint_index: 7 out of range"),
     ({"pickup_obj_name": "table"}, "has no hinge or slide joint"),
 ])
 def test_bad_specs_name_the_field(plugins, open_episodes, update, message):

@@ -51,14 +51,7 @@ def object_grasps(env: Any, name: str) -> np.ndarray:
     The object's asset UID comes from the scene metadata; its grasps from the grasp
     libraries (user libraries first, then the built-in set's generated grasps).
     """
-    uid = name
-    try:
-        from molmo_lerobot.plugins import get_plugins
-
-        objects = get_plugins().scene_dataset(env.spec.scene_dataset).metadata(env.spec.house_index)["objects"]
-        uid = objects.get(name, {}).get("asset_id", name)
-    except LookupError:
-        pass
+    uid = env.scene_metadata.get("objects", {}).get(name, {}).get("asset_id", name)
     try:
         return robot_grasps(uid, env.spec.robot.robot_name)
     except LookupError as exc:

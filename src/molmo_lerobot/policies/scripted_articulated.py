@@ -65,13 +65,7 @@ class ScriptedArticulated(PhasedExpert):
 
     # Geometry -----------------------------------------------------------------------------------
     def _uid(self) -> str:
-        from molmo_lerobot.plugins import get_plugins
-
-        try:
-            meta = get_plugins().scene_dataset(self.env.spec.scene_dataset).metadata(self.env.spec.house_index)
-            return meta["objects"].get(self.object_name, {}).get("asset_id", self.object_name)
-        except LookupError:
-            return self.object_name
+        return self.env.scene_metadata.get("objects", {}).get(self.object_name, {}).get("asset_id", self.object_name)
 
     def _body_T(self, q: float | None = None) -> np.ndarray:
         """World pose of the joint's moving body, now or with the joint at ``q``."""

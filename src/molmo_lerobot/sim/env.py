@@ -172,6 +172,7 @@ def make_env(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: Robo
     model, cams = _MODEL_CACHE[key]
     env = Env(spec, timing, copy.copy(model), robot, list(cams))
     env.camera_system = camera_system.name
+    env._scene = scene
     return env
 
 
@@ -203,6 +204,8 @@ class Env:
         self.camera_names = camera_names
         #: name of the camera system that built the cameras
         self.camera_system = ""
+        self._scene: SceneDataset | None = None
+        self._scene_metadata: dict[str, Any] | None = None
         self._depth_cameras = [c.name for c in spec.cameras if c.record_depth]
         self._renderer: mujoco.Renderer | None = None
         self._depth_renderer: mujoco.Renderer | None = None
@@ -333,6 +336,13 @@ class Env:
         return self._depth_renderer.render().astype(np.float32)
 
     # Privileged access (tasks, scripted experts) --------------------------------------------------
+    @property
+    def scene_metadata(self) -> dict[str, Any]:
+        """The house's metadata from its scene dataset (``objects``: body -> asset_id, category, …)."""
+        if self._scene_metadata is None:
+            self._scene_metadata = self._scene.metadata(self.spec.house_index) if self._scene else {"objects": {}}
+        return self._scene_metadata
+
     def body_id(self, name: str, field: str = "body") -> int:
         bid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
         if bid < 0:

@@ -1,8 +1,9 @@
 """The pick task (a task plugin): lift the object and hold it, touching nothing but the robot.
 
-Success (MolmoSpaces' rule, evaluated every policy step): the object's height is at least
-``succ_pos_threshold`` (default 0.01 m) above its height at the start of the episode
-**and** it touches the robot and nothing else (no table, no other object).
+Success (MolmoSpaces' ``PickTask``, see docs/success_rules.md): the object's height is at
+least ``succ_pos_threshold`` (default 0.01 m) above ``task.pickup_obj_start_pose`` (its height at
+the start when the episode gives no start pose) **and** it touches the robot and nothing else
+(contacts between top-level bodies: no table, no other object).
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ class PickTask(Task):
         self.start_height: float | None = None
 
     def setup(self) -> None:
-        self.start_height = float(self.env.data.xpos[self._object][2])
+        start = getattr(self.env.spec.task, "pickup_obj_start_pose", None)
+        self.start_height = float(start[2]) if start else float(self.env.data.xpos[self._object][2])
 
     def lift(self) -> float:
         """Height gained since ``setup`` (metres)."""
