@@ -66,7 +66,7 @@ def test_mobile_robot_episodes_fail_cleanly(data, fake_plugins):
          "no scene dataset plugin provides 'procthor-objaverse' (available: procedural_tabletop)"),
         (lambda ep: ep["cameras"][1].update(name="wrist_camera"), "cameras[1].name",
          "duplicate camera name 'wrist_camera' (also cameras[0])"),
-        (lambda ep: ep.update(cameras=[]), "cameras", "no cameras (an episode needs at least one)"),
+        (lambda ep: ep.update(cameras=[]), "cameras", "no cameras, and no camera system to add them"),
         (lambda ep: ep["cameras"][0].update(fov=0.0), "cameras[0].fov", "field of view must be in (0, 180) degrees, got 0.0"),
         (lambda ep: ep["language"].update(task_description="  "), "language.task_description", "empty task description"),
     ],

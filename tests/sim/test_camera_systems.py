@@ -43,9 +43,8 @@ def _cam_pose(env, name: str) -> np.ndarray:
 def test_choice_order():
     spec = EpisodeSpec.model_validate(droid_episode(_pick()))
     assert choose_camera_system(spec, None, "FrankaDroidCameraSystem") == "FrankaDroidCameraSystem"
-    with_source = spec.model_copy(update={"source": {"h5_file": "x", "traj_key": "t",
-                                                     "camera_system_class": "FrankaRandomizedDroidCameraSystem"}})
-    with_source = EpisodeSpec.model_validate(with_source.model_dump())
+    with_source = EpisodeSpec.model_validate({**droid_episode(_pick()), "source": {
+        "h5_file": "x", "traj_key": "t", "camera_system_class": "FrankaRandomizedDroidCameraSystem"}})
     assert choose_camera_system(with_source, None, "FrankaDroidCameraSystem") == "FrankaRandomizedDroidCameraSystem"
     assert choose_camera_system(with_source, "droid", "FrankaDroidCameraSystem") == "droid"
     own = EpisodeSpec.model_validate(_pick())

@@ -55,8 +55,14 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, *, index: int | Non
 
     _lookup(plugins, "scene_dataset", episode.scene_dataset, "scene_dataset", problem, "scene dataset")
 
-    if not episode.cameras:
-        problem("cameras", "no cameras (an episode needs at least one)")
+    if not episode.cameras:  # MolmoSpaces: the camera system (source.camera_system_class or the robot's) adds them
+        from molmo_lerobot.cameras.base import STANDARD, choose_camera_system
+
+        system = choose_camera_system(episode, None, getattr(robot, "default_camera_system", None))
+        if system == STANDARD:
+            problem("cameras", "no cameras, and no camera system to add them (source.camera_system_class)")
+        else:
+            _lookup(plugins, "camera_system", system, "source.camera_system_class", problem, "camera system")
     seen: dict[str, int] = {}
     for i, cam in enumerate(episode.cameras):
         if cam.name in seen:
