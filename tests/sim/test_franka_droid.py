@@ -109,7 +109,8 @@ def test_gripper_command_spans_the_full_robotiq_travel():
 
 
 def test_tcp_follows_the_unified_convention():
-    """Origin between the pads, +z towards the fingertips, fingers opening along ±y (like the Panda's tcp)."""
+    """On the axis between the fingers, +z towards the fingertips, fingers opening along ±y, fingertips
+    3.5 cm beyond it (like the Panda's tcp)."""
     env = _env(ms_pick_episode())
     m, d = env.model, env.data
     try:
@@ -120,7 +121,11 @@ def test_tcp_follows_the_unified_convention():
         l, r = (m.geom(f"robot_0/gripper/{s}_fingerpad_collision").id for s in ("left", "right"))
         mid = R.T @ ((d.geom_xpos[l] + d.geom_xpos[r]) / 2 - p)
         across = R.T @ (d.geom_xpos[l] - d.geom_xpos[r])
-        assert np.abs(mid).max() < 0.006
+        assert np.abs(mid[:2]).max() < 1e-3 and 0.0 < mid[2] < 0.02  # pads just beyond it, centred
+        from molmo_lerobot.assets.builtin import TCP_TO_FINGERTIP
+        tip = m.geom("robot_0/gripper/left_fingertip_collision").id
+        depth = (R.T @ (d.geom_xpos[tip] - p))[2] + m.geom_size[tip][2]
+        assert depth == pytest.approx(TCP_TO_FINGERTIP, abs=0.004)
         assert abs(across[1]) == pytest.approx(np.linalg.norm(across), rel=1e-3)
         base = d.xpos[m.body("robot_0/gripper/base").id]
         assert (R.T @ (p - base))[2] > 0.1  # +z points from the wrist to the fingertips

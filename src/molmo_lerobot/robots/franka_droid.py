@@ -15,8 +15,9 @@ joints and actuators ``fr3_joint1..7``; gripper driver joints ``gripper/left_dri
 wrist camera ``gripper/wrist_camera``.
 
 The TCP site follows MolmoSpaces' unified gripper convention (+z approach, fingers opening
-along ±y, origin midway between the finger pads), the same as the Panda's ``tcp`` site, so
-object-frame grasps (``transforms`` of their grasp files) transfer between the two grippers.
+along ±y, origin on the axis between the fingers), the same as the Panda's ``tcp`` site, at the
+Panda's depth behind the fingertips, so object-frame grasps (``transforms`` of their grasp files)
+transfer between the two grippers.
 
 Move groups: ``arm`` (7 joint positions, rad) and ``gripper`` (1 value, 0 open … 1 closed,
 mapped linearly onto the actuator's 0 … 255). ``init_qpos["gripper"]`` takes MolmoSpaces' two
@@ -46,10 +47,11 @@ DRIVER_CLOSED = 0.8
 CTRL_CLOSED = 255.0
 #: flange of link 7 (where the Panda hand sits), metres along its z axis
 FLANGE = 0.107
-#: TCP along the approach axis: midway between the finger pads at a 5 cm grip (pad centres 0.130-0.144 m over the travel)
-TCP_DEPTH = 0.1413
+#: TCP along the approach axis: on the finger axis with the fingertips 3.2-3.5 cm beyond it over the
+#: grip range, as on the Panda (assets.builtin.TCP_TO_FINGERTIP), so grasps made for one hand suit the other
+TCP_DEPTH = 0.128
 #: gripper position gain (N·m per rad of driver angle on the coupled tendon) and damping; force limit
-GRIPPER_KP, GRIPPER_KV, GRIPPER_FORCE = 40.0, 2.0, 4.0
+GRIPPER_KP, GRIPPER_KV, GRIPPER_FORCE = 100.0, 5.0, 10.0
 #: wrist camera (ZED mini on DROID's mount) in the ``gripper/base`` frame: beside the gripper, looking along it
 WRIST_CAMERA_POS = (0.0, 0.078, 0.023)
 WRIST_CAMERA_QUAT = (0.0, 0.0, 0.9887, 0.1498)
