@@ -3,7 +3,9 @@
 Columns: name, kind(s), distribution, version, status (``ok`` or ``error: <reason>``).
 ``--hooks`` adds, per plugin, the hooks it implements and the names it provides. Every
 provider hook is called first, so a plugin whose hook raises shows up as broken. A broken
-plugin is listed, never fatal: the command exits 0.
+plugin is listed, never fatal: the command exits 0. Names that several plugins provide are
+listed as clashes with their providers (a run using one fails unless its config pins a
+provider with ``plugins.prefer.<kind>.<name>=<plugin>``).
 """
 
 from __future__ import annotations
@@ -13,24 +15,27 @@ import sys
 
 from molmo_lerobot.plugins import KIND_HOOKS, Plugins, PluginRecord
 
-_PROVIDER_KINDS = ("task", "robot", "camera", "scene", "policy")
-
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="molmo-plugins", description="List installed molmo_lerobot plugins.")
     parser.add_argument("--hooks", action="store_true", help="also list the hooks each plugin implements")
     args = parser.parse_args(argv)
     plugins = Plugins()
-    for kind in _PROVIDER_KINDS:  # run every provider hook, so failing hooks are recorded
-        plugins.names(kind)
+    clashes = plugins.clashes()  # runs every provider hook, so failing hooks are recorded
     plugins.config_dirs()
     print(format_table(plugins.records))
+    if clashes:
+        print("\nCLASHES (a run using one of these names fails unless it pins a provider: "
+              "plugins.prefer.<kind>.<name>=<plugin>)")
+        for (kind, name), recs in clashes.items():
+            print(f"  {kind} {name!r}: " + ", ".join(r.label for r in recs))
     if args.hooks:
         for rec in plugins.records:
             print(f"\n{rec.name} ({rec.value})")
             hooks = implemented_hooks(plugins, rec)
             print("  hooks:    " + (", ".join(hooks) or "-"))
-            print("  provides: " + (", ".join(rec.provides) or "-"))
+            clashing = {f"{kind}:{name}" for kind, name in clashes}
+            print("  provides: " + (", ".join(p + (" (clash)" if p in clashing else "") for p in rec.provides) or "-"))
     broken = plugins.broken()
     if broken:
         print(f"\n{len(broken)} of {len(plugins.records)} plugins failed to load; "

@@ -128,6 +128,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         print("molmo-eval: push=true records the dataset it pushes (record=true)", file=sys.stderr)
         cfg["record"] = True
     plugins = get_plugins()
+    plugins.set_preferences((cfg.get("plugins") or {}).get("prefer"))  # workers apply the same pins
     policy_name = str(cfg["policy"]["name"])
     plugins.policy(policy_name)  # unknown or broken policy plugin: fail before any work
     recorders = plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
@@ -200,7 +201,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         if todo:
             job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], horizon=cfg.get("horizon"),
                             output_dir=str(out), benchmark_name=bench.name, benchmark_sha256=bench.sha256,
-                            recorders=recorders, horizons=horizons)
+                            recorders=recorders, horizons=horizons, prefer=plugins.prefer)
             executor.run(job, todo, record)
     ordered = [results[i] for i in sorted(results)]
     missing = sorted(set(indices) - set(results))
