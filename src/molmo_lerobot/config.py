@@ -89,7 +89,11 @@ def config_message(exc: BaseException) -> str:
         close = difflib.get_close_matches(name, options, n=3)
         if close:
             msg += f"; did you mean {', '.join(map(repr, close))}?"
-        return msg + f" (available: {', '.join(options) or 'none'})"
+        msg += f" (available: {', '.join(options) or 'none'})"
+        broken = get_plugins().broken()  # the option may be one a broken plugin would have added
+        for r in [r for r in broken if name in r.name or r.name in name] or broken:
+            msg += f"\n  plugin {r.name!r} from {r.distribution} failed to load: {r.error}"
+        return msg
     cause = exc.__cause__
     if isinstance(cause, OmegaConfBaseException) and str(cause).strip() and str(cause).strip() not in text:
         text += "\n" + str(cause).strip()

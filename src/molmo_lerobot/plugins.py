@@ -345,8 +345,8 @@ def _dist_name(ep: md.EntryPoint) -> str:
 
 
 def _one_line(exc: BaseException) -> str:
-    text = f"{type(exc).__name__}: {exc}".strip()
-    return text.splitlines()[0] if text else type(exc).__name__
+    text = f"{type(exc).__name__}: {exc}" if str(exc).strip() else type(exc).__name__
+    return text.strip().splitlines()[0]
 
 
 @cache
