@@ -53,9 +53,7 @@ def _validate(path: Path, *, schema_only: bool) -> int:
         return _report(exc.problems)
     if not schema_only:
         from molmo_lerobot.benchmark.validate import validate_benchmark
-        from molmo_lerobot.plugins import get_plugins
-
-        from molmo_lerobot.plugins import PluginConflict
+        from molmo_lerobot.plugins import PluginConflict, get_plugins
 
         plugins = get_plugins()
         try:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from molmo_lerobot.plugins import KIND_HOOKS, Plugins, PluginRecord
+from molmo_lerobot.plugins import KIND_HOOKS, PluginRecord, Plugins
 
 
 def main(argv: list[str] | None = None) -> int:

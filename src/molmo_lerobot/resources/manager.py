@@ -27,6 +27,7 @@ from pathlib import Path, PurePosixPath
 
 from filelock import FileLock, Timeout
 
+from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.resources.archive import pack_archive, safe_extract, sha256_file, tree_entries, verify_archive
 from molmo_lerobot.resources.errors import (
     CorruptArchiveError,
@@ -318,7 +319,7 @@ class ResourceManager:
 
     def _mark_complete(self, spec: ResourceSpec) -> None:
         if set(self.manifest(spec)["archives"]) <= self._done(spec):
-            _atomic_write(self.meta_dir(spec) / "complete", "1")
+            atomic_write(self.meta_dir(spec) / "complete", "1", parents=True)
 
     def _extract(self, spec: ResourceSpec, archives: list[str]) -> None:
         """Download, verify and extract ``archives`` on a thread pool, with one retry pass."""
@@ -388,7 +389,7 @@ class ResourceManager:
                 if dest.is_dir() and not dest.is_symlink():
                     raise ResourceError(f"archive {name}: {rel} would replace a directory in {vdir}")
                 os.replace(src, dest)
-            _atomic_write(self.meta_dir(spec) / "done" / f"{name}.ok", entry["sha256"])
+            atomic_write(self.meta_dir(spec) / "done" / f"{name}.ok", entry["sha256"], parents=True)
         finally:
             with contextlib.suppress(FileNotFoundError):
                 part.unlink()
@@ -449,7 +450,7 @@ class ResourceManager:
     def _update_json(path: Path, edit: Callable[[dict], None]) -> None:
         data = json.loads(path.read_text()) if path.is_file() else {}
         edit(data)
-        _atomic_write(path, json.dumps(data, indent=1, sort_keys=True))
+        atomic_write(path, json.dumps(data, indent=1, sort_keys=True), parents=True)
 
     def installed(self) -> dict[str, dict[str, list[str]]]:
         """``{data_type: {source: [versions]}}`` present in the cache."""
@@ -594,13 +595,6 @@ def _read_json(path: Path, what: str) -> dict:
     if not isinstance(data, dict):
         raise ResourceError(f"{what} {path.name} must hold a JSON object")
     return data
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def _walk(root: Path) -> dict[str, int | str]:

@@ -25,6 +25,7 @@ from tqdm import tqdm
 
 from molmo_lerobot.export.report import write_report
 from molmo_lerobot.export.wandb_log import log_run
+from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.runner.results import EpisodeResult, summarize
@@ -68,15 +69,6 @@ def _versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             pass
     return out
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
 
 
 def resolve_benchmark_path(bench_cfg: dict[str, Any]) -> Path:
@@ -207,7 +199,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     missing = sorted(set(indices) - set(results))
     if missing:
         raise RunError(f"run ended with {len(missing)} episodes unaccounted for: {missing[:10]}")
-    _atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered))
+    atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered))
     summary = summarize(
         ordered, **run_info, thresholds=thresholds, versions=_versions(), workers=cfg["workers"],
         executor=(cfg.get("executor") or {}).get("name", "local"), output_dir=str(out),
@@ -215,7 +207,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     )
     for factory in recorders:
         factory.finalize(out, ordered, summary)
-    _atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
+    atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
     write_report(out, summary, ordered)
     log_run(out, summary, ordered)
     return EvalResults(summary=summary, episodes=ordered, output_dir=out)
@@ -238,10 +230,10 @@ def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool) -> list[E
                                f"({previous.get(key)!r} vs {current.get(key)!r})")
         (out / RESULTS_FILE).unlink(missing_ok=True)
         done = _read_episodes(out / EPISODES_FILE)
-        _atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))
+        atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))
         return done
     out.mkdir(parents=True, exist_ok=True)
-    _atomic_write(run_file, json.dumps(run_info, indent=2) + "\n")
+    atomic_write(run_file, json.dumps(run_info, indent=2) + "\n")
     (out / EPISODES_FILE).touch()
     return []
 
