@@ -131,3 +131,25 @@ def test_help_is_hydras_app_help_with_every_config_group(capsys):
     groups = dict(line.split(": ", 1) for line in out.split("== Config groups ==")[1].split("==")[0].strip().splitlines())
     assert {"random", "scripted", "lerobot"} <= set(groups["policy"].split(", "))
     assert "--multirun" in out and "--cfg" in out
+
+
+CONFIG_PLUGIN = """
+from pathlib import Path
+from molmo_lerobot import hookimpl
+
+@hookimpl
+def molmo_config_dirs():
+    return [str(Path(__file__).parent / "sine_conf")]
+"""
+
+
+def test_plugin_config_dirs_join_the_search_path_of_compose_and_the_app(install, tmp_path, capsys):
+    from molmo_lerobot.config import compose
+
+    root = write_dist(tmp_path / "site", "sine-configs", {"sine_configs": CONFIG_PLUGIN}, {"sine_cfg": "sine_configs"})
+    (root / "sine_conf" / "policy").mkdir(parents=True)
+    (root / "sine_conf" / "policy" / "sine.yaml").write_text("name: sine\namplitude: 0.1\n")
+    install(root, "sine_configs")
+    assert compose(["policy=sine", "policy.amplitude=0.3"]).policy == {"name": "sine", "amplitude": 0.3}
+    assert main(["--info", "searchpath"]) == 0
+    assert f"file://{root / 'sine_conf'}" in capsys.readouterr().out

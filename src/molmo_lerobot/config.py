@@ -41,8 +41,9 @@ class PluginConfigDirs(SearchPathPlugin):
 
     def manipulate_search_path(self, search_path: ConfigSearchPath) -> None:
         primary = primary_config_dir()
-        ours = f"file://{primary}"
-        if not any(e.path == ours for e in search_path.get_path()):
+        paths = {Path(e.path.removeprefix("file://")).resolve() for e in search_path.get_path()
+                 if e.path and "://" not in e.path.removeprefix("file://")}
+        if primary not in paths:
             return  # some other Hydra app in this process
         seen = {primary}
         for d in get_plugins().config_dirs():
