@@ -349,7 +349,8 @@ def test_molmo_plugins_lists_the_clash(impostor_dist):
     res = _molmo_plugins(impostor_dist, "--hooks")
     assert res.returncode == 0, res.stderr
     assert "CLASHES" in res.stdout
-    line = next(ln for ln in res.stdout.splitlines() if ln.strip().startswith("robot 'franka':"))
+    line = next(ln for ln in res.stdout.splitlines() if ln.strip().startswith("robot 'franka' (and aliases "))
+    assert "franka_droid" in line and len([ln for ln in res.stdout.splitlines() if "impostor_franka' (" in ln]) == 1
     assert "'franka' (molmo-lerobot " in line and "'impostor_franka' (impostor-bots 0.1)" in line
     assert "provides: robot:franka (clash)" in res.stdout
 

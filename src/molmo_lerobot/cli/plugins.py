@@ -27,8 +27,8 @@ def main(argv: list[str] | None = None) -> int:
     if clashes:
         print("\nCLASHES (a run using one of these names fails unless it pins a provider: "
               "plugins.prefer.<kind>.<name>=<plugin>)")
-        for (kind, name), recs in clashes.items():
-            print(f"  {kind} {name!r}: " + ", ".join(r.label for r in recs))
+        for line in clash_lines(plugins, clashes):
+            print("  " + line)
     if args.hooks:
         for rec in plugins.records:
             print(f"\n{rec.name} ({rec.value})")
@@ -41,6 +41,22 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\n{len(broken)} of {len(plugins.records)} plugins failed to load; "
               "runs that do not need them are unaffected.", file=sys.stderr)
     return 0
+
+
+def clash_lines(plugins: Plugins, clashes: dict) -> list[str]:
+    """One line per clashing name and its providers; a name's clashing aliases are folded into it."""
+    groups: dict[tuple, list[str]] = {}
+    for (kind, name), recs in clashes.items():
+        groups.setdefault((kind, tuple(r.pm_name for r in recs)), []).append(name)
+    lines = []
+    for (kind, _), keys in groups.items():
+        recs = clashes[(kind, keys[0])]
+        primary = [k for k in keys if k in plugins.names(kind)] or keys[:1]
+        names = ", ".join(repr(k) for k in primary)
+        aliases = [k for k in keys if k not in primary]
+        also = f" (and aliases {', '.join(aliases)})" if aliases else ""
+        lines.append(f"{kind} {names}{also}: " + ", ".join(r.label for r in recs))
+    return lines
 
 
 def implemented_hooks(plugins: Plugins, rec: PluginRecord) -> list[str]:
