@@ -87,6 +87,7 @@ class Plugins:
         self.records: list[PluginRecord] = []
         self.prefer: dict[str, dict[str, str]] = {}
         self._provided: dict[str, dict[str, list[Any]]] | None = None  # pm name → kind → items
+        self._indices: dict[str, tuple[Any, dict]] = {}  # kind → (the _provided it was built from, index)
         eps = entry_points if entry_points is not None else md.entry_points(group=ENTRY_POINT_GROUP)
         for ep in sorted(eps, key=lambda e: (e.name, _dist_name(e))):
             self._load(ep)
@@ -202,7 +203,11 @@ class Plugins:
     def _index(self, kind: str) -> dict[str, list[tuple[Any, PluginRecord]]]:
         """``name or alias → [(item, plugin), …]``, one entry per providing plugin."""
         provided = self._collect()
-        index: dict[str, list[tuple[Any, PluginRecord]]] = {}
+        built_from, index = self._indices.get(kind, (None, {}))
+        if built_from is provided:
+            return index
+        index = {}
+        self._indices[kind] = (provided, index)
         for rec in self.records:
             for item in provided.get(rec.pm_name, {}).get(kind, []):
                 for key in dict.fromkeys([item.name, *getattr(item, "aliases", ())]):
