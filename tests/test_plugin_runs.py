@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -143,7 +144,7 @@ def molmo_config_dirs():
 """
 
 
-def test_plugin_config_dirs_join_the_search_path_of_compose_and_the_app(install, tmp_path, capsys):
+def test_plugin_config_dirs_join_the_search_path_of_compose_and_the_app(install, tmp_path):
     from molmo_lerobot.config import compose
 
     root = write_dist(tmp_path / "site", "sine-configs", {"sine_configs": CONFIG_PLUGIN}, {"sine_cfg": "sine_configs"})
@@ -151,5 +152,6 @@ def test_plugin_config_dirs_join_the_search_path_of_compose_and_the_app(install,
     (root / "sine_conf" / "policy" / "sine.yaml").write_text("name: sine\namplitude: 0.1\n")
     install(root, "sine_configs")
     assert compose(["policy=sine", "policy.amplitude=0.3"]).policy == {"name": "sine", "amplitude": 0.3}
-    assert main(["--info", "searchpath"]) == 0
-    assert f"file://{root / 'sine_conf'}" in capsys.readouterr().out
+    res = subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.eval", "--info", "searchpath"],
+                         capture_output=True, text=True, timeout=300)  # PYTHONPATH from install()
+    assert res.returncode == 0 and f"| molmo-plugin | file://{root / 'sine_conf'}" in res.stdout
