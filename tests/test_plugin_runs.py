@@ -73,6 +73,10 @@ def test_a_clash_fails_the_run_naming_both_and_a_pin_runs_on_the_chosen_provider
     assert main([*FAST, "plugins.prefer.robot.franka=impostor_franka", f"output_dir={out}"]) == 0
     summary = json.loads((out / "results.json").read_text())
     assert (summary["n_episodes"], summary["n_errors"]) == (2, 0)
+    assert summary["eval_options"]["plugins_prefer"] == {"robot": {"franka": "impostor_franka"}}  # provenance
+    capsys.readouterr()
+    assert main([*FAST, "plugins.prefer.robot.franka=franka", f"output_dir={out}", "resume=true"]) == 2
+    assert "its eval_options differs" in capsys.readouterr().err  # never mixes providers in one run
     built_in = {int(pid) for pid in marker.read_text().split()}
     assert built_in and os.getpid() not in built_in  # the workers built the pinned impostor
 

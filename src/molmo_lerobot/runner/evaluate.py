@@ -168,7 +168,8 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                       "path": str(bench.path)},
         "policy": cfg["policy"], "seed": cfg["seed"], "limit": limit, "horizon": cfg.get("horizon"),
         "timing": cfg["timing"],
-        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera")},
+        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
+                         **({"plugins_prefer": plugins.prefer} if plugins.prefer else {})},  # pinned providers
     }
     done = _prepare_output(out, run_info, bool(cfg.get("resume")))
     results: dict[int, EpisodeResult] = {r.episode_index: r for r in done if r.episode_index in set(indices)}
