@@ -16,6 +16,7 @@ import os
 import re
 import shutil
 import socket
+import stat
 import tempfile
 import threading
 import time
@@ -27,7 +28,15 @@ from pathlib import Path, PurePosixPath
 
 from filelock import FileLock, Timeout
 
-from molmo_lerobot.resources.archive import pack_archive, safe_extract, sha256_file, tree_entries, verify_archive
+from molmo_lerobot.resources import nofollow
+from molmo_lerobot.resources.archive import (
+    extract_limit,
+    pack_archive,
+    safe_extract,
+    sha256_file,
+    tree_entries,
+    verify_archive,
+)
 from molmo_lerobot.resources.errors import (
     CorruptArchiveError,
     ResourceError,
@@ -35,6 +44,7 @@ from molmo_lerobot.resources.errors import (
     UnsafeArchiveError,
 )
 from molmo_lerobot.resources.index import PathIndex, uid_of
+from molmo_lerobot.resources.manifests import check_index, check_local, parse_manifest, read_json
 from molmo_lerobot.resources.remotes import Remote, open_remote
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
@@ -110,6 +120,7 @@ class ResourceManager:
         self._indexes: dict[ResourceSpec, PathIndex] = {}
         self._manifests: dict[ResourceSpec, dict] = {}
         self._locks: dict[str, FileLock] = {}
+        self._place_lock = threading.Lock()  # one archive moves into a version dir at a time
 
     # -- paths -------------------------------------------------------------------------
     def version_dir(self, spec: ResourceSpec | str) -> Path:
@@ -130,6 +141,7 @@ class ResourceManager:
         """Drop LMDB handles and caches inherited through fork (they must not be shared)."""
         if os.getpid() != self._pid:
             self._indexes, self._manifests, self._locks, self._pid = {}, {}, {}, os.getpid()
+            self._place_lock = threading.Lock()
 
     # -- locks -------------------------------------------------------------------------
     @contextlib.contextmanager
@@ -175,7 +187,7 @@ class ResourceManager:
                                         "(no-lock mode never installs)")
                 with self._version_lock(spec):
                     self._fetch_meta(spec)
-            self._manifests[spec] = json.loads(path.read_text())
+            self._manifests[spec] = parse_manifest(read_json(path), f"{spec}: cached manifest {path}")
         return self._manifests[spec]
 
     def _fetch_meta(self, spec: ResourceSpec) -> None:
@@ -194,15 +206,13 @@ class ResourceManager:
                                if p.count("/") >= 3})
             raise ResourceError(f"remote {self.remote.url} has no {spec} "
                                 f"(versions there: {', '.join(versions) or 'none'})") from None
-        manifest = _read_json(tmp / "manifest.json", "manifest")
-        for key in ("archives", "link", "uid_depth"):
-            if key not in manifest:
-                raise ResourceError(f"{spec}: remote manifest.json lacks field {key!r}")
-        if (manifest.get("data_type"), manifest.get("source"), manifest.get("version")) != (
+        where = f"{spec}: remote {self.remote.url} {spec.rel}/manifest.json"
+        manifest = parse_manifest(read_json(tmp / "manifest.json", where), where)
+        if (manifest["data_type"], manifest["source"], manifest["version"]) != (
                 spec.data_type, spec.source, spec.version):
-            raise ResourceError(f"{spec}: remote manifest.json describes another resource")
-        if manifest["link"] not in LINK_MODES:
-            raise ResourceError(f"{spec}: manifest.json field 'link' is {manifest['link']!r}, not one of {LINK_MODES}")
+            raise ResourceError(f"{where} describes another resource")
+        check_index(read_json(tmp / "index.json.gz", f"{spec}: remote index.json.gz"), manifest["archives"],
+                    f"{spec}: remote {self.remote.url} {spec.rel}/index.json.gz")
         os.replace(tmp / "index.json.gz", meta / "index.json.gz")
         os.replace(tmp / "manifest.json", meta / "manifest.json")  # last: its presence means meta is complete
 
@@ -224,9 +234,8 @@ class ResourceManager:
                 try:
                     idx.env  # another process may have built it while we waited
                 except ResourceError:
-                    entries = json.loads(gzip.decompress((self.meta_dir(spec) / "index.json.gz").read_bytes()))
-                    if set(entries) != set(manifest["archives"]):
-                        raise ResourceError(f"{spec}: index.json.gz and manifest.json list different archives") from None
+                    path = self.meta_dir(spec) / "index.json.gz"
+                    entries = check_index(read_json(path, f"{spec}: {path}"), manifest["archives"], f"{spec}: {path}")
                     idx = PathIndex.build(idx.path, entries, uid_depth=manifest["uid_depth"])
         self._indexes[spec] = idx
         return idx
@@ -349,7 +358,8 @@ class ResourceManager:
                             fut.result()
                         except Exception as exc:  # collected, retried once, then raised
                             errors[name] = exc
-                fatal = [e for e in errors.values() if isinstance(e, UnsafeArchiveError)]
+                fatal = [e for e in errors.values()
+                         if isinstance(e, UnsafeArchiveError) or not getattr(e, "retryable", True)]
                 if not errors or fatal or attempt == 1:
                     break
                 pending = list(errors)
@@ -362,6 +372,11 @@ class ResourceManager:
             raise ResourceError(f"{spec}: installing {len(errors)} archive(s) failed: {first}") from first
 
     def _install_archive(self, spec: ResourceSpec, name: str, entry: dict) -> None:
+        """Download, verify, extract (never past the index) and move one archive into place.
+
+        Only the download and its checks may be retried: once an archive with the manifest's
+        checksum fails to extract or place, the same bytes would fail again.
+        """
         files = self.index(spec).files(name)
         tmp = self.meta_dir(spec) / "tmp"
         tmp.mkdir(parents=True, exist_ok=True)
@@ -370,30 +385,69 @@ class ResourceManager:
         try:
             self.remote.download(f"{spec.rel}/archives/{name}", part)
             verify_archive(part, name, entry["size"], entry["sha256"])
-            safe_extract(part, xdir, name)
-            got = _walk(xdir)
-            if set(got) != set(files):
-                missing, extra = sorted(set(files) - set(got)), sorted(set(got) - set(files))
-                raise CorruptArchiveError(f"archive {name}: contents differ from the index "
-                                          f"(missing {missing[:3]}, unexpected {extra[:3]})")
-            for rel, want in files.items():
-                if want[0] != "->" and got[rel] != want[0]:
-                    raise CorruptArchiveError(f"archive {name}: {rel} has size {got[rel]}, index says {want[0]}")
-            vdir = self.version_dir(spec)
-            for rel in sorted(files):
-                src, dest = xdir / rel, vdir / rel
-                dest.parent.mkdir(parents=True, exist_ok=True)
-                if not src.is_symlink():
-                    os.chmod(src, 0o444)
-                if dest.is_dir() and not dest.is_symlink():
-                    raise ResourceError(f"archive {name}: {rel} would replace a directory in {vdir}")
-                os.replace(src, dest)
+            try:
+                safe_extract(part, xdir, name, files, extract_limit(files))
+                self._place(spec, name, xdir, files)
+            except ResourceError as exc:
+                exc.retryable = False
+                raise
             _atomic_write(self.meta_dir(spec) / "done" / f"{name}.ok", entry["sha256"])
         finally:
             with contextlib.suppress(FileNotFoundError):
                 part.unlink()
             if xdir.exists():
                 shutil.rmtree(xdir, onexc=_force_remove)
+
+    def _place(self, spec: ResourceSpec, name: str, xdir: Path, files: dict[str, list]) -> None:
+        """Move an extracted archive into the version dir without following any link, then check
+        every link of the version against the real tree; on a problem, take the archive out again."""
+        vdir = self.version_dir(spec)
+        vdir.mkdir(parents=True, exist_ok=True)
+        where = f"archive {name}"
+        with self._place_lock, nofollow.open_root(xdir) as xroot, nofollow.open_root(vdir) as vroot:
+            placed: list[str] = []
+            try:
+                for rel in sorted(files):
+                    with nofollow.parent_of(xroot, rel, create=False, where=where) as (xfd, leaf), \
+                            nofollow.parent_of(vroot, rel, create=True, where=where) as (vfd, _):
+                        st = nofollow.lstat_at(xfd, leaf)
+                        if st is None:
+                            raise CorruptArchiveError(f"{where}: {rel} was not extracted")
+                        if stat.S_ISDIR(st.st_mode):
+                            nofollow.make_dirs(vroot, rel, where)
+                            continue
+                        if stat.S_ISREG(st.st_mode):
+                            os.chmod(leaf, 0o444, dir_fd=xfd)
+                        old = nofollow.lstat_at(vfd, leaf)
+                        if old is not None and stat.S_ISDIR(old.st_mode):
+                            raise ResourceError(f"{where}: {rel} would replace a directory in {vdir}")
+                        os.replace(leaf, leaf, src_dir_fd=xfd, dst_dir_fd=vfd)
+                        placed.append(rel)
+                self._check_links(spec, [r for r in placed if files[r][0] in ("->", None)], where)
+            except BaseException:
+                for rel in placed:
+                    nofollow.remove(vroot, rel)
+                raise
+
+    def _check_links(self, spec: ResourceSpec, new: list[str], where: str) -> None:
+        """Every link of the version must resolve, through the real tree, inside the version dir.
+
+        A new link can change where an older one leads (``a -> .`` makes ``b -> a/..`` escape),
+        so all links placed so far are rechecked whenever an archive brings links.
+        """
+        vdir = self.version_dir(spec)
+        new = [r for r in new if os.path.islink(vdir / r)]
+        if not new:
+            return
+        path = self.meta_dir(spec) / "links.json"
+        known = read_json(path) if path.is_file() else []
+        links = sorted({r for r in known if isinstance(r, str) and os.path.islink(vdir / r)} | set(new))
+        bad = [r for r in links if not nofollow.resolves_inside(vdir, r)]
+        if bad:
+            raise UnsafeArchiveError(f"{where}: link {bad[0]!r} -> {os.readlink(vdir / bad[0])!r} resolves to "
+                                     f"{os.path.realpath(vdir / bad[0])}, outside {vdir}, through the links of "
+                                     "this version; refusing to install")
+        _atomic_write(path, json.dumps(links))
 
     # -- links -------------------------------------------------------------------------
     def _link(self, spec: ResourceSpec) -> Path:
@@ -431,7 +485,8 @@ class ResourceManager:
                     if not link.exists():
                         os.replace(new, link)
             self._update_json(self.install_dir / META / "installed.json",
-                              lambda d: d.setdefault(spec.data_type, {}).__setitem__(spec.source, spec.version))
+                              lambda d: d.setdefault(spec.data_type, {}).__setitem__(spec.source, spec.version),
+                              "str")
         return link
 
     # -- local manifests ---------------------------------------------------------------
@@ -443,25 +498,25 @@ class ResourceManager:
                 versions.sort()
 
         with self._lock(self.cache_dir / META / "locks" / "manifest.lock"):
-            self._update_json(self.cache_dir / META / "installed.json", add)
+            self._update_json(self.cache_dir / META / "installed.json", add, "list")
 
     @staticmethod
-    def _update_json(path: Path, edit: Callable[[dict], None]) -> None:
-        data = json.loads(path.read_text()) if path.is_file() else {}
+    def _update_json(path: Path, edit: Callable[[dict], None], values: str) -> None:
+        data = check_local(read_json(path), path, values) if path.is_file() else {}
         edit(data)
         _atomic_write(path, json.dumps(data, indent=1, sort_keys=True))
 
     def installed(self) -> dict[str, dict[str, list[str]]]:
         """``{data_type: {source: [versions]}}`` present in the cache."""
         path = self.cache_dir / META / "installed.json"
-        return json.loads(path.read_text()) if path.is_file() else {}
+        return check_local(read_json(path), path, "list") if path.is_file() else {}
 
     def linked(self) -> dict[str, dict[str, str]]:
         """``{data_type: {source: version}}`` the install dir points at."""
         if self.install_dir is None:
             return {}
         path = self.install_dir / META / "installed.json"
-        return json.loads(path.read_text()) if path.is_file() else {}
+        return check_local(read_json(path), path, "str") if path.is_file() else {}
 
     # -- verification ------------------------------------------------------------------
     def verify(self) -> list[str]:
@@ -484,6 +539,7 @@ class ResourceManager:
         return problems
 
     def _verify_version(self, spec: ResourceSpec) -> list[str]:
+        """Compare the real tree (walked without following links) with the index of its done archives."""
         try:
             manifest, index = self.manifest(spec), self.index(spec)
         except ResourceError as exc:
@@ -493,20 +549,36 @@ class ResourceManager:
         if self.is_complete(spec) and not set(manifest["archives"]) <= done:
             problems.append(f"{spec}: marked complete but archives are missing")
         vdir = self.version_dir(spec)
+        tree = nofollow.walk(vdir) if vdir.is_dir() and not vdir.is_symlink() else {}
+        expected: dict[str, tuple[str, list]] = {}
         for archive in sorted(done & set(manifest["archives"])):
-            for rel, want in index.files(archive).items():
-                path = vdir / rel
-                if want[0] == "->":
-                    if not path.is_symlink() or os.readlink(path) != want[1]:
-                        problems.append(f"{spec}: {rel} (archive {archive}) is not the link to {want[1]!r}")
-                    continue
-                if not path.is_file() or path.is_symlink():
-                    problems.append(f"{spec}: {rel} (archive {archive}) is missing")
-                elif path.stat().st_size != want[0] or sha256_file(path) != want[1]:
-                    problems.append(f"{spec}: {rel} (archive {archive}) differs from the manifest")
-                elif path.stat().st_mode & 0o222:
-                    problems.append(f"{spec}: {rel} (archive {archive}) is writable")
+            expected.update((rel, (archive, want)) for rel, want in index.files(archive).items())
+        dirs = {p for rel in expected for p in PurePosixPath(rel).parents if str(p) != "."}
+        for rel, (archive, want) in sorted(expected.items()):
+            got, what = tree.get(rel), f"{spec}: {rel} (archive {archive})"
+            if want[0] == "->":
+                if got != ("l", want[1]):
+                    problems.append(f"{what} is not the link to {want[1]!r}")
+            elif want[0] is None:
+                if got is None:
+                    problems.append(f"{what} is missing")
+            elif got is None or got[0] != "f":
+                problems.append(f"{what} is missing")
+            elif got[1] != want[0] or sha256_file(vdir / rel) != want[1]:
+                problems.append(f"{what} differs from the manifest")
+            elif (vdir / rel).stat().st_mode & 0o222:
+                problems.append(f"{what} is writable")
+        for rel, got in sorted(tree.items()):
+            if rel not in expected and not (got == ("d",) and PurePosixPath(rel) in dirs) and not self._own_file(rel):
+                problems.append(f"{spec}: {rel} is not in the index of any installed archive")
+            if got[0] == "l" and not nofollow.resolves_inside(vdir, rel):
+                problems.append(f"{spec}: link {rel} -> {got[1]!r} resolves to {os.path.realpath(vdir / rel)}, "
+                                f"outside {vdir}")
         return problems
+
+    def _own_file(self, rel: str) -> bool:
+        """Bookkeeping a layout keeps inside the version dir (none in ours)."""
+        return False
 
 
 # -- packing -------------------------------------------------------------------------------
@@ -586,16 +658,6 @@ def _is_tty() -> bool:
     return sys.stderr.isatty()
 
 
-def _read_json(path: Path, what: str) -> dict:
-    try:
-        data = json.loads(path.read_text())
-    except ValueError as exc:
-        raise ResourceError(f"{what} {path.name} is not valid JSON: {exc}") from None
-    if not isinstance(data, dict):
-        raise ResourceError(f"{what} {path.name} must hold a JSON object")
-    return data
-
-
 def _atomic_write(path: Path, text: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
@@ -603,25 +665,14 @@ def _atomic_write(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
-def _walk(root: Path) -> dict[str, int | str]:
-    """Files (→ size) and symlinks (→ "->") under ``root``."""
-    out: dict[str, int | str] = {}
-    for dirpath, dirnames, filenames in os.walk(root):
-        for name in filenames + [d for d in dirnames if os.path.islink(os.path.join(dirpath, d))]:
-            full = os.path.join(dirpath, name)
-            rel = Path(full).relative_to(root).as_posix()
-            out[rel] = "->" if os.path.islink(full) else os.path.getsize(full)
-    return out
-
-
 def _make_links(root: Path, target: Path, files: Iterable[str]) -> None:
+    """Per-file links ``root/rel -> target/rel``, made without following any link below ``root``."""
     root.mkdir(parents=True, exist_ok=True)
-    for rel in files:
-        link = root / rel
-        if os.path.lexists(link):
-            continue
-        link.parent.mkdir(parents=True, exist_ok=True)
-        os.symlink(target / rel, link)
+    with nofollow.open_root(root) as rfd:
+        for rel in files:
+            with nofollow.parent_of(rfd, rel, create=True, where=f"install dir {root}") as (fd, leaf):
+                if nofollow.lstat_at(fd, leaf) is None:
+                    os.symlink(target / rel, leaf, dir_fd=fd)
 
 
 def _remove_link_tree(path: Path) -> None:
