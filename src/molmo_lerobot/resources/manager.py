@@ -45,7 +45,9 @@ from molmo_lerobot.resources.errors import (
 )
 from molmo_lerobot.resources.index import PathIndex, uid_of
 from molmo_lerobot.resources.manifests import check_index, check_local, parse_manifest, read_json
-from molmo_lerobot.resources.remotes import Remote, open_remote
+from molmo_lerobot.resources import molmospaces as ms
+from molmo_lerobot.resources.errors import RemoteNotFoundError
+from molmo_lerobot.resources.remotes import MOLMOSPACES, Remote, open_remote
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 LINK_MODES = ("dir", "file")
@@ -97,10 +99,17 @@ PostSetup = Callable[["ResourceManager", ResourceSpec, Path], None]
 class ResourceManager:
     """Installs resource versions from a remote into a cache and links them into an install dir.
 
+    Versions in MolmoSpaces' layout (see :mod:`~molmo_lerobot.resources.molmospaces`) keep
+    molmospaces-resources' flags, local manifests, links and locks, so either tool can use
+    what the other installed.
+
     ``use_lock=False`` is for workers reading a cache that a leader has filled: nothing is
     locked or written, and anything missing is an error instead of an install.
     ``post_setup`` callables run after every install as ``hook(manager, spec, path)``.
     """
+
+    #: MolmoSpaces' archives have no checksum or exact size: refuse one unpacking to more than this ratio.
+    max_inflate_ratio = 64
 
     def __init__(self, cache_dir: str | os.PathLike, install_dir: str | os.PathLike | None = None,
                  remote: Remote | str | os.PathLike | None = None, *, use_lock: bool = True, workers: int = 4,
@@ -191,21 +200,31 @@ class ResourceManager:
         return self._manifests[spec]
 
     def _fetch_meta(self, spec: ResourceSpec) -> None:
+        """Fetch and check the version's metadata into ``meta_dir`` (our layout first, then MolmoSpaces').
+
+        A version dir molmospaces-resources filled (their metadata files inside) is adopted
+        without asking the remote.
+        """
         meta = self.meta_dir(spec)
         if (meta / "manifest.json").is_file():
             return
-        if self.remote is None:
-            raise ResourceError(f"{spec} is not in cache {self.cache_dir} and no remote was given")
         tmp = meta / "tmp"
         tmp.mkdir(parents=True, exist_ok=True)
+        vdir = self.version_dir(spec)
+        if (vdir / ms.REMOTE_MANIFEST).is_file() and (vdir / ms.TRIES).is_file():
+            return self._convert_ms_meta(spec, vdir, f"{spec}: cache {vdir}")
+        if self.remote is None:
+            raise ResourceError(f"{spec} is not in cache {self.cache_dir} and no remote was given")
         try:
             self.remote.download(f"{spec.rel}/manifest.json", tmp / "manifest.json")
-            self.remote.download(f"{spec.rel}/index.json.gz", tmp / "index.json.gz")
-        except ResourceError:
-            versions = sorted({p.split("/")[2] for p in self.remote.list_files(f"{spec.data_type}/{spec.source}")
-                               if p.count("/") >= 3})
-            raise ResourceError(f"remote {self.remote.url} has no {spec} "
-                                f"(versions there: {', '.join(versions) or 'none'})") from None
+        except RemoteNotFoundError:
+            try:
+                for name in (ms.REMOTE_MANIFEST, ms.TRIES):
+                    self.remote.download(f"{spec.rel}/{name}", tmp / name)
+            except RemoteNotFoundError:
+                raise ResourceError(f"remote {self.remote.url} has no {spec} ({self._remote_versions(spec)})") from None
+            return self._convert_ms_meta(spec, tmp, f"{spec}: remote {self.remote.url} {spec.rel}")
+        self.remote.download(f"{spec.rel}/index.json.gz", tmp / "index.json.gz")
         where = f"{spec}: remote {self.remote.url} {spec.rel}/manifest.json"
         manifest = parse_manifest(read_json(tmp / "manifest.json", where), where)
         if (manifest["data_type"], manifest["source"], manifest["version"]) != (
@@ -215,6 +234,50 @@ class ResourceManager:
                     f"{spec}: remote {self.remote.url} {spec.rel}/index.json.gz")
         os.replace(tmp / "index.json.gz", meta / "index.json.gz")
         os.replace(tmp / "manifest.json", meta / "manifest.json")  # last: its presence means meta is complete
+
+    def _remote_versions(self, spec: ResourceSpec) -> str:
+        try:
+            files = self.remote.list_files(f"{spec.data_type}/{spec.source}")
+        except ResourceError:
+            return "the remote cannot be listed"
+        versions = sorted({p.split("/")[2] for p in files if p.count("/") >= 3})
+        return f"versions there: {', '.join(versions) or 'none'}"
+
+    def _convert_ms_meta(self, spec: ResourceSpec, src: Path, where: str) -> None:
+        """Our manifest and index from MolmoSpaces' two metadata files in ``src`` (kept beside them)."""
+        meta = self.meta_dir(spec)
+        sizes = read_json(src / ms.REMOTE_MANIFEST, f"{where}/{ms.REMOTE_MANIFEST}")
+        tries = read_json(src / ms.TRIES, f"{where}/{ms.TRIES}")
+        manifest, index = ms.convert(spec.data_type, spec.source, spec.version, sizes, tries, where)
+        manifest = parse_manifest(manifest, where)
+        check_index(index, manifest["archives"], f"{where}/{ms.TRIES}")
+        for name in (ms.REMOTE_MANIFEST, ms.TRIES):
+            if src != meta / "raw":
+                (meta / "raw").mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(src / name, meta / "raw" / name)
+        part = meta / f".index.{uuid.uuid4().hex}.tmp"
+        with gzip.GzipFile(part, "wb", mtime=0) as fh:
+            fh.write(json.dumps(index).encode())
+        os.replace(part, meta / "index.json.gz")
+        _atomic_write(meta / "manifest.json", json.dumps(manifest, indent=1, sort_keys=True))
+
+    def is_molmospaces(self, spec: ResourceSpec | str) -> bool:
+        """Whether the version has MolmoSpaces' layout (their flags, manifests and locks are kept)."""
+        return self.manifest(spec).get("format") == MOLMOSPACES
+
+    def _ms_cache_lock(self, spec: ResourceSpec):
+        """molmospaces-resources' cache lock, held while a version of their layout changes."""
+        return self._lock(self.cache_dir / ms.LOCK) if self.is_molmospaces(spec) else contextlib.nullcontext()
+
+    def _ms_prepare(self, spec: ResourceSpec) -> None:
+        """Their metadata files inside the version dir, as molmospaces-resources keeps them."""
+        vdir = self.version_dir(spec)
+        vdir.mkdir(parents=True, exist_ok=True)
+        for name in (ms.REMOTE_MANIFEST, ms.TRIES):
+            if not (vdir / name).is_file():
+                part = vdir / f".{name}.{uuid.uuid4().hex}.tmp"
+                shutil.copyfile(self.meta_dir(spec) / "raw" / name, part)
+                os.replace(part, vdir / name)
 
     def index(self, spec: ResourceSpec | str) -> PathIndex:
         """The version's LMDB index (built from ``index.json.gz`` on first use)."""
@@ -241,11 +304,24 @@ class ResourceManager:
         return idx
 
     def _done(self, spec: ResourceSpec) -> set[str]:
+        if self.is_molmospaces(spec):
+            vdir = self.version_dir(spec)
+            return {a for a in self.manifest(spec)["archives"] if ms.extract_flag(vdir, a).exists()}
         done = self.meta_dir(spec) / "done"
         return {p.name[:-3] for p in done.glob("*.ok")} if done.is_dir() else set()
 
+    def _mark_done(self, spec: ResourceSpec, name: str, entry: dict) -> None:
+        if self.is_molmospaces(spec):
+            ms.extract_flag(self.version_dir(spec), name).touch()
+        else:
+            _atomic_write(self.meta_dir(spec) / "done" / f"{name}.ok", entry["sha256"])
+
     def is_complete(self, spec: ResourceSpec | str) -> bool:
-        return (self.meta_dir(ResourceSpec.parse(spec)) / "complete").is_file()
+        spec = ResourceSpec.parse(spec)
+        if (self.meta_dir(spec) / "complete").is_file():
+            return True
+        return (self.meta_dir(spec) / "manifest.json").is_file() and self.is_molmospaces(spec) and \
+            set(self.manifest(spec)["archives"]) <= self._done(spec)
 
     # -- install -----------------------------------------------------------------------
     def install(self, spec: ResourceSpec | str, on_demand: bool = False) -> InstallResult:
@@ -265,11 +341,14 @@ class ResourceManager:
             self._fetch_meta(spec)
             manifest = self.manifest(spec)
             self.index(spec)
-            done = self._done(spec)
-            todo = [] if on_demand else [a for a in manifest["archives"] if a not in done]
-            self._extract(spec, todo)
-            self._mark_complete(spec)
-        self._record_cache(spec)
+            with self._ms_cache_lock(spec):
+                if self.is_molmospaces(spec):
+                    self._ms_prepare(spec)
+                done = self._done(spec)
+                todo = [] if on_demand else [a for a in manifest["archives"] if a not in done]
+                self._extract(spec, todo)
+                self._mark_complete(spec)
+                self._record_cache(spec)
         path = self._link(spec) if self.install_dir is not None else self.version_dir(spec)
         for hook in self.post_setup:
             hook(self, spec, path)
@@ -290,7 +369,7 @@ class ResourceManager:
         if not self.use_lock:
             raise ResourceError(f"{spec}: archive {wanted[0]} is not in cache {self.cache_dir}; "
                                 "no-lock mode never installs")
-        with self._version_lock(spec):
+        with self._version_lock(spec), self._ms_cache_lock(spec):
             todo = [a for a in wanted if a not in self._done(spec)]
             self._clean_tmp(spec)
             self._extract(spec, todo)
@@ -383,15 +462,21 @@ class ResourceManager:
         token = uuid.uuid4().hex
         part, xdir = tmp / f"{token}.part", tmp / f"x-{token}"
         try:
-            self.remote.download(f"{spec.rel}/archives/{name}", part)
-            verify_archive(part, name, entry["size"], entry["sha256"])
+            layout = self.manifest(spec).get("format", 1)
+            inflated = self.remote.fetch_archive(spec.rel, name, part, layout)
+            if layout == MOLMOSPACES:  # sizes in MB and no checksum: bound the unpacked size instead
+                limit = extract_limit(files) + (inflated if inflated is not None
+                                                else self.max_inflate_ratio * part.stat().st_size)
+            else:
+                verify_archive(part, name, entry["size"], entry["sha256"])
+                limit = extract_limit(files)
             try:
-                safe_extract(part, xdir, name, files, extract_limit(files))
+                safe_extract(part, xdir, name, files, limit)
                 self._place(spec, name, xdir, files)
             except ResourceError as exc:
                 exc.retryable = False
                 raise
-            _atomic_write(self.meta_dir(spec) / "done" / f"{name}.ok", entry["sha256"])
+            self._mark_done(spec, name, entry)
         finally:
             with contextlib.suppress(FileNotFoundError):
                 part.unlink()
@@ -455,7 +540,9 @@ class ResourceManager:
         link = self.link_path(spec)
         target = self.version_dir(spec)
         mode = self.manifest(spec)["link"]
-        with self._install_lock():
+        theirs = self.is_molmospaces(spec)
+        their_lock = self._lock(self.install_dir / ms.LOCK) if theirs else contextlib.nullcontext()
+        with self._install_lock(), their_lock:
             link.parent.mkdir(parents=True, exist_ok=True)
             current = self.linked().get(spec.data_type, {}).get(spec.source)
             token = uuid.uuid4().hex
@@ -468,13 +555,19 @@ class ResourceManager:
                         _remove_link_tree(link)
                     os.replace(tmp, link)
             else:
-                index, done = self.index(spec), self._done(spec)
-                files = [rel for a in sorted(done & set(self.manifest(spec)["archives"])) for rel in index.files(a)]
+                index, done = self.index(spec), sorted(self._done(spec) & set(self.manifest(spec)["archives"]))
+                files = [rel for a in done for rel in index.files(a)]
+                if theirs:  # their metadata files are linked too, and each linked archive flagged
+                    files += [ms.REMOTE_MANIFEST, ms.TRIES]
                 if current == spec.version and link.is_dir() and not link.is_symlink():
                     _make_links(link, target, files)  # same version: add what on-demand installs brought
+                    if theirs:
+                        _flag_links(link, done)
                 else:
                     new = link.parent / f".{link.name}.{token}.new"
                     _make_links(new, target, files)
+                    if theirs:
+                        _flag_links(new, done)
                     if link.is_symlink():
                         link.unlink()
                     elif link.exists():
@@ -484,9 +577,14 @@ class ResourceManager:
                         _remove_link_tree(old)
                     if not link.exists():
                         os.replace(new, link)
-            self._update_json(self.install_dir / META / "installed.json",
-                              lambda d: d.setdefault(spec.data_type, {}).__setitem__(spec.source, spec.version),
-                              "str")
+            def point(d: dict) -> None:
+                d.setdefault(spec.data_type, {})[spec.source] = spec.version
+
+            self._update_json(self.install_dir / META / "installed.json", point, "str")
+            if theirs:
+                if current is not None and current != spec.version:  # their cached tries index is per version
+                    shutil.rmtree(self.install_dir / ".lmdb" / spec.data_type / spec.source, ignore_errors=True)
+                self._update_json(self.install_dir / ms.LOCAL_MANIFEST, point, "str", indent=2)
         return link
 
     # -- local manifests ---------------------------------------------------------------
@@ -499,24 +597,36 @@ class ResourceManager:
 
         with self._lock(self.cache_dir / META / "locks" / "manifest.lock"):
             self._update_json(self.cache_dir / META / "installed.json", add, "list")
+            if self.is_molmospaces(spec):  # under their cache lock (held by the caller)
+                self._update_json(self.cache_dir / ms.LOCAL_MANIFEST, add, "list", indent=2)
 
     @staticmethod
-    def _update_json(path: Path, edit: Callable[[dict], None], values: str) -> None:
+    def _update_json(path: Path, edit: Callable[[dict], None], values: str, indent: int = 1) -> None:
         data = check_local(read_json(path), path, values) if path.is_file() else {}
         edit(data)
-        _atomic_write(path, json.dumps(data, indent=1, sort_keys=True))
+        _atomic_write(path, json.dumps(data, indent=indent, sort_keys=indent == 1))
 
     def installed(self) -> dict[str, dict[str, list[str]]]:
-        """``{data_type: {source: [versions]}}`` present in the cache."""
-        path = self.cache_dir / META / "installed.json"
-        return check_local(read_json(path), path, "list") if path.is_file() else {}
+        """``{data_type: {source: [versions]}}`` present in the cache (ours and molmospaces-resources')."""
+        out: dict[str, dict[str, list[str]]] = {}
+        for path in (self.cache_dir / META / "installed.json", self.cache_dir / ms.LOCAL_MANIFEST):
+            if path.is_file():
+                for data_type, sources in check_local(read_json(path), path, "list").items():
+                    for source, versions in sources.items():
+                        have = out.setdefault(data_type, {}).setdefault(source, [])
+                        have[:] = sorted(set(have) | set(versions))
+        return {t: {s: v for s, v in src.items() if v} for t, src in out.items() if any(src.values())}
 
     def linked(self) -> dict[str, dict[str, str]]:
-        """``{data_type: {source: version}}`` the install dir points at."""
+        """``{data_type: {source: version}}`` the install dir points at (molmospaces-resources' record wins)."""
         if self.install_dir is None:
             return {}
-        path = self.install_dir / META / "installed.json"
-        return check_local(read_json(path), path, "str") if path.is_file() else {}
+        out: dict[str, dict[str, str]] = {}
+        for path in (self.install_dir / META / "installed.json", self.install_dir / ms.LOCAL_MANIFEST):
+            if path.is_file():
+                for data_type, sources in check_local(read_json(path), path, "str").items():
+                    out.setdefault(data_type, {}).update({s: v for s, v in sources.items() if v is not None})
+        return {t: src for t, src in out.items() if src}
 
     # -- verification ------------------------------------------------------------------
     def verify(self) -> list[str]:
@@ -569,16 +679,16 @@ class ResourceManager:
             elif (vdir / rel).stat().st_mode & 0o222:
                 problems.append(f"{what} is writable")
         for rel, got in sorted(tree.items()):
-            if rel not in expected and not (got == ("d",) and PurePosixPath(rel) in dirs) and not self._own_file(rel):
+            if rel not in expected and not (got == ("d",) and PurePosixPath(rel) in dirs) and not self._own_file(spec, rel):
                 problems.append(f"{spec}: {rel} is not in the index of any installed archive")
             if got[0] == "l" and not nofollow.resolves_inside(vdir, rel):
                 problems.append(f"{spec}: link {rel} -> {got[1]!r} resolves to {os.path.realpath(vdir / rel)}, "
                                 f"outside {vdir}")
         return problems
 
-    def _own_file(self, rel: str) -> bool:
-        """Bookkeeping a layout keeps inside the version dir (none in ours)."""
-        return False
+    def _own_file(self, spec: ResourceSpec, rel: str) -> bool:
+        """Bookkeeping a layout keeps inside the version dir (MolmoSpaces' metadata and flags; none in ours)."""
+        return self.is_molmospaces(spec) and ms.is_own_file(rel)
 
 
 # -- packing -------------------------------------------------------------------------------
@@ -675,10 +785,18 @@ def _make_links(root: Path, target: Path, files: Iterable[str]) -> None:
                     os.symlink(target / rel, leaf, dir_fd=fd)
 
 
+def _flag_links(root: Path, archives: Iterable[str]) -> None:
+    """molmospaces-resources' per-archive "links made" flags in a per-file link dir."""
+    for archive in archives:
+        ms.link_flag(root, archive).touch()
+
+
 def _remove_link_tree(path: Path) -> None:
-    """Delete a tree of links made by :func:`_make_links`, refusing one that holds real files."""
+    """Delete a tree of links made by :func:`_make_links` (and their flags), refusing one that holds real files."""
     for dirpath, dirnames, filenames in os.walk(path):
         for name in filenames:
+            if dirpath == str(path) and name.startswith(".") and name.endswith("_complete_links"):
+                continue
             if not os.path.islink(os.path.join(dirpath, name)):
                 raise ResourceError(f"{path} holds real files ({name}); refusing to replace it with links")
     shutil.rmtree(path)
