@@ -254,13 +254,19 @@ class HttpRemote(Remote):
 
     def __init__(self, base_url: str, timeout: float = 60.0) -> None:
         self.url, self.timeout = base_url.rstrip("/"), timeout
+        self._client, self._pid = None, -1
 
-    def download(self, rel: str, dest: Path) -> None:
+    def client(self):
+        """One connection-pooling client per process (a client must not cross a fork)."""
         import httpx
 
+        if self._client is None or self._pid != os.getpid():
+            self._client, self._pid = httpx.Client(timeout=self.timeout, follow_redirects=True), os.getpid()
+        return self._client
+
+    def download(self, rel: str, dest: Path) -> None:
         url = f"{self.url}/{quote(rel)}"
-        _stream_to(lambda: httpx.stream("GET", url, timeout=self.timeout, follow_redirects=True), self.url, rel,
-                   Path(dest), rel)
+        _stream_to(lambda: self.client().stream("GET", url), self.url, rel, Path(dest))
 
     def _read_only(self, *args, **kwargs) -> None:
         raise ResourceError(f"remote {self.url}: an HTTP bucket is read-only here; pack into a directory and "
@@ -272,7 +278,8 @@ class HttpRemote(Remote):
         raise ResourceError(f"remote {self.url}: an HTTP bucket cannot be listed; name the version to install")
 
 
-def _stream_to(open_stream, remote: str, rel: str, dest: Path, what: str, expect: tuple[int, int] | None = None) -> None:
+def _stream_to(open_stream, remote: str, rel: str, dest: Path, what: str = "the file",
+               expect: tuple[int, int] | None = None) -> None:
     """Stream one HTTP response body into ``dest`` (atomically); every failure is one line.
 
     ``expect=(offset, size)`` for a Range request: the answer must be that exact range.
