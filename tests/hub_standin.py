@@ -84,6 +84,14 @@ class Repo:
                 "branches": self.branches, "tags": self.tags, "commits": self.commits}
 
 
+class _QuietServer(ThreadingHTTPServer):
+    """Drops handler errors (a client that hung up on purpose) instead of printing them into
+    whichever test's captured stderr is current."""
+
+    def handle_error(self, request, client_address) -> None:
+        pass
+
+
 class HubStandin:
     """The stand-in's state plus its HTTP server. Use as a context manager or ``start()``/``stop()``."""
 
@@ -98,7 +106,7 @@ class HubStandin:
         self.faults: dict[str, str] = {}  # file path in repo -> "truncate"
         self.token: str | None = None
         handler = type("Handler", (_Handler,), {"hub": self})
-        self.server = ThreadingHTTPServer((host, port), handler)
+        self.server = _QuietServer((host, port), handler)
         self.server.daemon_threads = True
         self.endpoint = f"http://{host}:{self.server.server_address[1]}"
         self._thread: threading.Thread | None = None

@@ -27,6 +27,14 @@ REMOTE_MANIFEST = "mjthor_resource_file_to_size_mb.json"
 TRIES = "mjthor_resources_combined_meta.json.gz"
 
 
+class _QuietServer(ThreadingHTTPServer):
+    """Drops handler errors (a client that hung up on purpose) instead of printing them into
+    whichever test's captured stderr is current."""
+
+    def handle_error(self, request, client_address) -> None:
+        pass
+
+
 class BucketStandin:
     """Serves ``root`` over HTTP. ``gets``/``sent`` count GETs and body bytes per path; ``faults``
     maps a path to ``"truncate"``, ``"401"``, ``"403"`` or ``"500"``."""
@@ -39,7 +47,7 @@ class BucketStandin:
         self.faults: dict[str, str] = {}
         self.lock = threading.Lock()
         handler = type("Handler", (_BucketHandler,), {"bucket": self})
-        self.server = ThreadingHTTPServer(("127.0.0.1", 0), handler)
+        self.server = _QuietServer(("127.0.0.1", 0), handler)
         self.server.daemon_threads = True
         self.url = f"http://127.0.0.1:{self.server.server_address[1]}"
         self._thread = threading.Thread(target=self.server.serve_forever, daemon=True)

@@ -310,21 +310,31 @@ def test_preset_installs_the_pinned_versions_into_the_assets_dir(bucket, tmp_pat
     assert (assets / "robots" / "franka_droid" / "a" / "franka_droid.xml").is_symlink()  # per file, eager
     assert (assets / "objects" / "thor").is_symlink() and (assets / "objects" / "thor" / "b.txt").read_text() == "20251117"
     assert (assets / "grasps" / "droid" / "a" / "droid.xml").is_file()  # eager
-    assert "scenes/ithor@20251217_with_occupancy (on demand)" in out  # scenes, objaverse: on demand
-    assert not (assets / "scenes" / "ithor" / "b.txt").exists()
+    # scenes: on demand, but (as MolmoSpaces' setup does) small datasets are extracted whole
+    assert "scenes/ithor@20251217_with_occupancy (on demand, 2 of its 2 base archives extracted)" in out
+    assert (assets / "scenes" / "ithor" / "b.txt").read_text() == "20251217_with_occupancy"
     assert (assets / "scenes" / "ithor" / ms.TRIES).is_file()
-    assert "objects/objaverse@20260131 (on demand)" in out
+    assert "objects/objaverse@20260131 (on demand)" in out  # objaverse: nothing until asked
+    assert not (assets / "objects" / "objaverse" / "b.txt").exists()
     linked = json.loads((assets / ms.LOCAL_MANIFEST).read_text())
     assert linked == ms.VERSIONS
     mgr = ResourceManager(cache, assets, bucket.url, progress=False)
-    assert mgr.ensure_path("scenes/ithor@20251217_with_occupancy", "b.txt").read_text() == "20251217_with_occupancy"
-    assert (assets / "scenes" / "ithor" / "b.txt").read_text() == "20251217_with_occupancy"  # linked on first use
+    assert mgr.ensure_path("objects/objaverse@20260131", "b.txt").read_text() == "20260131"
+    assert (assets / "objects" / "objaverse" / "b.txt").read_text() == "20260131"
     assert mgr.verify() == []
 
     table = tmp_path / "pins.json"
     table.write_text(json.dumps({"objects": {"thor": "20251117"}}))
     assert main(["install", "--preset", str(table), "--remote", bucket.url, "--no-progress"]) == 0
     assert "objects/thor@20251117 (eager): 0 archives extracted" in capsys.readouterr().out
+
+
+def test_setup_archives_follow_their_scene_rule():
+    small = [f"ithor_{i}.tar.zst" for i in range(4)]
+    big = [f"procthor_{i}.tar.zst" for i in range(12)] + ["procthor_base.tar.zst"]
+    assert ms.setup_archives("scenes", small) == small
+    assert ms.setup_archives("scenes", big) == ["procthor_base.tar.zst"]
+    assert ms.setup_archives("objects", small) == []
 
 
 # -- interop with molmospaces-resources' on-disk layout --------------------------------------------------------

@@ -126,7 +126,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _install(args: argparse.Namespace) -> int:
-    from molmo_lerobot.resources import ResourceError, ResourceManager, ResourceSpec
+    from molmo_lerobot.resources import ResourceError, ResourceManager
 
     specs: list[tuple[str, bool]] = [(s, args.on_demand or bool(args.uid)) for s in args.spec]
     if args.preset:
@@ -134,7 +134,7 @@ def _install(args: argparse.Namespace) -> int:
         for data_type, sources in table.items():
             for source, version in sources.items():
                 eager = args.eager or ms.behaviour(data_type, source)[1]
-                specs.append((f"{data_type}/{source}@{version}", args.on_demand or bool(args.uid) or not eager))
+                specs.append((f"{data_type}/{source}@{version}", args.on_demand or not eager))
         remote = args.remote or ms.BUCKET_URL
         cache = args.cache_dir or ms.cache_dir()
         install = args.install_dir or molmospaces_assets_dir()
@@ -149,8 +149,12 @@ def _install(args: argparse.Namespace) -> int:
     parsed = []
     for text, on_demand in specs:
         r = mgr.install(text, on_demand=on_demand)
-        parsed.append(ResourceSpec.parse(text))
+        parsed.append(r.spec)
         mode = "on demand" if r.on_demand else "eager"
+        if args.preset and r.on_demand and not args.on_demand:  # what MolmoSpaces extracts at setup anyway
+            setup = ms.setup_archives(r.spec.data_type, sorted(mgr.manifest(r.spec)["archives"]))
+            if setup:
+                mode += f", {mgr.ensure_archives(r.spec, setup)} of its {len(setup)} base archives extracted"
         print(f"installed {r.spec} ({mode}): {r.extracted} archives extracted, {r.present} already present → {r.path}")
     for uid in args.uid:
         holders = [s for s in parsed if mgr.index(s).archives_for_uid(uid)]

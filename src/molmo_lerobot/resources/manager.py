@@ -669,9 +669,11 @@ class ResourceManager:
             if want[0] == "->":
                 if got != ("l", want[1]):
                     problems.append(f"{what} is not the link to {want[1]!r}")
-            elif want[0] is None:
+            elif want[0] is None:  # MolmoSpaces' index: no size or checksum to compare
                 if got is None:
                     problems.append(f"{what} is missing")
+                elif got[0] == "f" and (vdir / rel).stat().st_mode & 0o222:
+                    problems.append(f"{what} is writable")
             elif got is None or got[0] != "f":
                 problems.append(f"{what} is missing")
             elif got[1] != want[0] or sha256_file(vdir / rel) != want[1]:

@@ -18,6 +18,7 @@ What molmospaces-resources writes, and we read and write the same way:
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 from molmo_lerobot.resources.errors import ResourceError
@@ -68,6 +69,14 @@ def behaviour(data_type: str, source: str) -> tuple[str, bool]:
     """``(link mode, eager)`` MolmoSpaces uses for a source."""
     link, eager = BEHAVIOUR.get(data_type, ("dir", True))
     return link, eager or (data_type, source) in EAGER_SOURCES
+
+
+def setup_archives(data_type: str, archives: list[str]) -> list[str]:
+    """Archives MolmoSpaces extracts at setup for an on-demand source: every archive of a small
+    scene dataset (under 10), else the scene archives whose names hold no number (shared bases)."""
+    if data_type != "scenes":
+        return []
+    return list(archives) if len(archives) < 10 else [a for a in archives if not re.search(r"\d", a)]
 
 
 def extract_flag(version_dir: Path, archive: str) -> Path:
