@@ -103,6 +103,9 @@ def test_eager_and_uid_installs_give_exact_files(kind, bucket, hub_standin, tmp_
 
     assert _install(tmp_path, remote, "objects/objaverse@20260131", "scenes/ithor@20251217") == 0
     assert _data(tmp_path / "install" / "objects" / "objaverse") == read_tree(objects)
+    if kind == "hf":  # an eager install reads each archive's bytes once, by Range, never whole shards
+        sent = sum(n for p, n in hub_standin.sent.items() if p.startswith("mujoco/objects/objaverse/20260131/shards/"))
+        assert sent == sum(r["size"] for r in rows.values())
     scenes_inst = tmp_path / "install" / "scenes" / "ithor"
     assert not scenes_inst.is_symlink() and (scenes_inst / "train_1.xml").is_symlink()  # their PER_FILE
     assert _data(scenes_inst) == read_tree(scenes)
@@ -283,12 +286,22 @@ def test_bucket_faults_are_one_line_and_retry_succeeds(fault, bucket, tmp_path, 
         read_tree(objects)
 
 
-def test_their_metadata_with_wrong_types_is_one_line(bucket, tmp_path, capsys):
-    publish_bucket(_objects_tree(tmp_path / "src", 2), bucket.root, "objects", "objaverse", "1")
-    vdir = bucket.root / "objects" / "objaverse" / "1"
-    (vdir / ms.REMOTE_MANIFEST).write_text(json.dumps({"objaverse_00aa0bb.tar.zst": "big"}))
+@pytest.mark.parametrize("what, content, match", [
+    (ms.REMOTE_MANIFEST, {"objaverse_00aa0bb.tar.zst": "big"}, "sizes in MB"),
+    (ms.REMOTE_MANIFEST, ["objaverse_00aa0bb.tar.zst"], "sizes in MB"),
+    (ms.TRIES, {"objaverse_00aa0bb.tar.zst": {"a": []}}, "node 'a' is not a JSON object"),
+    (ms.TRIES, {"objaverse_00aa0bb.tar.zst": {"..": {"x": {}}}}, "is not a clean relative path"),
+    (ms.TRIES, {"objaverse_00aa0bb.tar.zst": {".objaverse_01aa1bb.tar.zst_complete_extract": {}}},
+     "keeps for its own bookkeeping"),
+])
+def test_their_metadata_with_wrong_types_is_one_line(bucket, tmp_path, capsys, what, content, match):
+    import gzip
+
+    publish_bucket(_objects_tree(tmp_path / "src", 1), bucket.root, "objects", "objaverse", "1")
+    raw = json.dumps(content).encode()
+    (bucket.root / "objects" / "objaverse" / "1" / what).write_bytes(gzip.compress(raw) if what == ms.TRIES else raw)
     rc, err = _fault_install(tmp_path, bucket.url, capsys)
-    assert rc == 1 and err.count("\n") == 1 and ms.REMOTE_MANIFEST in err and "sizes in MB" in err, err
+    assert rc == 1 and err.count("\n") == 1 and what in err and match in err, err
 
 
 # -- the preset: MolmoSpaces' version table into their assets dir layout ----------------------------------------

@@ -98,7 +98,7 @@ def _run(args: argparse.Namespace) -> int:
             remote: dict[str, dict[str, list[str]]] = {}
             for f in files:
                 parts = f.split("/")
-                if len(parts) == 4 and parts[3] == "manifest.json":
+                if len(parts) == 4 and parts[3] in ("manifest.json", ms.REMOTE_MANIFEST):
                     remote.setdefault(parts[0], {}).setdefault(parts[1], []).append(parts[2])
             listing["remote"] = remote
         if args.json:

@@ -105,6 +105,11 @@ def convert(data_type: str, source: str, version: str, sizes: object, tries: obj
         raise ResourceError(f"{where}: {TRIES} must map archive names to path tries")
     index = {archive: {path: [None, None] for path in trie_leaves(trie, f"{where}: {TRIES}: archive {archive}")}
              for archive, trie in tries.items()}
+    for archive, paths in index.items():
+        for path in paths:
+            if is_own_file(path):  # an archive must not forge a completion flag or their metadata
+                raise ResourceError(f"{where}: {TRIES}: archive {archive} holds {path!r}, a name MolmoSpaces "
+                                    "keeps for its own bookkeeping")
     link, _ = behaviour(data_type, source)
     manifest = {"format": "molmospaces", "data_type": data_type, "source": source, "version": version,
                 "link": link, "uid_depth": 0,
