@@ -447,7 +447,7 @@ class ResourceManager:
         if errors:
             first = (fatal or list(errors.values()))[0]
             if isinstance(first, ResourceError):
-                raise first
+                raise first if str(first).startswith(f"{spec}:") else type(first)(f"{spec}: {first}") from None
             raise ResourceError(f"{spec}: installing {len(errors)} archive(s) failed: {first}") from first
 
     def _install_archive(self, spec: ResourceSpec, name: str, entry: dict) -> None:
