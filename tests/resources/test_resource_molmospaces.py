@@ -198,10 +198,11 @@ def _assert_failed_cleanly(tmp_path, rc, err, pattern):
     assert not (tmp_path / "install" / "objects" / "objaverse").exists()  # … but nothing is linked or complete
 
 
-@pytest.mark.parametrize("fault", ["corrupt-shard", "wrong-offset", "truncated", "404", "401"])
+@pytest.mark.parametrize("fault", ["corrupt-shard", "wrong-offset", "inflated-size", "truncated", "404", "401"])
 def test_hf_faults_are_one_line_and_retry_succeeds(fault, bucket, hub_standin, tmp_path, capsys, read_tree,
                                                    monkeypatch):
     objects = _objects_tree(tmp_path / "src", 4)
+    (objects / "01aa1bb" / "big.bin").write_bytes(os.urandom(300_000))  # past the per-member header allowance
     publish_bucket(objects, bucket.root, "objects", "objaverse", "1")
     rows = publish_hf(hub_standin, bucket.root, REPO, "mujoco", "objects", "objaverse", "1")
     from huggingface_hub import HfApi
@@ -218,17 +219,19 @@ def test_hf_faults_are_one_line_and_retry_succeeds(fault, bucket, hub_standin, t
         bad[start: start + 64] = bytes(64)
         api.upload_file(path_or_fileobj=bytes(bad), path_in_repo=shard, repo_id=REPO, repo_type="dataset")
         pattern = f"archive {re.escape(name)}: cannot be read"
-    elif fault == "wrong-offset":
+    elif fault in ("wrong-offset", "inflated-size"):
         import io
 
         import pyarrow as pa
         import pyarrow.parquet as pq
 
-        moved = [{**r, "offset": r["offset"] + 512} if r["path"] == name else r for r in rows.values()]
+        edit = {"offset": rows[name]["offset"] + 512} if fault == "wrong-offset" else {"inflated_size": 100}
+        moved = [{**r, "inflated_size": 1 << 20, **(edit if r["path"] == name else {})} for r in rows.values()]
         buf = io.BytesIO()
         pq.write_table(pa.Table.from_pylist(moved), buf)
         api.upload_file(path_or_fileobj=buf.getvalue(), path_in_repo=table, repo_id=REPO, repo_type="dataset")
-        pattern = f"archive {re.escape(name)}: cannot be read"
+        pattern = (f"archive {re.escape(name)}: cannot be read" if fault == "wrong-offset"
+                   else f"archive {re.escape(name)}: .*past its limit of .* bytes")
     elif fault == "truncated":
         hub_standin.faults[shard] = "truncate"
         pattern = "transfer of archive .* failed|truncated response"
@@ -247,7 +250,7 @@ def test_hf_faults_are_one_line_and_retry_succeeds(fault, bucket, hub_standin, t
     # fix the fault, retry: succeeds with exactly the source files
     if fault in ("corrupt-shard", "404"):
         api.upload_file(path_or_fileobj=good_shard, path_in_repo=shard, repo_id=REPO, repo_type="dataset")
-    elif fault == "wrong-offset":
+    elif fault in ("wrong-offset", "inflated-size"):
         api.upload_file(path_or_fileobj=good_table, path_in_repo=table, repo_id=REPO, repo_type="dataset")
     elif fault == "truncated":
         hub_standin.faults.clear()
@@ -284,6 +287,19 @@ def test_bucket_faults_are_one_line_and_retry_succeeds(fault, bucket, tmp_path, 
     assert rc == 0, err
     assert _data(tmp_path / "install" / "objects" / "objaverse") == \
         read_tree(objects)
+
+
+def test_bucket_archive_inflating_past_the_ratio_cap_is_refused_once(bucket, tmp_path, capsys):
+    """Their archives carry no checksum or per-file sizes: unpacking stops at 64x the archive's size."""
+    tree = tmp_path / "src"
+    (tree / "bomb").mkdir(parents=True)
+    (tree / "bomb" / "zeros.bin").write_bytes(bytes(32 << 20))
+    groups = publish_bucket(tree, bucket.root, "objects", "objaverse", "1")
+    rc, err = _fault_install(tmp_path, bucket.url, capsys, "bucket bomb")
+    _assert_failed_cleanly(tmp_path, rc, err, "past its limit of .* bytes")
+    assert bucket.archive_gets() == {f"objects/objaverse/1/{next(iter(groups))}": 1}  # no second download
+    written = sum(p.stat().st_size for p in (tmp_path / "cache").rglob("*") if p.is_file())
+    assert written < 1 << 20
 
 
 @pytest.mark.parametrize("what, content, match", [

@@ -146,8 +146,8 @@ class _Capped(io.RawIOBase):
         data = self.raw.read(n)
         self.count += len(data)
         if self.limit is not None and self.count > self.limit:
-            raise UnsafeArchiveError(f"archive {self.name}: decompresses to more than the {self.limit} bytes "
-                                     "its index allows; refusing to extract")
+            raise UnsafeArchiveError(f"archive {self.name}: decompresses past its limit of {self.limit} bytes "
+                                     "(from its index); refusing to extract")
         return data
 
 
@@ -182,8 +182,8 @@ def safe_extract(archive_path: Path, dest: Path, name: str, expected: Mapping[st
                     raise UnsafeArchiveError(f"{where} appears twice; refusing to extract")
                 size = _check_expected(member, rel, expected, dirs, seen, where)
                 if limit is not None and written + size > limit:
-                    raise UnsafeArchiveError(f"{where} would take the archive past the {limit} bytes its "
-                                             "index allows; refusing to extract")
+                    raise UnsafeArchiveError(f"{where} would take the archive past its limit of {limit} bytes "
+                                             "(from its index); refusing to extract")
                 written += size
                 _write_member(tar, member, rel, root, seen, where)
                 seen[rel] = "d" if member.isdir() else "l" if member.issym() else "f"
