@@ -5,6 +5,10 @@ read-only; bookkeeping lives beside it in ``<cache>/.molmo/`` (manifests, LMDB i
 per-archive completion flags, locks, temporary extraction dirs). The install dir holds
 ``<install>/<data_type>/<source>`` — one link to the version dir (``link="dir"``) or a tree
 of per-file links (``link="file"``, so relative MJCF paths resolve). Upgrades re-point links.
+
+Nothing is ever written through a link: archives are extracted and moved into place by
+walking every path with ``O_NOFOLLOW`` (:mod:`~molmo_lerobot.resources.nofollow`), and each
+link a version brings is resolved through the real tree and must stay inside the version.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from pathlib import Path, PurePosixPath
 
 from filelock import FileLock, Timeout
 
+from molmo_lerobot.resources import molmospaces as ms
 from molmo_lerobot.resources import nofollow
 from molmo_lerobot.resources.archive import (
     extract_limit,
@@ -39,14 +44,13 @@ from molmo_lerobot.resources.archive import (
 )
 from molmo_lerobot.resources.errors import (
     CorruptArchiveError,
+    RemoteNotFoundError,
     ResourceError,
     StaleLockError,
     UnsafeArchiveError,
 )
 from molmo_lerobot.resources.index import PathIndex, uid_of
 from molmo_lerobot.resources.manifests import check_index, check_local, parse_manifest, read_json
-from molmo_lerobot.resources import molmospaces as ms
-from molmo_lerobot.resources.errors import RemoteNotFoundError
 from molmo_lerobot.resources.remotes import MOLMOSPACES, Remote, open_remote
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")

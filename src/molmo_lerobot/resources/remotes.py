@@ -24,8 +24,8 @@ from urllib.parse import quote, unquote, urlparse
 
 from molmo_lerobot.resources.errors import RemoteNotFoundError, ResourceError
 
-#: Layout names, as recorded in a version's manifest ``format``.
-OURS, MOLMOSPACES = 1, "molmospaces"
+#: A version in MolmoSpaces' layout has this manifest ``format`` (ours: an integer).
+MOLMOSPACES = "molmospaces"
 
 
 class Remote(ABC):
@@ -213,6 +213,9 @@ class HfRemote(Remote):
         from huggingface_hub import get_session, hf_hub_url
         from huggingface_hub.utils import build_hf_headers
 
+        if size == 0:
+            Path(dest).write_bytes(b"")
+            return
         url = hf_hub_url(self.repo_id, self._full(rel), repo_type=self.repo_type, revision=self.revision,
                          endpoint=self.endpoint)
         headers = build_hf_headers(headers={"Range": f"bytes={offset}-{offset + size - 1}"})
