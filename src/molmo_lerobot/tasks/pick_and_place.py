@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+from shapely.geometry import Point
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.molmospaces import task_aliases
@@ -178,7 +179,7 @@ class PickAndPlaceTask(Task):
             if c.pos[2] < centre[2] and normal[2] >= math.cos(SUPPORT_MAX_ANGLE):
                 return True
         r_centre, r_size = geometry.body_aabb(m, d, self.receptacle_root)
-        if not geometry.xy_rect(r_centre, r_size).contains(geometry.shapely.Point(centre[:2])):
+        if not geometry.xy_rect(r_centre, r_size).contains(Point(centre[:2])):
             return False
         base = centre[2] - size[2] / 2
         top = r_centre[2] + r_size[2] / 2
