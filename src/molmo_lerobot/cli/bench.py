@@ -56,13 +56,24 @@ def _validate(path: Path, *, schema_only: bool) -> int:
         from molmo_lerobot.plugins import get_plugins
 
         plugins = get_plugins()
-        problems = validate_benchmark(bench, plugins)
+        found = validate_benchmark(bench, plugins)
+        problems = [p for p in found if not p.warning]
         if problems:
             for rec in plugins.broken():
                 print(f"note: plugin {rec.name!r} from {rec.distribution} failed to load: {rec.error}", file=sys.stderr)
             return _report(problems)
+        warnings = [p for p in found if p.warning]
+        for p in warnings:  # valid, but not runnable here as it stands
+            print(p, file=sys.stderr)
     _print_summary(bench)
-    print("checked    " + ("schema only" if schema_only else "schema and installed plugins: ok"))
+    if schema_only:
+        print("checked    schema only")
+    elif warnings:
+        n_eps = len({p.episode_index for p in warnings})
+        print(f"checked    valid; {n_eps} of {len(bench.episodes)} episodes cannot run here yet "
+              f"({len(warnings)} warning{'s' * (len(warnings) != 1)} above)")
+    else:
+        print("checked    schema and installed plugins: ok")
     return 0
 
 

@@ -40,6 +40,7 @@ class WorkerJob:
     benchmark_sha256: str
     recorders: list[RecorderFactory] = field(default_factory=list)
     horizons: dict[str, float] = field(default_factory=dict)
+    molmospaces: dict[str, Any] = field(default_factory=dict)  # MolmoSpaces data settings, user libraries
 
 
 class EpisodeWorker:
@@ -50,8 +51,11 @@ class EpisodeWorker:
         from molmo_lerobot.runner.policy import make_policy
         from molmo_lerobot.sim.env import Timing
 
+        from molmo_lerobot.molmospaces import configure
+
         self.job = job
         self.worker_id = worker_id
+        configure(job.molmospaces)
         self.plugins = get_plugins()
         self.timing = Timing(**job.timing)
         self.policy_name = str(job.policy["name"])
