@@ -225,7 +225,7 @@ def test_missing_scene_assets_fail_up_front_and_still_validate(assets, tmp_path,
     assert not (tmp_path / "run" / "results.json").exists()
     assert bench_cli.main(["validate", str(bench)]) == 0
     out = capsys.readouterr()
-    assert "episodes   3 over 3 houses" in out.out and out.err.count("warning: ") == 3
+    assert "episodes   3 over 3 houses" in out.out and out.err.count("warning: ") == 3  # one per missing scene
 
 
 # Validation --------------------------------------------------------------------------------------
@@ -281,3 +281,44 @@ def test_every_task_type_in_both_layouts_is_valid(assets, tmp_path, capsys):
         assert f"episodes   {len(episodes)} over 1 houses" in out.out
         assert "problem" not in out.err
     assert len(load_benchmark(legacy).episodes) == len(episodes)
+
+
+def test_install_uid_fetches_objaverse_objects_and_grasps_through_the_resource_manager(tmp_path, monkeypatch):
+    from molmo_lerobot.assets.catalog import default_catalog as fresh_catalog
+    from molmo_lerobot.molmospaces import settings
+    from molmo_lerobot.resources import pack
+    from standin import object_xml, save_npz
+
+    uids = ("a" * 32, "b" * 32)
+    objects, grasps = tmp_path / "objects_src", tmp_path / "grasps_src"
+    for uid in uids:
+        (objects / uid).mkdir(parents=True)
+        (objects / uid / f"{uid}.xml").write_text(object_xml(uid, "1 1 1 1"))
+        save_npz(grasps / uid / f"{uid}_grasps_filtered.npz", top_down_grasps())
+    remote = tmp_path / "remote"
+    pack(objects, remote, f"objects/objaverse@{layout.OBJECT_VERSIONS['objaverse']}", max_archive_bytes=1)
+    pack(grasps, remote, f"grasps/droid_objaverse@{layout.GRASP_VERSIONS['droid_objaverse']}", max_archive_bytes=1)
+    assets = tmp_path / "assets"
+    monkeypatch.setattr(settings, "_CURRENT", None)
+    fresh_catalog.cache_clear()
+    configure({"molmospaces": {"assets_dir": str(assets), "cache_dir": str(tmp_path / "cache"), "remote": str(remote)}})
+    try:
+        loc = fresh_catalog().library("objaverse").install(uids[0])
+        assert loc.mjcf_path == assets / "objects" / "objaverse" / uids[0] / f"{uids[0]}.xml" and loc.mjcf_path.is_file()
+        assert (assets / "grasps" / "droid_objaverse" / uids[0] / f"{uids[0]}_grasps_filtered.npz").is_file()
+        assert not (assets / "objects" / "objaverse" / uids[1] / f"{uids[1]}.xml").exists()  # one UID at a time
+    finally:
+        monkeypatch.setattr(settings, "_CURRENT", None)
+        fresh_catalog.cache_clear()
+
+
+def test_one_warning_per_missing_resource_and_user_scenes_from_overrides(assets, tmp_path, capsys):
+    _, houses = assets
+    ithor = houses[0]
+    bench = _write_bench(tmp_path / "b", [pick_episode(ithor)] * 3 + [user_pick_episode()])
+    assert bench_cli.main(["validate", str(bench), f"molmospaces.assets_dir={tmp_path / 'none'}"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "episodes 0, 1, 2: field scene_dataset" in err[0] and "episode 3: field scene_dataset" in err[1]
+    write_user_library(tmp_path)
+    assert bench_cli.main(["validate", str(bench), f"scene_xml_paths=[{tmp_path / 'scene.xml'}]"]) == 0
+    assert capsys.readouterr().err == ""

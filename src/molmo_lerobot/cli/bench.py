@@ -32,6 +32,8 @@ def main(argv: list[str] | None = None) -> int:
     val = sub.add_parser("validate", help="check a benchmark directory or JSON file")
     val.add_argument("path", type=Path)
     val.add_argument("--schema-only", action="store_true", help="skip the checks against installed plugins")
+    val.add_argument("overrides", nargs="*", metavar="KEY=VALUE",
+                     help="run-config overrides that locate data (molmospaces.assets_dir=…, scene_xml_paths=[…], …)")
     gen = sub.add_parser("generate", help="generate a benchmark deterministically")
     gen.add_argument("--task", default="pick")
     gen.add_argument("--houses", type=int, required=True, help="number of scenes (houses)")
@@ -42,19 +44,28 @@ def main(argv: list[str] | None = None) -> int:
     gen.add_argument("--force", action="store_true", help="replace an existing output directory")
     args = parser.parse_args(argv)
     if args.command == "validate":
-        return _validate(args.path, schema_only=args.schema_only)
+        return _validate(args.path, schema_only=args.schema_only, overrides=args.overrides)
     return _generate(args)
 
 
-def _validate(path: Path, *, schema_only: bool) -> int:
+def _validate(path: Path, *, schema_only: bool, overrides: list[str] | None = None) -> int:
     try:
         bench = load_benchmark(path)
     except BenchmarkError as exc:
         return _report(exc.problems)
     if not schema_only:
+        from omegaconf import OmegaConf
+
         from molmo_lerobot.benchmark.validate import validate_benchmark
+        from molmo_lerobot.config import ConfigError, compose
+        from molmo_lerobot.molmospaces import configure
         from molmo_lerobot.plugins import get_plugins
 
+        try:  # where MolmoSpaces data lives (assets dir, user scenes and libraries), as a run would see it
+            configure(OmegaConf.to_container(compose(list(overrides or [])), resolve=True))
+        except (ConfigError, ValueError, LookupError) as exc:
+            print(f"molmo-bench: error: {exc}", file=sys.stderr)
+            return 2
         plugins = get_plugins()
         found = validate_benchmark(bench, plugins)
         problems = [p for p in found if not p.warning]
@@ -63,8 +74,8 @@ def _validate(path: Path, *, schema_only: bool) -> int:
                 print(f"note: plugin {rec.name!r} from {rec.distribution} failed to load: {rec.error}", file=sys.stderr)
             return _report(problems)
         warnings = [p for p in found if p.warning]
-        for p in warnings:  # valid, but not runnable here as it stands
-            print(p, file=sys.stderr)
+        for line in _grouped(warnings):  # valid, but not runnable here as it stands: one line per missing thing
+            print(line, file=sys.stderr)
     _print_summary(bench)
     if schema_only:
         print("checked    schema only")
@@ -75,6 +86,19 @@ def _validate(path: Path, *, schema_only: bool) -> int:
     else:
         print("checked    schema and installed plugins: ok")
     return 0
+
+
+def _grouped(warnings: list[Problem]) -> list[str]:
+    """One ``warning:`` line per (file, field, message), listing the episodes it concerns."""
+    groups: dict[tuple[str, str | None, str], list[int]] = {}
+    for p in warnings:
+        groups.setdefault((p.file, p.field, p.message), []).append(p.episode_index)
+    lines = []
+    for (file, field, message), eps in groups.items():
+        shown = ", ".join(map(str, eps[:10])) + (", ..." if len(eps) > 10 else "")
+        where = f"episode{'s' * (len(eps) != 1)} {shown}"
+        lines.append(f"warning: {file}: {where}: " + (f"field {field}: " if field else "") + message)
+    return lines
 
 
 def _report(problems: list[Problem]) -> int:

@@ -16,37 +16,40 @@ from molmo_lerobot.assets.libraries import AssetError
 from molmo_lerobot.molmospaces.settings import SettingsError, configure
 
 
-def _missing(spec: Any, plugins: Any, camera_system: str | None) -> str | None:
+def _missing(spec: Any, plugins: Any, camera_system: str | None) -> tuple[str, str] | None:
+    """(field, what is missing and how to get it) for the first thing ``spec`` lacks here, or ``None``."""
     from molmo_lerobot.plugins import PluginError
 
-    checks = (("task type", "task_type", spec.task_name), ("robot", "robot", spec.robot.robot_name),
-              ("scene dataset", "scene_dataset", spec.scene_dataset))
+    checks = (("task type", "task_type", spec.task_name, "task.task_cls"),
+              ("robot", "robot", spec.robot.robot_name, "robot.robot_name"),
+              ("scene dataset", "scene_dataset", spec.scene_dataset, "scene_dataset"))
     found = {}
-    for what, kind, name in checks:
+    for what, kind, name, field in checks:
         try:
             found[kind] = getattr(plugins, kind)(name)
         except PluginError as exc:
-            return f"{what} {name!r}: {str(exc).splitlines()[0]} (install a plugin that provides it)"
+            return field, f"{what} {name!r}: {str(exc).splitlines()[0]} (install a plugin that provides it)"
     scene = found["scene_dataset"]
     reason = scene.missing(spec) if hasattr(scene, "missing") else None
     if reason:
-        return reason
+        return ("house_index" if "scene_xml_paths" in reason else "scene_dataset"), reason
     if hasattr(scene, "missing") and spec.scene_modifications.added_objects:
         from molmo_lerobot.molmospaces.scenes import resolve_object_file
 
         for name, rel in spec.scene_modifications.added_objects.items():
+            field = f"scene_modifications.added_objects[{name!r}]"
             try:
-                resolve_object_file(rel, f"scene_modifications.added_objects[{name!r}]")
+                resolve_object_file(rel, field)
             except FileNotFoundError as exc:
-                return str(exc)
+                return field, str(exc).removeprefix(f"{field}: ")
     if not spec.cameras:
         system = camera_system or (spec.source.camera_system_class if spec.source else None)
         if system is None:
-            return "cameras: [] and no camera system: set camera.system= or the episode's source.camera_system_class"
+            return "cameras", "cameras: [] and no camera system: set camera.system= or source.camera_system_class"
         try:
             plugins.camera_system(system)
         except PluginError as exc:
-            return f"cameras: [] needs camera system {system!r}: {str(exc).splitlines()[0]}"
+            return "cameras", f"cameras: [] needs camera system {system!r}: {str(exc).splitlines()[0]}"
     return None
 
 
@@ -62,17 +65,19 @@ def preflight(bench: Any, plugins: Any, config: Mapping[str, Any], indices: Iter
         return f"cannot set up MolmoSpaces data: {exc}"
     camera_system = (config.get("camera") or {}).get("system")
     skipped = set(skip)
-    reasons: dict[str, list[int]] = {}
+    reasons: dict[tuple[str, str, str], list[int]] = {}
     for i in indices:
         if i in skipped:
             continue
-        reason = _missing(bench.episodes[i], plugins, camera_system)
-        if reason:
-            reasons.setdefault(reason, []).append(i)
+        found = _missing(bench.episodes[i], plugins, camera_system)
+        if found:
+            file = bench.origins[i].file if i < len(bench.origins) else str(bench.path)
+            reasons.setdefault((file, *found), []).append(i)
     if not reasons:
         return None
-    (first, eps), *rest = reasons.items()
+    ((file, field, message), eps), *rest = reasons.items()
     shown = ", ".join(map(str, eps[:5])) + (", ..." if len(eps) > 5 else "")
     n_eps = sum(len(v) for v in reasons.values())
     more = f"; {len(rest)} more missing resource{'s' * (len(rest) != 1)} (molmo-bench validate lists them)" if rest else ""
-    return f"cannot simulate {n_eps} of {len(bench.episodes)} episodes: {first} (episode{'s' * (len(eps) != 1)} {shown}){more}"
+    return (f"cannot simulate {n_eps} of {len(bench.episodes)} episodes: {file}: episode{'s' * (len(eps) != 1)} "
+            f"{shown}: field {field}: {message}{more}")
