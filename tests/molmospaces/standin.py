@@ -232,3 +232,18 @@ def pick_episode(house: House, robot: str = "franka", gripper: list[float] | Non
         "language": {"task_description": "Pick up the mug", "referral_expressions": {"pickup_obj_name": "mug"},
                      "referral_expressions_priority": {}},
     }
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``python tests/molmospaces/standin.py OUT``: the stand-in tree at OUT/assets, a pick benchmark at OUT/bench."""
+    import sys
+
+    out = Path((argv or sys.argv[1:])[0])
+    houses = build_assets(out / "assets")
+    (out / "bench").mkdir(parents=True)
+    (out / "bench" / "benchmark.json").write_text(json.dumps([pick_episode(h) for h in houses], indent=1))
+    print(f"MLSPACES_ASSETS_DIR={out / 'assets'} molmo-eval policy=scripted benchmark.path={out / 'bench'}")
+
+
+if __name__ == "__main__":
+    main()

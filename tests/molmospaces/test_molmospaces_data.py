@@ -90,7 +90,7 @@ def test_scene_loads_with_its_physics_metadata_and_modifications(assets, tmp_pat
 # Libraries ---------------------------------------------------------------------------------------
 
 
-def test_thor_and_objaverse_libraries_and_droid_grasps(assets):
+def test_thor_and_objaverse_libraries_and_droid_grasps(assets, tmp_path):
     root, _ = assets
     cat = default_catalog()
     loc = cat.locate_uid("Mug_1")
@@ -101,8 +101,16 @@ def test_thor_and_objaverse_libraries_and_droid_grasps(assets):
     assert doc["category"] == "cup" and doc["clip_img_features"].shape == (3, 4)
     np.testing.assert_allclose(cat.get_grasps("Mug_1", robot="franka_droid"), top_down_grasps())
     assert cat.count_grasps(OBJAVERSE_UID, robot="franka") == 4  # droid grasps serve another robot
-    names = [g.name for g in cat._grasp_sources("Mug_1", "franka")]
-    assert names.index("droid") < len(names) and "droid_objaverse" not in names
+    assert [g.name for g in cat._grasp_sources("Mug_1", "franka")] == ["droid"]
+    assert [g.name for g in cat._grasp_sources(OBJAVERSE_UID, "franka_droid")] == ["droid_objaverse"]
+    # a user grasp library registered for the thor library goes before droid (MolmoSpaces' priority)
+    mine = tmp_path / "thor_grasps"
+    (mine / "Mug_1").mkdir(parents=True)
+    np.savez(mine / "Mug_1" / "g.npz", transforms=top_down_grasps()[:1])
+    (mine / "grasps_index.json").write_text(json.dumps({"grasp_paths": {"droid": {"Mug_1": "Mug_1/g.npz"}}}))
+    cat.register_user_grasp_library("better", mine, "thor")
+    assert [g.name for g in cat._grasp_sources("Mug_1", "franka_droid")] == ["better/droid", "droid"]
+    assert cat.count_grasps("Mug_1", robot="franka_droid") == 1
     with pytest.raises(AssetError, match="not installed under .*objaverse.*molmo-resources install objects/objaverse@"):
         cat.library("objaverse").install("f" * 32)
 
@@ -322,3 +330,27 @@ def test_one_warning_per_missing_resource_and_user_scenes_from_overrides(assets,
     write_user_library(tmp_path)
     assert bench_cli.main(["validate", str(bench), f"scene_xml_paths=[{tmp_path / 'scene.xml'}]"]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_objaverse_uid_known_by_metadata_but_not_installed_says_how_to_install(assets, tmp_path, monkeypatch):
+    import gzip
+
+    root, _ = assets
+    copy = tmp_path / "assets"
+    shutil.copytree(root, copy, symlinks=True)
+    shutil.rmtree(copy / ".lmdb")
+    shutil.rmtree(copy / "objects" / "objaverse" / OBJAVERSE_UID)
+    monkeypatch.setenv("MLSPACES_ASSETS_DIR", str(copy))
+    uid = "c" * 32
+    with gzip.open(copy / "objects/objathor_metadata/objects_metadata.json.gz", "rt") as fh:
+        docs = json.load(fh)
+    docs[uid] = {"assetId": uid, "category": "vase"}
+    with gzip.open(copy / "objects/objathor_metadata/objects_metadata.json.gz", "wt") as fh:
+        json.dump(docs, fh)
+    cat = default_catalog()
+    assert cat.locate_uid(uid).mjcf_path == copy / "objects/objaverse" / uid / f"{uid}.xml"
+    assert cat.annotation(uid)["category"] == "vase"
+    with pytest.raises(AssetError, match=rf"object '{uid}' is not installed .*molmo-resources install objects/objaverse@"):
+        cat.install_uid(uid)
+    with pytest.raises(AssetError, match="unknown asset UID 'Mug_9'"):
+        cat.install_uid("Mug_9")

@@ -19,6 +19,7 @@ import io
 import json
 import os
 import pickle
+import re
 from collections.abc import Iterator
 from functools import cache
 from pathlib import Path
@@ -30,6 +31,8 @@ from molmo_lerobot.assets.grasps import GraspLibrary
 from molmo_lerobot.assets.libraries import AssetError, AssetLibrary, MetadataStore, UidLocation
 from molmo_lerobot.molmospaces import layout
 from molmo_lerobot.molmospaces.settings import current
+
+_OBJAVERSE_UID = re.compile(r"[0-9a-f]{32}")
 
 #: The LMDB key MolmoSpaces writes last, when a metadata dump is complete.
 LMDB_COMPLETE_KEY = "__LMDBMap__dump_complete__"
@@ -152,7 +155,13 @@ class MolmoSpacesObjects(AssetLibrary):
         return iter(sorted(_xml_index(str(self.root))))
 
     def __contains__(self, uid: object) -> bool:
-        return isinstance(uid, str) and self._file(uid) is not None
+        """Installed here, or an objaverse UID (32 hex digits) its metadata knows, to be installed on demand."""
+        if not isinstance(uid, str):
+            return False
+        if self._file(uid) is not None:
+            return True
+        return (self.name == "objaverse" and _OBJAVERSE_UID.fullmatch(uid) is not None
+                and metadata_for(current().assets_dir).get(uid) is not None)
 
     def metadata(self, uid: str) -> dict:
         if uid not in self:
@@ -162,7 +171,9 @@ class MolmoSpacesObjects(AssetLibrary):
     def locate(self, uid: str) -> UidLocation:
         path = self._file(uid)
         if path is None:
-            raise self._unknown(uid)
+            if uid not in self:
+                raise self._unknown(uid)
+            path = self.root / uid / f"{uid}.xml"  # where install() puts it
         return UidLocation(self.name, None, path)
 
     def install(self, uid: str) -> UidLocation:
@@ -190,7 +201,10 @@ class MolmoSpacesObjects(AssetLibrary):
         except ResourceError as exc:
             raise AssetError(f"object {uid!r}: install from {settings.remote} failed: {exc}") from None
         _xml_index.cache_clear()
-        return self.locate(uid)
+        path = self._file(uid)
+        if path is None:
+            raise AssetError(f"object {uid!r}: installed {spec} but {self.root} has no {uid}.xml")
+        return UidLocation(self.name, None, path)
 
     @property
     def enumerable(self) -> bool:
@@ -202,16 +216,12 @@ class MolmoSpacesGrasps(GraspLibrary):
 
     robot = "droid"
 
-    def __init__(self, name: str) -> None:
-        super().__init__(Path("."), name=name)
+    def __init__(self, name: str) -> None:  # no fixed root: it follows the configured assets dir
+        self.name = name
 
     @property
     def root(self) -> Path:  # type: ignore[override]
         return current().assets / "grasps" / self.name
-
-    @root.setter
-    def root(self, value: Path) -> None:  # the base class assigns it; the assets dir decides
-        pass
 
     def path(self, uid: str, robot: str = "franka", joint: str | None = None) -> Path | None:
         path = self.root / uid / f"{joint or uid}_grasps_filtered.npz"
