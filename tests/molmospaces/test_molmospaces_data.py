@@ -4,7 +4,6 @@ and scenes, validation of their files and the up-front check of a run that canno
 from __future__ import annotations
 
 import json
-import math
 import shutil
 
 import mujoco

@@ -145,9 +145,9 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     cfg["output_dir"] = str(out)
     limit = cfg.get("limit")
     indices = list(range(len(bench.episodes)))[: int(limit) if limit is not None else None]
-    missing = preflight(bench, plugins, cfg, indices, skip=problems)
-    if missing:
-        raise RunError(missing)
+    cannot = preflight(bench, plugins, cfg, indices, skip=problems)  # before any output or worker
+    if cannot:
+        raise RunError(cannot)
 
     horizons = _task_horizons(cfg.get("horizons") or {})
     items: list[WorkItem] = []

@@ -48,10 +48,9 @@ class EpisodeWorker:
 
     def __init__(self, job: WorkerJob, worker_id: str) -> None:
         from molmo_lerobot.plugins import get_plugins
+        from molmo_lerobot.molmospaces import configure
         from molmo_lerobot.runner.policy import make_policy
         from molmo_lerobot.sim.env import Timing
-
-        from molmo_lerobot.molmospaces import configure
 
         self.job = job
         self.worker_id = worker_id

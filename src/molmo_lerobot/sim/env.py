@@ -5,7 +5,8 @@
 with the physics timestep set from ``timing.sim_dt_ms`` (never taken from any XML) and
 the solver options every scene shares (:data:`PHYSICS_OPTIONS`: the ``implicitfast``
 integrator for stiff position actuators, elliptic friction cones and ``impratio`` 10 so
-that grasped objects do not creep out of the fingers).
+that grasped objects do not creep out of the fingers), unless the scene dataset keeps its
+scenes' own (``SceneDataset.physics_options``: MolmoSpaces' scene XMLs).
 
 One :meth:`Env.step` is one policy step: ``policy_dt / ctrl_dt`` controller ticks, each
 moving the position targets linearly from the previous command towards the new one, and
@@ -24,7 +25,6 @@ from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
-
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
@@ -88,8 +88,8 @@ _MODEL_CACHE_SIZE = 4
 
 def _model_key(spec: EpisodeSpec, timing: Timing, camera_system: str) -> str:
     mods = spec.scene_modifications.model_dump(mode="json", exclude={"object_poses"})
-    return json.dumps([spec.scene_dataset, spec.data_split, spec.house_index, spec.robot.robot_name, spec.task.robot_base_pose,
-                       list(spec.img_resolution), [c.model_dump(mode="json") for c in spec.cameras], mods,
+    return json.dumps([spec.scene_dataset, spec.data_split, spec.house_index, spec.robot.robot_name,
+                       spec.task.robot_base_pose, list(spec.img_resolution), [c.model_dump(mode="json") for c in spec.cameras], mods,
                        timing.sim_dt_ms, camera_system], sort_keys=True)
 
 
