@@ -68,7 +68,8 @@ def test_mobile_robot_episodes_fail_cleanly(data, fake_plugins):
         (lambda ep: ep["cameras"][1].update(name="wrist_camera"), "cameras[1].name",
          "duplicate camera name 'wrist_camera' (also cameras[0])"),
         (lambda ep: ep.update(cameras=[]), "source.camera_system_class",
-         "warning: no camera system plugin provides 'FrankaDroidCameraSystem' (available: none)"),
+         "warning: no camera system plugin provides 'FrankaDroidCameraSystem' (available: none); "
+         "install a plugin that provides it, or set camera.system= for the run"),
         (lambda ep: ep["cameras"][0].update(fov=0.0), "cameras[0].fov", "field of view must be in (0, 180) degrees, got 0.0"),
         (lambda ep: ep["language"].update(task_description="  "), "language.task_description", "empty task description"),
     ],

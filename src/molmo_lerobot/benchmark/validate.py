@@ -48,7 +48,8 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, *, index: int | Non
     _lookup(plugins, "task_type", episode.task_name, "task.task_type" if _by_type(episode) else "task.task_cls",
             task_report)
 
-    robot = _lookup(plugins, "robot", episode.robot.robot_name, "robot.robot_name", warning, "robot")
+    robot = _lookup(plugins, "robot", episode.robot.robot_name, "robot.robot_name", warning, "robot",
+                    "install a robot plugin that provides it")
     sizes = getattr(robot, "move_groups", None)
     if isinstance(sizes, Mapping):
         for group, values in episode.robot.init_qpos.items():
@@ -76,7 +77,8 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, *, index: int | Non
         if system is None:
             warning("cameras", "no cameras: the run's camera system (camera.system=...) places them")
         else:
-            _lookup(plugins, "camera_system", system, "source.camera_system_class", warning, "camera system")
+            _lookup(plugins, "camera_system", system, "source.camera_system_class", warning, "camera system",
+                    "install a plugin that provides it, or set camera.system= for the run")
     seen: dict[str, int] = {}
     for i, cam in enumerate(episode.cameras):
         if cam.name in seen:
@@ -95,7 +97,8 @@ def _by_type(episode: EpisodeSpec) -> bool:
     return episode.task_name != episode.task.task_cls
 
 
-def _lookup(plugins: Plugins, kind: str, name: str, field: str, problem: Any, what: str | None = None) -> Any:
+def _lookup(plugins: Plugins, kind: str, name: str, field: str, problem: Any, what: str | None = None,
+            hint: str | None = None) -> Any:
     """The ``kind`` plugin object called ``name``, or record why not as a problem on ``field``.
 
     The message is the registry's first line ("unknown task 'x'; did you mean ...",
@@ -108,6 +111,8 @@ def _lookup(plugins: Plugins, kind: str, name: str, field: str, problem: Any, wh
         text = str(exc).splitlines()[0]
         if what is not None:
             text = re.sub(r"^unknown \w+ ", f"no {what} plugin provides ", text)
+        if hint:
+            text += f"; {hint}"
         for rec in plugins.broken():
             if rec.name in name or name in rec.name:
                 text += f"; plugin {rec.name!r} from {rec.distribution} failed to load: {rec.error}"
