@@ -1,12 +1,15 @@
 """``molmo-bench``: check benchmark files and make new benchmarks.
 
-  molmo-bench validate PATH
+  molmo-bench validate PATH [KEY=VALUE ...]
   molmo-bench generate --task pick --houses 10 --episodes-per-house 5 --seed 0 --name pick_v1 [--out DIR]
 
-``validate`` prints a summary (name, episodes, tasks, content hash) or every problem
-(file, episode index, field) and exits 1. ``generate`` writes a deterministic benchmark
-(``benchmark.json`` + ``benchmark_metadata.json``) and validates it; the output directory
-appears only once it is complete.
+``validate`` prints a summary (name, episodes, tasks, content hash) and exits 0 for a valid
+file — one MolmoSpaces accepts — printing one ``warning:`` line per thing this machine lacks
+to run it (scene assets, robot, camera system) with how to get it; an invalid file gets every
+problem (file, episode index, field) and exit 1. ``KEY=VALUE`` are run-config overrides saying
+where data lives (``molmospaces.assets_dir=…``, ``scene_xml_paths=[…]``, ``+asset_libraries.x=…``).
+``generate`` writes a deterministic benchmark (``benchmark.json`` + ``benchmark_metadata.json``)
+and validates it; the output directory appears only once it is complete.
 """
 
 from __future__ import annotations
@@ -74,7 +77,8 @@ def _validate(path: Path, *, schema_only: bool, overrides: list[str] | None = No
                 print(f"note: plugin {rec.name!r} from {rec.distribution} failed to load: {rec.error}", file=sys.stderr)
             return _report(problems)
         warnings = [p for p in found if p.warning]
-        for line in _grouped(warnings):  # valid, but not runnable here as it stands: one line per missing thing
+        lines = _grouped(warnings)
+        for line in lines:  # valid, but not runnable here as it stands: one line per missing thing
             print(line, file=sys.stderr)
     _print_summary(bench)
     if schema_only:
@@ -82,7 +86,7 @@ def _validate(path: Path, *, schema_only: bool, overrides: list[str] | None = No
     elif warnings:
         n_eps = len({p.episode_index for p in warnings})
         print(f"checked    valid; {n_eps} of {len(bench.episodes)} episodes cannot run here yet "
-              f"({len(warnings)} warning{'s' * (len(warnings) != 1)} above)")
+              f"({len(lines)} warning{'s' * (len(lines) != 1)} above)")
     else:
         print("checked    schema and installed plugins: ok")
     return 0
