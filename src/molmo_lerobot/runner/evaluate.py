@@ -181,7 +181,8 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                       "path": str(bench.path)},
         "policy": cfg["policy"], "seed": cfg["seed"], "limit": limit, "horizon": cfg.get("horizon"),
         "timing": cfg["timing"],
-        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera")},
+        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
+                         "molmospaces": molmospaces_settings(cfg).to_config()},
     }
     done = _prepare_output(out, run_info, bool(cfg.get("resume")))
     results: dict[int, EpisodeResult] = {r.episode_index: r for r in done if r.episode_index in set(indices)}
@@ -207,7 +208,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
             job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], horizon=cfg.get("horizon"),
                             output_dir=str(out), benchmark_name=bench.name, benchmark_sha256=bench.sha256,
                             recorders=recorders, horizons=horizons,
-                            molmospaces=molmospaces_settings(cfg).to_config())
+                            molmospaces=run_info["eval_options"]["molmospaces"])
             executor.run(job, todo, record)
     ordered = [results[i] for i in sorted(results)]
     missing = sorted(set(indices) - set(results))
