@@ -130,7 +130,8 @@ def test_runs_that_cannot_simulate_fail_up_front(tmp_path, monkeypatch):
     """MolmoSpaces episodes whose scenes (and mobile robots) are missing here: one line, before any worker."""
     monkeypatch.setenv("MLSPACES_ASSETS_DIR", str(tmp_path / "no_assets"))
     bench = Path(__file__).parent / "data" / "molmospaces" / "mixed_tasks"
-    with pytest.raises(RunError, match=r"^cannot simulate 8 of 8 episodes: scene 'procthor-objaverse' val house 2115: "
+    with pytest.raises(RunError, match=r"^cannot simulate 8 of 8 episodes: .*mixed_tasks/benchmark.json: episodes 0, 1: "
+                                       r"field scene_dataset: scene 'procthor-objaverse' val house 2115: "
                                        r".*no_assets/scenes/procthor-objaverse-val/val_2115_ceiling.xml not found"):
         run_evaluation(compose(["policy=random", "workers=1", f"benchmark.path={bench}", "horizon=2",
                                 f"output_dir={tmp_path / 'run'}", "progress=false"]))
