@@ -189,6 +189,14 @@ def test_expert_scores_on_ithor_and_procthor_layouts(assets, tmp_path):
     assert res.summary["n_errors"] == 0 and res.summary["n_success"] == 2, [e.error for e in res.episodes]
 
 
+def test_expert_scores_on_franka_droid_with_molmospaces_init_qpos(assets, tmp_path):
+    """Their robot name and gripper init (driver radians, open); droid grasps are this robot's own."""
+    _, houses = assets
+    ep = pick_episode(houses[2], robot="franka_droid", gripper=[0.00296, 0.00296])
+    res = _run(tmp_path, _write_bench(tmp_path / "b", [ep]))
+    assert res.summary["n_errors"] == 0 and res.summary["n_success"] == 1, [e.error for e in res.episodes]
+
+
 @pytest.mark.slow
 def test_expert_scores_on_every_standin_scene(assets, tmp_path):
     _, houses = assets
