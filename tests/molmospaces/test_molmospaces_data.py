@@ -216,6 +216,7 @@ def test_user_scene_and_libraries_from_the_run_config(assets, tmp_path):
     res = run_evaluation(compose(["policy=scripted", "workers=1", f"benchmark.path={bench}", scene, libs[0],
                                   f"output_dir={tmp_path / 'run2'}", "progress=false"]))
     assert "no grasps for 'blue_block'" in res.episodes[0].error
+    assert [g.name for g, _ in default_catalog().grasp_libraries if "/" in g.name] == []  # nor in this process
 
 
 def test_house_index_beyond_scene_xml_paths_fails_up_front(assets, tmp_path):

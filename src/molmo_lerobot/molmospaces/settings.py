@@ -103,6 +103,10 @@ def configure(config: Mapping[str, Any] | None = None) -> MolmoSpacesSettings:
     settings = resolve(config)
     from molmo_lerobot.assets.catalog import default_catalog
 
+    previous = _CURRENT
+    if previous is not None and not (previous.asset_libraries.items() <= settings.asset_libraries.items()
+                                     and previous.grasp_libraries.items() <= settings.grasp_libraries.items()):
+        default_catalog.cache_clear()  # a library the previous run config registered is gone from this one
     _CURRENT = settings
     catalog = default_catalog()
     for name, path in settings.asset_libraries.items():
