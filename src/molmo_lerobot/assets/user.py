@@ -142,9 +142,6 @@ def load_user_grasp_libraries(name: str, root: str | os.PathLike) -> list[UserGr
     root = Path(root).expanduser().resolve()
     index_path = root / GRASPS_INDEX
     index = _read_index(index_path, GraspError)
-    unknown = sorted(set(index) - {"grasp_paths", "articulated_grasp_paths"})
-    if unknown:
-        raise GraspError(f"{index_path}: field {unknown[0]}: unknown (expected grasp_paths, articulated_grasp_paths)")
     rigid_all = index.get("grasp_paths", {})
     art_all = index.get("articulated_grasp_paths", {})
     for field, value in (("grasp_paths", rigid_all), ("articulated_grasp_paths", art_all)):
