@@ -174,8 +174,11 @@ def build_assets(root: Path) -> list[House]:
         houses.append(House("ithor", split, index, xml, body, "Mug_1", base, poses[0]))
     # ProcTHOR / Holodeck layout: <split>_<i>_ceiling.xml (+ base variant), objects attached from objects/
     for dataset, index, origin, yaw in (("procthor-10k", 3, (4.0, 2.5), math.pi / 2),
+                                        ("procthor-10k", 7, (-1.5, -2.0), 0.3),
                                         ("procthor-objaverse", 2, (-3.0, 1.0), math.pi),
-                                        ("holodeck-objaverse", 5, (2.0, -4.0), -math.pi / 2)):
+                                        ("procthor-objaverse", 4, (1.0, 6.0), -0.4),
+                                        ("holodeck-objaverse", 5, (2.0, -4.0), -math.pi / 2),
+                                        ("holodeck-objaverse", 9, (5.5, 0.5), 2.0)):
         d = root / "scenes" / f"{dataset}-val"
         rel_thor = "../../objects/thor/Kitchen/Mug_2.xml"
         rel_obja = f"../../objects/objaverse/{OBJAVERSE_UID}/{OBJAVERSE_UID}.xml"
