@@ -24,6 +24,7 @@ def assets(standin, monkeypatch, tmp_path):
     from molmo_lerobot.assets.catalog import default_catalog
     from molmo_lerobot.molmospaces import settings
 
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes MUJOCO_LOG.TXT (attach warnings) into the working directory
     monkeypatch.setenv("MLSPACES_ASSETS_DIR", str(standin[0]))
     monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(tmp_path / "home"))
     monkeypatch.setattr(settings, "_CURRENT", None)
