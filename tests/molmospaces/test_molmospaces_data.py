@@ -362,3 +362,25 @@ def test_objaverse_uid_known_by_metadata_but_not_installed_says_how_to_install(a
         cat.install_uid(uid)
     with pytest.raises(AssetError, match="unknown asset UID 'Mug_9'"):
         cat.install_uid("Mug_9")
+
+
+def test_scenes_installed_on_demand_are_fetched_per_house_before_the_run(assets, tmp_path, monkeypatch):
+    from molmo_lerobot.molmospaces.preflight import preflight
+    from molmo_lerobot.resources import ResourceManager, pack
+
+    root, houses = assets
+    house = next(h for h in houses if (h.dataset, h.index) == ("procthor-10k", 3))
+    remote, cache, fresh = tmp_path / "remote", tmp_path / "cache", tmp_path / "fresh"
+    pack(root / "scenes" / "procthor-10k-val", remote, "scenes/procthor-10k-val@v1", link="file", max_archive_bytes=1)
+    ResourceManager(cache, fresh, remote, progress=False).install("scenes/procthor-10k-val@v1", on_demand=True)
+    for data in ("objects", "grasps"):
+        (fresh / data).symlink_to(root / data)
+    xml = fresh / "scenes" / "procthor-10k-val" / "val_3_ceiling.xml"
+    assert not xml.exists()
+    cfg = {"molmospaces": {"assets_dir": str(fresh), "cache_dir": str(cache), "remote": str(remote)}}
+    bench = load_benchmark(_write_bench(tmp_path / "b", [pick_episode(house)]))
+    assert preflight(bench, get_plugins(), cfg, [0]) is None
+    assert xml.is_file() and (fresh / "scenes" / "procthor-10k-val" / "val_3_metadata.json").is_file()
+    assert not (fresh / "scenes" / "procthor-10k-val" / "val_7_ceiling.xml").exists()  # only the house asked for
+    res = _run(tmp_path, tmp_path / "b", f"molmospaces.assets_dir={fresh}")
+    assert res.summary["n_success"] == 1 and res.summary["n_errors"] == 0, [e.error for e in res.episodes]

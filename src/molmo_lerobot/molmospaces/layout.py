@@ -22,19 +22,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-#: Versions MolmoSpaces pins for its data (used in install hints only).
-SCENE_VERSIONS = {
-    "ithor": "20251217_with_occupancy",
-    "procthor-10k-train": "20251122_with_occupancy",
-    "procthor-10k-val": "20251217_with_occupancy",
-    "procthor-10k-test": "20251121_with_occupancy",
-    "holodeck-objaverse-train": "20251217_with_occupancy",
-    "holodeck-objaverse-val": "20251217_with_occupancy",
-    "procthor-objaverse-train": "20251205_with_occupancy",
-    "procthor-objaverse-val": "20251205_with_occupancy",
-}
-OBJECT_VERSIONS = {"thor": "20251117", "objaverse": "20260131", "objathor_metadata": "20260129"}
-GRASP_VERSIONS = {"droid": "20251116", "droid_objaverse": "20251218"}
+from molmo_lerobot.resources import molmospaces as ms_resources
+
+#: The versions MolmoSpaces pins (the resource manager's table; install hints and on-demand installs).
+VERSIONS = ms_resources.VERSIONS
+OBJECT_VERSIONS = VERSIONS["objects"]
+GRASP_VERSIONS = VERSIONS["grasps"]
 
 #: Asset library → its grasp libraries, highest priority first (MolmoSpaces' order).
 OBJECT_LIBRARY_TO_GRASP_LIBRARIES = {"thor": ("droid",), "objaverse": ("droid_objaverse",)}
@@ -91,15 +84,26 @@ def scene_xml(assets: Path, dataset: str, split: str, house_index: int, variant:
 def install_source(dataset: str, split: str) -> str:
     """The resource ``scenes/<source>@<version>`` that holds ``dataset``'s ``split``."""
     source = SCENE_DIRS[dataset].format(split=split)
-    version = SCENE_VERSIONS.get(source)
+    version = VERSIONS["scenes"].get(source)
     return f"scenes/{source}@{version}" if version else f"scenes/{source}"
+
+
+def install_command(resource: str, assets: Path) -> str:
+    """The ``molmo-resources`` command that installs ``resource`` on demand into ``assets`` from MolmoSpaces' bucket."""
+    return (f"molmo-resources install {resource} --on-demand --remote {ms_resources.BUCKET_URL} "
+            f"--cache-dir {ms_resources.cache_dir()} --install-dir {assets}")
+
+
+def expected_metadata_name(xml: Path) -> str:
+    """The metadata file name MolmoSpaces looks for first beside scene ``xml``."""
+    name = xml.name
+    return name.replace("_ceiling.xml", "_metadata.json") if "ceiling" in name else name.replace(".xml", "_metadata.json")
 
 
 def metadata_path(xml: Path) -> Path | None:
     """The scene metadata JSON that MolmoSpaces reads for scene ``xml``, if one exists."""
     name = xml.name
-    direct = xml.with_name(name.replace("_ceiling.xml", "_metadata.json") if "ceiling" in name
-                           else name.replace(".xml", "_metadata.json"))
+    direct = xml.with_name(expected_metadata_name(xml))
     if direct.is_file():
         return direct
     parts = name.removesuffix(".xml").split("_")

@@ -183,9 +183,9 @@ class MolmoSpacesObjects(AssetLibrary):
         settings = current()
         spec = f"objects/{self.name}@{layout.OBJECT_VERSIONS[self.name]}"
         if not (settings.cache_dir and settings.remote):
-            raise AssetError(f"object {uid!r} is not installed under {self.root}; install it with `molmo-resources "
-                             f"install {spec} --remote <MolmoSpaces remote> --cache-dir <cache> --install-dir "
-                             f"{settings.assets}` or set molmospaces.cache_dir and molmospaces.remote")
+            raise AssetError(f"object {uid!r} is not installed under {self.root}; install it with "
+                             f"`{layout.install_command(spec, settings.assets)} --uid {uid}` or set "
+                             "molmospaces.cache_dir and molmospaces.remote to install objects as runs need them")
         from molmo_lerobot.resources import ResourceManager
         from molmo_lerobot.resources.errors import ResourceError
 

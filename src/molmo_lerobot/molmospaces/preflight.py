@@ -30,6 +30,8 @@ def _missing(spec: Any, plugins: Any, camera_system: str | None) -> tuple[str, s
         except PluginError as exc:
             return field, f"{what} {name!r}: {str(exc).splitlines()[0]} (install a plugin that provides it)"
     scene = found["scene_dataset"]
+    if hasattr(scene, "fetch"):
+        scene.fetch(spec)  # scenes installed on demand arrive now, before any worker starts
     reason = scene.missing(spec) if hasattr(scene, "missing") else None
     if reason:
         return ("house_index" if "scene_xml_paths" in reason else "scene_dataset"), reason

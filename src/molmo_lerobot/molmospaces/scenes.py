@@ -77,11 +77,43 @@ class MolmoSpacesScenes(SceneDataset):
             return str(exc)
         if path.is_file():
             return None
-        assets = current().assets
+        command = layout.install_command(layout.install_source(self.name, spec.data_split), current().assets)
         return (f"scene {self.name!r} {spec.data_split} house {spec.house_index}: {path} not found; install it with "
-                f"`molmo-resources install {layout.install_source(self.name, spec.data_split)} --remote <MolmoSpaces "
-                f"remote> --cache-dir <cache> --install-dir {assets}` or point MLSPACES_ASSETS_DIR "
-                "(molmospaces.assets_dir=) at a MolmoSpaces assets dir")
+                f"`{command}` (runs fetch each house) or point MLSPACES_ASSETS_DIR (molmospaces.assets_dir=) at a "
+                "MolmoSpaces assets dir")
+
+    def fetch(self, spec: EpisodeSpec) -> None:
+        """Install ``spec``'s scene now if its source was installed on demand (``--preset molmospaces``).
+
+        Where the assets dir records the scene source as linked by a resource manager (ours or
+        molmospaces-resources'), the archives holding the scene XML and its metadata are fetched
+        into the cache and linked, as MolmoSpaces does per house. Failures leave the scene missing
+        (:meth:`missing` then says so); nothing is fetched for sources installed otherwise.
+        """
+        try:
+            path = self.scene_path(spec.house_index, spec.data_split)
+        except layout.SceneLookupError:
+            return
+        if path.is_file() or self.name == layout.USER:
+            return
+        from molmo_lerobot.resources import ResourceError, ResourceManager
+        from molmo_lerobot.resources import molmospaces as ms_resources
+
+        settings = current()
+        try:
+            manager = ResourceManager(settings.cache_dir or ms_resources.cache_dir(), settings.assets,
+                                      settings.remote or ms_resources.BUCKET_URL, progress=False)
+            source = path.parent.name
+            version = manager.linked().get("scenes", {}).get(source)
+            if version is None:
+                return
+            resource = f"scenes/{source}@{version}"
+            meta = layout.expected_metadata_name(path)
+            for rel in (path.name, meta):
+                if manager.index(resource).archive_for_path(rel) is not None:
+                    manager.ensure_path(resource, rel)
+        except (ResourceError, OSError):
+            return
 
     # SceneDataset -------------------------------------------------------------------------------
     def build(self, house_index: int) -> mujoco.MjSpec:
