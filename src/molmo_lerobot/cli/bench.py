@@ -62,7 +62,7 @@ def _validate(path: Path, *, schema_only: bool, overrides: list[str] | None = No
         from molmo_lerobot.benchmark.validate import validate_benchmark
         from molmo_lerobot.config import ConfigError, compose
         from molmo_lerobot.molmospaces import configure
-        from molmo_lerobot.plugins import get_plugins
+        from molmo_lerobot.plugins import PluginConflict, get_plugins
 
         try:  # where MolmoSpaces data lives (assets dir, user scenes and libraries), as a run would see it
             configure(OmegaConf.to_container(compose(list(overrides or [])), resolve=True))
@@ -70,7 +70,11 @@ def _validate(path: Path, *, schema_only: bool, overrides: list[str] | None = No
             print(f"molmo-bench: error: {exc}", file=sys.stderr)
             return 2
         plugins = get_plugins()
-        found = validate_benchmark(bench, plugins)
+        try:
+            found = validate_benchmark(bench, plugins)
+        except PluginConflict as exc:
+            print(f"molmo-bench: error: {exc}", file=sys.stderr)
+            return 1
         problems = [p for p in found if not p.warning]
         if problems:
             for rec in plugins.broken():
