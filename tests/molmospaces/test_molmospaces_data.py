@@ -208,8 +208,8 @@ def test_user_scene_and_libraries_from_the_run_config(assets, tmp_path):
     lib = write_user_library(tmp_path)
     bench = _write_bench(tmp_path / "b", [user_pick_episode()])
     scene = f"scene_xml_paths=[{tmp_path / 'scene.xml'}]"
-    libs = [f"+asset_libraries.custom_assets={lib}",
-            f"+grasp_libraries.custom_grasps={{path: {lib}, asset_library: custom_assets}}"]
+    libs = [f"asset_libraries.custom_assets={lib}",  # open maps: no Hydra '+' needed
+            f"grasp_libraries.custom_grasps={{path: {lib}, asset_library: custom_assets}}"]
     res = _run(tmp_path, bench, scene, *libs)
     assert res.summary["n_errors"] == 0 and res.summary["n_success"] == 1, [e.error for e in res.episodes]
     # without the grasp library the expert has no grasps for the block: the library's grasps were used
