@@ -3,9 +3,9 @@
 Layouts, tried in this order for a directory:
 
 * ``benchmark.json``: a list of episode objects (+ optional ``benchmark_metadata.json``);
-* legacy ``house_<id>/episode_<8 digits>.json``: one episode per file, in MolmoSpaces'
-  order (house directories sorted by name, then episode files sorted by name), so episode
-  indices match theirs.
+* legacy ``house_<id>/episode_<n>.json`` (any integer ``n``; MolmoSpaces writes 8 digits):
+  one episode per file, in MolmoSpaces' order (house directories sorted by name, then episode
+  files sorted by name), so episode indices match theirs.
 
 A path to a ``.json`` file is read as a list of episodes or as a single episode.
 
@@ -29,7 +29,7 @@ from molmo_lerobot.benchmark.schema import UNION_TAGS, BenchmarkMetadata, Episod
 BENCHMARK_FILE = "benchmark.json"
 METADATA_FILE = "benchmark_metadata.json"
 _HOUSE_DIR = re.compile(r"house_(-?\d+)")
-_EPISODE_FILE = re.compile(r"episode_\d{8}\.json")
+_EPISODE_FILE = re.compile(r"episode_-?\d+\.json")
 _UNREADABLE = object()  # stands for a file already reported as unreadable
 
 
@@ -41,9 +41,11 @@ class Problem:
     message: str
     episode_index: int | None = None
     field: str | None = None
+    #: the file is valid (MolmoSpaces accepts it) but cannot run here as it stands
+    warning: bool = False
 
     def __str__(self) -> str:
-        parts = [self.file]
+        parts = ["warning: " + self.file] if self.warning else [self.file]
         if self.episode_index is not None:
             parts.append(f"episode {self.episode_index}")
         if self.field:
@@ -124,7 +126,7 @@ def load_benchmark(path: str | Path) -> Benchmark:
             raw = _read_legacy_dir(path, problems)
             if not raw and not problems:
                 problems.append(
-                    Problem(str(path), f"no {BENCHMARK_FILE} and no house_<id>/episode_<8 digits>.json files")
+                    Problem(str(path), f"no {BENCHMARK_FILE} and no house_<id>/episode_<n>.json files")
                 )
         meta_file = path / METADATA_FILE
         if meta_file.is_file():
@@ -209,7 +211,7 @@ def _read_legacy_dir(root: Path, problems: list[Problem]) -> list[tuple[Origin, 
             continue
         for ep_file in sorted(house_dir.glob("episode_*.json")):
             if not _EPISODE_FILE.fullmatch(ep_file.name):
-                problems.append(Problem(str(ep_file), "file name is not episode_<8 digits>.json"))
+                problems.append(Problem(str(ep_file), "file name is not episode_<integer>.json"))
                 continue
             # An unreadable file is already reported; it keeps its slot so later indices stay true.
             out.append((Origin(str(ep_file)), _read_json(ep_file, problems)))

@@ -26,6 +26,8 @@ from tqdm import tqdm
 from molmo_lerobot.export.report import write_report
 from molmo_lerobot.export.wandb_log import log_run
 from molmo_lerobot.fileio import atomic_write
+from molmo_lerobot.molmospaces.preflight import preflight
+from molmo_lerobot.molmospaces.settings import resolve as molmospaces_settings
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.runner.results import EpisodeResult, summarize
@@ -128,13 +130,17 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]))
     problems: dict[int, list[str]] = {}
     for p in validate_benchmark(bench, plugins):
-        problems.setdefault(p.episode_index, []).append(f"{p.field}: {p.message}" if p.field else p.message)
+        if not p.warning:  # warnings (not runnable here) are the preflight's to report
+            problems.setdefault(p.episode_index, []).append(f"{p.field}: {p.message}" if p.field else p.message)
 
     started = datetime.now(UTC)
     out = Path(cfg.get("output_dir") or Path("runs") / f"{bench.name}-{policy_name}-{started:%Y%m%d-%H%M%S}")
     cfg["output_dir"] = str(out)
     limit = cfg.get("limit")
     indices = list(range(len(bench.episodes)))[: int(limit) if limit is not None else None]
+    cannot = preflight(bench, plugins, cfg, indices, skip=problems)  # before any output or worker
+    if cannot:
+        raise RunError(cannot)
 
     horizons = _task_horizons(cfg.get("horizons") or {})
     items: list[WorkItem] = []
@@ -169,6 +175,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         "policy": cfg["policy"], "seed": cfg["seed"], "limit": limit, "horizon": cfg.get("horizon"),
         "timing": cfg["timing"],
         "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
+                         "molmospaces": molmospaces_settings(cfg).to_config(),
                          **({"plugins_prefer": plugins.prefer} if plugins.prefer else {})},  # pinned providers
     }
     done = _prepare_output(out, run_info, bool(cfg.get("resume")))
@@ -194,7 +201,8 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         if todo:
             job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], horizon=cfg.get("horizon"),
                             output_dir=str(out), benchmark_name=bench.name, benchmark_sha256=bench.sha256,
-                            recorders=recorders, horizons=horizons, prefer=plugins.prefer)
+                            recorders=recorders, horizons=horizons, prefer=plugins.prefer,
+                            molmospaces=run_info["eval_options"]["molmospaces"])
             executor.run(job, todo, record)
     ordered = [results[i] for i in sorted(results)]
     missing = sorted(set(indices) - set(results))
