@@ -94,3 +94,10 @@ def test_unbounded_and_coerced_values_are_refused(episodes, tmp_path, edit, fiel
     d = _write(tmp_path, bad)
     (problem,) = _problems(d)
     assert problem.startswith(f"{d / 'benchmark.json'}: episode 2: field {field}: {message}")
+
+
+def test_generate_name_cannot_leave_benchmarks(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["generate", "--houses", "1", "--episodes-per-house", "1", "--name", "../../escape"]) == 2
+    assert "--name '../../escape' names the output directory" in capsys.readouterr().err
+    assert not (tmp_path.parent.parent / "escape").exists()

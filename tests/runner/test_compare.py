@@ -200,3 +200,11 @@ def test_compare_two_real_runs(small_bench, tmp_path, eval_config, capsys):
     rep = json.loads(capsys.readouterr().out)
     assert rep["n_shared"] == 8 and rep["overall"]["diff"] > 0.5
     assert rep["overall"]["p_value"] < 0.05 and rep["overall"]["ci95"][0] > 0
+
+
+def test_deeply_nested_run_files_are_one_line(tmp_path, capsys):
+    a = _write_run(tmp_path / "a", {0: (True, True)})
+    b = _write_run(tmp_path / "b", {0: (True, True)})
+    (b / "results.json").write_text("[" * 100_000 + "]" * 100_000)
+    assert main([str(a), str(b)]) == 2
+    assert capsys.readouterr().err == f"molmo-compare: error: {b / 'results.json'}: JSON nested too deeply\n"

@@ -141,7 +141,7 @@ def test_output_dir_that_cannot_be_written_is_one_line(tmp_path, capsys):
     a_file.write_text("x")
     for out, needle in ((a_file, f"output_dir {a_file} is a file, not a directory"),
                         (a_file / "sub", f"cannot write output_dir {a_file / 'sub'}: Not a directory"),
-                        (Path("/proc/self/molmo-out"), "cannot write output_dir /proc/self/molmo-out")):
+                        (Path("/sys/molmo-out"), "cannot write output_dir /sys/molmo-out: Operation not permitted")):
         assert main(["limit=1", "horizon=1", f"output_dir={out}"]) == 2
         err = capsys.readouterr().err
         assert needle in err and "Traceback" not in err and len(err.splitlines()) == 1, err
@@ -162,7 +162,7 @@ def _limit_file_size(nbytes: int):
 
 
 def test_a_full_disk_mid_run_leaves_episodes_jsonl_valid_for_resume(faulty_policy, small_bench, tmp_path,
-                                                                    eval_config, outcomes):
+                                                                    eval_config):
     """Writes past RLIMIT_FSIZE fail with EFBIG (Python ignores SIGXFSZ) as a full disk fails with ENOSPC."""
     out = tmp_path / "run"
     args = [f"benchmark.path={small_bench}", f"output_dir={out}", "progress=false", *_common(faulty_policy)]

@@ -148,6 +148,8 @@ def load_benchmark(path: str | Path) -> Benchmark:
         meta_file = path.with_name(METADATA_FILE)
         if path.name == BENCHMARK_FILE and meta_file.is_file():
             metadata = _read_metadata(meta_file, problems)
+    elif path.exists():
+        problems.append(Problem(str(path), "not a regular file or directory"))
     else:
         problems.append(Problem(str(path), "no such benchmark file or directory"))
 

@@ -85,6 +85,8 @@ def load_run(path: str | Path) -> Run:
         results = json.loads(results_path.read_text())
     except json.JSONDecodeError as exc:
         raise CompareError(f"{results_path}: not valid JSON ({exc})") from None
+    except RecursionError:
+        raise CompareError(f"{results_path}: JSON nested too deeply") from None
     if not isinstance(results, dict):
         raise CompareError(f"{results_path}: expected a JSON object")
     bench = results.get("benchmark")
@@ -100,6 +102,10 @@ def load_run(path: str | Path) -> Run:
             ep = json.loads(line)
         except json.JSONDecodeError as exc:
             raise CompareError(f"{episodes_path}:{lineno}: not valid JSON ({exc})") from None
+        except RecursionError:
+            raise CompareError(f"{episodes_path}:{lineno}: JSON nested too deeply") from None
+        if not isinstance(ep, dict):
+            raise CompareError(f"{episodes_path}:{lineno}: expected a JSON object")
         for key in ("episode_index", "success", "success_once"):
             if key not in ep:
                 raise CompareError(f"{episodes_path}:{lineno}: field {key!r} is missing")

@@ -6,6 +6,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+import mujoco
 import numpy as np
 
 if TYPE_CHECKING:
@@ -23,16 +24,15 @@ class SimulationDiverged(RuntimeError):
 
 #: MuJoCo warnings that mean the simulation state can no longer be trusted (MuJoCo resets
 #: the state after a bad acceleration, so a blow-up can look like a calm, failed episode).
-DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC", "mjWARN_BADCTRL")
+DIVERGENCE_WARNINGS = {name: int(getattr(mujoco.mjtWarning, name))
+                       for name in ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC", "mjWARN_BADCTRL")}
 
 
 def check_divergence(data: Any, when: str) -> None:
     """Raise :class:`SimulationDiverged` if ``data`` (an ``MjData``) holds non-finite state or
     has raised one of :data:`DIVERGENCE_WARNINGS` since it was reset; ``when`` locates it."""
-    import mujoco
-
-    for name in DIVERGENCE_WARNINGS:
-        info = data.warning[int(getattr(mujoco.mjtWarning, name))]
+    for name, index in DIVERGENCE_WARNINGS.items():
+        info = data.warning[index]
         if info.number > 0:
             raise SimulationDiverged(f"simulation diverged {when} (t={data.time:.3f}s): MuJoCo {name} "
                                      f"x{info.number} (dof/index {info.lastinfo}); check init_qpos and object poses")
