@@ -123,6 +123,10 @@ def test_resume_with_a_smaller_limit_keeps_every_episode(faulty_policy, small_be
         run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=5", "resume=true")))
     res = run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "resume=true")))  # limit=null: all
     assert res.summary["n_episodes"] == 8 and len(_rows(out)) == 8
+    with pytest.raises(RunError, match=r"with limit=3: it was started with limit=null \(8 episodes recorded\).*use "
+                                       r"limit=null"):
+        run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=3", "resume=true")))
+    assert len(_rows(out)) == 8
 
 
 def test_resume_names_a_corrupt_record(faulty_policy, small_bench, tmp_path, eval_config):

@@ -340,10 +340,11 @@ def _reopen(out: Path, run_info: dict[str, Any]) -> list[EpisodeResult]:
     done = _read_episodes(out / EPISODES_FILE)
     old, new = previous.get("limit"), current["limit"]
     if new is not None and (old is None or new < old):
-        recorded = len(done)
-        raise RunError(f"cannot resume {out} with limit={new}: it was started with limit={old} "
+        recorded, shown = len(done), "null" if old is None else old
+        raise RunError(f"cannot resume {out} with limit={new}: it was started with limit={shown} "
                        f"({recorded} episode{'s' * (recorded != 1)} recorded) and a resume never drops recorded "
-                       f"episodes; use limit={old} or larger" + ("" if old is None else " (or limit=null)"))
+                       + ("episodes; use limit=null" if old is None else
+                          f"episodes; use limit={old} or larger (or limit=null)"))
     (out / RESULTS_FILE).unlink(missing_ok=True)
     _atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))
     if new != old:  # a larger limit extends the run
