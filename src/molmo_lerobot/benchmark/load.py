@@ -217,7 +217,7 @@ def read_regular_file(file: Path) -> str:
     fd = os.open(file, os.O_RDONLY | os.O_NONBLOCK)
     try:
         if not stat.S_ISREG(os.fstat(fd).st_mode):
-            raise OSError(f"{file} is not a regular file")
+            raise OSError("not a regular file (a FIFO, device or socket)")
         with os.fdopen(fd, "rb", closefd=False) as f:
             return f.read().decode("utf-8")
     finally:

@@ -64,10 +64,10 @@ def config_problems(cfg: Mapping[str, Any]) -> list[str]:
             out.append(f"horizons.{task}: expected a positive number of seconds, got {value!r} "
                        f"(at most {MAX_TASK_HORIZON_SEC:g})")
     out.extend(_timing_problems(cfg.get("timing")))
-    timeout = cfg.get("episode_timeout_s")
+    timeout = cfg.get("episode_timeout_s", 900)
     if not (_is_number(timeout) and timeout > 0):
         out.append(f"episode_timeout_s: expected a positive number of seconds, got {timeout!r}")
-    retries = cfg.get("episode_retries")
+    retries = cfg.get("episode_retries", 1)
     if not (_is_int(retries) and retries >= 0):
         out.append(f"episode_retries: expected a non-negative integer, got {retries!r}")
     for key in ("resume", "record", "push", "progress"):
