@@ -45,15 +45,16 @@ def test_errored_and_invalid_episodes_count_in_their_task(faulty_policy, small_b
 
     bench = _bench(small_bench, tmp_path, edit)
     out = tmp_path / "run"
-    res = run_evaluation(eval_config(bench, out, *_common(faulty_policy, "limit=5", "+policy.faults={1: raise}")))
+    res = run_evaluation(eval_config(bench, out, *_common(faulty_policy, "limit=5", "+policy.faults={1: raise, 4: hang}",
+                                                          "episode_timeout_s=8")))
     assert list(res.summary["per_task"]) == ["pick"]
     pick = res.summary["per_task"]["pick"]
-    assert (pick["n_episodes"], pick["n_errors"], pick["n_valid"]) == (5, 2, 3)
+    assert (pick["n_episodes"], pick["n_errors"], pick["n_valid"]) == (5, 3, 2)
     for row in _rows(out):
         assert row["task_type"] == "pick" and row["prompt"] and row["horizon"] == 2, row
         assert row["horizon_source"] == "cli"
     errors = {r["episode_index"]: r["error"] for r in _rows(out) if r["error"]}
-    assert set(errors) == {1, 3} and errors[3].startswith("invalid episode")
+    assert set(errors) == {1, 3, 4} and errors[3].startswith("invalid episode") and "timed out" in errors[4]
 
 
 def test_horizon_sources():
