@@ -194,7 +194,7 @@ def test_errored_episodes_without_a_task_type_stay_in_their_task(tmp_path):
 @pytest.mark.slow
 def test_compare_two_real_runs(small_bench, tmp_path, eval_config, capsys):
     run_evaluation = pytest.importorskip("molmo_lerobot.runner.evaluate").run_evaluation
-    run_evaluation(eval_config(small_bench, tmp_path / "random", "policy=random", "workers=2", "horizon=40"))
+    run_evaluation(eval_config(small_bench, tmp_path / "random", "policy=random", "workers=2"))  # same trial
     run_evaluation(eval_config(small_bench, tmp_path / "scripted", "policy=scripted", "workers=2"))
     assert main([str(tmp_path / "random"), str(tmp_path / "scripted"), "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
