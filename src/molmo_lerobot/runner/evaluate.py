@@ -32,6 +32,7 @@ from tqdm import tqdm
 
 from molmo_lerobot.export.report import write_report
 from molmo_lerobot.export.wandb_log import log_run
+from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.runner.results import EpisodeResult, summarize
@@ -77,20 +78,6 @@ def _versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             pass
     return out
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    """Replace ``path`` with ``text`` all at once; on failure ``path`` is untouched."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    try:
-        with open(tmp, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def safe_name(name: str) -> str:
@@ -165,6 +152,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         print("molmo-eval: push=true records the dataset it pushes (record=true)", file=sys.stderr)
         cfg["record"] = True
     plugins = get_plugins()
+    plugins.set_preferences((cfg.get("plugins") or {}).get("prefer"))  # workers apply the same pins
     policy_name = str(cfg["policy"]["name"])
     plugins.policy(policy_name)  # unknown or broken policy plugin: fail before any work
     recorders = plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
@@ -222,7 +210,8 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                       "path": str(bench.path)},
         "policy": cfg["policy"], "seed": cfg["seed"], "limit": limit, "horizon": cfg.get("horizon"),
         "timing": cfg["timing"],
-        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera")},
+        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
+                         **({"plugins_prefer": plugins.prefer} if plugins.prefer else {})},  # pinned providers
     }
     done = _prepare_output(out, run_info, bool(cfg.get("resume")))
     outside = sorted(r.episode_index for r in done if r.episode_index not in described)
@@ -258,7 +247,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
             if todo:
                 job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], horizon=cfg.get("horizon"),
                                 output_dir=str(out), benchmark_name=bench.name, benchmark_sha256=bench.sha256,
-                                recorders=recorders, horizons=horizons)
+                                recorders=recorders, horizons=horizons, prefer=plugins.prefer)
                 executor.run(job, todo, record)
     finally:
         log.close()
@@ -272,10 +261,10 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=cfg,
     )
     try:
-        _atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered))
+        atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered))
         for factory in recorders:
             factory.finalize(out, ordered, summary)
-        _atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
+        atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
         write_report(out, summary, ordered)
     except OSError as exc:
         raise _write_error(out, "the run's outputs", exc) from None
@@ -314,7 +303,7 @@ def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool) -> list[E
                                "or choose another output_dir")
             return _reopen(out, run_info)
         out.mkdir(parents=True, exist_ok=True)
-        _atomic_write(run_file, json.dumps(run_info, indent=2) + "\n")
+        atomic_write(run_file, json.dumps(run_info, indent=2) + "\n")
         (out / EPISODES_FILE).touch()
     except OSError as exc:
         raise RunError(f"cannot write output_dir {out}: {exc.strerror or exc}") from None
@@ -346,9 +335,9 @@ def _reopen(out: Path, run_info: dict[str, Any]) -> list[EpisodeResult]:
                        + ("episodes; use limit=null" if old is None else
                           f"episodes; use limit={old} or larger (or limit=null)"))
     (out / RESULTS_FILE).unlink(missing_ok=True)
-    _atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))
+    atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))
     if new != old:  # a larger limit extends the run
-        _atomic_write(run_file, json.dumps({**previous, "limit": new}, indent=2) + "\n")
+        atomic_write(run_file, json.dumps({**previous, "limit": new}, indent=2) + "\n")
     return done
 
 
