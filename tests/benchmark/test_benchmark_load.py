@@ -106,7 +106,7 @@ def test_wrong_types_show_the_value(episodes, tmp_path):
     bad[1]["robot"]["init_qpos"]["arm"][2] = "x"
     f = _write_list(tmp_path, bad) / "benchmark.json"
     problems = _problems(f.parent)
-    assert f"{f}: episode 1: field house_index: Input should be a valid integer, unable to parse string as an integer (got \"twelve\")" in problems
+    assert f"{f}: episode 1: field house_index: Input should be a valid integer (got \"twelve\")" in problems
     assert any(p.startswith(f"{f}: episode 1: field robot.init_qpos.arm[2]: ") for p in problems)
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -141,6 +142,10 @@ def _generate(args: argparse.Namespace) -> int:
 
     if args.houses < 1 or args.episodes_per_house < 1:
         print("molmo-bench: error: --houses and --episodes-per-house must be >= 1", file=sys.stderr)
+        return 2
+    if not args.out and not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]*", args.name):
+        print(f"molmo-bench: error: --name {args.name!r} names the output directory: use letters, digits, '.', '_' "
+              "and '-' (or give --out)", file=sys.stderr)
         return 2
     out: Path = args.out or Path("benchmarks") / args.name
     if out.exists() and not args.force:
