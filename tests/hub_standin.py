@@ -89,6 +89,7 @@ class HubStandin:
         self.repos: dict[tuple[str, str], Repo] = {}
         self.lock = threading.RLock()
         self.requests: list[tuple[str, str]] = []  # (method, path) of every request, for assertions
+        self.fail_commits: int | None = None  # an HTTP status: every commit fails with it (a Hub outage)
         handler = type("Handler", (_Handler,), {"hub": self})
         self.server = ThreadingHTTPServer((host, port), handler)
         self.server.daemon_threads = True
@@ -332,6 +333,8 @@ class _Handler(BaseHTTPRequestHandler):
                 "siblings": [{"rfilename": p, "size": item[1]} for p, item in sorted(files.items())]}
 
     def _commit(self, repo: Repo, branch: str) -> None:
+        if self.hub.fail_commits:
+            raise HubError(self.hub.fail_commits, "stand-in: the Hub refuses commits")
         if branch not in repo.branches:
             raise HubError(404, f"Invalid rev id: {branch}", "RevisionNotFound")
         lines = [json.loads(line) for line in self._body().splitlines() if line.strip()]

@@ -58,6 +58,11 @@ def main(argv: list[str] | None = None) -> int:
     for err in s["errors"][:10]:
         print(f"  episode {err['episode_index']}: {err['error']}")
     print(f"outputs: {res.output_dir}")
+    push = s.get("push")
+    if push and not push["ok"]:
+        print(f"molmo-eval: error: push to the Hub as {push['repo_id']} failed ({push['error']}); every local "
+              f"file is kept in {res.output_dir} (results.json records the failure)", file=sys.stderr)
+        return 1
     return 0
 
 

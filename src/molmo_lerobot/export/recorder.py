@@ -95,14 +95,19 @@ class LeRobotRecorderFactory(RecorderFactory):
         return LeRobotRecorder(self, worker_id, Path(output_dir))
 
     def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any]) -> None:
-        """Merge the shards into ``output_dir/dataset``; push it when ``push=true`` (failure = warning)."""
+        """Merge the shards into ``output_dir/dataset``; push it when ``push=true``.
+
+        The push outcome goes into ``summary["push"]`` (``repo_id``, ``ok``, ``error``): a failed
+        push keeps every local file and makes ``molmo-eval`` exit non-zero."""
         from molmo_lerobot.export.hub import push_dataset
         from molmo_lerobot.export.merge import merge_shards
 
         quiet_libraries()
         root = merge_shards(Path(output_dir), results, summary, self)
-        if self.push and root is not None:
-            push_dataset(root, self.repo_id, private=self.private)
+        if self.push:
+            error = (push_dataset(root, self.repo_id, private=self.private) if root is not None
+                     else "no episode finished without error, so there is no dataset to push")
+            summary["push"] = {"repo_id": self.repo_id, "ok": error is None, "error": error}
 
 
 def quiet_libraries() -> None:
