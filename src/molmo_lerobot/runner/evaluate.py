@@ -27,6 +27,7 @@ from molmo_lerobot.export.report import write_report
 from molmo_lerobot.export.wandb_log import log_run
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.runner.fingerprint import policy_checkpoints
 from molmo_lerobot.runner.results import EpisodeResult, summarize
 from molmo_lerobot.runner.rollout import resolve_horizon
 from molmo_lerobot.runner.worker import WorkerJob, WorkItem
@@ -173,7 +174,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     run_info = {
         "benchmark": {"name": bench.name, "sha256": bench.sha256, "n_episodes": len(bench.episodes),
                       "path": str(bench.path)},
-        "policy": cfg["policy"], "seed": cfg["seed"], "limit": limit, "horizon": cfg.get("horizon"),
+        "policy": cfg["policy"], "policy_checkpoint": policy_checkpoints(cfg["policy"]), "seed": cfg["seed"], "limit": limit, "horizon": cfg.get("horizon"),
         "timing": cfg["timing"],
         "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera")},
     }
@@ -231,7 +232,7 @@ def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool) -> list[E
             raise RunError(f"cannot resume: {run_file} is missing")
         previous = json.loads(run_file.read_text())
         current = json.loads(json.dumps(run_info))  # compare as stored (JSON turns int keys into strings)
-        for key in ("benchmark", "policy", "seed", "horizon", "timing", "eval_options"):
+        for key in ("benchmark", "policy", "policy_checkpoint", "seed", "horizon", "timing", "eval_options"):
             if previous.get(key) != current.get(key):
                 raise RunError(f"cannot resume {out}: its {key} differs from this run's "
                                f"({previous.get(key)!r} vs {current.get(key)!r})")
