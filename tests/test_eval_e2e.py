@@ -58,6 +58,20 @@ def test_contract_outputs(two_worker_run):
     assert "pick_v1 · scripted: success" in stdout
 
 
+def test_report_has_a_thumbnail_and_first_success_per_episode_without_recording(two_worker_run):
+    """record=false: the worker-side glance recorder still saves first | last exterior frame per episode."""
+    out, _ = two_worker_run
+    rows = _episodes(out)
+    page = (out / "report.html").read_text()
+    for r in rows:
+        assert r["extra"]["thumbnail"] == f"thumbnails/{r['episode_index']:06d}.jpg"
+        assert (out / r["extra"]["thumbnail"]).stat().st_size > 1000
+        assert f'<img src="{r["extra"]["thumbnail"]}"' in page
+        assert r["extra"]["object_category"]
+        assert (r["extra"]["first_success_step"] is not None) == r["success_once"]
+    assert not (out / "dataset").exists()
+
+
 def test_workers_do_not_change_outcomes(two_worker_run, tmp_path):
     out2, _ = two_worker_run
     res1 = run_evaluation(compose(["policy=scripted", "workers=1", "limit=4", f"output_dir={tmp_path / 'w1'}",
