@@ -21,13 +21,13 @@ from pathlib import Path
 from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
-from tqdm import tqdm
 
 from molmo_lerobot.export.report import write_report
 from molmo_lerobot.export.wandb_log import log_run
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
+from molmo_lerobot.runner.progress import Progress
 from molmo_lerobot.runner.results import EpisodeResult, summarize
 from molmo_lerobot.runner.rollout import resolve_horizon
 from molmo_lerobot.runner.worker import WorkerJob, WorkItem
@@ -183,17 +183,18 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     episodes_path = out / EPISODES_FILE
     todo = [it for it in items if it.episode_index not in results]
     t0 = time.perf_counter()
-    with open(episodes_path, "a") as log, tqdm(total=len(indices), initial=len(results), disable=not cfg.get("progress", True),
-                                              desc=f"{bench.name} · {policy_name}", unit="ep", file=sys.stderr) as bar:
+    progress = Progress(len(indices), len(results), f"{bench.name} · {policy_name}", out,
+                        enabled=bool(cfg.get("progress", True)),
+                        heartbeat_s=float(cfg.get("progress_interval_s") or 30.0))
+    progress.success = sum(r.success for r in results.values())
+    progress.errors = sum(r.error is not None for r in results.values())
+    with open(episodes_path, "a") as log, progress:
         def record(result: EpisodeResult) -> None:
             results[result.episode_index] = result
             log.write(json.dumps(result.to_dict()) + "\n")
             log.flush()
             os.fsync(log.fileno())
-            bar.update(1)
-            n = len(results)
-            bar.set_postfix(success=f"{sum(r.success for r in results.values()) / n:.2f}",
-                            errors=sum(r.error is not None for r in results.values()))
+            progress.episode_done(result.success, result.error is not None)
 
         for failed in errors:
             if failed.episode_index not in results:
@@ -201,7 +202,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         if todo:
             job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], horizon=cfg.get("horizon"),
                             output_dir=str(out), benchmark_name=bench.name, benchmark_sha256=bench.sha256,
-                            recorders=recorders, horizons=horizons)
+                            recorders=recorders + progress.factories(), horizons=horizons)
             executor.run(job, todo, record)
     ordered = [results[i] for i in sorted(results)]
     missing = sorted(set(indices) - set(results))
