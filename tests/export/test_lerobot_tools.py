@@ -40,7 +40,7 @@ def test_the_video_backend_lerobot_picks_loads_and_decodes_our_videos(recorded):
     backend = get_safe_default_video_backend()
     root, repo_id = recorded
     ds = LeRobotDataset(repo_id, root=root)  # LeRobot's default backend, as its tools use it
-    assert ds.video_backend == backend
+    assert ds._video_backend == backend
     frame = ds[7]  # episode 1, step 1: brightness encodes (episode, step)
     level = (1 * 37 + 1 * 5) % 250 / 255.0
     assert float(np.asarray(frame["observation.images.exo"]).mean()) == pytest.approx(level, abs=0.03)
