@@ -207,7 +207,7 @@ def _failure_groups(results: list[EpisodeResult]) -> tuple[str, dict[int, int]]:
 def _first_success_svg(results: list[EpisodeResult], policy_dt_s: float) -> str:
     """Histogram of the time to first success (seconds) over the episodes that ever succeeded."""
     times = sorted(r.extra["first_success_step"] * policy_dt_s for r in results
-                   if (r.extra or {}).get("first_success_step") is not None)
+                   if r.success_once and (r.extra or {}).get("first_success_step") is not None)
     if not times:
         return "<p class=sub>No episode succeeded at any step (or the run predates this measurement).</p>"
     hi = max(times[-1], policy_dt_s)
