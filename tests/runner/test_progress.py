@@ -68,3 +68,29 @@ def test_molmo_eval_off_a_terminal_prints_plain_lines_with_steps(faulty_policy, 
     assert any("0/2 episodes" in ln and "running: ep 0 " in ln for ln in lines), proc.stderr
     assert lines[-1].startswith("pick_small · faulty: 2/2 episodes (100%)")
     assert (out / "logs" / "w0g0.log").exists()
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_on_a_terminal_library_warnings_print_above_the_bar(tmp_path, monkeypatch):
+    """Ray's token warning (a ``ray`` logger record) goes through tqdm.write, never into the bar line."""
+    import logging
+
+    term = _Terminal()
+    ray_logger = logging.getLogger("ray")
+    handler = logging.StreamHandler(term)
+    monkeypatch.setattr(ray_logger, "handlers", [handler])
+    monkeypatch.setattr(ray_logger, "propagate", False)
+    monkeypatch.setattr(sys, "stderr", term)  # tqdm's logging redirect replaces handlers writing to stderr
+    handler.stream = sys.stderr
+    with Progress(2, 0, "bench · p", tmp_path, stream=term) as progress:
+        progress.episode_done(True, False)
+        ray_logger.warning("Token authentication is disabled for this Ray cluster.")
+        progress.episode_done(True, False)
+    screen = [seg for line in term.getvalue().split("\n") for seg in line.split("\r")]
+    assert "Token authentication is disabled for this Ray cluster." in screen  # a line of its own
+    assert any(seg.startswith("bench · p: 100%") for seg in screen)
+    assert ray_logger.handlers == [handler]  # restored after the run
