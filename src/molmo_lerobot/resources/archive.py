@@ -14,6 +14,7 @@ from pathlib import Path, PurePosixPath
 
 import zstandard
 
+from molmo_lerobot.fileio import atomic_open
 from molmo_lerobot.resources.errors import CorruptArchiveError, ResourceError, UnsafeArchiveError
 from molmo_lerobot.resources.manifests import link_escapes
 from molmo_lerobot.resources.nofollow import make_dirs, open_root, parent_of
@@ -65,9 +66,8 @@ def pack_archive(root: Path, rel_paths: Iterable[str], out: Path, level: int = 1
     Member metadata is normalized (owner, mtime, mode) so the same tree packs to the same bytes.
     """
     out = Path(out)
-    part = out.with_name(out.name + ".part")
     cctx = zstandard.ZstdCompressor(level=level)
-    with open(part, "wb") as fh, cctx.stream_writer(fh, closefd=False) as zw:
+    with atomic_open(out, "wb") as fh, cctx.stream_writer(fh, closefd=False) as zw:
         with tarfile.open(fileobj=zw, mode="w|", format=tarfile.PAX_FORMAT) as tar:
             for rel in rel_paths:
                 info = tar.gettarinfo(str(root / rel), arcname=rel)
@@ -81,7 +81,6 @@ def pack_archive(root: Path, rel_paths: Iterable[str], out: Path, level: int = 1
                 else:
                     info.mode = 0o777
                     tar.addfile(info)
-    os.replace(part, out)
     return {"size": out.stat().st_size, "sha256": sha256_file(out)}
 
 

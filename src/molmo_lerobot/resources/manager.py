@@ -32,6 +32,7 @@ from pathlib import Path, PurePosixPath
 
 from filelock import FileLock, Timeout
 
+from molmo_lerobot.fileio import atomic_open, atomic_write
 from molmo_lerobot.resources import molmospaces as ms
 from molmo_lerobot.resources import nofollow
 from molmo_lerobot.resources.archive import (
@@ -259,11 +260,9 @@ class ResourceManager:
             if src != meta / "raw":
                 (meta / "raw").mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(src / name, meta / "raw" / name)
-        part = meta / f".index.{uuid.uuid4().hex}.tmp"
-        with gzip.GzipFile(part, "wb", mtime=0) as fh:
+        with atomic_open(meta / "index.json.gz", "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as fh:
             fh.write(json.dumps(index).encode())
-        os.replace(part, meta / "index.json.gz")
-        _atomic_write(meta / "manifest.json", json.dumps(manifest, indent=1, sort_keys=True))
+        atomic_write(meta / "manifest.json", json.dumps(manifest, indent=1, sort_keys=True), parents=True)
 
     def is_molmospaces(self, spec: ResourceSpec | str) -> bool:
         """Whether the version has MolmoSpaces' layout (their flags, manifests and locks are kept)."""
@@ -279,9 +278,8 @@ class ResourceManager:
         vdir.mkdir(parents=True, exist_ok=True)
         for name in (ms.REMOTE_MANIFEST, ms.TRIES):
             if not (vdir / name).is_file():
-                part = vdir / f".{name}.{uuid.uuid4().hex}.tmp"
-                shutil.copyfile(self.meta_dir(spec) / "raw" / name, part)
-                os.replace(part, vdir / name)
+                with open(self.meta_dir(spec) / "raw" / name, "rb") as src, atomic_open(vdir / name, "wb") as dst:
+                    shutil.copyfileobj(src, dst)
 
     def index(self, spec: ResourceSpec | str) -> PathIndex:
         """The version's LMDB index (built from ``index.json.gz`` on first use)."""
@@ -318,7 +316,7 @@ class ResourceManager:
         if self.is_molmospaces(spec):
             ms.extract_flag(self.version_dir(spec), name).touch()
         else:
-            _atomic_write(self.meta_dir(spec) / "done" / f"{name}.ok", entry["sha256"])
+            atomic_write(self.meta_dir(spec) / "done" / f"{name}.ok", entry["sha256"], parents=True)
 
     def is_complete(self, spec: ResourceSpec | str) -> bool:
         spec = ResourceSpec.parse(spec)
@@ -410,7 +408,7 @@ class ResourceManager:
 
     def _mark_complete(self, spec: ResourceSpec) -> None:
         if set(self.manifest(spec)["archives"]) <= self._done(spec):
-            _atomic_write(self.meta_dir(spec) / "complete", "1")
+            atomic_write(self.meta_dir(spec) / "complete", "1", parents=True)
 
     def _extract(self, spec: ResourceSpec, archives: list[str]) -> None:
         """Download, verify and extract ``archives`` on a thread pool, with one retry pass."""
@@ -536,7 +534,7 @@ class ResourceManager:
             raise UnsafeArchiveError(f"{where}: link {bad[0]!r} -> {os.readlink(vdir / bad[0])!r} resolves to "
                                      f"{os.path.realpath(vdir / bad[0])}, outside {vdir}, through the links of "
                                      "this version; refusing to install")
-        _atomic_write(path, json.dumps(links))
+        atomic_write(path, json.dumps(links), parents=True)
 
     # -- links -------------------------------------------------------------------------
     def _link(self, spec: ResourceSpec) -> Path:
@@ -608,7 +606,7 @@ class ResourceManager:
     def _update_json(path: Path, edit: Callable[[dict], None], values: str, indent: int = 1) -> None:
         data = check_local(read_json(path), path, values) if path.is_file() else {}
         edit(data)
-        _atomic_write(path, json.dumps(data, indent=indent, sort_keys=indent == 1))
+        atomic_write(path, json.dumps(data, indent=indent, sort_keys=indent == 1), parents=True)
 
     def installed(self) -> dict[str, dict[str, list[str]]]:
         """``{data_type: {source: [versions]}}`` present in the cache (ours and molmospaces-resources')."""
@@ -772,13 +770,6 @@ def _is_tty() -> bool:
     import sys
 
     return sys.stderr.isatty()
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def _make_links(root: Path, target: Path, files: Iterable[str]) -> None:

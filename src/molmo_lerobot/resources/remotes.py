@@ -22,6 +22,7 @@ from abc import ABC, abstractmethod
 from pathlib import Path
 from urllib.parse import quote, unquote, urlparse
 
+from molmo_lerobot.fileio import atomic_open, atomic_write
 from molmo_lerobot.resources.errors import RemoteNotFoundError, ResourceError
 
 #: A version in MolmoSpaces' layout has this manifest ``format`` (ours: an integer).
@@ -85,9 +86,8 @@ class LocalRemote(Remote):
         src = self._path(rel)
         if not src.is_file():
             raise RemoteNotFoundError(f"remote {self.url}: {rel} not found")
-        part = Path(f"{dest}.{uuid.uuid4().hex}.part")
-        shutil.copyfile(src, part)
-        os.replace(part, dest)
+        with open(src, "rb") as fsrc, atomic_open(dest, "wb") as fdst:
+            shutil.copyfileobj(fsrc, fdst)
 
     def upload_dir(self, local_dir: Path, rel_prefix: str, message: str = "") -> None:
         target = self._path(rel_prefix)
@@ -101,9 +101,7 @@ class LocalRemote(Remote):
     def put_bytes(self, rel: str, data: bytes, message: str = "") -> None:
         path = self._path(rel)
         path.parent.mkdir(parents=True, exist_ok=True)
-        part = path.with_name(f".{path.name}.{uuid.uuid4().hex}.part")
-        part.write_bytes(data)
-        os.replace(part, path)
+        atomic_write(path, data)
 
     def list_files(self, prefix: str = "") -> list[str]:
         base = self._path(prefix) if prefix else self.root

@@ -24,6 +24,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from molmo_lerobot.export.report import write_report
 from molmo_lerobot.export.wandb_log import log_run
+from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
@@ -69,15 +70,6 @@ def _versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             pass
     return out
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
 
 
 def resolve_benchmark_path(bench_cfg: dict[str, Any]) -> Path:
@@ -129,6 +121,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         print("molmo-eval: push=true records the dataset it pushes (record=true)", file=sys.stderr)
         cfg["record"] = True
     plugins = get_plugins()
+    plugins.set_preferences((cfg.get("plugins") or {}).get("prefer"))  # workers apply the same pins
     policy_name = str(cfg["policy"]["name"])
     plugins.policy(policy_name)  # unknown or broken policy plugin: fail before any work
     recorders = plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
@@ -174,9 +167,11 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     run_info = {
         "benchmark": {"name": bench.name, "sha256": bench.sha256, "n_episodes": len(bench.episodes),
                       "path": str(bench.path)},
-        "policy": cfg["policy"], "policy_checkpoint": policy_checkpoints(cfg["policy"]), "seed": cfg["seed"], "limit": limit, "horizon": cfg.get("horizon"),
+        "policy": cfg["policy"], "policy_checkpoint": policy_checkpoints(cfg["policy"]), "seed": cfg["seed"],
+        "limit": limit, "horizon": cfg.get("horizon"),
         "timing": cfg["timing"],
-        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera")},
+        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
+                         **({"plugins_prefer": plugins.prefer} if plugins.prefer else {})},  # pinned providers
     }
     done = _prepare_output(out, run_info, bool(cfg.get("resume")))
     results: dict[int, EpisodeResult] = {r.episode_index: r for r in done if r.episode_index in set(indices)}
@@ -202,13 +197,14 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         if todo:
             job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], horizon=cfg.get("horizon"),
                             output_dir=str(out), benchmark_name=bench.name, benchmark_sha256=bench.sha256,
-                            recorders=recorders + progress.factories(), horizons=horizons)
+                            recorders=recorders + progress.factories(), horizons=horizons,
+                            prefer=plugins.prefer)
             executor.run(job, todo, record)
     ordered = [results[i] for i in sorted(results)]
     missing = sorted(set(indices) - set(results))
     if missing:
         raise RunError(f"run ended with {len(missing)} episodes unaccounted for: {missing[:10]}")
-    _atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered))
+    atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered))
     summary = summarize(
         ordered, **run_info, thresholds=thresholds, versions=_versions(), workers=cfg["workers"],
         executor=(cfg.get("executor") or {}).get("name", "local"), output_dir=str(out),
@@ -216,7 +212,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     )
     for factory in recorders:
         factory.finalize(out, ordered, summary)
-    _atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
+    atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
     write_report(out, summary, ordered)
     log_run(out, summary, ordered)
     return EvalResults(summary=summary, episodes=ordered, output_dir=out)
@@ -239,10 +235,10 @@ def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool) -> list[E
                                f"({previous.get(key)!r} vs {current.get(key)!r})")
         (out / RESULTS_FILE).unlink(missing_ok=True)
         done = _read_episodes(out / EPISODES_FILE)
-        _atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))
+        atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))
         return done
     out.mkdir(parents=True, exist_ok=True)
-    _atomic_write(run_file, json.dumps(run_info, indent=2) + "\n")
+    atomic_write(run_file, json.dumps(run_info, indent=2) + "\n")
     (out / EPISODES_FILE).touch()
     return []
 
