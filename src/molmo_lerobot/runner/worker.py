@@ -40,6 +40,7 @@ class WorkerJob:
     benchmark_sha256: str
     recorders: list[RecorderFactory] = field(default_factory=list)
     horizons: dict[str, float] = field(default_factory=dict)
+    molmospaces: dict[str, Any] = field(default_factory=dict)  # MolmoSpaces data settings, user libraries
     prefer: dict[str, dict[str, str]] = field(default_factory=dict)  # the run's plugins.prefer pins
     camera_system: str | None = None
     end_on_success: bool = False
@@ -49,12 +50,14 @@ class EpisodeWorker:
     """Loads plugins and the policy once, then runs episodes in sequence."""
 
     def __init__(self, job: WorkerJob, worker_id: str) -> None:
+        from molmo_lerobot.molmospaces import configure
         from molmo_lerobot.plugins import get_plugins
         from molmo_lerobot.runner.policy import make_policy
         from molmo_lerobot.sim.env import Timing
 
         self.job = job
         self.worker_id = worker_id
+        configure(job.molmospaces)
         self.plugins = get_plugins()
         self.plugins.set_preferences(job.prefer)
         self.timing = Timing(**job.timing)
@@ -92,7 +95,8 @@ class EpisodeWorker:
                     task_type=task_type.name, fps=1000.0 / self.timing.policy_dt_ms, horizon=horizon,
                     camera_names=list(env.camera_names), img_resolution=tuple(spec.img_resolution),
                     joint_names=dict(env.joint_names), move_groups=dict(env.move_groups),
-                    extra={"task_cls": task_cls, "policy": self.policy_name,
+                    extra={"task_cls": task_cls, "policy": self.policy_name, "robot": spec.robot.robot_name,
+                           "object": getattr(spec.task, "pickup_obj_name", None),
                            "benchmark": self.job.benchmark_name, "benchmark_sha256": self.job.benchmark_sha256},
                 )
                 outcome = rollout(env, task, self.policy, ctx, horizon, self.recorders, info, self.policy_name,
