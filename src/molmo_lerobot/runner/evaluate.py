@@ -27,6 +27,7 @@ from molmo_lerobot.export.report import write_report
 from molmo_lerobot.export.wandb_log import log_run
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.protocol.run_server import ServeError, served_policy
 from molmo_lerobot.runner.results import EpisodeResult, summarize
 from molmo_lerobot.runner.rollout import resolve_horizon
 from molmo_lerobot.runner.worker import WorkerJob, WorkItem
@@ -198,10 +199,14 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
             if failed.episode_index not in results:
                 record(failed)
         if todo:
-            job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], horizon=cfg.get("horizon"),
-                            output_dir=str(out), benchmark_name=bench.name, benchmark_sha256=bench.sha256,
-                            recorders=recorders, horizons=horizons)
-            executor.run(job, todo, record)
+            try:  # policy.serve=true: one local policy server for the run, the workers its clients
+                with served_policy(cfg["policy"], int(cfg["workers"]), out) as worker_policy:
+                    job = WorkerJob(policy=worker_policy, timing=cfg["timing"], horizon=cfg.get("horizon"),
+                                    output_dir=str(out), benchmark_name=bench.name, benchmark_sha256=bench.sha256,
+                                    recorders=recorders, horizons=horizons)
+                    executor.run(job, todo, record)
+            except ServeError as exc:
+                raise RunError(str(exc)) from None
     ordered = [results[i] for i in sorted(results)]
     missing = sorted(set(indices) - set(results))
     if missing:
