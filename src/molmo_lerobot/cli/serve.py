@@ -29,6 +29,9 @@ from omegaconf import OmegaConf
 if TYPE_CHECKING:
     from molmo_lerobot.protocol.server import PolicyServer
 
+#: ``policy.serve*`` switches of a run (see protocol/run_server.py), not the policy's own options
+RUN_SERVING_KEYS = frozenset({"serve", "serve_max_batch", "serve_batch_timeout_ms"})
+
 SERVER_OPTIONS = {
     "host": str,
     "port": int,
@@ -71,7 +74,7 @@ def build_server(policy_cfg: dict[str, Any], **options: Any) -> PolicyServer:
     from molmo_lerobot.protocol.server import PolicyServer
     from molmo_lerobot.runner.policy import make_policy
 
-    cfg = {k: v for k, v in policy_cfg.items() if not k.startswith("serve")}  # the run's serving switches
+    cfg = {k: v for k, v in policy_cfg.items() if k not in RUN_SERVING_KEYS}
     metadata = {"server": "molmo-serve", "version": __version__, "policy": cfg.get("name")}
     return PolicyServer(lambda: make_policy(cfg), metadata=metadata, **options)
 

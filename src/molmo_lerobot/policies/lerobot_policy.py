@@ -142,9 +142,10 @@ def _suffixes(name: str) -> list[str]:
     return [".".join(parts[i:]) for i in range(min(3, len(parts) - 1) + 1)]
 
 
-#: LeRobot policy types whose ``select_action`` is ``predict_action_chunk`` plus an action queue
-#: (no observation history), so a batched forward with per-client queues reproduces it
-BATCHABLE_TYPES = frozenset({"act", "pi0", "pi05"})
+#: LeRobot policy types whose ``select_action`` is ``predict_action_chunk`` plus an action queue,
+#: with stateless processors, so a batched forward with per-client queues reproduces it. Not
+#: (yet) pi0 / pi0.5: their relative-action processor step keeps the last observation's state.
+BATCHABLE_TYPES = frozenset({"act"})
 
 
 class LeRobotPolicy(Policy):
