@@ -159,3 +159,24 @@ def test_a_call_that_breaks_as_a_whole_is_retried_per_item(shared):
         assert ra["arm"][0, 0] == 1 and rc["arm"][0, 0] == 1
         assert isinstance(rb, PolicyServerError) and "one item breaks the whole call" in str(rb)
         assert shared["batches"] == [3, 1, 1, 1]
+
+
+def test_clients_fall_into_step_and_an_idle_one_is_not_waited_for(shared):
+    with serve_in_thread(server(shared, batch_timeout_ms=300)) as srv:
+        a, b = clients(srv, 2)
+
+        def episode(c, offset, steps, pause_at=-1):
+            time.sleep(offset)
+            latencies = []
+            for i in range(steps):
+                if i == pause_at:
+                    time.sleep(2.0)  # e.g. building the next scene: the server must not wait for it
+                t0 = time.monotonic()
+                c.infer(OBS)
+                latencies.append(time.monotonic() - t0)
+                time.sleep(0.05)  # the client's own work between requests
+            return latencies
+
+        la, _ = together([lambda: episode(a, 0, 30), lambda: episode(b, 0.12, 8)])
+        assert shared["batches"][1:7] == [2] * 6  # out of phase at first, then in step
+        assert sorted(la)[len(la) // 2] < 0.1  # once b went idle, a was answered without waiting

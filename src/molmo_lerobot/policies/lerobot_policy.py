@@ -52,7 +52,7 @@ class LeRobotPolicyConfig(BaseModel):
     max_unmatched_fraction: float = Field(default=0.01, ge=0.0, le=1.0)
     serve: bool = False
     serve_max_batch: int | None = Field(default=None, ge=1)
-    serve_batch_timeout_ms: float = Field(default=20.0, ge=0)
+    serve_batch_timeout_ms: float = Field(default=50.0, ge=0)
 
 
 def parse_config(cfg: dict[str, Any], model: type[BaseModel] = LeRobotPolicyConfig) -> Any:

@@ -30,7 +30,7 @@ def serve_options(policy_cfg: dict[str, Any], workers: int) -> dict[str, Any] | 
     if not policy_cfg.get("serve"):
         return None
     return {"max_batch": int(policy_cfg.get("serve_max_batch") or workers),
-            "batch_timeout_ms": float(policy_cfg.get("serve_batch_timeout_ms", 20.0)),
+            "batch_timeout_ms": float(policy_cfg.get("serve_batch_timeout_ms", 50.0)),
             "max_clients": max(8, workers + 2), "first_request_timeout_s": 600.0, "idle_timeout_s": 3600.0}
 
 

@@ -11,9 +11,10 @@ before its first observation. ``GET /healthz`` answers 200, ``GET /stats`` a JSO
 
 **Batching.** With ``max_batch > 1`` and a policy whose ``batched`` is true, requests from
 different connections that arrive within ``batch_timeout_ms`` of the first (up to
-``max_batch``, or as soon as every connected client is waiting) run as one
-``act_batch`` call; each client keeps its own policy state, and an item that fails fails
-only its own request.
+``max_batch``) run as one ``act_batch`` call. A batch is sent as soon as no other client is
+due: clients idle for longer than their usual cycle between requests (building a scene,
+say) are not waited for, and clients in step wait for each other, so they stay in step.
+Each client keeps its own policy state; an item that fails fails only its own request.
 
 **Bounds.** Everything a client can ask for is bounded: the message size (in both directions,
 checked before a reply is encoded), move groups, images, arrays and numbers (see
@@ -68,10 +69,20 @@ class PolicyNotServable(ValueError):
 @dataclass(eq=False)
 class _Client:
     ws: ServerConnection
-    since: float = field(default_factory=time.monotonic)
+    since: float = field(default_factory=time.monotonic)  # last activity (connect or a finished request)
     policy: Policy | None = None
     busy: bool = False
     evicted: bool = False
+    cycle: float | None = None  # the client's usual time between an answer and its next request
+    acting: bool = False  # its last request was an observation (not a reset)
+    queued: bool = False  # its observation waits in the batch queue
+
+    def expected(self, now: float, batch_timeout_s: float) -> bool:
+        """Whether this client's next observation is due soon: worth holding a batch open for."""
+        if self.queued or self.evicted or self.policy is None:
+            return False
+        window = 1.0 if self.cycle is None else 1.5 * self.cycle + batch_timeout_s
+        return self.busy or now - self.since < window
 
 
 @dataclass(eq=False)
@@ -285,18 +296,23 @@ class PolicyServer:
             timeout = self.idle_timeout_s
             client.busy = True
             start = time.perf_counter()
+            gap = time.monotonic() - client.since
             try:
                 request = self._decode(frame)
                 if request.get("endpoint") == RESET_ENDPOINT:
+                    client.acting = False
                     await self._call(policy.reset, episode_context(request))
                     needs_reset = False
                     await ws.send(packb({"endpoint": RESET_ENDPOINT, "ok": True}))
                     continue
                 check_observation(request)
+                if client.acting:
+                    client.cycle = gap if client.cycle is None else 0.7 * client.cycle + 0.3 * gap
+                client.acting = True
                 if needs_reset:
                     await self._call(policy.reset, episode_context(request))
                     needs_reset = False
-                action, infer_ms = await self._act(policy, request)
+                action, infer_ms = await self._act(client, request)
                 payload = self._encode(action, infer_ms, prev_total_ms)
             except ConnectionClosed:
                 raise
@@ -342,7 +358,9 @@ class PolicyServer:
         return payload
 
     # inference ---------------------------------------------------------------------------
-    async def _act(self, policy: Policy, obs: dict[str, Any]) -> tuple[Action, float]:
+    async def _act(self, client: _Client, obs: dict[str, Any]) -> tuple[Action, float]:
+        policy = client.policy
+        assert policy is not None
         if not self.batching:
             assert self._infer_slots is not None
             async with self._infer_slots:
@@ -353,7 +371,11 @@ class PolicyServer:
         pending = _Pending(policy, obs, asyncio.get_running_loop().create_future())
         self._pending.append(pending)
         self._wake.set()
-        return await pending.future
+        client.queued = True
+        try:
+            return await pending.future
+        finally:
+            client.queued = False
 
     async def _batcher(self) -> None:
         """Collect pending requests into batches; one ``act_batch`` call at a time."""
@@ -365,7 +387,7 @@ class PolicyServer:
                 if not self._pending:
                     continue
                 deadline = self._pending[0].t + self.batch_timeout_s
-                while len(self._pending) < min(self.max_batch, self._ready_clients()):
+                while len(self._pending) < min(self.max_batch, len(self._pending) + self._expected_clients()):
                     remaining = deadline - time.monotonic()
                     if remaining <= 0:
                         break
@@ -391,8 +413,10 @@ class PolicyServer:
                     item.future.set_exception(RuntimeError("server shutting down"))
             raise
 
-    def _ready_clients(self) -> int:
-        return max(1, sum(not c.evicted and c.policy is not None for c in self._clients))
+    def _expected_clients(self) -> int:
+        """Idle clients whose next request is due within their usual cycle (not those building a scene)."""
+        now = time.monotonic()
+        return sum(c.expected(now, self.batch_timeout_s) for c in self._clients)
 
     def _run_batch(self, batch: list[_Pending]) -> tuple[list[Any], float]:
         policies, observations = [b.policy for b in batch], [b.obs for b in batch]
