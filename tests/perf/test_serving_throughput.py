@@ -35,7 +35,7 @@ DEVICE = os.environ.get("MOLMO_PERF_DEVICE", "auto")
 MODES = {
     "in-process": [],
     "served": ["policy.serve=true", "policy.serve_max_batch=1"],
-    "served+batched": ["policy.serve=true", ],
+    "served+batched": ["policy.serve=true"],
 }
 
 

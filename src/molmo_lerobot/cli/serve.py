@@ -6,7 +6,7 @@ Server options (key=value):
   host, port                  where to listen (port=0 picks a free port)
   max_clients=8               connections served at once; a new client evicts one idle >= evict_idle_s
   max_batch=1                 batch requests from different clients (policies with a batched act)
-  batch_timeout_ms=5          how long a request waits for others to join its batch
+  batch_timeout_ms=20         longest a request waits for due clients to join its batch
   max_concurrency=1           policy calls run at once without batching
   max_message_bytes=67108864  largest request or reply
   first_request_timeout_s=10  a connection must send its first request within this

@@ -110,7 +110,7 @@ class PolicyServer:
         idle_timeout_s: float = 120.0,
         evict_idle_s: float = 2.0,
         max_batch: int = 1,
-        batch_timeout_ms: float = 5.0,
+        batch_timeout_ms: float = 20.0,
         shutdown_timeout_s: float = 30.0,
     ) -> None:
         for name, value in (("max_clients", max_clients), ("max_concurrency", max_concurrency),
