@@ -7,7 +7,7 @@ nothing is asserted about speed.
 
 ``pytest -m perf -s tests/perf/test_serving_throughput.py``; knobs: ``MOLMO_PERF_WORKERS``
 (1,2,4), ``MOLMO_PERF_EPISODES`` (8), ``MOLMO_PERF_HORIZON`` (30 steps), ``MOLMO_PERF_DEVICE``
-(auto: cuda when present). Rows are appended to ``runs/perf.jsonl``.
+(auto: cuda when present), ``MOLMO_PERF_BATCH_TIMEOUT_MS``. Rows are appended to ``runs/perf.jsonl``.
 """
 
 from __future__ import annotations
@@ -32,10 +32,12 @@ WORKERS = [int(w) for w in os.environ.get("MOLMO_PERF_WORKERS", "1,2,4").split("
 EPISODES = int(os.environ.get("MOLMO_PERF_EPISODES", "8"))
 HORIZON = int(os.environ.get("MOLMO_PERF_HORIZON", "30"))
 DEVICE = os.environ.get("MOLMO_PERF_DEVICE", "auto")
+BATCH_TIMEOUT_MS = os.environ.get("MOLMO_PERF_BATCH_TIMEOUT_MS")  # default: policy.serve_batch_timeout_ms
 MODES = {
     "in-process": [],
     "served": ["policy.serve=true", "policy.serve_max_batch=1"],
-    "served+batched": ["policy.serve=true"],
+    "served+batched": ["policy.serve=true"] + ([f"policy.serve_batch_timeout_ms={BATCH_TIMEOUT_MS}"]
+                                               if BATCH_TIMEOUT_MS else []),
 }
 
 
@@ -61,7 +63,8 @@ def test_throughput_in_process_vs_served_vs_batched(tmp_path):
                          "batch_sizes": stats.get("batch_sizes"), "errors": res.summary["n_errors"]})
     base = {r["workers"]: r for r in rows if r["mode"] == "in-process"}
     one = base[WORKERS[0]]["eps_per_min"]
-    print(f"\ntiny ACT on pick_v1, {EPISODES} episodes x {HORIZON} steps, device={DEVICE}")
+    print(f"\ntiny ACT on pick_v1, {EPISODES} episodes x {HORIZON} steps, device={DEVICE}, "
+          f"batch timeout {BATCH_TIMEOUT_MS or 'default'} ms")
     print(f"{'mode':>15} {'workers':>7} {'wall s':>8} {'eps/min':>8} {'excl. start':>11} {'vs in-proc':>10} "
           f"{'vs w=1':>7}  batch sizes (size: batches)")
     for r in rows:
