@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
+from molmo_lerobot.runner.progress import redirect_worker_output
 from molmo_lerobot.runner.results import EpisodeResult
 from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob, WorkItem
 
@@ -33,6 +34,7 @@ class WorkerStartError(RuntimeError):
 def _worker_main(conn: Connection, job: WorkerJob, worker_id: str) -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the supervisor decides when workers stop
+    redirect_worker_output(job.output_dir, worker_id)  # library prints go to logs/, not through the bar
     try:
         worker = EpisodeWorker(job, worker_id)
     except Exception as exc:

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from molmo_lerobot.runner.local import WorkerStartError, _failure
+from molmo_lerobot.runner.progress import redirect_worker_output
 from molmo_lerobot.runner.results import EpisodeResult
 from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob, WorkItem
 
@@ -36,6 +37,7 @@ class SimulatorActor:
 
     def __init__(self, job: WorkerJob, worker_id: str) -> None:
         os.environ.setdefault("MUJOCO_GL", "egl")
+        redirect_worker_output(job.output_dir, worker_id)  # library prints go to logs/, not through the bar
         self.worker: EpisodeWorker | None = None
         self.init_error: str | None = None
         try:
