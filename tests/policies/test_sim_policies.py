@@ -84,7 +84,7 @@ class _Scripted:
     """A test policy: plays fixed chunks, records what it was given."""
 
     needs_images = False
-    privileged = False
+    needs_simulator = False
 
     def __init__(self, chunks):
         self.chunks, self.ctx = list(chunks), None
@@ -173,4 +173,4 @@ def test_only_privileged_policies_get_the_simulator(tmp_path, episodes):
         assert result.error is None and result.extra["ended_by"] == "horizon"
         worker.close()
     assert seen["scripted"] is not None and seen["random"] is None
-    assert plugins.policy("scripted").factory({}).privileged and not plugins.policy("random").factory({}).privileged
+    assert plugins.policy("scripted").factory({}).needs_simulator and not plugins.policy("random").factory({}).needs_simulator

@@ -125,7 +125,7 @@ class PhasedExpert(Policy):
     ``speed`` (rad/s)."""
 
     needs_images = False
-    privileged = True
+    needs_simulator = True
 
     def __init__(self, config: dict[str, Any]) -> None:
         self.chunk = int(config.get("chunk", 12))
@@ -286,7 +286,7 @@ class ScriptedExpert(Policy):
     """
 
     needs_images = False
-    privileged = True
+    needs_simulator = True
 
     def __init__(self, config: dict[str, Any]) -> None:
         self.config = config

@@ -88,7 +88,7 @@ class EpisodeWorker:
                 ctx = EpisodeContext(
                     spec=spec, episode_index=item.episode_index, seed=item.seed, prompt=prompt,
                     move_groups=dict(env.move_groups), policy_dt_s=self.timing.policy_dt_ms / 1000.0,
-                    env=env if self.policy.privileged else None,
+                    env=env if self.policy.needs_simulator else None,
                 )
                 info = EpisodeInfo(
                     episode_index=item.episode_index, house_index=house, seed=item.seed, prompt=prompt,
