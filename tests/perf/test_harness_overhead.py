@@ -28,7 +28,8 @@ from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.runner.evaluate import episode_seed, run_evaluation
 from molmo_lerobot.runner.policy import make_policy
 from molmo_lerobot.runner.rollout import resolve_horizon
-from molmo_lerobot.sim.env import Timing, make_env
+from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.sim.env import Timing
 
 pytestmark = pytest.mark.perf
 N_EPISODES = int(os.environ.get("MOLMO_PERF_EPISODES", "20"))
@@ -56,7 +57,7 @@ def raw_loop(n: int, policy_name: str) -> tuple[float, int, int, int]:
         seed = episode_seed(0, spec.model_dump(mode="json"))
         task_type = plugins.task_type(spec.task_name)
         horizon = resolve_horizon(None, spec.task, task_type.default_horizon_sec, timing.policy_dt_ms)
-        env = make_env(spec, timing, plugins)
+        env = build_env(spec, timing, plugins)
         env.reset(seed)
         task = task_type.create(spec, env)
         m, d = env.model, env.data
