@@ -18,12 +18,13 @@ def data_path(name: str) -> Path:
     raise FileNotFoundError(f"shipped directory {name!r} not found next to {_PKG}")
 
 
-def package_asset_dir(package: str, *parts: str, marker: str, what: str) -> Path:
-    """``parts`` inside the installed ``package``, checked to hold ``marker``; ``what`` names who needs it."""
+def package_asset_dir(package: str, *parts: str, marker: str, what: str, install: str | None = None) -> Path:
+    """``parts`` inside the installed ``package``, checked to hold ``marker``; ``what`` names who needs it
+    and ``install`` how to get the package (default ``pip install <package>``)."""
     found = importlib.util.find_spec(package)
     if found is None or not found.submodule_search_locations:
         dist = package.replace("_", "-")
-        raise FileNotFoundError(f"{what}: the {dist!r} package is not installed (pip install {dist})")
+        raise FileNotFoundError(f"{what}: the {dist!r} package is not installed ({install or f'pip install {dist}'})")
     path = Path(next(iter(found.submodule_search_locations))).joinpath(*parts)
     if not (path / marker).exists():
         raise FileNotFoundError(f"{what}: assets not found at {path} ({package} layout changed?)")

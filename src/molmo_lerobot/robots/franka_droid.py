@@ -67,7 +67,8 @@ _DRIVERS = {"finger_joint": "left_driver_joint", "right_outer_knuckle_joint": "r
 def robotiq_xml() -> Path:
     """robosuite's Robotiq 2F-85 MJCF inside the installed package (the package is not imported)."""
     return package_asset_dir("robosuite", "models", "assets", "grippers", marker="robotiq_gripper_85.xml",
-                             what="the franka_droid robot (Robotiq 2F-85 gripper)") / "robotiq_gripper_85.xml"
+                             what="the franka_droid robot (Robotiq 2F-85 gripper)",
+                             install="pip install --no-deps robosuite: only its asset files are used") / "robotiq_gripper_85.xml"
 
 
 def molmospaces_model(assets_dir: Path | None = None) -> Path | None:
