@@ -85,7 +85,7 @@ def test_kill_9_of_one_worker_from_outside_mid_run(faulty_policy, small_bench, t
 
 
 def test_policy_that_cannot_start_fails_the_run_clearly(faulty_policy, small_bench, tmp_path, eval_config):
-    from molmo_lerobot.runner.local import WorkerStartError
+    from molmo_lerobot.runner.supervisor import WorkerStartError
 
     cfg = eval_config(small_bench, tmp_path / "run", "policy=faulty", "workers=1", "horizon=2", "policy.fail_init=true")
     with pytest.raises(WorkerStartError, match="refusing to start"):

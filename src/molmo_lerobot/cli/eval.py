@@ -19,6 +19,13 @@ Every key of conf/eval.yaml can be overridden; policy/benchmark/executor pick co
 
 
 def main(argv: list[str] | None = None) -> int:
+    from molmo_lerobot.runner.supervisor import reaping_children
+
+    with reaping_children():  # exit only after every child process is reaped
+        return _main(argv)
+
+
+def _main(argv: list[str] | None = None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
     if any(a in ("-h", "--help") for a in args):
         print(USAGE)
@@ -29,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     from molmo_lerobot.config import ConfigError, compose
     from molmo_lerobot.plugins import PluginError
     from molmo_lerobot.runner.evaluate import RunError, run_evaluation
-    from molmo_lerobot.runner.local import WorkerStartError
+    from molmo_lerobot.runner.supervisor import RunInterrupted, WorkerStartError
 
     expected: tuple[type[BaseException], ...] = (ConfigError, PluginError, RunError, WorkerStartError)
     try:
@@ -44,6 +51,9 @@ def main(argv: list[str] | None = None) -> int:
     except expected as exc:
         print(f"molmo-eval: error: {exc}", file=sys.stderr)
         return 2
+    except RunInterrupted as exc:
+        print(f"molmo-eval: {exc}", file=sys.stderr)
+        return 128 + exc.signum
     except KeyboardInterrupt:
         print("molmo-eval: interrupted; finished episodes are kept in episodes.jsonl "
               "(rerun with resume=true to continue)", file=sys.stderr)

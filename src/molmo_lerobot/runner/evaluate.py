@@ -15,6 +15,7 @@ import platform
 import sys
 import time
 from dataclasses import dataclass
+from functools import partial
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
@@ -29,6 +30,7 @@ from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.runner.results import EpisodeResult, summarize
 from molmo_lerobot.runner.rollout import resolve_horizon
+from molmo_lerobot.runner.supervisor import RunInterrupted
 from molmo_lerobot.runner.worker import WorkerJob, WorkItem
 
 RUN_FILE = "run.json"
@@ -38,6 +40,10 @@ RESULTS_FILE = "results.json"
 
 class RunError(RuntimeError):
     """The run cannot start or continue; the message says why and what to do."""
+
+
+class ExportError(RunError):
+    """The run is scored (``results.json`` written) but an export step after it failed."""
 
 
 @dataclass
@@ -168,7 +174,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                                   cfg["timing"]["policy_dt_ms"], horizons.get(task_type.name))
         if horizon not in entry["horizon_steps"]:
             entry["horizon_steps"].append(horizon)
-        items.append(WorkItem(i, raw, seed))
+        items.append(WorkItem(i, raw, seed, task_type.name, horizon))
 
     run_info = {
         "benchmark": {"name": bench.name, "sha256": bench.sha256, "n_episodes": len(bench.episodes),
@@ -198,10 +204,14 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
             if failed.episode_index not in results:
                 record(failed)
         if todo:
-            job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], horizon=cfg.get("horizon"),
-                            output_dir=str(out), benchmark_name=bench.name, benchmark_sha256=bench.sha256,
-                            recorders=recorders, horizons=horizons)
-            executor.run(job, todo, record)
+            job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], output_dir=str(out),
+                            benchmark_name=bench.name, benchmark_sha256=bench.sha256, recorders=recorders)
+            try:
+                executor.run(job, todo, record)
+            except RunInterrupted as exc:
+                raise RunInterrupted(exc.signum, f"{exc}: {len(results)} of {len(indices)} episodes finished and "
+                                     f"kept in {episodes_path}; to continue, rerun with output_dir={out} "
+                                     "resume=true") from None
     ordered = [results[i] for i in sorted(results)]
     missing = sorted(set(indices) - set(results))
     if missing:
@@ -212,11 +222,18 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         executor=(cfg.get("executor") or {}).get("name", "local"), output_dir=str(out),
         started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=cfg,
     )
-    for factory in recorders:
-        factory.finalize(out, ordered, summary)
-    _atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
-    write_report(out, summary, ordered)
-    log_run(out, summary, ordered)
+    _atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")  # the score, before any export
+    failed = []
+    for name, step in [*((f"export {type(f).__name__}", partial(f.finalize, out, ordered, summary)) for f in recorders),
+                       ("report", partial(write_report, out, summary, ordered)),
+                       ("W&B log", partial(log_run, out, summary, ordered))]:
+        try:
+            step()
+        except Exception as exc:
+            failed.append(f"{name}: {type(exc).__name__}: {exc}".splitlines()[0])
+    if failed:
+        raise ExportError(f"export failed after the run was scored ({'; '.join(failed)}); the score stands: "
+                          f"{summary['n_success']}/{summary['n_episodes']} successes in {out / RESULTS_FILE}")
     return EvalResults(summary=summary, episodes=ordered, output_dir=out)
 
 
