@@ -19,11 +19,13 @@ misbehaves in the episodes named by ``policy.faults={episode_index: kind}``:
 first N workers that start after a ``sigkill*`` fault fired SIGKILL themselves while starting.
 
 The distribution also provides a recorder: with ``+trace_dir=D`` every finished episode writes
-``D/trace-<episode_index>``, a SHA-256 of every action and joint position of the episode.
+``D/trace-<episode_index>``, a SHA-256 of every action and joint position of the episode;
+``+trace_fail_finalize=true`` makes its run-level ``finalize`` (the export step) raise.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import sys
@@ -118,11 +120,15 @@ MODULE = textwrap.dedent('''
 
 
     class TraceFactory(RecorderFactory):
-        def __init__(self, out):
-            self.out = Path(out)
+        def __init__(self, out, fail_finalize=False):
+            self.out, self.fail_finalize = Path(out), fail_finalize
 
         def make(self, worker_id, output_dir):
             return TraceRecorder(self.out)
+
+        def finalize(self, output_dir, results, summary):
+            if self.fail_finalize:
+                raise OSError("trace export: disk full (trace_fail_finalize=true)")
 
 
     class TraceRecorder(Recorder):
@@ -150,7 +156,9 @@ MODULE = textwrap.dedent('''
 
     @hookimpl
     def molmo_recorders(config):
-        return [TraceFactory(config["trace_dir"])] if config.get("trace_dir") else []
+        if not config.get("trace_dir"):
+            return []
+        return [TraceFactory(config["trace_dir"], bool(config.get("trace_fail_finalize")))]
 ''')
 
 POLICY_YAML = textwrap.dedent("""\
@@ -263,8 +271,9 @@ SUBREAPER = textwrap.dedent(r'''
             return "gone", ""
         return stat.rsplit(")", 1)[1].split()[0], cmd
 
-    proc = subprocess.Popen([sys.executable, "-m", "molmo_lerobot.cli.eval", *plan["args"]],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # output to files, not pipes: a worker left running would hold a pipe open forever
+    logs = {name: open(plan["log_prefix"] + name, "w+") for name in ("stdout", "stderr")}
+    proc = subprocess.Popen([sys.executable, "-m", "molmo_lerobot.cli.eval", *plan["args"]], **logs)
     signalled = None
     if plan.get("signal"):
         def ready():
@@ -276,11 +285,12 @@ SUBREAPER = textwrap.dedent(r'''
             os.kill(proc.pid, plan["signal"])
             signalled = time.monotonic()
     try:
-        stdout, stderr = proc.communicate(timeout=plan.get("timeout_s", 300))
+        proc.wait(timeout=plan.get("timeout_s", 300))
     except subprocess.TimeoutExpired:
         proc.kill()
-        stdout, stderr = proc.communicate()
+        proc.wait()
     exited = time.monotonic()
+    stdout, stderr = (Path(f.name).read_text() for f in logs.values())
     # orphans still running after a grace period (a stopped worker may take a moment to end)
     deadline = time.monotonic() + plan.get("orphan_grace_s", 0.0)
     while time.monotonic() < deadline and any(state(p)[0] not in ("Z", "gone") for p in children()):
@@ -297,15 +307,16 @@ SUBREAPER = textwrap.dedent(r'''
 ''')
 
 
-def _run_cli(*args: str, signal: int | None = None, when: list[tuple[Path, int]] = (), orphan_grace_s: float = 0.0,
-             timeout_s: float = 300) -> dict:
+def _run_cli(log_dir: Path, *args: str, signal: int | None = None, when: list[tuple[Path, int]] = (),
+             orphan_grace_s: float = 0.0, timeout_s: float = 200) -> dict:
     """Run ``molmo-eval *args`` under a child subreaper; see ``SUBREAPER``. Returns its report:
     ``rc``, ``stdout``, ``stderr``, ``left`` (pid → (state, cmdline) of every process it left
     behind, zombies included) and ``exit_after_signal_s``."""
     import subprocess
 
     plan = {"args": list(args), "signal": signal, "when": [(str(p), n) for p, n in when],
-            "orphan_grace_s": orphan_grace_s, "timeout_s": timeout_s}
+            "orphan_grace_s": orphan_grace_s, "timeout_s": timeout_s,
+            "log_prefix": str(log_dir / "molmo-eval.")}
     env = dict(os.environ, MUJOCO_GL="egl")
     out = subprocess.run([sys.executable, "-c", SUBREAPER, json.dumps(plan)], capture_output=True, text=True,
                          env=env, timeout=timeout_s + 60)
@@ -314,6 +325,6 @@ def _run_cli(*args: str, signal: int | None = None, when: list[tuple[Path, int]]
 
 
 @pytest.fixture
-def run_cli():
+def run_cli(tmp_path):
     """``run_cli(*args, signal=…, when=[(file, lines)], orphan_grace_s=…)``: molmo-eval under a subreaper."""
-    return _run_cli
+    return functools.partial(_run_cli, tmp_path)

@@ -191,3 +191,24 @@ def test_workers_of_a_killed_molmo_eval_end_on_their_own(faulty_policy, small_be
     assert report["rc"] == -signal.SIGKILL
     running = {pid: s for pid, s in report["left"].items() if s[0] not in ("Z", "gone")}
     assert running == {}, f"workers still running after their supervisor died: {running}"
+
+
+def test_a_failing_export_leaves_the_score_standing(faulty_policy, small_bench, tmp_path, eval_config):
+    """Scores first: results.json and episodes.jsonl are final before any export step runs; an export
+    that fails is an error that says the score stands and where it is; the report still runs."""
+    from molmo_lerobot.runner.evaluate import ExportError
+
+    out = tmp_path / "run"
+    cfg = eval_config(small_bench, out, "policy=faulty", "workers=1", "horizon=2", "limit=3",
+                      f"policy.marker_dir={faulty_policy.marker_dir}", f"+trace_dir={tmp_path / 'traces'}",
+                      "+trace_fail_finalize=true")
+    with pytest.raises(ExportError, match=r"export failed after the run was scored \(export TraceFactory: "
+                                          r"OSError: trace export: disk full.*the score stands: 0/3 successes in "
+                                          + str(out / "results.json")):
+        run_evaluation(cfg)
+    summary = json.loads((out / "results.json").read_text())
+    assert summary["n_episodes"] == 3 and summary["n_errors"] == 0
+    rows = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    assert [r["episode_index"] for r in rows] == [0, 1, 2]
+    assert sorted(p.name for p in (tmp_path / "traces").iterdir()) == ["trace-0", "trace-1", "trace-2"]
+    assert (out / "report.html").exists(), "the report runs even though an export step failed"

@@ -72,3 +72,20 @@ def test_joining_a_missing_cluster_is_a_clear_start_error(faulty_policy, small_b
     with pytest.raises(WorkerStartError, match="could not join the Ray cluster at 'auto'"):
         run_evaluation(cfg)
     assert not ray.is_initialized()
+
+
+@pytest.mark.slow
+def test_local_and_ray_random_policy_trajectories_are_identical(faulty_policy, small_bench, tmp_path, eval_config,
+                                                                outcomes, traces):
+    """The random policy's draws come from each episode's seed: local processes and Ray actors give the
+    same outcomes and the same trajectories (a hash of every action and joint position) on 8 episodes."""
+    runs = {}
+    for executor in ("local", "ray"):
+        runs[executor] = run_evaluation(eval_config(
+            small_bench, tmp_path / executor, "policy=random", "workers=2", "horizon=20", f"executor={executor}",
+            f"+trace_dir={tmp_path / f'traces-{executor}'}"))
+    assert outcomes(tmp_path / "ray") == outcomes(tmp_path / "local")
+    local_traces, ray_traces = traces(tmp_path / "traces-local"), traces(tmp_path / "traces-ray")
+    assert sorted(local_traces) == list(range(8)) and ray_traces == local_traces
+    assert len(set(local_traces.values())) == 8, "every episode's seed gives its own trajectory"
+    assert all(r.error is None for r in runs["ray"].episodes)

@@ -129,7 +129,7 @@ class RayTransport(Transport):
                 ref, handle.ref = handle.ref, None
                 out.append((RESULT, ray.get(ref)))
         except RayActorError as exc:
-            out.append(self._dead(handle, f"its Ray actor lost (pid {handle.pid}: {_short(exc)})"))
+            out.append(self._dead(handle, f"Ray actor error (pid {handle.pid}: {_short(exc)})"))
         except RayError as exc:
             out.append(self._dead(handle, f"a failure outside the episode ({_short(exc)})"))
         return out

@@ -206,7 +206,7 @@ class Supervisor:
 
     def _report(self, slot: _Slot, result: EpisodeResult) -> None:
         if slot.item is None or slot.item.episode_index != result.episode_index:
-            return  # a late result of an episode already decided (never happens with one item per worker)
+            return  # not the episode this worker was given: a transport bug must not count twice
         result.attempts = self._attempts.get(result.episode_index, 1)
         slot.item = None
         self._on_result(result)
