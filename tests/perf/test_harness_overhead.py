@@ -9,8 +9,10 @@ result files). Per-episode outcomes are asserted identical.
 
 Each side is timed for ``M`` and ``N`` episodes: per-episode cost = (T_N - T_M) / (N - M), fixed
 cost (interpreter start, imports, plugin and policy loading, worker start-up, result files) =
-T_M - M x per-episode. The configurations run interleaved, ``REPS`` times; the best of each is
-kept. The same is done for ``molmo-eval`` with 2 workers (throughput workers=2 / workers=1).
+T_M - M x per-episode. Each episode's own time (scene build to last step: the raw loop's clock,
+the worker's ``duration_s``) is reported too, the less noisy per-episode figure on a shared
+machine. The configurations run interleaved, ``REPS`` times; the best of each is kept. The same
+is done for ``molmo-eval`` with 2 workers (throughput workers=2 / workers=1).
 
 Figures are printed and appended to ``runs/perf.jsonl``; nothing is asserted about speed.
 Knobs: ``MOLMO_PERF_EPISODES`` (N, default 6; M = N / 3), ``MOLMO_PERF_HORIZON`` (policy steps,
@@ -71,7 +73,7 @@ PLUGIN = textwrap.dedent('''
 
 #: The raw loop, run as ``python -c RAW '{"n": …}'``: prints one JSON line of outcomes.
 RAW = textwrap.dedent('''
-    import json, sys
+    import json, sys, time
     from collections import deque
 
     import numpy as np
@@ -91,6 +93,7 @@ RAW = textwrap.dedent('''
     policy = ImageScripted({"name": "image_scripted", "chunk": args["chunk"]})
     out = []
     for i in range(args["n"]):
+        t0 = time.perf_counter()
         spec = bench.episodes[i]
         seed = episode_seed(0, spec.model_dump(mode="json"))
         task_type = plugins.task_type(spec.task_name)
@@ -117,7 +120,8 @@ RAW = textwrap.dedent('''
                 obs = env.observe(images=not queue)
                 obs["prompt"], obs["step"] = prompt, step + 1
         env.close()
-        out.append({"episode_index": i, "success": success, "success_once": success_once, "steps": args["horizon"]})
+        out.append({"episode_index": i, "success": success, "success_once": success_once, "steps": args["horizon"],
+                    "duration_s": time.perf_counter() - t0})
     print(json.dumps(out))
 ''')
 
@@ -157,7 +161,7 @@ def _harness(n: int, workers: int, out_dir: Path, env: dict[str, str]) -> tuple[
     assert out.returncode == 0, out.stderr[-2000:]
     rows = [json.loads(line) for line in (out_dir / "episodes.jsonl").read_text().splitlines()]
     assert all(r["error"] is None for r in rows), [r["error"] for r in rows]
-    return wall, [{k: r[k] for k in ("episode_index", "success", "success_once", "steps")} for r in rows]
+    return wall, rows
 
 
 def _split(t_m: float, t_n: float) -> tuple[float, float]:
@@ -178,17 +182,24 @@ def test_harness_vs_raw_loop_and_workers_scaling(perf_env, tmp_path):
     runs = {"raw": lambda n, k: _raw(n, perf_env),
             "harness_w1": lambda n, k: _harness(n, 1, tmp_path / f"w1-{n}-{k}", perf_env),
             "harness_w2": lambda n, k: _harness(n, 2, tmp_path / f"w2-{n}-{k}", perf_env)}
+    keys = ("episode_index", "success", "success_once", "steps")
     walls: dict[tuple[str, int], list[float]] = {}
     outcomes: dict[tuple[str, int], list[dict]] = {}
+    episode_s: dict[tuple[str, int], float] = {}  # best time of each episode inside its process
     for k in range(REPS):  # interleaved: every configuration once per round
         for n in (M, N):
             for name, run in runs.items():
                 wall, rows = run(n, k)
                 walls.setdefault((name, n), []).append(wall)
-                assert outcomes.setdefault((name, n), rows) == rows, f"{name} is not deterministic"
+                seen = [{key: r[key] for key in keys} for r in rows]
+                assert outcomes.setdefault((name, n), seen) == seen, f"{name} is not deterministic"
+                for r in rows:
+                    episode_s[(name, r["episode_index"])] = min(episode_s.get((name, r["episode_index"]), 1e9),
+                                                                r["duration_s"])
     for name in runs:
         assert outcomes[(name, N)] == outcomes[("raw", N)], f"{name} and the raw loop disagree on outcomes"
     best = {key: min(v) for key, v in walls.items()}
+    inner = {name: sum(episode_s[(name, i)] for i in range(N)) / N for name in runs}
     split = {name: _split(best[(name, M)], best[(name, N)]) for name in runs}
     (raw_ep, raw_fixed), (h1_ep, h1_fixed), (h2_ep, h2_fixed) = split["raw"], split["harness_w1"], split["harness_w2"]
     _report("harness_vs_raw", {
@@ -196,6 +207,8 @@ def test_harness_vs_raw_loop_and_workers_scaling(perf_env, tmp_path):
         "successes": sum(r["success"] for r in outcomes[("raw", N)]),
         "raw_per_episode_s": round(raw_ep, 3), "harness_per_episode_s": round(h1_ep, 3),
         "per_episode_ratio": round(h1_ep / raw_ep, 3),
+        "raw_episode_inside_s": round(inner["raw"], 3), "harness_episode_inside_s": round(inner["harness_w1"], 3),
+        "inside_ratio": round(inner["harness_w1"] / inner["raw"], 3),
         "raw_fixed_s": round(raw_fixed, 2), "harness_fixed_s": round(h1_fixed, 2),
         "workers2_per_episode_s": round(h2_ep, 3), "workers2_fixed_s": round(h2_fixed, 2),
         "throughput_workers2_over_workers1": round(h1_ep / h2_ep, 3),
