@@ -13,10 +13,14 @@ LeRobot's ``push_to_hub`` / ``LeRobotDataset(repo_id)`` call:
 - ``POST|DELETE /api/{type}s/{repo}/branch/{name}``, ``POST …/tag/{rev}``, ``DELETE …/tag/{tag}``
 - ``POST /api/{type}s/{repo}/preupload/{rev}`` (every file "regular": no LFS, no Xet)
 - ``POST /api/{type}s/{repo}/commit/{rev}`` (ndjson: header, file, deletedFile, deletedFolder)
-- ``HEAD|GET /[datasets/]{repo}/resolve/{rev}/{path}`` with ``ETag``, ``X-Repo-Commit`` and ``Range``
+- ``HEAD|GET /[datasets/]{repo}/resolve/{rev}/{path}`` with ``ETag``, ``X-Repo-Commit`` and
+  single-range ``Range`` requests (``206`` with ``Content-Range``, ``416`` outside the file)
 
 Errors carry ``X-Error-Code`` (``RepoNotFound``, ``RevisionNotFound``, ``EntryNotFound``) so
-the client raises its usual exceptions. Tokens are accepted and ignored.
+the client raises its usual exceptions. Tokens are ignored unless ``token`` is set (then a
+request without ``Authorization: Bearer <token>`` gets 401). For tests: ``sent`` counts the
+body bytes served per file path and ``ranges`` records each Range read; ``faults`` maps a
+path to ``"truncate"`` (announce the full length, send half, close).
 """
 
 from __future__ import annotations
@@ -80,6 +84,14 @@ class Repo:
                 "branches": self.branches, "tags": self.tags, "commits": self.commits}
 
 
+class _QuietServer(ThreadingHTTPServer):
+    """Drops handler errors (a client that hung up on purpose) instead of printing them into
+    whichever test's captured stderr is current."""
+
+    def handle_error(self, request, client_address) -> None:
+        pass
+
+
 class HubStandin:
     """The stand-in's state plus its HTTP server. Use as a context manager or ``start()``/``stop()``."""
 
@@ -89,8 +101,12 @@ class HubStandin:
         self.repos: dict[tuple[str, str], Repo] = {}
         self.lock = threading.RLock()
         self.requests: list[tuple[str, str]] = []  # (method, path) of every request, for assertions
+        self.sent: dict[str, int] = {}  # file path in repo -> body bytes served
+        self.ranges: list[tuple[str, int, int]] = []  # (file path, start, end) of every Range read
+        self.faults: dict[str, str] = {}  # file path in repo -> "truncate"
+        self.token: str | None = None
         handler = type("Handler", (_Handler,), {"hub": self})
-        self.server = ThreadingHTTPServer((host, port), handler)
+        self.server = _QuietServer((host, port), handler)
         self.server.daemon_threads = True
         self.endpoint = f"http://{host}:{self.server.server_address[1]}"
         self._thread: threading.Thread | None = None
@@ -219,6 +235,8 @@ class _Handler(BaseHTTPRequestHandler):
         query = {k: v[-1] for k, v in parse_qs(url.query).items()}
         segs = url.path.strip("/").split("/")
         try:
+            if self.hub.token is not None and self.headers.get("Authorization") != f"Bearer {self.hub.token}":
+                raise HubError(401, "Invalid credentials in Authorization header")
             with self.hub.lock:
                 if segs[0] == "api":
                     self._api(segs[1:], query)
@@ -393,7 +411,23 @@ class _Handler(BaseHTTPRequestHandler):
                 return self._send(416, raw=b"", headers={"Content-Range": f"bytes */{size}"})
             data, status = data[start : end + 1], 206
             headers["Content-Range"] = f"bytes {start}-{end}/{size}"
+            self.hub.ranges.append((path, start, end))
+        if self.command == "GET":
+            self.hub.sent[path] = self.hub.sent.get(path, 0) + len(data)
+            if self.hub.faults.get(path) == "truncate":
+                return self._truncate(status, data, headers)
         self._send(status, raw=data, headers=headers)
+
+    def _truncate(self, status: int, data: bytes, headers: dict) -> None:
+        """Announce the whole body, send half of it, and drop the connection."""
+        self.send_response(status)
+        for k, v in headers.items():
+            self.send_header(k, str(v))
+        self.send_header("Content-Length", str(len(data)))
+        self.end_headers()
+        self.wfile.write(data[: len(data) // 2])
+        self.wfile.flush()
+        self.close_connection = True
 
 
 def pinned_client_factory(endpoint: str):

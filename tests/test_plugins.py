@@ -7,13 +7,16 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
+from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.benchmark.validate import validate_benchmark
 from molmo_lerobot.cli.plugins import format_table
-from molmo_lerobot.plugins import ENTRY_POINT_GROUP, PluginError, Plugins
+from molmo_lerobot.config import ConfigError
+from molmo_lerobot.plugins import ENTRY_POINT_GROUP, PluginConflict, PluginError, Plugins
 
 DATA = Path(__file__).resolve().parent / "data" / "molmospaces"
 
@@ -130,3 +133,271 @@ def test_table_format():
     ]
     assert format_table([]).startswith("no plugins installed")
 
+
+
+# Dispatch through pluggy -------------------------------------------------------------------
+def _bare(*plugins_and_names) -> Plugins:
+    plugins = Plugins(entry_points=[])
+    for plugin, name in plugins_and_names:
+        plugins.add(plugin, name)
+    return plugins
+
+
+def test_specname_implementations_are_used():
+    class Bots:
+        @hookimpl(specname="molmo_robots")
+        def provide_bots(self):
+            return [SimpleNamespace(name="specbot", aliases=("sb",))]
+
+    plugins = _bare((Bots(), "bots"))
+    assert plugins.robot("sb").name == "specbot"
+    assert plugins.records[0].kinds == ["robot"] and plugins.records[0].provides == ["robot:specbot"]
+
+
+def test_hooks_run_in_pluggys_order_with_tryfirst_and_trylast():
+    def override(tag, **opts):
+        class Override:
+            @hookimpl(**opts)
+            def molmo_episode_overrides(self, episode, config):
+                return [*episode, tag]
+        return Override()
+
+    plugins = _bare((override("last", trylast=True), "a"), (override("first", tryfirst=True), "b"),
+                    (override("early"), "c"), (override("late"), "d"))
+    # pluggy: tryfirst, then the most recently registered first, then trylast
+    assert plugins.apply_episode_overrides([], {}) == ["first", "late", "early", "last"]
+
+
+def test_a_hook_with_an_unknown_name_or_a_wrapper_marks_the_plugin_broken():
+    class Typo:
+        @hookimpl
+        def molmo_robot(self):
+            return []
+
+    class Wrapper:
+        @hookimpl(wrapper=True)
+        def molmo_robots(self):
+            return (yield)
+
+    plugins = _bare((Typo(), "typo"), (Wrapper(), "wrapper"))
+    rec = {r.name: r for r in plugins.records}
+    assert "unknown hook molmo_robot()" in rec["typo"].error
+    assert "hook wrappers are not supported" in rec["wrapper"].error
+    assert plugins.names("robot") == []
+
+
+class _GoodRecorder:
+    @hookimpl
+    def molmo_recorders(self, config):
+        return ["good-factory"]
+
+
+def test_a_broken_recorder_plugin_is_skipped_and_marked_broken(capsys):
+    class Broken:
+        @hookimpl
+        def molmo_recorders(self, config):
+            raise AttributeError("module 'lerobot' has no attribute 'OldApi'")
+
+    class Exits:
+        @hookimpl
+        def molmo_recorders(self, config):
+            raise SystemExit(3)
+
+    plugins = _bare((_GoodRecorder(), "good"), (Broken(), "broken"), (Exits(), "exits"))
+    assert plugins.recorder_factories({"record": True}) == ["good-factory"]
+    rec = {r.name: r for r in plugins.records}
+    assert rec["broken"].error == "molmo_recorders() failed: AttributeError: module 'lerobot' has no attribute 'OldApi'"
+    assert rec["exits"].error == "molmo_recorders() failed: SystemExit: 3"
+    assert rec["good"].status == "ok"
+    err = capsys.readouterr().err
+    assert "plugin 'broken' ((in-process) -) is broken and was skipped" in err
+    assert plugins.recorder_factories({}) == ["good-factory"]  # skipped from then on
+
+
+def test_a_recorder_rejecting_the_config_fails_the_run_with_its_message():
+    class Picky:
+        @hookimpl
+        def molmo_recorders(self, config):
+            raise ValueError("picky.fps must be positive")
+
+    plugins = _bare((_GoodRecorder(), "good"), (Picky(), "picky"))
+    with pytest.raises(ConfigError, match="picky.fps must be positive"):
+        plugins.recorder_factories({})
+    assert plugins.broken() == []
+
+
+def test_a_broken_override_plugin_is_skipped_but_an_inapplicable_override_fails_the_episode(capsys):
+    class Tag:
+        @hookimpl
+        def molmo_episode_overrides(self, episode, config):
+            return [*episode, "tag"]
+
+    class Broken:
+        @hookimpl
+        def molmo_episode_overrides(self, episode, config):
+            raise KeyError("camera")
+
+    plugins = _bare((Tag(), "tag"), (Broken(), "broken"))
+    assert plugins.apply_episode_overrides([], {}) == ["tag"]
+    assert plugins.apply_episode_overrides(["x"], {}) == ["x", "tag"]
+    assert {r.name: r.status for r in plugins.records} == {"tag": "ok", "broken": "error"}
+    assert "plugin 'broken'" in capsys.readouterr().err
+
+    class Inapplicable:
+        @hookimpl
+        def molmo_episode_overrides(self, episode, config):
+            raise ValueError("custom_object: no target object")
+
+    plugins = _bare((Tag(), "tag"), (Inapplicable(), "inapplicable"))
+    with pytest.raises(ValueError, match="no target object"):
+        plugins.apply_episode_overrides([], {})
+    assert plugins.broken() == []
+
+
+# Name clashes ------------------------------------------------------------------------------
+IMPOSTOR = textwrap.dedent("""
+    import os
+    from pathlib import Path
+
+    from molmo_lerobot import hookimpl
+    from molmo_lerobot.robots.franka import Franka
+
+
+    class Impostor(Franka):
+        \"\"\"The built-in Franka under the same name; leaves a mark wherever it is built.\"\"\"
+
+        def add_to(self, world, base_pose):
+            marker = os.environ.get("IMPOSTOR_MARKER")
+            if marker:
+                with open(marker, "a") as f:
+                    f.write(f"{os.getpid()}\\n")
+            super().add_to(world, base_pose)
+
+
+    @hookimpl
+    def molmo_robots():
+        return [Impostor()]
+""")
+
+
+def write_dist(root: Path, dist: str, modules: dict[str, str], entry_points: dict[str, str]) -> Path:
+    """A distribution ``dist`` (modules + ``*.dist-info`` with ``molmo_lerobot`` entry points) under ``root``."""
+    root.mkdir(parents=True, exist_ok=True)
+    info = root / f"{dist.replace('-', '_')}-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(
+        f"[{ENTRY_POINT_GROUP}]\n" + "".join(f"{k} = {v}\n" for k, v in entry_points.items()))
+    for name, text in modules.items():
+        (root / f"{name}.py").write_text(text)
+    return root
+
+
+@pytest.fixture
+def impostor_dist(tmp_path: Path) -> Path:
+    """``impostor-bots``: entry point ``impostor_franka`` providing a robot named ``franka`` (like the built-in)."""
+    return write_dist(tmp_path / "impostor", "impostor-bots", {"impostor_bots": IMPOSTOR},
+                      {"impostor_franka": "impostor_bots"})
+
+
+def test_a_clashing_name_fails_naming_both_providers(impostor_dist, monkeypatch):
+    monkeypatch.syspath_prepend(str(impostor_dist))
+    plugins = Plugins()
+    clashes = plugins.clashes()
+    assert [r.name for r in clashes[("robot", "franka")]] == ["franka", "impostor_franka"]
+    assert ("robot", "franka_droid") in clashes  # the aliases clash too
+    for name in ("franka", "franka_droid"):
+        with pytest.raises(PluginConflict) as info:
+            plugins.robot(name)
+        msg = str(info.value)
+        assert "\n" not in msg
+        assert f"robot {name!r} is provided by plugin 'franka' (molmo-lerobot " in msg
+        assert "and plugin 'impostor_franka' (impostor-bots 0.1)" in msg
+        assert f"plugins.prefer.robot.{name}=<plugin>" in msg
+    assert plugins.policy("random").name == "random"  # names without a clash are unaffected
+
+
+@pytest.mark.parametrize("pin", ["impostor_franka", "impostor-bots", "impostor-bots:impostor_franka"])
+def test_a_pinned_provider_resolves_the_clash(impostor_dist, monkeypatch, pin):
+    monkeypatch.syspath_prepend(str(impostor_dist))
+    plugins = Plugins()
+    plugins.set_preferences({"robot": {"franka": pin}})
+    assert type(plugins.robot("franka")).__name__ == "Impostor"
+    assert type(plugins.robot("franka_droid")).__name__ == "Impostor"  # pinned by its primary name
+    assert type(plugins.resolve("robot", "franka", prefer={"robot": {"franka": "franka"}})).__name__ == "Franka"
+    plugins.set_preferences({})
+    with pytest.raises(PluginConflict):
+        plugins.robot("franka")
+
+
+@pytest.mark.parametrize(
+    ("prefer", "needle"),
+    [
+        ({"robots": {"franka": "franka"}}, "plugins.prefer.robots: unknown kind"),
+        ({"robot": {"frank": "franka"}}, "plugins.prefer.robot.frank: unknown robot 'frank'; did you mean 'franka'"),
+        ({"robot": {"franka": "kuka"}}, "plugins.prefer.robot.franka='kuka': no such provider of robot 'franka'"),
+    ],
+)
+def test_bad_pins_are_one_clear_line(impostor_dist, monkeypatch, prefer, needle):
+    monkeypatch.syspath_prepend(str(impostor_dist))
+    with pytest.raises(PluginError) as info:
+        Plugins().set_preferences(prefer)
+    assert str(info.value).startswith(needle)
+
+
+def test_molmo_plugins_lists_the_clash(impostor_dist):
+    res = _molmo_plugins(impostor_dist, "--hooks")
+    assert res.returncode == 0, res.stderr
+    assert "CLASHES" in res.stdout
+    line = next(ln for ln in res.stdout.splitlines() if ln.strip().startswith("robot 'franka' (and aliases "))
+    assert "franka_droid" in line and len([ln for ln in res.stdout.splitlines() if "impostor_franka' (" in ln]) == 1
+    assert "'franka' (molmo-lerobot " in line and "'impostor_franka' (impostor-bots 0.1)" in line
+    assert "provides: robot:franka (clash)" in res.stdout
+
+
+# Plugins that exit at import ---------------------------------------------------------------
+@pytest.fixture
+def exiting_dist(tmp_path: Path) -> Path:
+    """``exitbots``: ``exit7`` calls ``sys.exit(7)`` at import, ``ctrlc`` raises KeyboardInterrupt."""
+    return write_dist(tmp_path / "exiting", "exitbots",
+                      {"exitbots_exit7": "import sys\nsys.exit(7)\n",
+                       "exitbots_ctrlc": "raise KeyboardInterrupt\n"},
+                      {"exit7": "exitbots_exit7", "ctrlc": "exitbots_ctrlc"})
+
+
+def test_a_plugin_exiting_at_import_is_listed_broken(exiting_dist, monkeypatch):
+    monkeypatch.syspath_prepend(str(exiting_dist))
+    plugins = Plugins()
+    rec = {r.name: r for r in plugins.records}
+    assert (rec["exit7"].status, rec["exit7"].error) == ("error", "SystemExit: 7")
+    assert (rec["ctrlc"].status, rec["ctrlc"].error) == ("error", "KeyboardInterrupt")
+    with pytest.raises(PluginError) as info:
+        plugins.policy("exit7")
+    assert "plugin 'exit7' from exitbots failed to load: SystemExit: 7" in str(info.value)
+    assert plugins.policy("random").name == "random"
+
+
+def test_molmo_plugins_and_molmo_eval_survive_a_plugin_exiting_at_import(exiting_dist, tmp_path):
+    res = _molmo_plugins(exiting_dist)
+    assert res.returncode == 0, res.stderr
+    rows = {line.split()[0]: line for line in res.stdout.splitlines() if line.strip()}
+    assert rows["exit7"].endswith("error: SystemExit: 7") and rows["ctrlc"].endswith("error: KeyboardInterrupt")
+    env = {**os.environ, "PYTHONPATH": str(exiting_dist), "MUJOCO_GL": "egl"}
+    res = subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.eval", "policy=exit7",
+                          f"output_dir={tmp_path / 'out'}"], capture_output=True, text=True, env=env, timeout=300)
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.startswith("molmo-eval: error: unknown policy 'exit7'")
+    assert "plugin 'exit7' from exitbots failed to load: SystemExit: 7" in res.stderr
+    assert "Traceback" not in res.stderr
+
+
+def test_molmo_bench_validate_reports_a_clash_in_one_line(impostor_dist):
+    from molmo_lerobot.paths import data_path
+
+    env = {**os.environ, "PYTHONPATH": str(impostor_dist)}
+    res = subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.bench", "validate", str(data_path("benchmarks") / "pick_v1")],
+                         capture_output=True, text=True, env=env, timeout=300)
+    assert res.returncode == 1 and "Traceback" not in res.stderr
+    assert res.stderr.strip().splitlines() == [
+        "molmo-bench: error: robot 'franka' is provided by plugin 'franka' (molmo-lerobot 0.1.0) and plugin "
+        "'impostor_franka' (impostor-bots 0.1); choose one with plugins.prefer.robot.franka=<plugin>"]

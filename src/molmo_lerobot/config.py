@@ -1,8 +1,11 @@
-"""Hydra config composition: ``conf/`` plus every config directory contributed by plugins.
+"""Hydra config: ``conf/`` plus every config directory plugins contribute.
 
-We compose with Hydra's compose API rather than ``@hydra.main`` so that the search path
-can be extended with plugin directories discovered at run time, and so that Hydra does not
-change the working directory or write its own output folders.
+Plugin config dirs join Hydra's search path through a Hydra ``SearchPathPlugin``
+(:class:`PluginConfigDirs`), so ``molmo-eval`` (a Hydra app), :func:`compose` and
+``molmo-eval --info searchpath`` all see them. ``molmo_open_map`` is a config node for
+free-form maps (``horizons``, ``camera.overrides``, ``plugins.prefer``, a policy's
+``cameras``): placed with ``- /molmo_open_map@<key>`` in a defaults list, ``<key>.<new>=v``
+works on the command line without Hydra's ``+``.
 """
 
 from __future__ import annotations
@@ -13,30 +16,61 @@ from pathlib import Path
 
 from hydra import compose as hydra_compose
 from hydra import initialize_config_dir
+from hydra.core.config_search_path import ConfigSearchPath
+from hydra.core.config_store import ConfigStore
 from hydra.core.global_hydra import GlobalHydra
+from hydra.core.plugins import Plugins as HydraPlugins
 from hydra.errors import HydraException
+from hydra.plugins.search_path_plugin import SearchPathPlugin
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from molmo_lerobot.hookspecs import ConfigError
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
 
+__all__ = ["ConfigError", "PluginConfigDirs", "compose", "config_message", "primary_config_dir"]
 
-class ConfigError(ValueError):
-    """A command-line override or config file is invalid; the message says which."""
+
+def primary_config_dir() -> Path:
+    return data_path("conf").resolve()
+
+
+class PluginConfigDirs(SearchPathPlugin):
+    """Appends every ``molmo_config_dirs`` directory to the search path of our configs."""
+
+    def manipulate_search_path(self, search_path: ConfigSearchPath) -> None:
+        primary = primary_config_dir()
+        paths = {Path(e.path.removeprefix("file://")).resolve() for e in search_path.get_path()
+                 if e.path and "://" not in e.path.removeprefix("file://")}
+        if primary not in paths:
+            return  # some other Hydra app in this process
+        seen = {primary}
+        for d in get_plugins().config_dirs():
+            path = Path(d).resolve()
+            if path not in seen:
+                seen.add(path)
+                search_path.append(provider="molmo-plugin", path=f"file://{path}")
+
+
+def _register() -> None:
+    open_map = OmegaConf.create({})
+    OmegaConf.set_struct(open_map, False)  # keys may be added below it without `+`
+    ConfigStore.instance().store(name="molmo_open_map", node=open_map, provider="molmo_lerobot")
+    HydraPlugins.instance().register(PluginConfigDirs)
+
+
+_register()
 
 
 def compose(overrides: list[str], config_name: str = "eval") -> DictConfig:
-    """Compose ``config_name`` with ``overrides``; plugin config dirs join the search path."""
-    primary = data_path("conf")
-    extra = [d for d in get_plugins().config_dirs() if Path(d).resolve() != primary.resolve()]
-    searchpath = "hydra.searchpath=[" + ",".join(f"file://{d}" for d in extra) + "]"
+    """Compose ``config_name`` with ``overrides`` (no Hydra app: nothing is written)."""
     GlobalHydra.instance().clear()
     try:
-        with initialize_config_dir(config_dir=str(primary), version_base="1.3"):
-            cfg = hydra_compose(config_name=config_name, overrides=[*overrides, searchpath])
+        with initialize_config_dir(config_dir=str(primary_config_dir()), version_base="1.3"):
+            cfg = hydra_compose(config_name=config_name, overrides=overrides)
     except (HydraException, OmegaConfBaseException) as exc:
-        raise ConfigError(_hydra_message(exc)) from None
+        raise ConfigError(config_message(exc)) from None
     finally:
         GlobalHydra.instance().clear()
     OmegaConf.set_struct(cfg, False)
@@ -44,8 +78,9 @@ def compose(overrides: list[str], config_name: str = "eval") -> DictConfig:
     return cfg
 
 
-def _hydra_message(exc: BaseException) -> str:
-    """Hydra's message, shortened to what a user needs (with a did-you-mean for groups)."""
+def config_message(exc: BaseException) -> str:
+    """Hydra's message for a bad override or config: a did-you-mean for an unknown group
+    option, otherwise Hydra's full text (with its ``+key=value`` hint and the cause)."""
     text = str(exc).strip()
     missing = re.search(r"Could not find '([\w-]+)/([^']+)'", text)
     if missing:
@@ -55,5 +90,12 @@ def _hydra_message(exc: BaseException) -> str:
         close = difflib.get_close_matches(name, options, n=3)
         if close:
             msg += f"; did you mean {', '.join(map(repr, close))}?"
-        return msg + f" (available: {', '.join(options) or 'none'})"
-    return text.splitlines()[0] if text else type(exc).__name__
+        msg += f" (available: {', '.join(options) or 'none'})"
+        broken = get_plugins().broken()  # the option may be one a broken plugin would have added
+        for r in [r for r in broken if name in r.name or r.name in name] or broken:
+            msg += f"\n  plugin {r.name!r} from {r.distribution} failed to load: {r.error}"
+        return msg
+    cause = exc.__cause__
+    if isinstance(cause, OmegaConfBaseException) and str(cause).strip() and str(cause).strip() not in text:
+        text += "\n" + str(cause).strip()
+    return text or type(exc).__name__

@@ -6,7 +6,16 @@ task types, robots, camera systems, scene datasets and policies are plugins too 
 register through the very same entry points (see ``pyproject.toml``).
 
 Each ``molmo_*`` provider hook returns a list of descriptors; the registries in
-:mod:`molmo_lerobot.plugins` index them by name (and alias) and report conflicts.
+:mod:`molmo_lerobot.plugins` index them by name (and alias). Two plugins providing one name
+clash: ``molmo-plugins`` lists it and a run resolving that name fails naming both, unless
+its config pins one (``plugins.prefer.<kind>.<name>=<plugin>``).
+
+Hooks are called through pluggy one implementation at a time, in pluggy's order (the most
+recently registered first, ``tryfirst`` / ``trylast`` respected; ``specname`` works). An
+implementation that raises marks its plugin broken (listed by ``molmo-plugins``, skipped
+everywhere else); hook wrappers are not supported. Hooks that take the run config
+(``molmo_recorders``, ``molmo_episode_overrides``) reject it by raising ``ValueError``
+(e.g. :class:`ConfigError`): that is reported as the run's (or the episode's) error instead.
 """
 
 from __future__ import annotations
@@ -26,6 +35,13 @@ if TYPE_CHECKING:
 PROJECT = "molmo_lerobot"
 hookspec = pluggy.HookspecMarker(PROJECT)
 hookimpl = pluggy.HookimplMarker(PROJECT)
+
+
+class ConfigError(ValueError):
+    """A command-line override or config value is invalid; the message says which.
+
+    Raise it from a hook that takes the run config to reject that config in one line.
+    """
 
 
 @hookspec
@@ -72,7 +88,8 @@ def molmo_recorders(config: dict[str, Any]) -> list[Any]:
     """Recorder factories (:class:`~molmo_lerobot.runner.recorders.RecorderFactory`) for this run.
 
     Called once in the main process with the resolved run config (a plain dict); return an
-    empty list unless the config asks for your recording. Each factory is pickled to every
+    empty list unless the config asks for your recording, and raise :class:`ConfigError` if
+    it asks for it wrongly (the run then fails with your message). Each factory is pickled to every
     worker and makes one recorder there that sees every step of the one rollout loop.
     """
 
@@ -83,7 +100,8 @@ def molmo_episode_overrides(episode: EpisodeSpec, config: Any) -> EpisodeSpec | 
 
     Called once per episode with the validated spec and the run config. Return a new
     :class:`EpisodeSpec` (e.g. ``episode.model_copy(update=...)``) to replace it, or
-    ``None`` to leave it alone. Implementations run in registration order and each sees
-    the previous one's result. They must be deterministic: the same episode and config
-    always give the same result.
+    ``None`` to leave it alone. Implementations run in pluggy's call order and each sees
+    the previous one's result. Raise ``ValueError`` when your override cannot apply to this
+    episode (that episode is recorded as an error with your message). They must be
+    deterministic: the same episode and config always give the same result.
     """

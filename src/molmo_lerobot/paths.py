@@ -4,6 +4,7 @@ assets inside installed registry packages."""
 from __future__ import annotations
 
 import importlib.util
+import os
 from pathlib import Path
 
 _PKG = Path(__file__).resolve().parent
@@ -36,7 +37,5 @@ DEFAULT_MOLMOSPACES_ASSETS_DIR = Path("~/.cache/molmo_lerobot/molmospaces/assets
 
 def molmospaces_assets_dir(configured: str | Path | None = None) -> Path:
     """MolmoSpaces' assets dir: ``configured``, else ``$MLSPACES_ASSETS_DIR``, else our install dir."""
-    import os
-
     value = configured or os.environ.get("MLSPACES_ASSETS_DIR") or DEFAULT_MOLMOSPACES_ASSETS_DIR
     return Path(value).expanduser()

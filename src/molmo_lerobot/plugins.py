@@ -1,16 +1,23 @@
 """One plugin manager, one discovery path: entry points in the group ``molmo_lerobot``.
 
-Loading is guarded: a plugin whose import (or hook) fails is recorded with its error and
-everything else keeps working. Only a run that asks for something that broken plugin
-would have provided fails, with a message naming the plugin and its error.
+Built-ins and third-party plugins load the same way. Every hook is dispatched through
+pluggy (``pm.hook.<name>.get_hookimpls()``, so ``specname``, ``tryfirst`` and ``trylast``
+apply) one implementation at a time, so that a plugin whose import or hook fails is
+marked broken with its error while everything else keeps working; only a run that needs
+what the broken plugin would have provided fails, naming it.
+
+Two plugins that provide the same name (a robot ``franka``, a policy ``random``) are a
+clash: ``molmo-plugins`` lists it, and resolving that name fails naming both providers
+unless the run pins one (``plugins.prefer.<kind>.<name>=<plugin>``, see :meth:`Plugins.set_preferences`).
 """
 
 from __future__ import annotations
 
 import difflib
 import importlib.metadata as md
+import sys
 import traceback
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
@@ -18,6 +25,7 @@ from typing import Any
 import pluggy
 
 from molmo_lerobot import hookspecs
+from molmo_lerobot.hookspecs import ConfigError
 
 ENTRY_POINT_GROUP = hookspecs.PROJECT
 
@@ -32,15 +40,22 @@ KIND_HOOKS = {
     "molmo_episode_overrides": "override",
     "molmo_recorders": "recorder",
 }
+#: kinds whose items are looked up by name (``plugins.prefer.<kind>``) → their hook
+PROVIDER_HOOKS = {kind: hook for hook, kind in KIND_HOOKS.items()
+                  if kind in ("task", "robot", "camera", "scene", "policy")}
 
 
 class PluginError(LookupError):
     """A requested plugin is unknown or failed to load. The message says which and why."""
 
 
+class PluginConflict(PluginError):
+    """Several plugins provide the requested name and the run pins none of them."""
+
+
 @dataclass
 class PluginRecord:
-    """One entry point and what became of it."""
+    """One entry point (or in-process plugin) and what became of it."""
 
     name: str
     value: str
@@ -51,6 +66,16 @@ class PluginRecord:
     kinds: list[str] = field(default_factory=list)
     provides: list[str] = field(default_factory=list)
     module: Any = None
+    traceback: str | None = None
+    pm_name: str = ""  # the name it is registered under in the pluggy manager
+
+    @property
+    def label(self) -> str:
+        return f"{self.name!r} ({self.distribution} {self.version})"
+
+    def matches(self, ref: str) -> bool:
+        """Whether ``ref`` names this plugin: entry-point name, ``<distribution>:<name>`` or distribution."""
+        return ref in (self.name, f"{self.distribution}:{self.name}", self.distribution)
 
 
 class Plugins:
@@ -60,144 +85,279 @@ class Plugins:
         self.pm = pluggy.PluginManager(hookspecs.PROJECT)
         self.pm.add_hookspecs(hookspecs)
         self.records: list[PluginRecord] = []
+        self.prefer: dict[str, dict[str, str]] = {}
+        self._provided: dict[str, dict[str, list[Any]]] | None = None  # pm name → kind → items
+        self._indices: dict[str, tuple[Any, dict]] = {}  # kind → (the _provided it was built from, index)
         eps = entry_points if entry_points is not None else md.entry_points(group=ENTRY_POINT_GROUP)
-        for ep in sorted(eps, key=lambda e: e.name):
+        for ep in sorted(eps, key=lambda e: (e.name, _dist_name(e))):
             self._load(ep)
-        self._registries: dict[str, dict[str, Any]] = {}
 
+    # Loading --------------------------------------------------------------------------
     def _load(self, ep: md.EntryPoint) -> None:
         dist = getattr(ep, "dist", None)
-        rec = PluginRecord(
-            name=ep.name,
-            value=ep.value,
-            distribution=dist.name if dist else "?",
-            version=dist.version if dist else "?",
-        )
+        rec = PluginRecord(name=ep.name, value=ep.value, distribution=_dist_name(ep),
+                           version=dist.version if dist else "?")
         self.records.append(rec)
         try:
             module = ep.load()
-            self.pm.register(module, name=ep.name)
-        except Exception as exc:  # a broken plugin must never take the run down
-            rec.status, rec.error = "error", _one_line(exc)
-            rec.traceback = traceback.format_exc()  # type: ignore[attr-defined]
+        except BaseException as exc:  # noqa: BLE001 - even sys.exit() or KeyboardInterrupt at import
+            rec.traceback = traceback.format_exc()
+            self._break(rec, _one_line(exc))
             return
-        rec.module = module
-        for impl in self.pm.get_hookcallers(module) or []:
-            kind = KIND_HOOKS.get(impl.name)
-            if kind:
-                rec.kinds.append(kind)
+        self._register(module, rec)
 
-    def add(self, module: Any, name: str) -> None:
+    def _register(self, plugin: Any, rec: PluginRecord) -> None:
+        taken = {r.pm_name for r in self.records if r is not rec}
+        rec.pm_name = rec.name if rec.name not in taken else f"{rec.distribution}:{rec.name}"
+        rec.module = plugin
+        try:
+            self.pm.register(plugin, name=rec.pm_name)
+        except Exception as exc:  # a hookimpl whose arguments the spec does not have, a duplicate, …
+            self._break(rec, _one_line(exc))
+            return
+        problems = []
+        for caller in self.pm.get_hookcallers(plugin) or []:
+            impls = [i for i in caller.get_hookimpls() if i.plugin is plugin]
+            if not caller.has_spec() and not all(i.optionalhook for i in impls):
+                problems.append(f"implements unknown hook {caller.name}() (not in molmo_lerobot.hookspecs)")
+            elif any(i.hookwrapper or i.wrapper for i in impls):
+                problems.append(f"wraps {caller.name}(); hook wrappers are not supported")
+            elif caller.name in KIND_HOOKS:
+                rec.kinds.append(KIND_HOOKS[caller.name])
+        if problems:
+            self.pm.unregister(plugin)
+            self._break(rec, "; ".join(problems))
+        self._provided = None
+
+    def add(self, plugin: Any, name: str) -> None:
         """Register an in-process plugin (tests, notebooks) as if it came from an entry point."""
-        rec = PluginRecord(name=name, value=repr(module), distribution="(in-process)", version="-")
-        self.pm.register(module, name=name)
-        rec.module = module
-        rec.kinds = [KIND_HOOKS[h.name] for h in self.pm.get_hookcallers(module) or [] if h.name in KIND_HOOKS]
+        rec = PluginRecord(name=name, value=repr(plugin), distribution="(in-process)", version="-")
         self.records.append(rec)
-        self._registries.clear()
+        self._register(plugin, rec)
 
     def broken(self) -> list[PluginRecord]:
         return [r for r in self.records if r.status != "ok"]
 
-    def _collect(self, hook_name: str) -> dict[str, Any]:
-        """Call a provider hook plugin by plugin, so one failing hook only marks its own plugin."""
-        if hook_name in self._registries:
-            return self._registries[hook_name]
-        registry: dict[str, Any] = {}
-        for rec in self.records:
-            if rec.status != "ok" or rec.module is None:
-                continue
-            impl = getattr(rec.module, hook_name, None)
-            if impl is None or hook_name not in [h.name for h in self.pm.get_hookcallers(rec.module) or []]:
-                continue
-            try:
-                items = impl() or []
-            except Exception as exc:
-                rec.status, rec.error = "error", f"{hook_name}() failed: {_one_line(exc)}"
-                continue
-            for item in items:
-                keys = [item] if isinstance(item, str) else [item.name, *getattr(item, "aliases", ())]
-                if not isinstance(item, str):
-                    rec.provides.append(f"{KIND_HOOKS[hook_name]}:{item.name}")
-                for key in keys:
-                    registry.setdefault(key, (item, rec))
-        self._registries[hook_name] = registry
-        return registry
+    def _break(self, rec: PluginRecord, error: str, *, warn: bool = False) -> None:
+        rec.status, rec.error = "error", error
+        self._provided = None
+        if warn:
+            print(f"molmo_lerobot: warning: plugin {rec.label} is broken and was skipped: {error}", file=sys.stderr)
 
-    def _get(self, hook_name: str, name: str) -> Any:
-        registry = self._collect(hook_name)
-        if name in registry:
-            return registry[name][0]
-        kind = KIND_HOOKS[hook_name]
-        primary = sorted({item.name for item, _ in registry.values()})
+    # Dispatch -------------------------------------------------------------------------
+    def _impls(self, hook_name: str) -> Iterable[tuple[PluginRecord, Any]]:
+        """``(plugin, hookimpl)`` of the working plugins, in pluggy's call order."""
+        live = {r.pm_name: r for r in self.records}
+        # get_hookimpls() lists in reverse call order: trylast first, tryfirst last.
+        for impl in reversed(getattr(self.pm.hook, hook_name).get_hookimpls()):
+            rec = live.get(impl.plugin_name)
+            if rec is not None and rec.status == "ok":
+                yield rec, impl
+
+    def _invoke(self, rec: PluginRecord, hook_name: str, impl: Any, kwargs: dict[str, Any], *,
+                run_time: bool) -> tuple[bool, Any]:
+        """Call one implementation; a failure marks its plugin broken and gives ``(False, None)``.
+
+        At run time (``run_time``) a ``ValueError`` is the plugin rejecting its arguments and
+        propagates, and Ctrl-C stops the run; elsewhere anything, even ``sys.exit()``, is caught.
+        """
+        passthrough = (ValueError, KeyboardInterrupt) if run_time else ()
+        try:
+            return True, impl.function(*(kwargs[arg] for arg in impl.argnames))
+        except passthrough:
+            raise
+        except BaseException as exc:  # noqa: BLE001 - a plugin must never take the process down
+            self._break(rec, f"{hook_name}() failed: {_one_line(exc)}", warn=run_time)
+            return False, None
+
+    def _call(self, hook_name: str, *, run_time: bool = False, **kwargs: Any) -> Iterable[tuple[PluginRecord, Any]]:
+        """``(plugin, result)`` of each implementation of ``hook_name`` that did not fail."""
+        for rec, impl in self._impls(hook_name):
+            ok, result = self._invoke(rec, hook_name, impl, kwargs, run_time=run_time)
+            if ok:
+                yield rec, result
+
+    def _collect(self) -> dict[str, dict[str, list[Any]]]:
+        """Every provider hook of every plugin, called once; a plugin failing one provides nothing."""
+        if self._provided is not None:
+            return self._provided
+        provided: dict[str, dict[str, list[Any]]] = {}
+        for kind, hook in PROVIDER_HOOKS.items():
+            for rec, items in self._call(hook):
+                try:
+                    items = list(items or [])
+                    for item in items:
+                        if not isinstance(getattr(item, "name", None), str):
+                            raise TypeError(f"returned {type(item).__name__} without a string 'name'")
+                except Exception as exc:
+                    self._break(rec, f"{hook}() failed: {_one_line(exc)}")
+                    continue
+                provided.setdefault(rec.pm_name, {})[kind] = items
+        ok = {r.pm_name: r for r in self.records if r.status == "ok"}
+        self._provided = {name: kinds for name, kinds in provided.items() if name in ok}
+        for rec in self.records:
+            rec.provides = [f"{k}:{item.name}" for k, items in self._provided.get(rec.pm_name, {}).items()
+                            for item in items]
+        return self._provided
+
+    def _index(self, kind: str) -> dict[str, list[tuple[Any, PluginRecord]]]:
+        """``name or alias → [(item, plugin), …]``, one entry per providing plugin."""
+        provided = self._collect()
+        built_from, index = self._indices.get(kind, (None, {}))
+        if built_from is provided:
+            return index
+        index = {}
+        self._indices[kind] = (provided, index)
+        for rec in self.records:
+            for item in provided.get(rec.pm_name, {}).get(kind, []):
+                for key in dict.fromkeys([item.name, *getattr(item, "aliases", ())]):
+                    providers = index.setdefault(key, [])
+                    if all(r is not rec for _, r in providers):
+                        providers.append((item, rec))
+        return index
+
+    # Registries -----------------------------------------------------------------------
+    def resolve(self, kind: str, name: str, prefer: Mapping[str, Mapping[str, str]] | None = None) -> Any:
+        """The ``kind`` item called ``name`` (or an alias of it).
+
+        A name several plugins provide resolves only if ``prefer`` (default: the pins set
+        by :meth:`set_preferences`) names one of them, as ``{kind: {name: plugin}}``.
+        """
+        if kind not in PROVIDER_HOOKS:
+            raise PluginError(f"unknown plugin kind {kind!r} (kinds: {', '.join(PROVIDER_HOOKS)})")
+        index = self._index(kind)
+        providers = index.get(name)
+        if not providers:
+            raise PluginError(self._unknown(kind, name, index))
+        if len(providers) == 1:
+            return providers[0][0]
+        pins = (self.prefer if prefer is None else prefer).get(kind) or {}
+        pin = pins.get(name) or next((pins[item.name] for item, _ in providers if item.name in pins), None)
+        who = " and ".join(f"plugin {rec.label}" for _, rec in providers)
+        if pin is None:
+            raise PluginConflict(f"{kind} {name!r} is provided by {who}; choose one with "
+                                 f"plugins.prefer.{kind}.{name}=<plugin>")
+        chosen = [item for item, rec in providers if rec.matches(str(pin))]
+        if len(chosen) != 1:
+            raise PluginConflict(f"plugins.prefer.{kind}.{name}={pin!r} names {len(chosen)} of the "
+                                 f"providers of {kind} {name!r} ({who}); give one plugin name")
+        return chosen[0]
+
+    def set_preferences(self, prefer: Mapping[str, Mapping[str, str]] | None) -> None:
+        """Pin providers for clashing names (``{kind: {name: plugin}}``, the run's ``plugins.prefer``).
+
+        Replaces earlier pins; every pin is checked now (known kind, a plugin that provides
+        the name), so a typo fails before any work with one line.
+        """
+        pins = {str(k): {str(n): str(p) for n, p in (v or {}).items()} for k, v in (prefer or {}).items()}
+        for kind, names in pins.items():
+            if kind not in PROVIDER_HOOKS:
+                raise PluginError(f"plugins.prefer.{kind}: unknown kind (kinds: {', '.join(PROVIDER_HOOKS)})")
+            index = self._index(kind)
+            for name, pin in names.items():
+                providers = index.get(name)
+                if not providers:
+                    raise PluginError(f"plugins.prefer.{kind}.{name}: " + self._unknown(kind, name, index))
+                if not any(rec.matches(pin) for _, rec in providers):
+                    who = ", ".join(rec.label for _, rec in providers)
+                    raise PluginError(f"plugins.prefer.{kind}.{name}={pin!r}: no such provider of "
+                                      f"{kind} {name!r} (providers: {who})")
+        self.prefer = pins
+
+    def clashes(self) -> dict[tuple[str, str], list[PluginRecord]]:
+        """``(kind, name) → providers`` for every name more than one plugin provides."""
+        return {(kind, name): [rec for _, rec in providers]
+                for kind in PROVIDER_HOOKS for name, providers in sorted(self._index(kind).items())
+                if len(providers) > 1}
+
+    def _unknown(self, kind: str, name: str, index: dict[str, list]) -> str:
+        primary = sorted({item.name for providers in index.values() for item, _ in providers})
         msg = f"unknown {kind} {name!r}"
-        close = difflib.get_close_matches(name, list(registry), n=3)
+        close = difflib.get_close_matches(name, list(index), n=3)
         if close:
             msg += f"; did you mean {', '.join(repr(c) for c in close)}?"
         msg += f" (available: {', '.join(primary) or 'none'})"
         suspects = [r for r in self.broken() if name in r.name or r.name in name]
         for r in suspects or self.broken():
             msg += f"\n  plugin {r.name!r} from {r.distribution} failed to load: {r.error}"
-        raise PluginError(msg)
+        return msg
 
-    # Registries -----------------------------------------------------------------------
     def task_type(self, name: str) -> Any:
         """Task type by name or alias (MolmoSpaces ``task_cls`` dotted paths are aliases)."""
-        return self._get("molmo_task_types", name)
+        return self.resolve("task", name)
 
     def robot(self, name: str) -> Any:
-        return self._get("molmo_robots", name)
+        return self.resolve("robot", name)
 
     def camera_system(self, name: str) -> Any:
-        return self._get("molmo_camera_systems", name)
+        return self.resolve("camera", name)
 
     def scene_dataset(self, name: str) -> Any:
-        return self._get("molmo_scene_datasets", name)
+        return self.resolve("scene", name)
 
     def policy(self, name: str) -> Any:
-        return self._get("molmo_policies", name)
+        return self.resolve("policy", name)
 
     def names(self, kind: str) -> list[str]:
-        hook = next(h for h, k in KIND_HOOKS.items() if k == kind)
-        return sorted({item.name for item, _ in self._collect(hook).values()})
+        return sorted({item.name for providers in self._index(kind).values() for item, _ in providers})
 
+    # Run-time hooks -------------------------------------------------------------------
     def config_dirs(self) -> list[str]:
+        """Hydra config directories every plugin contributes, in pluggy's call order."""
         dirs: list[str] = []
-        for rec in self.records:
-            if rec.status == "ok" and rec.module is not None and hasattr(rec.module, "molmo_config_dirs"):
-                try:
-                    dirs.extend(str(d) for d in rec.module.molmo_config_dirs() or [])
-                except Exception as exc:
-                    rec.status, rec.error = "error", f"molmo_config_dirs() failed: {_one_line(exc)}"
+        for rec, result in self._call("molmo_config_dirs"):
+            try:
+                dirs.extend(str(d) for d in result or [])
+            except Exception as exc:
+                self._break(rec, f"molmo_config_dirs() failed: {_one_line(exc)}")
         return dirs
 
     def recorder_factories(self, config: dict[str, Any]) -> list[Any]:
-        """Every ``molmo_recorders`` implementation's factories for this run config."""
+        """Every ``molmo_recorders`` implementation's factories for this run config.
+
+        A plugin that rejects the config (``ValueError``) fails the run with a
+        :class:`ConfigError`; one that fails otherwise is marked broken and skipped with a
+        warning, so a broken third-party recorder never breaks runs that do not use it.
+        """
         factories: list[Any] = []
-        for rec in self.records:
-            fn = getattr(rec.module, "molmo_recorders", None) if rec.status == "ok" else None
-            if fn is not None:
-                factories.extend(fn(config=config) or [])
+        try:
+            for _, result in self._call("molmo_recorders", run_time=True, config=config):
+                factories.extend(result or [])
+        except ConfigError:
+            raise
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
         return factories
 
     def apply_episode_overrides(self, episode: Any, config: Any) -> Any:
-        """Run every ``molmo_episode_overrides`` implementation in registration order."""
-        for rec in self.records:
-            fn: Callable | None = getattr(rec.module, "molmo_episode_overrides", None) if rec.status == "ok" else None
-            if fn is None:
-                continue
-            new = fn(episode=episode, config=config)
-            if new is not None:
+        """Run every ``molmo_episode_overrides`` implementation in pluggy's call order.
+
+        Each sees the previous one's result. ``ValueError`` (an override that cannot apply
+        to this episode) propagates, failing the episode; any other failure marks the plugin
+        broken and skips it (with a warning), so a broken override never breaks every run.
+        """
+        for rec, impl in self._impls("molmo_episode_overrides"):
+            ok, new = self._invoke(rec, "molmo_episode_overrides", impl, {"episode": episode, "config": config},
+                                   run_time=True)
+            if ok and new is not None:
                 episode = new
         return episode
 
 
+def _dist_name(ep: md.EntryPoint) -> str:
+    dist = getattr(ep, "dist", None)
+    return dist.name if dist else "?"
+
+
 def _one_line(exc: BaseException) -> str:
-    text = f"{type(exc).__name__}: {exc}".strip()
-    return text.splitlines()[0] if text else type(exc).__name__
+    text = f"{type(exc).__name__}: {exc}" if str(exc).strip() else type(exc).__name__
+    return text.strip().splitlines()[0]
 
 
 @cache
 def get_plugins() -> Plugins:
-    """The process-wide plugin set (loaded once per process; workers load their own)."""
+    """The process-wide plugin set (loaded once per process; workers load their own).
+
+    A worker applies its run's pins with ``get_plugins().set_preferences(prefer)``.
+    """
     return Plugins()

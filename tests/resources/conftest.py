@@ -70,6 +70,46 @@ def craft_version(tmp_path):
     return make
 
 
+@pytest.fixture
+def craft_archives(tmp_path):
+    """Publish ``{archive: [(TarInfo, bytes|None)]}`` as ``objects/evil@1`` with a matching manifest and index.
+
+    Sizes, checksums and the index are true to the archives, so only the installer's own
+    checks can refuse them. ``index``/``manifest`` edit the generated ones before writing.
+    """
+
+    def make(archives: dict[str, list], edit_index=None, edit_manifest=None, link: str = "dir") -> Path:
+        remote = tmp_path / "remote"
+        vdir = remote / "objects" / "evil" / "1"
+        (vdir / "archives").mkdir(parents=True, exist_ok=True)
+        entries, index = {}, {}
+        for name, members in archives.items():
+            buf = io.BytesIO()
+            files = {}
+            with tarfile.open(fileobj=buf, mode="w", format=tarfile.PAX_FORMAT) as tar:
+                for info, data in members:
+                    tar.addfile(info, io.BytesIO(data) if data is not None else None)
+                    if info.issym():
+                        files[info.name] = ["->", info.linkname]
+                    elif info.isreg():
+                        files[info.name] = [len(data), hashlib.sha256(data).hexdigest()]
+            blob = zstandard.ZstdCompressor().compress(buf.getvalue())
+            (vdir / "archives" / name).write_bytes(blob)
+            entries[name] = {"size": len(blob), "sha256": hashlib.sha256(blob).hexdigest(), "n_files": len(files)}
+            index[name] = files
+        manifest = {"format": 1, "data_type": "objects", "source": "evil", "version": "1", "link": link,
+                    "uid_depth": 0, "archives": entries}
+        if edit_index:
+            edit_index(index)
+        if edit_manifest:
+            edit_manifest(manifest)
+        (vdir / "manifest.json").write_text(json.dumps(manifest))
+        (vdir / "index.json.gz").write_bytes(gzip.compress(json.dumps(index).encode()))
+        return remote
+
+    return make
+
+
 def _member(name: str, data: bytes | None = None, kind: bytes = tarfile.REGTYPE, linkname: str = ""):
     info = tarfile.TarInfo(name)
     info.type = kind

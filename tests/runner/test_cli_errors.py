@@ -52,3 +52,25 @@ def test_print_config(capsys):
     assert main(["--cfg", "policy=random", "workers=3"]) == 0
     out = capsys.readouterr().out
     assert "name: random" in out and "workers: 3" in out
+
+
+def test_override_errors_keep_hydras_hint(capsys, tmp_path):
+    assert main(["policy=random", "policy.camerass.exterior=x", f"output_dir={tmp_path / 'out'}"]) == 2
+    err = capsys.readouterr().err
+    assert "Could not override 'policy.camerass.exterior'.\nTo append to your config use " \
+           "+policy.camerass.exterior=x" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["horizons.pick=15"], "horizons:\n  pick: 15"),
+        (["camera.overrides.exterior.fov=50"], "overrides:\n    exterior:\n      fov: 50"),
+        (["plugins.prefer.robot.franka=franka"], "prefer:\n    robot:\n      franka: franka"),
+        (["policy=lerobot", "policy.cameras.exterior=observation.images.front"],
+         "cameras:\n    exterior: observation.images.front"),
+    ],
+)
+def test_documented_maps_take_new_keys_without_plus(args, needle, capsys):
+    assert main(["--cfg", *args]) == 0
+    assert needle in capsys.readouterr().out

@@ -13,11 +13,12 @@ lookups fall back to computing the analytic grasps, so a fresh clone works.
 from __future__ import annotations
 
 import os
-import tempfile
 import zipfile
 from pathlib import Path
 
 import numpy as np
+
+from molmo_lerobot.fileio import atomic_open
 
 KEY = "transforms"
 
@@ -70,10 +71,8 @@ def save_grasp_file(path: str | os.PathLike, transforms: np.ndarray) -> Path:
     path = Path(path)
     transforms = _check(np.asarray(transforms, dtype=np.float64), str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".npz", dir=path.parent)
-    with os.fdopen(fd, "wb") as fh:
+    with atomic_open(path, "wb") as fh:
         np.savez(fh, **{KEY: transforms})
-    os.replace(tmp, path)
     return path
 
 

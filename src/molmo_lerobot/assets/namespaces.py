@@ -14,8 +14,9 @@ import json
 import os
 import re
 import shutil
-import uuid
 from pathlib import Path
+
+from molmo_lerobot.fileio import atomic_write
 
 NAMESPACE_RE = re.compile(r"[-_\w][-_\w/]*[-_\w]+")
 METADATA_FILE = "namespace_metadata.json"
@@ -67,9 +68,7 @@ def _write_metadata(directory: Path, metadata: dict) -> None:
         raise NamespaceError(f"namespace metadata must be a JSON object, got {type(metadata).__name__}")
     text = json.dumps(metadata, indent=1, sort_keys=True)  # raises on non-JSON values before writing
     directory.mkdir(parents=True, exist_ok=True)
-    tmp = directory / f".{METADATA_FILE}.{uuid.uuid4().hex}.tmp"
-    tmp.write_text(text)
-    os.replace(tmp, directory / METADATA_FILE)
+    atomic_write(directory / METADATA_FILE, text)
 
 
 def create_namespace(namespace: str, metadata: dict | None = None, root: str | os.PathLike | None = None,

@@ -14,8 +14,6 @@ from __future__ import annotations
 import importlib
 import json
 import math
-import os
-import tempfile
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -30,6 +28,7 @@ from molmo_lerobot.assets.builtin import (
     BuiltinReceptacle,
 )
 from molmo_lerobot.cameras.base import look_rotation, mat_to_quat
+from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.robots.franka import Franka
 from molmo_lerobot.sim.tabletop import ProceduralTabletop, ProceduralTabletopReceptacles
 
@@ -343,25 +342,10 @@ def benchmark_metadata(name: str, task: str, description: str, episodes: list[di
     }
 
 
-def _write_atomic(path: Path, obj: Any) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; a benchmark is meant to be shared
-        with os.fdopen(fd, "w") as f:
-            json.dump(obj, f, indent=1)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_benchmark(out_dir: str | Path, episodes: list[dict[str, Any]], metadata: dict[str, Any]) -> Path:
     """Write ``benchmark.json`` and ``benchmark_metadata.json`` (each atomically) into ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    _write_atomic(out / "benchmark_metadata.json", metadata)
-    _write_atomic(out / "benchmark.json", episodes)
+    atomic_write(out / "benchmark_metadata.json", json.dumps(metadata, indent=1) + "\n")
+    atomic_write(out / "benchmark.json", json.dumps(episodes, indent=1) + "\n")
     return out

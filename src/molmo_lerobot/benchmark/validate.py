@@ -14,7 +14,7 @@ from typing import Any
 
 from molmo_lerobot.benchmark.load import Benchmark, Problem
 from molmo_lerobot.benchmark.schema import EpisodeSpec
-from molmo_lerobot.plugins import PluginError, Plugins, get_plugins
+from molmo_lerobot.plugins import PluginConflict, PluginError, Plugins, get_plugins
 
 
 def validate_benchmark(bench: Benchmark, plugins: Plugins | None = None) -> list[Problem]:
@@ -84,6 +84,8 @@ def _lookup(plugins: Plugins, kind: str, name: str, field: str, problem: Any, wh
     """
     try:
         return getattr(plugins, kind)(name)
+    except PluginConflict:
+        raise  # two plugins provide the name: not an episode's problem, the run must pin one
     except PluginError as exc:
         text = str(exc).splitlines()[0]
         if what is not None:

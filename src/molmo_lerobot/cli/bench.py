@@ -53,10 +53,14 @@ def _validate(path: Path, *, schema_only: bool) -> int:
         return _report(exc.problems)
     if not schema_only:
         from molmo_lerobot.benchmark.validate import validate_benchmark
-        from molmo_lerobot.plugins import get_plugins
+        from molmo_lerobot.plugins import PluginConflict, get_plugins
 
         plugins = get_plugins()
-        problems = validate_benchmark(bench, plugins)
+        try:
+            problems = validate_benchmark(bench, plugins)
+        except PluginConflict as exc:
+            print(f"molmo-bench: error: {exc}", file=sys.stderr)
+            return 1
         if problems:
             for rec in plugins.broken():
                 print(f"note: plugin {rec.name!r} from {rec.distribution} failed to load: {rec.error}", file=sys.stderr)

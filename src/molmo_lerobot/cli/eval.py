@@ -1,21 +1,18 @@
 """``molmo-eval policy=P benchmark=B workers=N [key=value ...]``: evaluate a policy.
 
-Arguments are Hydra overrides of ``conf/eval.yaml`` (plus config dirs that plugins add).
-``--cfg`` prints the resolved config and exits.
+A Hydra app over ``conf/eval.yaml`` (plus the config dirs plugins add): ``-m`` sweeps
+(``molmo-eval -m policy=random,scripted limit=2`` writes one complete run per job under
+``hydra.sweep.dir/hydra.sweep.subdir``), ``--cfg job|hydra|all``, ``--help``, ``--info``.
+Bad overrides and run errors print one ``molmo-eval: error:`` message and exit 2.
 """
 
 from __future__ import annotations
 
 import os
 import sys
+from typing import Any
 
-USAGE = """usage: molmo-eval [--cfg] [key=value ...]
-
-  molmo-eval policy=scripted benchmark=pick_v1 workers=2 [limit=K] [seed=S] [output_dir=D]
-             [record=true] [push=true hub.repo_id=ns/name] [executor=local|ray] [resume=true]
-
-Every key of conf/eval.yaml can be overridden; policy/benchmark/executor pick config groups.
-"""
+_CFG_TYPES = ("job", "hydra", "all")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -27,37 +24,83 @@ def main(argv: list[str] | None = None) -> int:
 
 def _main(argv: list[str] | None = None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
-    if any(a in ("-h", "--help") for a in args):
-        print(USAGE)
-        return 0
+    for i, a in enumerate(args):  # `--cfg` alone (our older form) means Hydra's `--cfg job`
+        if a in ("--cfg", "-c") and (i + 1 == len(args) or args[i + 1] not in _CFG_TYPES):
+            args.insert(i + 1, "job")
+            break
     os.environ.setdefault("MUJOCO_GL", "egl")
-    from omegaconf import OmegaConf
+    from hydra import version
+    from hydra._internal.hydra import Hydra
+    from hydra._internal.utils import create_config_search_path, get_args_parser
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
 
-    from molmo_lerobot.config import ConfigError, compose
+    from molmo_lerobot.config import config_message, primary_config_dir
     from molmo_lerobot.plugins import PluginError
-    from molmo_lerobot.runner.evaluate import RunError, run_evaluation
-    from molmo_lerobot.runner.supervisor import RunInterrupted, WorkerStartError
+    from molmo_lerobot.runner.supervisor import RunInterrupted
 
-    expected: tuple[type[BaseException], ...] = (ConfigError, PluginError, RunError, WorkerStartError)
+    parser = get_args_parser()
+    parser.prog = "molmo-eval"
+    ns = parser.parse_args(args)
+    version.setbase("1.3")
+    codes: list[int] = []
+    GlobalHydra.instance().clear()
     try:
-        from molmo_lerobot.benchmark.load import BenchmarkError
-
-        expected += (BenchmarkError,)
-        cfg = compose([a for a in args if a != "--cfg"])
-        if "--cfg" in args:
-            print(OmegaConf.to_yaml(cfg))
-            return 0
-        res = run_evaluation(cfg)
-    except expected as exc:
-        print(f"molmo-eval: error: {exc}", file=sys.stderr)
+        search_path = create_config_search_path(f"file://{primary_config_dir()}")
+        hydra = Hydra.create_main_hydra2(task_name="molmo_eval", config_search_path=search_path)
+        if ns.help:
+            hydra.app_help(config_name="eval", args_parser=parser, args=ns)
+        elif ns.hydra_help:
+            hydra.hydra_help(config_name="eval", args_parser=parser, args=ns)
+        elif ns.cfg:
+            hydra.show_cfg(config_name="eval", overrides=ns.overrides, cfg_type=ns.cfg, package=ns.package,
+                           resolve=ns.resolve)
+        elif ns.shell_completion:
+            hydra.shell_completion(config_name="eval", overrides=ns.overrides)
+        elif ns.info:
+            hydra.show_info(ns.info, config_name="eval", overrides=ns.overrides)
+        elif ns.multirun:
+            hydra.multirun(config_name="eval", task_function=lambda cfg: codes.append(_job(cfg, sweep=True)),
+                           overrides=[*ns.overrides, "hydra.mode=MULTIRUN"])
+        else:
+            hydra.run(config_name="eval", task_function=lambda cfg: codes.append(_job(cfg, sweep=False)),
+                      overrides=[*ns.overrides, "hydra.mode=RUN"])
+    except (HydraException, OmegaConfBaseException, PluginError) as exc:
+        print(f"molmo-eval: error: {config_message(exc)}", file=sys.stderr)
         return 2
-    except RunInterrupted as exc:
+    except RunInterrupted as exc:  # stops a sweep too
         print(f"molmo-eval: {exc}", file=sys.stderr)
         return 128 + exc.signum
     except KeyboardInterrupt:
         print("molmo-eval: interrupted; finished episodes are kept in episodes.jsonl "
               "(rerun with resume=true to continue)", file=sys.stderr)
         return 130
+    finally:
+        GlobalHydra.instance().clear()
+    return max(codes, default=0)
+
+
+def _job(cfg: Any, *, sweep: bool) -> int:
+    """One run (a sweep job writes to its sweep subdir unless ``output_dir`` is set)."""
+    from hydra.core.hydra_config import HydraConfig
+
+    from molmo_lerobot.config import ConfigError
+    from molmo_lerobot.plugins import PluginError
+    from molmo_lerobot.runner.evaluate import RunError, run_evaluation
+    from molmo_lerobot.runner.supervisor import WorkerStartError
+
+    expected: tuple[type[BaseException], ...] = (ConfigError, PluginError, RunError, WorkerStartError)
+    try:
+        from molmo_lerobot.benchmark.load import BenchmarkError
+
+        expected += (BenchmarkError,)
+        if sweep and cfg.get("output_dir") is None:
+            cfg.output_dir = HydraConfig.get().runtime.output_dir
+        res = run_evaluation(cfg)
+    except expected as exc:
+        print(f"molmo-eval: error: {exc}", file=sys.stderr)
+        return 2
     s = res.summary
     lo, hi = s["ci95"]
     print(f"{s['benchmark']['name']} · {s['policy']['name']}: success {s['success_rate']:.3f} "

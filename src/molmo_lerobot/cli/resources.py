@@ -10,6 +10,9 @@ import json
 import sys
 from pathlib import Path
 
+from molmo_lerobot.paths import molmospaces_assets_dir
+from molmo_lerobot.resources import molmospaces as ms
+
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="molmo-resources",
@@ -27,12 +30,22 @@ def _parser() -> argparse.ArgumentParser:
     pk.add_argument("--uid-depth", type=int, default=0, help="path component that names the UID (default 0)")
     pk.add_argument("--max-archive-mb", type=float, default=64.0)
 
-    ins = sub.add_parser("install", help="install DATA_TYPE/SOURCE@VERSION into a cache and install dir")
-    ins.add_argument("spec", nargs="+", metavar="DATA_TYPE/SOURCE@VERSION")
-    ins.add_argument("--remote", required=True)
-    ins.add_argument("--cache-dir", required=True, type=Path)
-    ins.add_argument("--install-dir", required=True, type=Path)
+    ins = sub.add_parser("install", help="install DATA_TYPE/SOURCE@VERSION (or a preset's versions) into a cache "
+                                         "and install dir")
+    ins.add_argument("spec", nargs="*", metavar="DATA_TYPE/SOURCE@VERSION")
+    ins.add_argument("--preset", help="'molmospaces' (the versions MolmoSpaces pins, into its assets dir layout) or a "
+                                      "JSON version table {data_type: {source: version}}")
+    ins.add_argument("--remote", help="directory, file://, http(s):// bucket or hf://datasets/<ns>/<repo>[/<prefix>] "
+                                      f"(with --preset: default MolmoSpaces' bucket {ms.BUCKET_URL})")
+    ins.add_argument("--cache-dir", type=Path, help="with --preset: default $MLSPACES_CACHE_DIR or "
+                                                    "~/.cache/molmo-spaces-resources (shared with molmospaces-resources)")
+    ins.add_argument("--install-dir", type=Path, help="with --preset: default MolmoSpaces' assets dir "
+                                                      "($MLSPACES_ASSETS_DIR or ours)")
     ins.add_argument("--on-demand", action="store_true", help="fetch manifests and index only; archives on first use")
+    ins.add_argument("--eager", action="store_true", help="with --preset: extract every archive now, also of sources "
+                                                          "MolmoSpaces installs on demand")
+    ins.add_argument("--uid", action="append", default=[], help="also install the archives holding this UID "
+                                                                "(repeatable; the rest stays on demand)")
     ins.add_argument("--workers", type=int, default=4)
     ins.add_argument("--lock-timeout", type=float, default=600.0)
     ins.add_argument("--no-lock", action="store_true", help="read a cache a leader filled; never write")
@@ -68,13 +81,7 @@ def _run(args: argparse.Namespace) -> int:
               f"{len(manifest['archives'])} archives, {total} bytes → {args.remote}")
         return 0
     if args.command == "install":
-        mgr = ResourceManager(args.cache_dir, args.install_dir, args.remote, use_lock=not args.no_lock,
-                              workers=args.workers, progress=args.progress, lock_timeout=args.lock_timeout)
-        for spec in args.spec:
-            r = mgr.install(spec, on_demand=args.on_demand)
-            mode = "on demand" if r.on_demand else "eager"
-            print(f"installed {r.spec} ({mode}): {r.extracted} archives extracted, {r.present} already present → {r.path}")
-        return 0
+        return _install(args)
     if args.command == "verify":
         mgr = ResourceManager(args.cache_dir, args.install_dir)
         problems = mgr.verify()
@@ -91,7 +98,7 @@ def _run(args: argparse.Namespace) -> int:
             remote: dict[str, dict[str, list[str]]] = {}
             for f in files:
                 parts = f.split("/")
-                if len(parts) == 4 and parts[3] == "manifest.json":
+                if len(parts) == 4 and parts[3] in ("manifest.json", ms.REMOTE_MANIFEST):
                     remote.setdefault(parts[0], {}).setdefault(parts[1], []).append(parts[2])
             listing["remote"] = remote
         if args.json:
@@ -116,6 +123,47 @@ def _run(args: argparse.Namespace) -> int:
         print(f"wrote analytic grasps for {len(written)} built-in objects → {out}")
         return 0
     raise AssertionError(args.command)
+
+
+def _install(args: argparse.Namespace) -> int:
+    from molmo_lerobot.resources import ResourceError, ResourceManager
+
+    specs: list[tuple[str, bool]] = [(s, args.on_demand or bool(args.uid)) for s in args.spec]
+    if args.preset:
+        table = ms.VERSIONS if args.preset == "molmospaces" else ms.read_versions_file(Path(args.preset))
+        for data_type, sources in table.items():
+            for source, version in sources.items():
+                eager = args.eager or ms.behaviour(data_type, source)[1]
+                specs.append((f"{data_type}/{source}@{version}", args.on_demand or not eager))
+        remote = args.remote or ms.BUCKET_URL
+        cache = args.cache_dir or ms.cache_dir()
+        install = args.install_dir or molmospaces_assets_dir()
+    else:
+        missing = [flag for flag, value in (("--remote", args.remote), ("--cache-dir", args.cache_dir),
+                                            ("--install-dir", args.install_dir)) if value is None]
+        if missing or not specs:
+            raise ResourceError(f"install needs {', '.join(missing) or 'DATA_TYPE/SOURCE@VERSION'} (or --preset)")
+        remote, cache, install = args.remote, args.cache_dir, args.install_dir
+    mgr = ResourceManager(cache, install, remote, use_lock=not args.no_lock, workers=args.workers,
+                          progress=args.progress, lock_timeout=args.lock_timeout)
+    parsed = []
+    for text, on_demand in specs:
+        r = mgr.install(text, on_demand=on_demand)
+        parsed.append(r.spec)
+        mode = "on demand" if r.on_demand else "eager"
+        if args.preset and r.on_demand and not args.on_demand:  # what MolmoSpaces extracts at setup anyway
+            setup = ms.setup_archives(r.spec.data_type, sorted(mgr.manifest(r.spec)["archives"]))
+            if setup:
+                mode += f", {mgr.ensure_archives(r.spec, setup)} of its {len(setup)} base archives extracted"
+        print(f"installed {r.spec} ({mode}): {r.extracted} archives extracted, {r.present} already present → {r.path}")
+    for uid in args.uid:
+        holders = [s for s in parsed if mgr.index(s).archives_for_uid(uid)]
+        if not holders:
+            raise ResourceError(f"UID {uid!r} is in none of {', '.join(map(str, parsed))}")
+        for spec in holders:
+            files = mgr.ensure_uid(spec, uid)
+            print(f"installed UID {uid} from {spec}: {len(files)} files")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from molmo_lerobot.export.merge import DATASET_DIR, EVAL_EPISODES, EVAL_INFO, read_eval_records
+from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.runner.results import EpisodeResult
 
 REPORT_FILE = "report.html"
@@ -163,7 +164,4 @@ def write_report(output_dir: Path | str, summary: dict[str, Any], results: list[
     output_dir = Path(output_dir)
     page = render_report(summary, results, episode_videos(output_dir))
     path = output_dir / REPORT_FILE
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(page)
-    os.replace(tmp, path)
-    return path
+    return atomic_write(path, page)

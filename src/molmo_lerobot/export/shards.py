@@ -11,13 +11,14 @@ killed worker has no marker and is skipped at merge time, never merged half-writ
 from __future__ import annotations
 
 import json
-import os
 import re
 import secrets
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
+
+from molmo_lerobot.fileio import atomic_write
 
 SHARDS_DIR = "dataset_shards"
 MARKER = "meta/molmo_shard.json"
@@ -53,12 +54,7 @@ class Shard:
 def write_marker(root: Path, record: dict[str, Any]) -> None:
     """Declare a finalized shard complete (atomic: a torn write never counts)."""
     path = root / MARKER
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w") as f:
-        json.dump(record, f)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    atomic_write(path, json.dumps(record))
 
 
 def list_shards(output_dir: Path) -> list[Shard]:

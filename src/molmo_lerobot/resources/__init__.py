@@ -1,10 +1,16 @@
 """Resources: versioned read-only cache, version-free install dir, remotes, archives and index."""
 
-from molmo_lerobot.resources.errors import CorruptArchiveError, ResourceError, StaleLockError, UnsafeArchiveError
+from molmo_lerobot.resources.errors import (
+    CorruptArchiveError,
+    RemoteNotFoundError,
+    ResourceError,
+    StaleLockError,
+    UnsafeArchiveError,
+)
 from molmo_lerobot.resources.manager import InstallResult, ResourceManager, ResourceSpec, pack
-from molmo_lerobot.resources.remotes import HfRemote, LocalRemote, Remote, open_remote
+from molmo_lerobot.resources.remotes import HfRemote, HttpRemote, LocalRemote, Remote, open_remote
 
 __all__ = [
-    "CorruptArchiveError", "HfRemote", "InstallResult", "LocalRemote", "Remote", "ResourceError",
-    "ResourceManager", "ResourceSpec", "StaleLockError", "UnsafeArchiveError", "open_remote", "pack",
+    "CorruptArchiveError", "HfRemote", "HttpRemote", "InstallResult", "LocalRemote", "Remote", "RemoteNotFoundError",
+    "ResourceError", "ResourceManager", "ResourceSpec", "StaleLockError", "UnsafeArchiveError", "open_remote", "pack",
 ]

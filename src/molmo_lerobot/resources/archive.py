@@ -1,20 +1,27 @@
-"""``.tar.zst`` archives: deterministic packing, checksums, and extraction that refuses escapes."""
+"""``.tar.zst`` archives: deterministic packing, checksums, and extraction that never follows a link
+and never writes more than the archive's index says."""
 
 from __future__ import annotations
 
 import hashlib
+import io
 import os
 import posixpath
 import stat
 import tarfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path, PurePosixPath
 
 import zstandard
 
+from molmo_lerobot.fileio import atomic_open
 from molmo_lerobot.resources.errors import CorruptArchiveError, ResourceError, UnsafeArchiveError
+from molmo_lerobot.resources.manifests import link_escapes
+from molmo_lerobot.resources.nofollow import make_dirs, open_root, parent_of
 
 CHUNK = 1 << 20
+_HEADER_ALLOWANCE = 8 << 10  # tar header, PAX record and padding per member
+_END_ALLOWANCE = 64 << 10  # end-of-archive blocks and record padding
 
 
 def sha256_file(path: str | os.PathLike) -> str:
@@ -42,7 +49,7 @@ def tree_entries(root: Path) -> dict[str, list]:
             st = os.lstat(full)
             if stat.S_ISLNK(st.st_mode):
                 target = os.readlink(full)
-                if _link_escapes(rel, target):
+                if link_escapes(rel, target):
                     raise ResourceError(f"{full}: symlink to {target!r} points outside {root}")
                 entries[rel] = ["->", target]
             elif stat.S_ISREG(st.st_mode):
@@ -59,9 +66,8 @@ def pack_archive(root: Path, rel_paths: Iterable[str], out: Path, level: int = 1
     Member metadata is normalized (owner, mtime, mode) so the same tree packs to the same bytes.
     """
     out = Path(out)
-    part = out.with_name(out.name + ".part")
     cctx = zstandard.ZstdCompressor(level=level)
-    with open(part, "wb") as fh, cctx.stream_writer(fh, closefd=False) as zw:
+    with atomic_open(out, "wb") as fh, cctx.stream_writer(fh, closefd=False) as zw:
         with tarfile.open(fileobj=zw, mode="w|", format=tarfile.PAX_FORMAT) as tar:
             for rel in rel_paths:
                 info = tar.gettarinfo(str(root / rel), arcname=rel)
@@ -75,7 +81,6 @@ def pack_archive(root: Path, rel_paths: Iterable[str], out: Path, level: int = 1
                 else:
                     info.mode = 0o777
                     tar.addfile(info)
-    os.replace(part, out)
     return {"size": out.stat().st_size, "sha256": sha256_file(out)}
 
 
@@ -91,13 +96,6 @@ def verify_archive(path: Path, name: str, size: int, sha256: str) -> None:
         )
 
 
-def _link_escapes(member: str, target: str) -> bool:
-    if not target or PurePosixPath(target).is_absolute():
-        return True
-    resolved = posixpath.normpath(posixpath.join(posixpath.dirname(member), target))
-    return resolved == ".." or resolved.startswith("../") or resolved.startswith("/")
-
-
 def check_member(member: tarfile.TarInfo, archive: str) -> None:
     """Refuse absolute paths, ``..``, escaping symlinks/hard links, devices and other specials."""
     name = member.name
@@ -108,7 +106,7 @@ def check_member(member: tarfile.TarInfo, archive: str) -> None:
         raise UnsafeArchiveError(f"{where} contains '..' (path traversal); refusing to extract")
     if member.ischr() or member.isblk() or member.isfifo():
         raise UnsafeArchiveError(f"{where} is a device or fifo; refusing to extract")
-    if member.issym() and _link_escapes(name, member.linkname):
+    if member.issym() and link_escapes(name, member.linkname):
         raise UnsafeArchiveError(f"{where} is a symlink to {member.linkname!r} outside the archive; refusing to extract")
     if member.islnk():
         target = posixpath.normpath(member.linkname)
@@ -118,24 +116,143 @@ def check_member(member: tarfile.TarInfo, archive: str) -> None:
         raise UnsafeArchiveError(f"{where} has an unsupported type; refusing to extract")
 
 
-def safe_extract(archive_path: Path, dest: Path, name: str) -> list[str]:
-    """Stream-extract ``archive_path`` into the (new, empty) directory ``dest``; returns member names.
+def extract_limit(entries: Mapping[str, list]) -> int:
+    """Most decompressed tar bytes an archive holding ``entries`` may take: data, headers, padding."""
+    data = sum(-(-e[0] // 512) * 512 for e in entries.values() if isinstance(e[0], int))
+    return data + _HEADER_ALLOWANCE * (len(entries) + len(_ancestors(entries))) + _END_ALLOWANCE
 
-    Every member is checked before it is written, and Python's ``data`` extraction filter
-    re-checks the real paths, so nothing is ever written outside ``dest``.
+
+def _ancestors(paths: Iterable[str]) -> set[str]:
+    out: set[str] = set()
+    for p in paths:
+        parent = posixpath.dirname(p)
+        while parent and parent not in out:
+            out.add(parent)
+            parent = posixpath.dirname(parent)
+    return out
+
+
+class _Capped(io.RawIOBase):
+    """A decompressed stream that refuses to yield more than ``limit`` bytes."""
+
+    def __init__(self, raw, limit: int | None, name: str) -> None:
+        self.raw, self.limit, self.name, self.count = raw, limit, name, 0
+
+    def readable(self) -> bool:
+        return True
+
+    def read(self, n: int = -1) -> bytes:
+        data = self.raw.read(n)
+        self.count += len(data)
+        if self.limit is not None and self.count > self.limit:
+            raise UnsafeArchiveError(f"archive {self.name}: decompresses past its limit of {self.limit} bytes "
+                                     "(from its index); refusing to extract")
+        return data
+
+
+def safe_extract(archive_path: Path, dest: Path, name: str, expected: Mapping[str, list] | None = None,
+                 limit: int | None = None) -> list[str]:
+    """Stream-extract ``archive_path`` into the new directory ``dest``; returns the member paths.
+
+    Nothing is written through a link: every path is walked with ``O_NOFOLLOW`` from ``dest``.
+    With ``expected`` (the index's ``{path: entry}``) a member that is not indexed, repeated,
+    of another kind, or larger than its indexed size is refused before a byte of it is
+    written, so an archive never writes more than its index says; ``limit`` (default:
+    :func:`extract_limit` of ``expected``) caps the decompressed stream itself.
     """
     dest = Path(dest)
     dest.mkdir(parents=True, exist_ok=False)
-    names: list[str] = []
+    if expected is not None and limit is None:
+        limit = extract_limit(expected)
+    dirs = _ancestors(expected) if expected is not None else set()
+    seen: dict[str, str] = {}
+    written = 0
     dctx = zstandard.ZstdDecompressor()
     try:
-        with open(archive_path, "rb") as fh, dctx.stream_reader(fh) as zr, tarfile.open(fileobj=zr, mode="r|") as tar:
+        with open(archive_path, "rb") as fh, dctx.stream_reader(fh) as zr, open_root(dest) as root, \
+                tarfile.open(fileobj=_Capped(zr, limit, name), mode="r|") as tar:
             for member in tar:
                 check_member(member, name)
-                tar.extract(member, dest, filter="data", set_attrs=False)
-                names.append(member.name)
-    except tarfile.FilterError as exc:
-        raise UnsafeArchiveError(f"archive {name}: {exc}; refusing to extract") from None
+                rel = posixpath.normpath(member.name)
+                if rel == ".":
+                    continue
+                where = f"archive {name}: member {rel!r}"
+                if rel in seen:
+                    raise UnsafeArchiveError(f"{where} appears twice; refusing to extract")
+                size = _check_expected(member, rel, expected, dirs, seen, where)
+                if limit is not None and written + size > limit:
+                    raise UnsafeArchiveError(f"{where} would take the archive past its limit of {limit} bytes "
+                                             "(from its index); refusing to extract")
+                written += size
+                _write_member(tar, member, rel, root, seen, where)
+                seen[rel] = "d" if member.isdir() else "l" if member.issym() else "f"
     except (tarfile.TarError, zstandard.ZstdError, EOFError) as exc:
         raise CorruptArchiveError(f"archive {name}: cannot be read ({type(exc).__name__}: {exc})") from None
-    return names
+    if expected is not None:
+        missing = sorted(set(expected) - set(seen))
+        if missing:
+            raise CorruptArchiveError(f"archive {name}: contents differ from the index (missing {missing[:3]})")
+    return [rel for rel in seen]
+
+
+def _check_expected(member: tarfile.TarInfo, rel: str, expected: Mapping[str, list] | None, dirs: set[str],
+                    seen: dict[str, str], where: str) -> int:
+    """Bytes the member will write, after checking it against its index entry."""
+    size = member.size if member.isreg() else 0
+    if member.islnk():
+        target = posixpath.normpath(member.linkname)
+        if seen.get(target) != "f":
+            raise UnsafeArchiveError(f"{where} is a hard link to {member.linkname!r}, which is not an earlier "
+                                     "regular file of the archive; refusing to extract")
+    if expected is None:
+        return size
+    want = expected.get(rel)
+    if want is None:
+        if member.isdir() and rel in dirs:
+            return 0
+        raise CorruptArchiveError(f"{where} is not in the index; archive contents differ from the index "
+                                  "(unexpected member)")
+    kind, value = want[0], want[1]
+    if kind == "->":
+        if not member.issym() or member.linkname != value:
+            raise CorruptArchiveError(f"{where} is not the link to {value!r} the index names")
+    elif kind is not None:
+        if not (member.isreg() or member.islnk()):
+            raise CorruptArchiveError(f"{where} is not a regular file as the index says")
+        if member.islnk():
+            return kind  # a copy of an earlier member: its indexed size
+        if member.size != kind:
+            raise UnsafeArchiveError(f"{where} has size {member.size}, but its indexed size is {kind}; "
+                                     "refusing to extract")
+    return size
+
+
+def _write_member(tar: tarfile.TarFile, member: tarfile.TarInfo, rel: str, root: int, seen: dict[str, str],
+                  where: str) -> None:
+    if member.isdir():
+        make_dirs(root, rel, where)
+        return
+    with parent_of(root, rel, create=True, where=where) as (fd, leaf):
+        if member.issym():
+            os.symlink(member.linkname, leaf, dir_fd=fd)
+            return
+        out = os.open(leaf, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644, dir_fd=fd)
+        with open(out, "wb") as dst:
+            if member.islnk():
+                with parent_of(root, posixpath.normpath(member.linkname), create=False, where=where) as (sfd, sleaf):
+                    src = os.open(sleaf, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC, dir_fd=sfd)
+                    with open(src, "rb") as fh:
+                        _copy(fh, dst, None)
+            else:
+                _copy(tar.extractfile(member), dst, member.size)
+
+
+def _copy(src, dst, size: int | None) -> None:
+    left = size
+    while left is None or left > 0:
+        block = src.read(CHUNK if left is None else min(CHUNK, left))
+        if not block:
+            break
+        dst.write(block)
+        if left is not None:
+            left -= len(block)

@@ -17,3 +17,7 @@ class UnsafeArchiveError(ResourceError):
 
 class StaleLockError(ResourceError):
     """A lock could not be taken in time; the message names the holder and what to do."""
+
+
+class RemoteNotFoundError(ResourceError):
+    """The remote answered that a file does not exist (HTTP 404 or its equivalent)."""

@@ -5,6 +5,10 @@ read-only; bookkeeping lives beside it in ``<cache>/.molmo/`` (manifests, LMDB i
 per-archive completion flags, locks, temporary extraction dirs). The install dir holds
 ``<install>/<data_type>/<source>`` — one link to the version dir (``link="dir"``) or a tree
 of per-file links (``link="file"``, so relative MJCF paths resolve). Upgrades re-point links.
+
+Nothing is ever written through a link: archives are extracted and moved into place by
+walking every path with ``O_NOFOLLOW`` (:mod:`~molmo_lerobot.resources.nofollow`), and each
+link a version brings is resolved through the real tree and must stay inside the version.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import os
 import re
 import shutil
 import socket
+import stat
 import tempfile
 import threading
 import time
@@ -27,15 +32,27 @@ from pathlib import Path, PurePosixPath
 
 from filelock import FileLock, Timeout
 
-from molmo_lerobot.resources.archive import pack_archive, safe_extract, sha256_file, tree_entries, verify_archive
+from molmo_lerobot.fileio import atomic_open, atomic_write
+from molmo_lerobot.resources import molmospaces as ms
+from molmo_lerobot.resources import nofollow
+from molmo_lerobot.resources.archive import (
+    extract_limit,
+    pack_archive,
+    safe_extract,
+    sha256_file,
+    tree_entries,
+    verify_archive,
+)
 from molmo_lerobot.resources.errors import (
     CorruptArchiveError,
+    RemoteNotFoundError,
     ResourceError,
     StaleLockError,
     UnsafeArchiveError,
 )
 from molmo_lerobot.resources.index import PathIndex, uid_of
-from molmo_lerobot.resources.remotes import Remote, open_remote
+from molmo_lerobot.resources.manifests import check_index, check_local, parse_manifest, read_json
+from molmo_lerobot.resources.remotes import MOLMOSPACES, Remote, open_remote
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 LINK_MODES = ("dir", "file")
@@ -87,10 +104,17 @@ PostSetup = Callable[["ResourceManager", ResourceSpec, Path], None]
 class ResourceManager:
     """Installs resource versions from a remote into a cache and links them into an install dir.
 
+    Versions in MolmoSpaces' layout (see :mod:`~molmo_lerobot.resources.molmospaces`) keep
+    molmospaces-resources' flags, local manifests, links and locks, so either tool can use
+    what the other installed.
+
     ``use_lock=False`` is for workers reading a cache that a leader has filled: nothing is
     locked or written, and anything missing is an error instead of an install.
     ``post_setup`` callables run after every install as ``hook(manager, spec, path)``.
     """
+
+    #: MolmoSpaces' archives have no checksum or exact size: refuse one unpacking to more than this ratio.
+    max_inflate_ratio = 64
 
     def __init__(self, cache_dir: str | os.PathLike, install_dir: str | os.PathLike | None = None,
                  remote: Remote | str | os.PathLike | None = None, *, use_lock: bool = True, workers: int = 4,
@@ -110,6 +134,7 @@ class ResourceManager:
         self._indexes: dict[ResourceSpec, PathIndex] = {}
         self._manifests: dict[ResourceSpec, dict] = {}
         self._locks: dict[str, FileLock] = {}
+        self._place_lock = threading.Lock()  # one archive moves into a version dir at a time
 
     # -- paths -------------------------------------------------------------------------
     def version_dir(self, spec: ResourceSpec | str) -> Path:
@@ -130,6 +155,7 @@ class ResourceManager:
         """Drop LMDB handles and caches inherited through fork (they must not be shared)."""
         if os.getpid() != self._pid:
             self._indexes, self._manifests, self._locks, self._pid = {}, {}, {}, os.getpid()
+            self._place_lock = threading.Lock()
 
     # -- locks -------------------------------------------------------------------------
     @contextlib.contextmanager
@@ -175,36 +201,85 @@ class ResourceManager:
                                         "(no-lock mode never installs)")
                 with self._version_lock(spec):
                     self._fetch_meta(spec)
-            self._manifests[spec] = json.loads(path.read_text())
+            self._manifests[spec] = parse_manifest(read_json(path), f"{spec}: cached manifest {path}")
         return self._manifests[spec]
 
     def _fetch_meta(self, spec: ResourceSpec) -> None:
+        """Fetch and check the version's metadata into ``meta_dir`` (our layout first, then MolmoSpaces').
+
+        A version dir molmospaces-resources filled (their metadata files inside) is adopted
+        without asking the remote.
+        """
         meta = self.meta_dir(spec)
         if (meta / "manifest.json").is_file():
             return
-        if self.remote is None:
-            raise ResourceError(f"{spec} is not in cache {self.cache_dir} and no remote was given")
         tmp = meta / "tmp"
         tmp.mkdir(parents=True, exist_ok=True)
+        vdir = self.version_dir(spec)
+        if (vdir / ms.REMOTE_MANIFEST).is_file() and (vdir / ms.TRIES).is_file():
+            return self._convert_ms_meta(spec, vdir, f"{spec}: cache {vdir}")
+        if self.remote is None:
+            raise ResourceError(f"{spec} is not in cache {self.cache_dir} and no remote was given")
         try:
             self.remote.download(f"{spec.rel}/manifest.json", tmp / "manifest.json")
-            self.remote.download(f"{spec.rel}/index.json.gz", tmp / "index.json.gz")
-        except ResourceError:
-            versions = sorted({p.split("/")[2] for p in self.remote.list_files(f"{spec.data_type}/{spec.source}")
-                               if p.count("/") >= 3})
-            raise ResourceError(f"remote {self.remote.url} has no {spec} "
-                                f"(versions there: {', '.join(versions) or 'none'})") from None
-        manifest = _read_json(tmp / "manifest.json", "manifest")
-        for key in ("archives", "link", "uid_depth"):
-            if key not in manifest:
-                raise ResourceError(f"{spec}: remote manifest.json lacks field {key!r}")
-        if (manifest.get("data_type"), manifest.get("source"), manifest.get("version")) != (
+        except RemoteNotFoundError:
+            try:
+                for name in (ms.REMOTE_MANIFEST, ms.TRIES):
+                    self.remote.download(f"{spec.rel}/{name}", tmp / name)
+            except RemoteNotFoundError:
+                raise ResourceError(f"remote {self.remote.url} has no {spec} ({self._remote_versions(spec)})") from None
+            return self._convert_ms_meta(spec, tmp, f"{spec}: remote {self.remote.url} {spec.rel}")
+        self.remote.download(f"{spec.rel}/index.json.gz", tmp / "index.json.gz")
+        where = f"{spec}: remote {self.remote.url} {spec.rel}/manifest.json"
+        manifest = parse_manifest(read_json(tmp / "manifest.json", where), where)
+        if (manifest["data_type"], manifest["source"], manifest["version"]) != (
                 spec.data_type, spec.source, spec.version):
-            raise ResourceError(f"{spec}: remote manifest.json describes another resource")
-        if manifest["link"] not in LINK_MODES:
-            raise ResourceError(f"{spec}: manifest.json field 'link' is {manifest['link']!r}, not one of {LINK_MODES}")
+            raise ResourceError(f"{where} describes another resource")
+        check_index(read_json(tmp / "index.json.gz", f"{spec}: remote index.json.gz"), manifest["archives"],
+                    f"{spec}: remote {self.remote.url} {spec.rel}/index.json.gz")
         os.replace(tmp / "index.json.gz", meta / "index.json.gz")
         os.replace(tmp / "manifest.json", meta / "manifest.json")  # last: its presence means meta is complete
+
+    def _remote_versions(self, spec: ResourceSpec) -> str:
+        try:
+            files = self.remote.list_files(f"{spec.data_type}/{spec.source}")
+        except ResourceError:
+            return "the remote cannot be listed"
+        versions = sorted({p.split("/")[2] for p in files if p.count("/") >= 3})
+        return f"versions there: {', '.join(versions) or 'none'}"
+
+    def _convert_ms_meta(self, spec: ResourceSpec, src: Path, where: str) -> None:
+        """Our manifest and index from MolmoSpaces' two metadata files in ``src`` (kept beside them)."""
+        meta = self.meta_dir(spec)
+        sizes = read_json(src / ms.REMOTE_MANIFEST, f"{where}/{ms.REMOTE_MANIFEST}")
+        tries = read_json(src / ms.TRIES, f"{where}/{ms.TRIES}")
+        manifest, index = ms.convert(spec.data_type, spec.source, spec.version, sizes, tries, where)
+        manifest = parse_manifest(manifest, where)
+        check_index(index, manifest["archives"], f"{where}/{ms.TRIES}")
+        for name in (ms.REMOTE_MANIFEST, ms.TRIES):
+            if src != meta / "raw":
+                (meta / "raw").mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(src / name, meta / "raw" / name)
+        with atomic_open(meta / "index.json.gz", "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as fh:
+            fh.write(json.dumps(index).encode())
+        atomic_write(meta / "manifest.json", json.dumps(manifest, indent=1, sort_keys=True), parents=True)
+
+    def is_molmospaces(self, spec: ResourceSpec | str) -> bool:
+        """Whether the version has MolmoSpaces' layout (their flags, manifests and locks are kept)."""
+        return self.manifest(spec).get("format") == MOLMOSPACES
+
+    def _ms_cache_lock(self, spec: ResourceSpec):
+        """molmospaces-resources' cache lock, held while a version of their layout changes."""
+        return self._lock(self.cache_dir / ms.LOCK) if self.is_molmospaces(spec) else contextlib.nullcontext()
+
+    def _ms_prepare(self, spec: ResourceSpec) -> None:
+        """Their metadata files inside the version dir, as molmospaces-resources keeps them."""
+        vdir = self.version_dir(spec)
+        vdir.mkdir(parents=True, exist_ok=True)
+        for name in (ms.REMOTE_MANIFEST, ms.TRIES):
+            if not (vdir / name).is_file():
+                with open(self.meta_dir(spec) / "raw" / name, "rb") as src, atomic_open(vdir / name, "wb") as dst:
+                    shutil.copyfileobj(src, dst)
 
     def index(self, spec: ResourceSpec | str) -> PathIndex:
         """The version's LMDB index (built from ``index.json.gz`` on first use)."""
@@ -224,19 +299,31 @@ class ResourceManager:
                 try:
                     idx.env  # another process may have built it while we waited
                 except ResourceError:
-                    entries = json.loads(gzip.decompress((self.meta_dir(spec) / "index.json.gz").read_bytes()))
-                    if set(entries) != set(manifest["archives"]):
-                        raise ResourceError(f"{spec}: index.json.gz and manifest.json list different archives") from None
+                    path = self.meta_dir(spec) / "index.json.gz"
+                    entries = check_index(read_json(path, f"{spec}: {path}"), manifest["archives"], f"{spec}: {path}")
                     idx = PathIndex.build(idx.path, entries, uid_depth=manifest["uid_depth"])
         self._indexes[spec] = idx
         return idx
 
     def _done(self, spec: ResourceSpec) -> set[str]:
+        if self.is_molmospaces(spec):
+            vdir = self.version_dir(spec)
+            return {a for a in self.manifest(spec)["archives"] if ms.extract_flag(vdir, a).exists()}
         done = self.meta_dir(spec) / "done"
         return {p.name[:-3] for p in done.glob("*.ok")} if done.is_dir() else set()
 
+    def _mark_done(self, spec: ResourceSpec, name: str, entry: dict) -> None:
+        if self.is_molmospaces(spec):
+            ms.extract_flag(self.version_dir(spec), name).touch()
+        else:
+            atomic_write(self.meta_dir(spec) / "done" / f"{name}.ok", entry["sha256"], parents=True)
+
     def is_complete(self, spec: ResourceSpec | str) -> bool:
-        return (self.meta_dir(ResourceSpec.parse(spec)) / "complete").is_file()
+        spec = ResourceSpec.parse(spec)
+        if (self.meta_dir(spec) / "complete").is_file():
+            return True
+        return (self.meta_dir(spec) / "manifest.json").is_file() and self.is_molmospaces(spec) and \
+            set(self.manifest(spec)["archives"]) <= self._done(spec)
 
     # -- install -----------------------------------------------------------------------
     def install(self, spec: ResourceSpec | str, on_demand: bool = False) -> InstallResult:
@@ -256,11 +343,14 @@ class ResourceManager:
             self._fetch_meta(spec)
             manifest = self.manifest(spec)
             self.index(spec)
-            done = self._done(spec)
-            todo = [] if on_demand else [a for a in manifest["archives"] if a not in done]
-            self._extract(spec, todo)
-            self._mark_complete(spec)
-        self._record_cache(spec)
+            with self._ms_cache_lock(spec):
+                if self.is_molmospaces(spec):
+                    self._ms_prepare(spec)
+                done = self._done(spec)
+                todo = [] if on_demand else [a for a in manifest["archives"] if a not in done]
+                self._extract(spec, todo)
+                self._mark_complete(spec)
+                self._record_cache(spec)
         path = self._link(spec) if self.install_dir is not None else self.version_dir(spec)
         for hook in self.post_setup:
             hook(self, spec, path)
@@ -281,7 +371,7 @@ class ResourceManager:
         if not self.use_lock:
             raise ResourceError(f"{spec}: archive {wanted[0]} is not in cache {self.cache_dir}; "
                                 "no-lock mode never installs")
-        with self._version_lock(spec):
+        with self._version_lock(spec), self._ms_cache_lock(spec):
             todo = [a for a in wanted if a not in self._done(spec)]
             self._clean_tmp(spec)
             self._extract(spec, todo)
@@ -318,7 +408,7 @@ class ResourceManager:
 
     def _mark_complete(self, spec: ResourceSpec) -> None:
         if set(self.manifest(spec)["archives"]) <= self._done(spec):
-            _atomic_write(self.meta_dir(spec) / "complete", "1")
+            atomic_write(self.meta_dir(spec) / "complete", "1", parents=True)
 
     def _extract(self, spec: ResourceSpec, archives: list[str]) -> None:
         """Download, verify and extract ``archives`` on a thread pool, with one retry pass."""
@@ -349,7 +439,8 @@ class ResourceManager:
                             fut.result()
                         except Exception as exc:  # collected, retried once, then raised
                             errors[name] = exc
-                fatal = [e for e in errors.values() if isinstance(e, UnsafeArchiveError)]
+                fatal = [e for e in errors.values()
+                         if isinstance(e, UnsafeArchiveError) or not getattr(e, "retryable", True)]
                 if not errors or fatal or attempt == 1:
                     break
                 pending = list(errors)
@@ -358,42 +449,92 @@ class ResourceManager:
         if errors:
             first = (fatal or list(errors.values()))[0]
             if isinstance(first, ResourceError):
-                raise first
+                raise first if str(first).startswith(f"{spec}:") else type(first)(f"{spec}: {first}") from None
             raise ResourceError(f"{spec}: installing {len(errors)} archive(s) failed: {first}") from first
 
     def _install_archive(self, spec: ResourceSpec, name: str, entry: dict) -> None:
+        """Download, verify, extract (never past the index) and move one archive into place.
+
+        Only the download and its checks may be retried: once an archive with the manifest's
+        checksum fails to extract or place, the same bytes would fail again.
+        """
         files = self.index(spec).files(name)
         tmp = self.meta_dir(spec) / "tmp"
         tmp.mkdir(parents=True, exist_ok=True)
         token = uuid.uuid4().hex
         part, xdir = tmp / f"{token}.part", tmp / f"x-{token}"
         try:
-            self.remote.download(f"{spec.rel}/archives/{name}", part)
-            verify_archive(part, name, entry["size"], entry["sha256"])
-            safe_extract(part, xdir, name)
-            got = _walk(xdir)
-            if set(got) != set(files):
-                missing, extra = sorted(set(files) - set(got)), sorted(set(got) - set(files))
-                raise CorruptArchiveError(f"archive {name}: contents differ from the index "
-                                          f"(missing {missing[:3]}, unexpected {extra[:3]})")
-            for rel, want in files.items():
-                if want[0] != "->" and got[rel] != want[0]:
-                    raise CorruptArchiveError(f"archive {name}: {rel} has size {got[rel]}, index says {want[0]}")
-            vdir = self.version_dir(spec)
-            for rel in sorted(files):
-                src, dest = xdir / rel, vdir / rel
-                dest.parent.mkdir(parents=True, exist_ok=True)
-                if not src.is_symlink():
-                    os.chmod(src, 0o444)
-                if dest.is_dir() and not dest.is_symlink():
-                    raise ResourceError(f"archive {name}: {rel} would replace a directory in {vdir}")
-                os.replace(src, dest)
-            _atomic_write(self.meta_dir(spec) / "done" / f"{name}.ok", entry["sha256"])
+            layout = self.manifest(spec).get("format", 1)
+            inflated = self.remote.fetch_archive(spec.rel, name, part, layout)
+            if layout == MOLMOSPACES:  # sizes in MB and no checksum: bound the unpacked size instead
+                limit = extract_limit(files) + (inflated if inflated is not None
+                                                else self.max_inflate_ratio * part.stat().st_size)
+            else:
+                verify_archive(part, name, entry["size"], entry["sha256"])
+                limit = extract_limit(files)
+            try:
+                safe_extract(part, xdir, name, files, limit)
+                self._place(spec, name, xdir, files)
+            except ResourceError as exc:
+                exc.retryable = False
+                raise
+            self._mark_done(spec, name, entry)
         finally:
             with contextlib.suppress(FileNotFoundError):
                 part.unlink()
             if xdir.exists():
                 shutil.rmtree(xdir, onexc=_force_remove)
+
+    def _place(self, spec: ResourceSpec, name: str, xdir: Path, files: dict[str, list]) -> None:
+        """Move an extracted archive into the version dir without following any link, then check
+        every link of the version against the real tree; on a problem, take the archive out again."""
+        vdir = self.version_dir(spec)
+        vdir.mkdir(parents=True, exist_ok=True)
+        where = f"archive {name}"
+        with self._place_lock, nofollow.open_root(xdir) as xroot, nofollow.open_root(vdir) as vroot:
+            placed: list[str] = []
+            try:
+                for rel in sorted(files):
+                    with nofollow.parent_of(xroot, rel, create=False, where=where) as (xfd, leaf), \
+                            nofollow.parent_of(vroot, rel, create=True, where=where) as (vfd, _):
+                        st = nofollow.lstat_at(xfd, leaf)
+                        if st is None:
+                            raise CorruptArchiveError(f"{where}: {rel} was not extracted")
+                        if stat.S_ISDIR(st.st_mode):
+                            nofollow.make_dirs(vroot, rel, where)
+                            continue
+                        if stat.S_ISREG(st.st_mode):
+                            os.chmod(leaf, 0o444, dir_fd=xfd)
+                        old = nofollow.lstat_at(vfd, leaf)
+                        if old is not None and stat.S_ISDIR(old.st_mode):
+                            raise ResourceError(f"{where}: {rel} would replace a directory in {vdir}")
+                        os.replace(leaf, leaf, src_dir_fd=xfd, dst_dir_fd=vfd)
+                        placed.append(rel)
+                self._check_links(spec, [r for r in placed if files[r][0] in ("->", None)], where)
+            except BaseException:
+                for rel in placed:
+                    nofollow.remove(vroot, rel)
+                raise
+
+    def _check_links(self, spec: ResourceSpec, new: list[str], where: str) -> None:
+        """Every link of the version must resolve, through the real tree, inside the version dir.
+
+        A new link can change where an older one leads (``a -> .`` makes ``b -> a/..`` escape),
+        so all links placed so far are rechecked whenever an archive brings links.
+        """
+        vdir = self.version_dir(spec)
+        new = [r for r in new if os.path.islink(vdir / r)]
+        if not new:
+            return
+        path = self.meta_dir(spec) / "links.json"
+        known = read_json(path) if path.is_file() else []
+        links = sorted({r for r in known if isinstance(r, str) and os.path.islink(vdir / r)} | set(new))
+        bad = [r for r in links if not nofollow.resolves_inside(vdir, r)]
+        if bad:
+            raise UnsafeArchiveError(f"{where}: link {bad[0]!r} -> {os.readlink(vdir / bad[0])!r} resolves to "
+                                     f"{os.path.realpath(vdir / bad[0])}, outside {vdir}, through the links of "
+                                     "this version; refusing to install")
+        atomic_write(path, json.dumps(links), parents=True)
 
     # -- links -------------------------------------------------------------------------
     def _link(self, spec: ResourceSpec) -> Path:
@@ -401,7 +542,9 @@ class ResourceManager:
         link = self.link_path(spec)
         target = self.version_dir(spec)
         mode = self.manifest(spec)["link"]
-        with self._install_lock():
+        theirs = self.is_molmospaces(spec)
+        their_lock = self._lock(self.install_dir / ms.LOCK) if theirs else contextlib.nullcontext()
+        with self._install_lock(), their_lock:
             link.parent.mkdir(parents=True, exist_ok=True)
             current = self.linked().get(spec.data_type, {}).get(spec.source)
             token = uuid.uuid4().hex
@@ -414,13 +557,19 @@ class ResourceManager:
                         _remove_link_tree(link)
                     os.replace(tmp, link)
             else:
-                index, done = self.index(spec), self._done(spec)
-                files = [rel for a in sorted(done & set(self.manifest(spec)["archives"])) for rel in index.files(a)]
+                index, done = self.index(spec), sorted(self._done(spec) & set(self.manifest(spec)["archives"]))
+                files = [rel for a in done for rel in index.files(a)]
+                if theirs:  # their metadata files are linked too, and each linked archive flagged
+                    files += [ms.REMOTE_MANIFEST, ms.TRIES]
                 if current == spec.version and link.is_dir() and not link.is_symlink():
                     _make_links(link, target, files)  # same version: add what on-demand installs brought
+                    if theirs:
+                        _flag_links(link, done)
                 else:
                     new = link.parent / f".{link.name}.{token}.new"
                     _make_links(new, target, files)
+                    if theirs:
+                        _flag_links(new, done)
                     if link.is_symlink():
                         link.unlink()
                     elif link.exists():
@@ -430,8 +579,14 @@ class ResourceManager:
                         _remove_link_tree(old)
                     if not link.exists():
                         os.replace(new, link)
-            self._update_json(self.install_dir / META / "installed.json",
-                              lambda d: d.setdefault(spec.data_type, {}).__setitem__(spec.source, spec.version))
+            def point(d: dict) -> None:
+                d.setdefault(spec.data_type, {})[spec.source] = spec.version
+
+            self._update_json(self.install_dir / META / "installed.json", point, "str")
+            if theirs:
+                if current is not None and current != spec.version:  # their cached tries index is per version
+                    shutil.rmtree(self.install_dir / ".lmdb" / spec.data_type / spec.source, ignore_errors=True)
+                self._update_json(self.install_dir / ms.LOCAL_MANIFEST, point, "str", indent=2)
         return link
 
     # -- local manifests ---------------------------------------------------------------
@@ -443,25 +598,37 @@ class ResourceManager:
                 versions.sort()
 
         with self._lock(self.cache_dir / META / "locks" / "manifest.lock"):
-            self._update_json(self.cache_dir / META / "installed.json", add)
+            self._update_json(self.cache_dir / META / "installed.json", add, "list")
+            if self.is_molmospaces(spec):  # under their cache lock (held by the caller)
+                self._update_json(self.cache_dir / ms.LOCAL_MANIFEST, add, "list", indent=2)
 
     @staticmethod
-    def _update_json(path: Path, edit: Callable[[dict], None]) -> None:
-        data = json.loads(path.read_text()) if path.is_file() else {}
+    def _update_json(path: Path, edit: Callable[[dict], None], values: str, indent: int = 1) -> None:
+        data = check_local(read_json(path), path, values) if path.is_file() else {}
         edit(data)
-        _atomic_write(path, json.dumps(data, indent=1, sort_keys=True))
+        atomic_write(path, json.dumps(data, indent=indent, sort_keys=indent == 1), parents=True)
 
     def installed(self) -> dict[str, dict[str, list[str]]]:
-        """``{data_type: {source: [versions]}}`` present in the cache."""
-        path = self.cache_dir / META / "installed.json"
-        return json.loads(path.read_text()) if path.is_file() else {}
+        """``{data_type: {source: [versions]}}`` present in the cache (ours and molmospaces-resources')."""
+        out: dict[str, dict[str, list[str]]] = {}
+        for path in (self.cache_dir / META / "installed.json", self.cache_dir / ms.LOCAL_MANIFEST):
+            if path.is_file():
+                for data_type, sources in check_local(read_json(path), path, "list").items():
+                    for source, versions in sources.items():
+                        have = out.setdefault(data_type, {}).setdefault(source, [])
+                        have[:] = sorted(set(have) | set(versions))
+        return {t: {s: v for s, v in src.items() if v} for t, src in out.items() if any(src.values())}
 
     def linked(self) -> dict[str, dict[str, str]]:
-        """``{data_type: {source: version}}`` the install dir points at."""
+        """``{data_type: {source: version}}`` the install dir points at (molmospaces-resources' record wins)."""
         if self.install_dir is None:
             return {}
-        path = self.install_dir / META / "installed.json"
-        return json.loads(path.read_text()) if path.is_file() else {}
+        out: dict[str, dict[str, str]] = {}
+        for path in (self.install_dir / META / "installed.json", self.install_dir / ms.LOCAL_MANIFEST):
+            if path.is_file():
+                for data_type, sources in check_local(read_json(path), path, "str").items():
+                    out.setdefault(data_type, {}).update({s: v for s, v in sources.items() if v is not None})
+        return {t: src for t, src in out.items() if src}
 
     # -- verification ------------------------------------------------------------------
     def verify(self) -> list[str]:
@@ -484,6 +651,7 @@ class ResourceManager:
         return problems
 
     def _verify_version(self, spec: ResourceSpec) -> list[str]:
+        """Compare the real tree (walked without following links) with the index of its done archives."""
         try:
             manifest, index = self.manifest(spec), self.index(spec)
         except ResourceError as exc:
@@ -493,20 +661,38 @@ class ResourceManager:
         if self.is_complete(spec) and not set(manifest["archives"]) <= done:
             problems.append(f"{spec}: marked complete but archives are missing")
         vdir = self.version_dir(spec)
+        tree = nofollow.walk(vdir) if vdir.is_dir() and not vdir.is_symlink() else {}
+        expected: dict[str, tuple[str, list]] = {}
         for archive in sorted(done & set(manifest["archives"])):
-            for rel, want in index.files(archive).items():
-                path = vdir / rel
-                if want[0] == "->":
-                    if not path.is_symlink() or os.readlink(path) != want[1]:
-                        problems.append(f"{spec}: {rel} (archive {archive}) is not the link to {want[1]!r}")
-                    continue
-                if not path.is_file() or path.is_symlink():
-                    problems.append(f"{spec}: {rel} (archive {archive}) is missing")
-                elif path.stat().st_size != want[0] or sha256_file(path) != want[1]:
-                    problems.append(f"{spec}: {rel} (archive {archive}) differs from the manifest")
-                elif path.stat().st_mode & 0o222:
-                    problems.append(f"{spec}: {rel} (archive {archive}) is writable")
+            expected.update((rel, (archive, want)) for rel, want in index.files(archive).items())
+        dirs = {p for rel in expected for p in PurePosixPath(rel).parents if str(p) != "."}
+        for rel, (archive, want) in sorted(expected.items()):
+            got, what = tree.get(rel), f"{spec}: {rel} (archive {archive})"
+            if want[0] == "->":
+                if got != ("l", want[1]):
+                    problems.append(f"{what} is not the link to {want[1]!r}")
+            elif want[0] is None:  # MolmoSpaces' index: no size or checksum to compare
+                if got is None:
+                    problems.append(f"{what} is missing")
+                elif got[0] == "f" and (vdir / rel).stat().st_mode & 0o222:
+                    problems.append(f"{what} is writable")
+            elif got is None or got[0] != "f":
+                problems.append(f"{what} is missing")
+            elif got[1] != want[0] or sha256_file(vdir / rel) != want[1]:
+                problems.append(f"{what} differs from the manifest")
+            elif (vdir / rel).stat().st_mode & 0o222:
+                problems.append(f"{what} is writable")
+        for rel, got in sorted(tree.items()):
+            if rel not in expected and not (got == ("d",) and PurePosixPath(rel) in dirs) and not self._own_file(spec, rel):
+                problems.append(f"{spec}: {rel} is not in the index of any installed archive")
+            if got[0] == "l" and not nofollow.resolves_inside(vdir, rel):
+                problems.append(f"{spec}: link {rel} -> {got[1]!r} resolves to {os.path.realpath(vdir / rel)}, "
+                                f"outside {vdir}")
         return problems
+
+    def _own_file(self, spec: ResourceSpec, rel: str) -> bool:
+        """Bookkeeping a layout keeps inside the version dir (MolmoSpaces' metadata and flags; none in ours)."""
+        return self.is_molmospaces(spec) and ms.is_own_file(rel)
 
 
 # -- packing -------------------------------------------------------------------------------
@@ -586,48 +772,28 @@ def _is_tty() -> bool:
     return sys.stderr.isatty()
 
 
-def _read_json(path: Path, what: str) -> dict:
-    try:
-        data = json.loads(path.read_text())
-    except ValueError as exc:
-        raise ResourceError(f"{what} {path.name} is not valid JSON: {exc}") from None
-    if not isinstance(data, dict):
-        raise ResourceError(f"{what} {path.name} must hold a JSON object")
-    return data
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
-def _walk(root: Path) -> dict[str, int | str]:
-    """Files (→ size) and symlinks (→ "->") under ``root``."""
-    out: dict[str, int | str] = {}
-    for dirpath, dirnames, filenames in os.walk(root):
-        for name in filenames + [d for d in dirnames if os.path.islink(os.path.join(dirpath, d))]:
-            full = os.path.join(dirpath, name)
-            rel = Path(full).relative_to(root).as_posix()
-            out[rel] = "->" if os.path.islink(full) else os.path.getsize(full)
-    return out
-
-
 def _make_links(root: Path, target: Path, files: Iterable[str]) -> None:
+    """Per-file links ``root/rel -> target/rel``, made without following any link below ``root``."""
     root.mkdir(parents=True, exist_ok=True)
-    for rel in files:
-        link = root / rel
-        if os.path.lexists(link):
-            continue
-        link.parent.mkdir(parents=True, exist_ok=True)
-        os.symlink(target / rel, link)
+    with nofollow.open_root(root) as rfd:
+        for rel in files:
+            with nofollow.parent_of(rfd, rel, create=True, where=f"install dir {root}") as (fd, leaf):
+                if nofollow.lstat_at(fd, leaf) is None:
+                    os.symlink(target / rel, leaf, dir_fd=fd)
+
+
+def _flag_links(root: Path, archives: Iterable[str]) -> None:
+    """molmospaces-resources' per-archive "links made" flags in a per-file link dir."""
+    for archive in archives:
+        ms.link_flag(root, archive).touch()
 
 
 def _remove_link_tree(path: Path) -> None:
-    """Delete a tree of links made by :func:`_make_links`, refusing one that holds real files."""
+    """Delete a tree of links made by :func:`_make_links` (and their flags), refusing one that holds real files."""
     for dirpath, dirnames, filenames in os.walk(path):
         for name in filenames:
+            if dirpath == str(path) and name.startswith(".") and name.endswith("_complete_links"):
+                continue
             if not os.path.islink(os.path.join(dirpath, name)):
                 raise ResourceError(f"{path} holds real files ({name}); refusing to replace it with links")
     shutil.rmtree(path)

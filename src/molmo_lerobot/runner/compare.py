@@ -96,12 +96,11 @@ def load_run(path: str | Path) -> Run:
 
 def mcnemar_exact(only_a: int, only_b: int) -> float:
     """Two-sided exact McNemar p-value for ``only_a`` vs ``only_b`` discordant pairs."""
-    n = only_a + only_b
-    if n == 0:
+    if only_a + only_b == 0:
         return 1.0
-    k = min(only_a, only_b)
-    tail = sum(math.comb(n, i) for i in range(k + 1))
-    return min(1.0, 2 * tail / 2**n)
+    from scipy.stats import binomtest
+
+    return float(binomtest(only_a, only_a + only_b, 0.5).pvalue)
 
 
 def paired_diff_ci(both: int, only_a: int, only_b: int, neither: int, z: float = Z95) -> tuple[float, float]:

@@ -26,6 +26,7 @@ from tqdm import tqdm
 
 from molmo_lerobot.export.report import write_report
 from molmo_lerobot.export.wandb_log import log_run
+from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.runner.results import EpisodeResult, summarize
@@ -74,15 +75,6 @@ def _versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             pass
     return out
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
 
 
 def resolve_benchmark_path(bench_cfg: dict[str, Any]) -> Path:
@@ -134,6 +126,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         print("molmo-eval: push=true records the dataset it pushes (record=true)", file=sys.stderr)
         cfg["record"] = True
     plugins = get_plugins()
+    plugins.set_preferences((cfg.get("plugins") or {}).get("prefer"))  # workers apply the same pins
     policy_name = str(cfg["policy"]["name"])
     plugins.policy(policy_name)  # unknown or broken policy plugin: fail before any work
     recorders = plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
@@ -181,7 +174,8 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                       "path": str(bench.path)},
         "policy": cfg["policy"], "seed": cfg["seed"], "limit": limit, "horizon": cfg.get("horizon"),
         "timing": cfg["timing"],
-        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera")},
+        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
+                         **({"plugins_prefer": plugins.prefer} if plugins.prefer else {})},  # pinned providers
     }
     done = _prepare_output(out, run_info, bool(cfg.get("resume")))
     results: dict[int, EpisodeResult] = {r.episode_index: r for r in done if r.episode_index in set(indices)}
@@ -205,7 +199,8 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                 record(failed)
         if todo:
             job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], output_dir=str(out),
-                            benchmark_name=bench.name, benchmark_sha256=bench.sha256, recorders=recorders)
+                            benchmark_name=bench.name, benchmark_sha256=bench.sha256, recorders=recorders,
+                            prefer=plugins.prefer)
             try:
                 executor.run(job, todo, record)
             except RunInterrupted as exc:
@@ -216,13 +211,13 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     missing = sorted(set(indices) - set(results))
     if missing:
         raise RunError(f"run ended with {len(missing)} episodes unaccounted for: {missing[:10]}")
-    _atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered))
+    atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered))
     summary = summarize(
         ordered, **run_info, thresholds=thresholds, versions=_versions(), workers=cfg["workers"],
         executor=(cfg.get("executor") or {}).get("name", "local"), output_dir=str(out),
         started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=cfg,
     )
-    _atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")  # the score, before any export
+    atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")  # the score, before any export
     failed = []
     for name, step in [*((f"export {type(f).__name__}", partial(f.finalize, out, ordered, summary)) for f in recorders),
                        ("report", partial(write_report, out, summary, ordered)),
@@ -254,10 +249,10 @@ def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool) -> list[E
                                f"({previous.get(key)!r} vs {current.get(key)!r})")
         (out / RESULTS_FILE).unlink(missing_ok=True)
         done = _read_episodes(out / EPISODES_FILE)
-        _atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))
+        atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))
         return done
     out.mkdir(parents=True, exist_ok=True)
-    _atomic_write(run_file, json.dumps(run_info, indent=2) + "\n")
+    atomic_write(run_file, json.dumps(run_info, indent=2) + "\n")
     (out / EPISODES_FILE).touch()
     return []
 

@@ -6,7 +6,6 @@ a failure with its ``error`` recorded; it is never dropped from the denominator.
 
 from __future__ import annotations
 
-import math
 from collections import defaultdict
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -46,14 +45,13 @@ class EpisodeResult:
 
 
 def wilson_ci(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
-    """Wilson score interval for k successes in n trials (``(0, 1)`` when n == 0)."""
+    """Wilson score interval (scipy's) for k successes in n trials at ``z`` (``(0, 1)`` when n == 0)."""
     if n == 0:
         return (0.0, 1.0)
-    p = k / n
-    denom = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return (max(0.0, centre - half), min(1.0, centre + half))
+    from scipy.stats import binomtest, norm  # lazily: workers import this module, not scipy.stats
+
+    ci = binomtest(k, n).proportion_ci(confidence_level=1 - 2 * norm.sf(z), method="wilson")
+    return (float(ci.low), float(ci.high))
 
 
 def _block(results: list[EpisodeResult]) -> dict[str, Any]:

@@ -50,6 +50,7 @@ class WorkerJob:
     benchmark_name: str
     benchmark_sha256: str
     recorders: list[RecorderFactory] = field(default_factory=list)
+    prefer: dict[str, dict[str, str]] = field(default_factory=dict)  # the run's plugins.prefer pins
 
 
 class WorkerStop(BaseException):
@@ -67,6 +68,7 @@ class EpisodeWorker:
         self.job = job
         self.worker_id = worker_id
         self.plugins = get_plugins()
+        self.plugins.set_preferences(job.prefer)
         self.timing = Timing(**job.timing)
         self.policy_name = str(job.policy["name"])
         self.policy = make_policy(job.policy)

@@ -1,0 +1,73 @@
+"""``--env.type=molmo``: molmo_lerobot benchmarks inside LeRobot's own tools.
+
+``lerobot-eval --policy.path=… --env.type=molmo --env.task=pick_v1`` (a shipped benchmark name or a
+benchmark directory). Observation and action features are named as in our ``record=true`` datasets
+(``observation.images.<camera>``, ``observation.state``, ``action``), so a policy trained with
+``lerobot-train`` on such a dataset evaluates here without mapping flags. ``--seed=0`` runs the
+benchmark's episodes in order; ``--seed=S`` starts at episode ``S mod N`` (see
+``molmo_lerobot.gym_env``). LeRobot's ``pc_success`` counts an episode as a success if any step
+succeeded: that is ``success_once`` in ``molmo-eval``'s episodes.jsonl.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import partial
+from typing import Any
+
+from lerobot.configs.types import FeatureType, PolicyFeature
+from lerobot.envs.configs import EnvConfig
+from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
+
+
+@EnvConfig.register_subclass("molmo")
+@dataclass
+class MolmoEnvConfig(EnvConfig):
+    task: str | None = "pick_v1"
+    fps: int = 15
+    #: molmo-eval's run seed: per-episode simulator seeds derive from it and each episode's content
+    run_seed: int = 0
+    #: policy steps per episode (default: as molmo-eval resolves it per task)
+    horizon: int | None = None
+    end_on_success: bool = False
+    timing: dict[str, float] = field(default_factory=dict)
+    features: dict[str, PolicyFeature] = field(default_factory=dict)
+    features_map: dict[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        from molmo_lerobot.gym_env import MolmoEnv
+
+        env = MolmoEnv(**self.gym_kwargs)
+        try:
+            self.fps = env.metadata["render_fps"]
+            n_action = env.action_space.shape[0]
+            self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(n_action,)),
+                             "agent_pos": PolicyFeature(type=FeatureType.STATE,
+                                                        shape=env.observation_space["agent_pos"].shape)}
+            self.features_map = {ACTION: ACTION, "agent_pos": OBS_STATE}
+            for cam, box in env.observation_space["pixels"].items():
+                key = f"pixels/{cam}"
+                self.features[key] = PolicyFeature(type=FeatureType.VISUAL, shape=box.shape)
+                self.features_map[key] = f"{OBS_IMAGES}.{cam.replace('/', '_')}"
+        finally:
+            env.close()
+
+    @property
+    def gym_kwargs(self) -> dict[str, Any]:
+        return {"benchmark": self.task, "run_seed": self.run_seed, "horizon": self.horizon,
+                "end_on_success": self.end_on_success, "timing": dict(self.timing) or None}
+
+    def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, Any]]:
+        """One vector env of ``n_envs`` copies (a benchmark path is no valid gym id, so no ``gym.make``)."""
+        import gymnasium as gym
+        from gymnasium.vector import AutoresetMode
+
+        from molmo_lerobot.gym_env import MolmoEnv
+
+        make_one = partial(MolmoEnv, **self.gym_kwargs)
+        if use_async_envs and n_envs > 1:
+            vec = gym.vector.AsyncVectorEnv([make_one] * n_envs, autoreset_mode=AutoresetMode.SAME_STEP,
+                                            context="forkserver")
+        else:
+            vec = gym.vector.SyncVectorEnv([make_one] * n_envs, autoreset_mode=AutoresetMode.SAME_STEP)
+        return {self.type: {0: vec}}

@@ -1,0 +1,197 @@
+"""Our benchmarks as Gymnasium environments, in LeRobot's env convention.
+
+``gymnasium.make("molmo_lerobot/<benchmark>")`` works for every shipped benchmark once this
+module is imported (``molmo_lerobot/Benchmark`` takes ``benchmark=<name or directory>``).
+The env steps the very ``Env`` and ``Task`` objects that ``molmo-eval``'s rollout steps; it
+adds no physics or success logic of its own.
+
+Episodes and seeds
+    ``reset(seed=s)`` runs benchmark episode ``s mod N``; ``reset()`` without a seed runs the
+    next episode in benchmark order (starting at 0); ``episode_index=k`` pins one episode.
+    The simulator seed of episode ``i`` is ``molmo-eval``'s (derived from ``run_seed`` and the
+    episode's content), so episode ``i`` here and episode ``i`` of ``molmo-eval seed=<run_seed>``
+    are the same trial. ``lerobot-eval --seed=S`` seeds its ``b``-th env of batch ``k`` with
+    ``S + k * batch_size + b``: with ``--seed=0`` its episode order is benchmark order.
+
+Observation
+    ``{"pixels": {camera: uint8 (H, W, 3)}, "agent_pos": float32 (n,)}``: ``agent_pos`` is the
+    ``observation.state`` of our recorded datasets (each move group's joint positions, in the
+    robot's move-group order; the gripper as 0 open … 1 closed).
+
+Action
+    float32 ``(n,)``: the robot's move groups concatenated in that same order (the
+    ``action`` feature of our datasets), e.g. Franka: 7 arm joint targets + 1 gripper command.
+
+The reward is the task's own (``Task.reward``: e.g. the opening fraction for open/close), else
+1.0 on success and 0.0 otherwise. ``info`` carries ``is_success`` (success in the current state, LeRobot's key), ``success_once``,
+``episode_index``, ``task`` (the task type), ``task_description`` (the prompt), ``seed`` and
+``horizon``. ``terminated`` is set on success when ``end_on_success``; ``truncated`` at the horizon.
+``render()`` returns the first exterior (non-wrist) camera's image.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from molmo_lerobot.runner.episode import EpisodeRunner, load_run_benchmark
+
+NAMESPACE = "molmo_lerobot"
+
+
+class EpisodeIndexError(IndexError):
+    """An episode index outside the benchmark."""
+
+
+class MolmoEnv(gym.Env):
+    """One benchmark as a Gymnasium env; see the module docstring for the conventions."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
+
+    def __init__(self, benchmark: str = "pick_v1", *, episode_index: int | None = None, run_seed: int = 0,
+                 horizon: int | None = None, end_on_success: bool = False, timing: dict[str, float] | None = None,
+                 eval_options: dict[str, Any] | None = None, render_mode: str | None = "rgb_array") -> None:
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
+        self.render_mode = render_mode
+        self.bench = load_run_benchmark(benchmark)
+        self.runner = EpisodeRunner(timing=timing, horizon=horizon, run_seed=run_seed, eval_options=eval_options)
+        self.end_on_success = bool(end_on_success)
+        self._n = len(self.bench.episodes)
+        self._pinned = None if episode_index is None else self._check_index(episode_index)
+        self._next = 0
+        self.metadata = {**self.metadata, "render_fps": round(1000.0 / self.runner.timing.policy_dt_ms)}
+        #: the longest horizon of the benchmark (LeRobot's rollout loop bound)
+        self._max_episode_steps = max(self.runner.horizon_of(e) for e in self.bench.episodes)
+        self._episode = self.runner.open(self.bench, self._pinned or 0)  # spaces come from a real episode
+        self.observation_space, self.action_space = self._spaces()
+        self._steps = 0
+        self._success_once = False
+
+    # Gymnasium API --------------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        if self._pinned is not None:
+            index = self._pinned
+        elif seed is not None:
+            index = int(seed) % self._n
+        else:
+            index = self._next
+        self._next = (index + 1) % self._n
+        self._close_episode()
+        self._episode = self.runner.open(self.bench, index)  # compiled models are cached: reopening is cheap
+        self._steps, self._success_once = 0, False
+        obs = self._episode.env.observe(images=True)
+        self._check_layout(obs)
+        return self._obs(obs), self._info(False)
+
+    def step(self, action: np.ndarray):
+        if self._episode is None:
+            raise RuntimeError("step() before reset()")
+        ep = self._episode
+        a = np.asarray(action, dtype=np.float64).reshape(-1) if not isinstance(action, dict) else action
+        if isinstance(a, np.ndarray) and a.shape != (self._action_dim,):
+            raise ValueError(f"action has shape {np.shape(action)}, expected ({self._action_dim},): "
+                             f"{self._action_doc()}")
+        success = ep.step(self._split(a) if isinstance(a, np.ndarray) else a)
+        self._steps += 1
+        self._success_once |= success
+        terminated = bool(success and self.end_on_success)
+        truncated = self._steps >= ep.horizon and not terminated
+        reward = ep.task.reward()
+        obs = ep.env.observe(images=True)
+        return (self._obs(obs), float(success if reward is None else reward), terminated, truncated,
+                self._info(success))
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None or self._episode is None:
+            return None
+        cams = self._episode.env.camera_names
+        exterior = next((c for c in cams if "wrist" not in c.lower()), cams[0])
+        return self._episode.env.render(exterior)
+
+    def close(self) -> None:
+        self._close_episode()
+
+    # LeRobot's vector env calls these by name ---------------------------------------------------------
+    def task_description(self) -> str:
+        return self._episode.prompt if self._episode else ""
+
+    def task(self) -> str:
+        return self._episode.task_type.name if self._episode else ""
+
+    # Internals --------------------------------------------------------------------------------
+    def _check_index(self, index: int) -> int:
+        if isinstance(index, bool) or not isinstance(index, int | np.integer) or not 0 <= index < self._n:
+            raise EpisodeIndexError(f"episode_index {index!r} is outside benchmark {self.bench.name!r} "
+                                    f"({self._n} episodes: 0..{self._n - 1})")
+        return int(index)
+
+    def _spaces(self) -> tuple[spaces.Dict, spaces.Box]:
+        env = self._episode.env
+        obs = env.observe(images=True)
+        self._groups = dict(env.move_groups)
+        self._cams = {c: np.asarray(img).shape for c, img in obs["images"].items()}
+        self._action_dim = sum(self._groups.values())
+        state_dim = sum(np.asarray(obs["qpos"][g]).size for g in self._groups)
+        pixels = spaces.Dict({c: spaces.Box(0, 255, shape, np.uint8) for c, shape in self._cams.items()})
+        obs_space = spaces.Dict({"pixels": pixels,
+                                 "agent_pos": spaces.Box(-np.inf, np.inf, (state_dim,), np.float32)})
+        act_space = spaces.Box(-np.inf, np.inf, (self._action_dim,), np.float32)
+        return obs_space, act_space
+
+    def _check_layout(self, obs: dict[str, Any]) -> None:
+        """Every episode of one env must share the spaces (cameras, resolution, move groups)."""
+        cams = {c: np.asarray(img).shape for c, img in obs["images"].items()}
+        if cams != self._cams or dict(self._episode.env.move_groups) != self._groups:
+            raise ValueError(f"{self.bench.where(self._episode.index)}: cameras {cams} / move groups "
+                             f"{dict(self._episode.env.move_groups)} differ from this env's spaces "
+                             f"({self._cams} / {self._groups}); pin episode_index to run it")
+
+    def _action_doc(self) -> str:
+        return " + ".join(f"{g} ({d})" for g, d in self._groups.items())
+
+    def _split(self, a: np.ndarray) -> dict[str, np.ndarray]:
+        out, i = {}, 0
+        for g, d in self._groups.items():
+            out[g] = a[i:i + d]
+            i += d
+        return out
+
+    def _obs(self, obs: dict[str, Any]) -> dict[str, Any]:
+        state = np.concatenate([np.asarray(obs["qpos"][g], dtype=np.float32).reshape(-1) for g in self._groups])
+        return {"pixels": {c: np.asarray(obs["images"][c], dtype=np.uint8) for c in self._cams}, "agent_pos": state}
+
+    def _info(self, success: bool) -> dict[str, Any]:
+        ep = self._episode
+        return {"is_success": bool(success), "success_once": bool(self._success_once or success),
+                "episode_index": ep.index, "task": ep.task_type.name, "task_description": ep.prompt,
+                "seed": ep.seed, "horizon": ep.horizon}
+
+    def _close_episode(self) -> None:
+        if self._episode is not None:
+            self._episode.close()
+            self._episode = None
+
+
+def register_benchmarks(namespace: str = NAMESPACE) -> list[str]:
+    """Register ``<namespace>/<name>`` for every shipped benchmark and ``<namespace>/Benchmark``."""
+    from molmo_lerobot.paths import data_path
+
+    ids = []
+    names = sorted(p.name for p in data_path("benchmarks").iterdir() if p.is_dir())
+    for name in names:
+        env_id = f"{namespace}/{name}"
+        if env_id not in gym.registry:
+            gym.register(env_id, entry_point=MolmoEnv, kwargs={"benchmark": name}, disable_env_checker=True)
+        ids.append(env_id)
+    generic = f"{namespace}/Benchmark"
+    if generic not in gym.registry:
+        gym.register(generic, entry_point=MolmoEnv, disable_env_checker=True)
+    return [*ids, generic]
+
+
+register_benchmarks()

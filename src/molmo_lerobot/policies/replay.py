@@ -1,0 +1,62 @@
+"""The replay policy (a policy plugin): plays a fixed action sequence, open loop.
+
+``policy=replay policy.actions=<file.npy>`` with an array of shape ``(T, n)``: one row per policy
+step, the move groups concatenated in the robot's order (the ``action`` feature of our datasets
+and the Gymnasium env's action). Past ``T`` the last row is held. Useful to replay a recorded
+dataset's actions, or the same actions through ``molmo-eval`` and the Gymnasium env.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from molmo_lerobot import hookimpl
+from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
+
+
+class ReplayPolicy(Policy):
+    """Rows of ``policy.actions`` in order, split into move groups."""
+
+    needs_images = False
+
+    def __init__(self, config: dict[str, Any]) -> None:
+        path = config.get("actions")
+        if not path:
+            raise ValueError("policy=replay needs policy.actions=<file.npy> (an array of shape (T, n))")
+        try:
+            actions = np.load(Path(path).expanduser(), allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"policy.actions={path}: cannot load a .npy array ({exc})") from None
+        if actions.ndim != 2 or not len(actions) or not np.all(np.isfinite(actions)):
+            raise ValueError(f"policy.actions={path}: expected a finite array of shape (T, n), got {actions.shape}")
+        self.actions = actions.astype(np.float64)
+        self.move_groups: dict[str, int] = {}
+        self.t = 0
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        self.move_groups = dict(ctx.move_groups)
+        if sum(self.move_groups.values()) != self.actions.shape[1]:
+            raise ValueError(f"policy.actions has {self.actions.shape[1]} columns, the robot's move groups "
+                             f"{self.move_groups} need {sum(self.move_groups.values())}")
+        self.t = 0
+
+    def act(self, obs: Observation) -> Action:
+        row = self.actions[min(self.t, len(self.actions) - 1)]
+        self.t += 1
+        out, start = {}, 0
+        for group, dim in self.move_groups.items():
+            out[group] = row[start:start + dim]
+            start += dim
+        return out
+
+
+def make_replay(config: dict[str, Any]) -> ReplayPolicy:
+    return ReplayPolicy(config)
+
+
+@hookimpl
+def molmo_policies() -> list[PolicyType]:
+    return [PolicyType(name="replay", factory=make_replay, description="a fixed action sequence (policy.actions=…)")]

@@ -1,0 +1,155 @@
+"""MolmoSpaces' resource layout: file names, per-data-type behaviour, pinned versions, and the
+conversion of their metadata into our manifest and index.
+
+What molmospaces-resources writes, and we read and write the same way:
+
+- remote and cache version dir ``<data_type>/<source>/<version>/``: ``REMOTE_MANIFEST``
+  (``{archive: size_mb}``), ``TRIES`` (gzip JSON ``{archive: path trie}``; a trie is nested
+  dicts whose keys may hold several ``/``-joined components, empty dicts are leaves), the
+  extracted tree, and an empty flag ``.<archive>_complete_extract`` per extracted archive;
+- cache and install dir roots: ``LOCAL_MANIFEST`` (``{type: {source: [versions]}}`` in the
+  cache, ``{type: {source: version}}`` in the install dir) and a ``.lock`` file lock each;
+- install dir ``<data_type>/<source>``: one link to the version dir (their ``GLOBAL``), or a
+  real dir of per-file links plus links to the two metadata files and an empty flag
+  ``.<archive>_complete_links`` per linked archive (their ``PER_FILE``); their LMDB cache of
+  the tries under ``.lmdb/<data_type>/<source>`` (dropped when the version changes).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+from molmo_lerobot.resources.errors import ResourceError
+from molmo_lerobot.resources.manifests import ARCHIVE_NAME, clean_rel
+
+REMOTE_MANIFEST = "mjthor_resource_file_to_size_mb.json"
+TRIES = "mjthor_resources_combined_meta.json.gz"
+LOCAL_MANIFEST = "mjthor_data_type_to_source_to_versions.json"
+LOCK = ".lock"
+
+#: MolmoSpaces' public buckets (their R2 bucket for MuJoCo data) and Hub repo.
+BUCKET_URL = "https://pub-3555e9bb2d304fab9c6c79819e48aa40.r2.dev"
+HF_URL = "hf://datasets/allenai/molmospaces/mujoco"
+
+#: Per data type: (link mode, eager); sources listed in ``EAGER_SOURCES`` are always eager.
+BEHAVIOUR = {
+    "robots": ("file", True),
+    "scenes": ("file", False),
+    "objects": ("dir", False),
+    "grasps": ("dir", False),
+    "test_data": ("dir", True),
+    "benchmarks": ("dir", True),
+    "textures": ("dir", True),
+}
+EAGER_SOURCES = {("objects", "thor"), ("objects", "objathor_metadata"), ("grasps", "droid"), ("grasps", "rum")}
+
+#: The data MolmoSpaces' constants pin (scenes per dataset and split, object and grasp
+#: libraries, robots), as ``{data_type: {source: version}}``.
+VERSIONS: dict[str, dict[str, str]] = {
+    "robots": {
+        "rby1": "20251224", "rby1m": "20251224", "franka_droid": "20260127", "franka_cap": "20260213",
+        "floating_rum": "20251110", "floating_robotiq": "20260208_retry4", "franka_fr3": "20260303",
+        "i2rt_yam": "20260223", "g1": "20260802", "humans_rocketbox": "20260812",
+    },
+    "scenes": {
+        "ithor": "20251217_with_occupancy", "refs": "20250923",
+        "procthor-10k-train": "20251122_with_occupancy", "procthor-10k-val": "20251217_with_occupancy",
+        "procthor-10k-test": "20251121_with_occupancy",
+        "holodeck-objaverse-train": "20251217_with_occupancy", "holodeck-objaverse-val": "20251217_with_occupancy",
+        "procthor-objaverse-train": "20251205_with_occupancy", "procthor-objaverse-val": "20251205_with_occupancy",
+    },
+    "objects": {"thor": "20251117", "objaverse": "20260131"},
+    "grasps": {"droid": "20251116", "droid_objaverse": "20251218"},
+}
+
+
+def behaviour(data_type: str, source: str) -> tuple[str, bool]:
+    """``(link mode, eager)`` MolmoSpaces uses for a source."""
+    link, eager = BEHAVIOUR.get(data_type, ("dir", True))
+    return link, eager or (data_type, source) in EAGER_SOURCES
+
+
+def setup_archives(data_type: str, archives: list[str]) -> list[str]:
+    """Archives MolmoSpaces extracts at setup for an on-demand source: every archive of a small
+    scene dataset (under 10), else the scene archives whose names hold no number (shared bases)."""
+    if data_type != "scenes":
+        return []
+    return list(archives) if len(archives) < 10 else [a for a in archives if not re.search(r"\d", a)]
+
+
+def extract_flag(version_dir: Path, archive: str) -> Path:
+    return version_dir / f".{archive.replace('/', '__')}_complete_extract"
+
+
+def link_flag(link_dir: Path, archive: str) -> Path:
+    return link_dir / f".{archive.replace('/', '__')}_complete_links"
+
+
+def is_own_file(rel: str) -> bool:
+    """Their bookkeeping inside a version dir (metadata and flags), not part of the data."""
+    return rel in (REMOTE_MANIFEST, TRIES) or ("/" not in rel and rel.startswith(".") and rel.endswith("_complete_extract"))
+
+
+def convert(data_type: str, source: str, version: str, sizes: object, tries: object,
+            where: str) -> tuple[dict, dict[str, dict[str, list]]]:
+    """Our manifest and index from their ``{archive: size_mb}`` manifest and ``{archive: trie}`` tries."""
+    if not isinstance(sizes, dict) or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and v >= 0 for v in sizes.values()):
+        raise ResourceError(f"{where}: {REMOTE_MANIFEST} must map archive names to sizes in MB")
+    for name in sizes:
+        if not ARCHIVE_NAME.match(name) or not name.endswith(".tar.zst"):
+            raise ResourceError(f"{where}: {REMOTE_MANIFEST}: archive name {name!r} is not a plain .tar.zst file name")
+    if not isinstance(tries, dict):
+        raise ResourceError(f"{where}: {TRIES} must map archive names to path tries")
+    index = {archive: {path: [None, None] for path in trie_leaves(trie, f"{where}: {TRIES}: archive {archive}")}
+             for archive, trie in tries.items()}
+    for archive, paths in index.items():
+        for path in paths:
+            if is_own_file(path):  # an archive must not forge a completion flag or their metadata
+                raise ResourceError(f"{where}: {TRIES}: archive {archive} holds {path!r}, a name MolmoSpaces "
+                                    "keeps for its own bookkeeping")
+    link, _ = behaviour(data_type, source)
+    manifest = {"format": "molmospaces", "data_type": data_type, "source": source, "version": version,
+                "link": link, "uid_depth": 0,
+                "archives": {name: {"size": round(mb * 1e6), "size_mb": mb} for name, mb in sizes.items()}}
+    return manifest, index
+
+
+def trie_leaves(trie: object, where: str) -> list[str]:
+    """Leaf paths of a (possibly compacted) path trie, walked without recursion."""
+    if not isinstance(trie, dict):
+        raise ResourceError(f"{where}: the trie must be a JSON object")
+    leaves: list[str] = []
+    stack: list[tuple[str, dict]] = [("", trie)]
+    while stack:
+        prefix, node = stack.pop()
+        for key, child in node.items():
+            path = f"{prefix}/{key}" if prefix else key
+            if not isinstance(child, dict):
+                raise ResourceError(f"{where}: node {path!r} is not a JSON object")
+            if not clean_rel(path) or path.count("/") > 64:
+                raise ResourceError(f"{where}: path {path!r} is not a clean relative path")
+            if child:
+                stack.append((path, child))
+            else:
+                leaves.append(path)
+    return sorted(leaves)
+
+
+def read_versions_file(path: Path) -> dict[str, dict[str, str]]:
+    """A version table file ``{data_type: {source: version}}`` (their pinned-assets file format)."""
+    from molmo_lerobot.resources.manifests import read_json
+
+    data = read_json(Path(path), f"version table {path}")
+    if not isinstance(data, dict) or not all(
+            isinstance(s, dict) and all(isinstance(k, str) and isinstance(v, str) for k, v in s.items())
+            for s in data.values()):
+        raise ResourceError(f"version table {path}: must hold {{data_type: {{source: version}}}}")
+    return data
+
+
+def cache_dir() -> Path:
+    """MolmoSpaces' cache dir: ``$MLSPACES_CACHE_DIR`` or theirs by default (so both tools share it)."""
+    return Path(os.environ.get("MLSPACES_CACHE_DIR", "~/.cache/molmo-spaces-resources")).expanduser()

@@ -1,0 +1,161 @@
+"""Plugins in real ``molmo-eval`` runs: clashes and pins reach the workers, broken run-time
+hooks leave runs untouched, and ``molmo-eval`` is a Hydra app (``-m`` sweeps, ``--help``)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from molmo_lerobot.cli.eval import main
+from molmo_lerobot.plugins import get_plugins
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_plugins import IMPOSTOR, write_dist  # noqa: E402
+
+FAST = ["policy=random", "limit=2", "horizon=3", "workers=1", "progress=false"]
+BROKEN_RECORDER = """
+from molmo_lerobot import hookimpl
+
+@hookimpl
+def molmo_recorders(config):
+    raise AttributeError("module 'lerobot' has no attribute 'OldRecorderApi'")
+"""
+BROKEN_OVERRIDE = """
+from molmo_lerobot import hookimpl
+
+@hookimpl
+def molmo_episode_overrides(episode, config):
+    return episode.nonexistent_field
+"""
+
+
+@pytest.fixture
+def install(monkeypatch):
+    """``install(root, *modules)``: put a plugin distribution on the path of this process and its workers."""
+    modules: list[str] = []
+
+    def _install(root: Path, *names: str) -> None:
+        monkeypatch.syspath_prepend(str(root))
+        monkeypatch.setenv("PYTHONPATH", os.pathsep.join(p for p in (str(root), os.environ.get("PYTHONPATH")) if p))
+        modules.extend(names)
+        get_plugins.cache_clear()
+
+    yield _install
+    for name in modules:
+        sys.modules.pop(name, None)
+    get_plugins.cache_clear()
+
+
+def _episodes(run: Path) -> list[dict]:
+    rows = [json.loads(line) for line in (run / "episodes.jsonl").read_text().splitlines()]
+    return [{k: r[k] for k in ("episode_index", "success", "steps", "seed", "error")} for r in rows]
+
+
+def test_a_clash_fails_the_run_naming_both_and_a_pin_runs_on_the_chosen_provider(install, tmp_path, monkeypatch, capsys):
+    install(write_dist(tmp_path / "site", "impostor-bots", {"impostor_bots": IMPOSTOR},
+                       {"impostor_franka": "impostor_bots"}), "impostor_bots")
+    marker = tmp_path / "impostor-built"
+    monkeypatch.setenv("IMPOSTOR_MARKER", str(marker))
+
+    assert main([*FAST, f"output_dir={tmp_path / 'clash'}"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert err.startswith("molmo-eval: error: robot 'franka' is provided by plugin 'franka' (molmo-lerobot ")
+    assert "plugin 'impostor_franka' (impostor-bots 0.1)" in err
+    assert not (tmp_path / "clash" / "results.json").exists() and not marker.exists()
+
+    out = tmp_path / "pinned"
+    assert main([*FAST, "plugins.prefer.robot.franka=impostor_franka", f"output_dir={out}"]) == 0
+    summary = json.loads((out / "results.json").read_text())
+    assert (summary["n_episodes"], summary["n_errors"]) == (2, 0)
+    assert summary["eval_options"]["plugins_prefer"] == {"robot": {"franka": "impostor_franka"}}  # provenance
+    capsys.readouterr()
+    assert main([*FAST, "plugins.prefer.robot.franka=franka", f"output_dir={out}", "resume=true"]) == 2
+    assert "its eval_options differs" in capsys.readouterr().err  # never mixes providers in one run
+    built_in = {int(pid) for pid in marker.read_text().split()}
+    assert built_in and os.getpid() not in built_in  # the workers built the pinned impostor
+
+    assert main([*FAST, "plugins.prefer.robot.franka=franka", f"output_dir={tmp_path / 'builtin'}"]) == 0
+    assert {int(pid) for pid in marker.read_text().split()} == built_in  # the built-in never touches it
+
+
+def test_broken_recorder_and_override_plugins_leave_other_runs_untouched(install, tmp_path, capsys):
+    assert main([*FAST, f"output_dir={tmp_path / 'clean'}"]) == 0
+    install(write_dist(tmp_path / "site", "broken-hooks",
+                       {"broken_recorder": BROKEN_RECORDER, "broken_override": BROKEN_OVERRIDE},
+                       {"bad_recorder": "broken_recorder", "bad_override": "broken_override"}),
+            "broken_recorder", "broken_override")
+    capsys.readouterr()
+    assert main([*FAST, f"output_dir={tmp_path / 'with_broken'}"]) == 0
+    err = capsys.readouterr().err
+    assert "plugin 'bad_recorder' (broken-hooks 0.1) is broken and was skipped: molmo_recorders() failed: " \
+           "AttributeError: module 'lerobot' has no attribute 'OldRecorderApi'" in err
+    assert "plugin 'bad_override' (broken-hooks 0.1) is broken and was skipped: molmo_episode_overrides() " \
+           "failed: AttributeError:" in err
+    assert _episodes(tmp_path / "with_broken") == _episodes(tmp_path / "clean")
+    assert all(e["error"] is None for e in _episodes(tmp_path / "with_broken"))
+
+
+def test_a_sweep_writes_one_complete_run_per_job(tmp_path, capsys):
+    sweep = tmp_path / "sweep"
+    assert main(["-m", "policy=random,scripted", "limit=2", "horizon=3", "workers=1", "progress=false",
+                 f"hydra.sweep.dir={sweep}"]) == 0
+    out = capsys.readouterr()
+    assert "Launching 2 jobs locally" in out.err
+    jobs = sorted(p.name for p in sweep.iterdir() if p.is_dir())
+    assert jobs == ["0-random-pick_v1", "1-scripted-pick_v1"]
+    for job, policy in zip(jobs, ("random", "scripted")):
+        summary = json.loads((sweep / job / "results.json").read_text())
+        assert (summary["policy"]["name"], summary["n_episodes"]) == (policy, 2)
+        assert len(_episodes(sweep / job)) == 2 and f"outputs: {sweep / job}" in out.out
+    assert (sweep / "multirun.yaml").is_file()
+
+
+def test_a_sweep_job_that_fails_does_not_stop_the_others(tmp_path, capsys):
+    sweep = tmp_path / "sweep"
+    assert main(["-m", "workers=0,1", *FAST[:3], "progress=false", f"hydra.sweep.dir={sweep}"]) == 2
+    assert "workers must be at least 1, got 0" in capsys.readouterr().err
+    assert json.loads((sweep / "1-random-pick_v1" / "results.json").read_text())["n_episodes"] == 2
+
+
+def test_a_single_run_writes_nothing_but_its_output_dir(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main([*FAST, "output_dir=out"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_help_is_hydras_app_help_with_every_config_group(capsys):
+    assert main(["--help"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: molmo-eval [-m]")
+    groups = dict(line.split(": ", 1) for line in out.split("== Config groups ==")[1].split("==")[0].strip().splitlines())
+    assert {"random", "scripted", "lerobot"} <= set(groups["policy"].split(", "))
+    assert "--multirun" in out and "--cfg" in out
+
+
+CONFIG_PLUGIN = """
+from pathlib import Path
+from molmo_lerobot import hookimpl
+
+@hookimpl
+def molmo_config_dirs():
+    return [str(Path(__file__).parent / "sine_conf")]
+"""
+
+
+def test_plugin_config_dirs_join_the_search_path_of_compose_and_the_app(install, tmp_path):
+    from molmo_lerobot.config import compose
+
+    root = write_dist(tmp_path / "site", "sine-configs", {"sine_configs": CONFIG_PLUGIN}, {"sine_cfg": "sine_configs"})
+    (root / "sine_conf" / "policy").mkdir(parents=True)
+    (root / "sine_conf" / "policy" / "sine.yaml").write_text("name: sine\namplitude: 0.1\n")
+    install(root, "sine_configs")
+    assert compose(["policy=sine", "policy.amplitude=0.3"]).policy == {"name": "sine", "amplitude": 0.3}
+    res = subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.eval", "--info", "searchpath"],
+                         capture_output=True, text=True, timeout=300)  # PYTHONPATH from install()
+    assert res.returncode == 0 and f"| molmo-plugin | file://{root / 'sine_conf'}" in res.stdout
