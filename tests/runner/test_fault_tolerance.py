@@ -212,3 +212,108 @@ def test_a_failing_export_leaves_the_score_standing(faulty_policy, small_bench, 
     assert [r["episode_index"] for r in rows] == [0, 1, 2]
     assert sorted(p.name for p in (tmp_path / "traces").iterdir()) == ["trace-0", "trace-1", "trace-2"]
     assert (out / "report.html").exists(), "the report runs even though an export step failed"
+
+
+class _ScriptedTransport:
+    """An in-memory transport for the supervisor's state machine: each started worker follows the
+    next entry of ``starts`` (``ok``, ``die`` while starting, ``init_error``), each attempt of an
+    episode the next entry of ``attempts[episode]`` (``ok``, ``die``, ``hang``; default ``ok``)."""
+
+    def __init__(self, starts=(), attempts=None):
+        self.starts, self.attempts = list(starts), {k: list(v) for k, v in (attempts or {}).items()}
+        self.started, self.stopped = [], []
+
+    def open(self, workers):
+        pass
+
+    def close(self):
+        pass
+
+    def start(self, worker_id, job):
+        handle = {"id": worker_id, "start": self.starts.pop(0) if self.starts else "ok", "ready": False,
+                  "item": None, "dead": False}
+        self.started.append(worker_id)
+        return handle
+
+    def submit(self, handle, item):
+        handle["item"] = item
+
+    def wait(self, handles, timeout):
+        time.sleep(0.001)
+
+    def events(self, h):
+        from molmo_lerobot.runner.supervisor import DEAD, INIT_ERROR, READY, RESULT
+
+        if h["dead"]:
+            return []
+        if not h["ready"]:
+            if h["start"] == "die":
+                h["dead"] = True
+                return [(DEAD, "signal SIGKILL")]
+            if h["start"] == "init_error":
+                h["dead"] = True
+                return [(INIT_ERROR, "RuntimeError: no GPU")]
+            h["ready"] = True
+            return [(READY, None)]
+        item = h["item"]
+        if item is None:
+            return []
+        todo = self.attempts.get(item.episode_index) or ["ok"]
+        what = todo.pop(0) if len(todo) > 1 else todo[0]
+        if what == "die":
+            h["dead"] = True
+            return [(DEAD, "signal SIGKILL")]
+        if what == "hang":
+            return []
+        h["item"] = None
+        return [(RESULT, {"episode_index": item.episode_index, "house_index": 0, "task_cls": "x", "success": True,
+                          "success_once": True, "steps": item.horizon, "seed": item.seed})]
+
+    def stop(self, h):
+        self.stopped.append(h["id"])
+        h["dead"] = True
+
+    def ended(self, h):
+        return h["dead"]
+
+    def kill(self, h):
+        h["dead"] = True
+
+
+def _supervise(transport, n, **options):
+    from molmo_lerobot.runner.supervisor import Supervisor
+    from molmo_lerobot.runner.worker import WorkItem
+
+    results = []
+    items = [WorkItem(i, {"house_index": i, "task": {"task_cls": "x"}}, 100 + i, "pick", 5) for i in range(n)]
+    Supervisor(transport, workers=2, **options).run(None, items, results.append)
+    return {r.episode_index: r for r in results}, len(results)
+
+
+def test_supervisor_charges_start_up_deaths_to_the_episode_and_bounds_retries():
+    # worker w0 runs episode 0 and dies; its replacement dies while starting: episode 0 is out of retries
+    t = _ScriptedTransport(starts=["ok", "ok", "die"], attempts={0: ["die", "ok"]})
+    by, n = _supervise(t, 4, retries=1)
+    assert n == 4 and sorted(by) == [0, 1, 2, 3], "every episode reported exactly once"
+    assert by[0].error == "worker process died with signal SIGKILL while starting" and by[0].attempts == 2
+    assert by[0].task_type == "pick" and by[0].horizon == 5 and by[0].seed == 100
+    assert all(by[i].error is None and by[i].attempts == 1 for i in (1, 2, 3))
+
+
+def test_supervisor_init_error_fails_the_run_only_before_any_worker_started():
+    from molmo_lerobot.runner.supervisor import WorkerStartError
+
+    with pytest.raises(WorkerStartError, match="worker could not start: RuntimeError: no GPU"):
+        _supervise(_ScriptedTransport(starts=["init_error", "init_error"]), 2)
+    t = _ScriptedTransport(starts=["ok", "ok", "init_error"], attempts={1: ["die", "ok"]})
+    by, n = _supervise(t, 3, retries=2)
+    # one death and one worker that could not start: two more attempts, charged, no error, the run goes on
+    assert n == 3 and all(r.error is None for r in by.values()) and sum(r.attempts for r in by.values()) == 5
+
+
+def test_supervisor_watchdog_records_a_timeout_and_stops_the_worker():
+    t = _ScriptedTransport(attempts={1: ["hang"]})
+    by, n = _supervise(t, 3, timeout_s=0.2)
+    assert n == 3 and by[1].error == "episode timed out after 0.2 s (watchdog)" and by[1].attempts == 1
+    assert by[0].error is None and by[2].error is None
+    assert "w1g0" in t.stopped, "the hung worker was asked to stop"
