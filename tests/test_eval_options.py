@@ -15,7 +15,7 @@ from molmo_lerobot.config import compose
 from molmo_lerobot.overrides import OverrideError, molmo_episode_overrides
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
-from molmo_lerobot.runner.evaluate import run_evaluation
+from molmo_lerobot.runner.evaluate import RunError, run_evaluation
 from molmo_lerobot.sim.env import Timing, make_env
 
 CUSTOM_MJCF = """<mujoco><worldbody><body name="thing"><freejoint/>
@@ -126,12 +126,14 @@ def test_plugin_episode_overrides_apply(tmp_path, monkeypatch):
     assert [r["prompt"] for r in _rows(tmp_path)] == ["overridden"]
 
 
-def test_robots_without_a_plugin_are_errors_not_crashes(tmp_path):
-    """MolmoSpaces door/nav episodes need a mobile robot: each is counted as an error with the reason."""
+def test_runs_that_cannot_simulate_fail_up_front(tmp_path, monkeypatch):
+    """MolmoSpaces episodes whose scenes (and mobile robots) are missing here: one line, before any worker."""
+    monkeypatch.setenv("MLSPACES_ASSETS_DIR", str(tmp_path / "no_assets"))
     bench = Path(__file__).parent / "data" / "molmospaces" / "mixed_tasks"
-    res = run_evaluation(compose(["policy=random", "workers=1", f"benchmark.path={bench}", "horizon=2",
-                                  f"output_dir={tmp_path}", "progress=false"]))
-    rows = _rows(tmp_path)
-    assert len(rows) == res.summary["n_episodes"] == len(load_benchmark(bench).episodes)
-    mobile = [r for r in rows if "no robot plugin provides 'rby1" in (r["error"] or "")]
-    assert mobile and all(not r["success"] for r in mobile)
+    with pytest.raises(RunError, match=r"^cannot simulate 8 of 8 episodes: .*mixed_tasks/benchmark.json: episodes 0, 1: "
+                                       r"field scene_dataset: scene 'procthor-objaverse' val house 2115: "
+                                       r".*no_assets/scenes/procthor-objaverse-val/val_2115_ceiling.xml not found"):
+        run_evaluation(compose(["policy=random", "workers=1", f"benchmark.path={bench}", "horizon=2",
+                                f"output_dir={tmp_path / 'run'}", "progress=false"]))
+    assert not (tmp_path / "run").exists()
+

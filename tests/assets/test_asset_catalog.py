@@ -33,25 +33,37 @@ def _pose(z: float) -> np.ndarray:
 
 @pytest.fixture
 def user_lib(tmp_path):
-    """A user library: a new object, an override of a built-in's metadata, grasps, per-joint grasps."""
+    """A MolmoSpaces-format user library: a new object, an override of a built-in's metadata, grasps,
+    per-joint grasps (``assets_index.json`` + ``grasps_index.json`` in one directory)."""
     root = tmp_path / "userlib"
-    (root / "objects").mkdir(parents=True)
-    (root / "mjcf").mkdir()
-    (root / "mjcf" / "my_cabinet.xml").write_text("<mujoco model='cabinet'/>")
-    (root / "mjcf" / "can.xml").write_text("<mujoco model='user can'/>")
-    docs = {
-        "my_cabinet": {"assetId": "my_cabinet", "category": "cabinet", "description": "oak cabinet",
-                       "mass": 12.0, "mjcf": "../mjcf/my_cabinet.xml", "arrays": "my_cabinet.npz"},
-        UID: {"assetId": UID, "description": "user red can", "mjcf": "../mjcf/can.xml"},
-    }
-    for uid, doc in docs.items():
-        (root / "objects" / f"{uid}.json").write_text(json.dumps(doc))
-    np.savez(root / "objects" / "my_cabinet.npz", handle_positions=np.ones((2, 3)))
-    (root / "library.json").write_text(json.dumps({"name": "mine", "objects": {u: f"objects/{u}.json" for u in docs}}))
-    save_grasp_file(root / "grasps" / "franka" / f"{UID}.npz", np.stack([_pose(0.5)] * 3))
-    save_grasp_file(root / "grasps" / "franka" / "my_cabinet" / "door_hinge.npz", np.stack([_pose(0.1)] * 4))
-    save_grasp_file(root / "grasps" / "franka" / "my_cabinet" / "drawer_slide.npz", np.stack([_pose(0.2)] * 2))
+    for d in ("my_cabinet/franka", f"{UID}/franka"):
+        (root / d).mkdir(parents=True)
+    (root / "my_cabinet" / "my_cabinet.xml").write_text("<mujoco model='cabinet'/>")
+    (root / UID / "can.xml").write_text("<mujoco model='user can'/>")
+    (root / "my_cabinet" / "my_cabinet.json").write_text(json.dumps(
+        {"assetId": "my_cabinet", "category": "cabinet", "description": "oak cabinet", "mass": 12.0}))
+    (root / UID / f"{UID}.json").write_text(json.dumps({"assetId": UID, "description": "user red can"}))
+    np.savez(root / "my_cabinet" / "my_cabinet.npz", handle_positions=np.ones((2, 3)))
+    (root / "assets_index.json").write_text(json.dumps({
+        "my_cabinet": {"uid": "my_cabinet", "object_path": "my_cabinet/my_cabinet.xml",
+                       "metadata_path": "my_cabinet/my_cabinet.json", "metadata_npz_path": "my_cabinet/my_cabinet.npz"},
+        UID: {"uid": UID, "object_path": f"{UID}/can.xml", "metadata_path": f"{UID}/{UID}.json",
+              "metadata_npz_path": None}}))
+    save_grasp_file(root / UID / "franka" / "grasps.npz", np.stack([_pose(0.5)] * 3))
+    save_grasp_file(root / "my_cabinet" / "franka" / "joint_grasps_door_hinge.npz", np.stack([_pose(0.1)] * 4))
+    save_grasp_file(root / "my_cabinet" / "franka" / "joint_grasps_drawer_slide.npz", np.stack([_pose(0.2)] * 2))
+    (root / "grasps_index.json").write_text(json.dumps({
+        "grasp_paths": {"franka": {UID: f"{UID}/franka/grasps.npz"}},
+        "articulated_grasp_paths": {"franka": {"my_cabinet": {
+            "door_hinge": "my_cabinet/franka/joint_grasps_door_hinge.npz",
+            "drawer_slide": "my_cabinet/franka/joint_grasps_drawer_slide.npz"}}}}))
     return root
+
+
+def _register(cat, root, name="mine"):
+    lib = cat.register_user_asset_library(name, root)
+    cat.register_user_grasp_library(f"{name}_grasps", root, name)
+    return lib
 
 
 def test_builtin_set_is_an_asset_library():
@@ -90,12 +102,12 @@ def test_module_level_get_grasps_works_on_fresh_clone(tmp_path, monkeypatch):
 def test_user_library_registered_at_runtime(user_lib, tmp_path, monkeypatch):
     monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(tmp_path / "home"))
     cat = AssetCatalog()
-    lib = cat.register_directory(user_lib)
+    lib = _register(cat, user_lib)
     assert lib.name == "mine" and [l.name for l in cat.libraries] == ["mine", "builtin"]
     loc = cat.locate_uid("my_cabinet")
-    assert (loc.library, loc.archive, loc.mjcf_path) == ("mine", None, user_lib / "mjcf" / "my_cabinet.xml")
+    assert (loc.library, loc.archive, loc.mjcf_path) == ("mine", None, user_lib / "my_cabinet" / "my_cabinet.xml")
     doc = cat.annotation("my_cabinet")
-    assert doc["category"] == "cabinet" and doc["handle_positions"].shape == (2, 3) and "mjcf" not in doc
+    assert doc["category"] == "cabinet" and doc["handle_positions"].shape == (2, 3)
     # the union: the user library overrides the description, the built-in fills the other fields
     can = cat.annotation(UID)
     assert can["description"] == "user red can" and can["synset"] == "can.n.01" and can["mass"] == 0.15
@@ -110,12 +122,12 @@ def test_user_library_registered_at_runtime(user_lib, tmp_path, monkeypatch):
     with pytest.raises(GraspError, match="joint 'lid'"):
         cat.get_grasps("my_cabinet", joint="lid")
     with pytest.raises(AssetError, match="already registered"):
-        cat.register_directory(user_lib)
+        cat.register_user_asset_library("mine", user_lib)
 
 
 def test_newest_grasp_library_goes_first(user_lib, tmp_path):
     cat = AssetCatalog()
-    cat.register_directory(user_lib)
+    _register(cat, user_lib)
     extra = tmp_path / "extra_grasps"
     save_grasp_file(extra / "franka" / f"{UID}.npz", np.stack([_pose(0.9)]))
     cat.register_grasp_library(extra)
@@ -130,18 +142,17 @@ def test_malformed_user_libraries_name_the_file(tmp_path):
     root = tmp_path / "bad"
     root.mkdir()
     cat = AssetCatalog()
-    with pytest.raises(AssetError, match=r"bad/library.json: file not found"):
-        cat.register_directory(root)
-    (root / "library.json").write_text("{not json")
-    with pytest.raises(AssetError, match="library.json: invalid JSON"):
-        cat.register_directory(root)
-    (root / "library.json").write_text(json.dumps({"objects": {"x": "x.json"}}))
-    with pytest.raises(AssetError, match="object 'x': .*x.json not found"):
-        cat.register_directory(root)
-    (root / "x.json").write_text(json.dumps({"assetId": "x"}))
-    cat.register_directory(root)
-    with pytest.raises(AssetError, match=r"x.json: field 'mjcf'"):
-        cat.locate_uid("x")
+    with pytest.raises(AssetError, match=r"bad/assets_index.json: file not found"):
+        cat.register_user_asset_library("bad", root)
+    (root / "assets_index.json").write_text("{not json")
+    with pytest.raises(AssetError, match="assets_index.json: invalid JSON"):
+        cat.register_user_asset_library("bad", root)
+    (root / "assets_index.json").write_text(json.dumps({"x": {"uid": "x", "object_path": "x.xml"}}))
+    with pytest.raises(AssetError, match=r"assets_index.json: field x.object_path: .*x.xml not found"):
+        cat.register_user_asset_library("bad", root)
+    (root / "x.xml").write_text("<mujoco/>")
+    with pytest.raises(AssetError, match=r"assets_index.json: field x.metadata_path: missing"):
+        cat.register_user_asset_library("bad", root)
     save_bad = tmp_path / "g" / "franka" / "x.npz"
     save_bad.parent.mkdir(parents=True)
     np.savez(save_bad, transforms=np.zeros((3, 3, 3)))
@@ -173,7 +184,7 @@ def test_packed_library_metadata_in_lmdb_and_install_uid(tmp_path, user_lib):
     mgr.install("grasps/packed@1", on_demand=True)
     cat = AssetCatalog()
     cat.register_library(ResourceAssetLibrary(mgr, "objects/packed@1", "grasps/packed@1"))
-    cat.register_directory(user_lib)  # registered later: first in priority
+    _register(cat, user_lib)  # registered later: first in priority
     assert cat.annotation("lamp_02")["category"] == "lamp"
     assert (mgr.meta_dir("objects/packed@1") / "metadata.lmdb" / "data.mdb").is_file()
     loc = cat.locate_uid("vase_01")

@@ -106,7 +106,7 @@ def test_wrong_types_show_the_value(episodes, tmp_path):
     bad[1]["robot"]["init_qpos"]["arm"][2] = "x"
     f = _write_list(tmp_path, bad) / "benchmark.json"
     problems = _problems(f.parent)
-    assert f"{f}: episode 1: field house_index: Input should be a valid integer, unable to parse string as an integer (got \"twelve\")" in problems
+    assert f"{f}: episode 1: field house_index: Input should be a valid integer (got \"twelve\")" in problems
     assert any(p.startswith(f"{f}: episode 1: field robot.init_qpos.arm[2]: ") for p in problems)
 
 
@@ -149,7 +149,7 @@ def test_missing_and_empty_paths(tmp_path):
     assert _problems(tmp_path / "nope") == [f"{tmp_path / 'nope'}: no such benchmark file or directory"]
     (tmp_path / "empty").mkdir()
     (problem,) = _problems(tmp_path / "empty")
-    assert "no benchmark.json and no house_<id>/episode_<8 digits>.json files" in problem
+    assert "no benchmark.json and no house_<id>/episode_<n>.json files" in problem
 
 
 def test_bad_metadata_is_reported(data, tmp_path):

@@ -21,15 +21,16 @@ from molmo_lerobot.runner.compare import (
 SHA = "ab" * 32
 
 
-def _write_run(path, outcomes, sha=SHA, policy="p", seed=0, task=lambda i: "pick", errors=()):
+def _write_run(path, outcomes, sha=SHA, policy="p", seed=0, task=lambda i: "pick", errors=(), header=None,
+               horizon=lambda i: 10, task_cls="x.Pick"):
     """A finished run directory with ``outcomes[i] = (success, success_once)`` per episode index."""
     path.mkdir(parents=True)
-    rows = [{"episode_index": i, "house_index": i // 2, "task_cls": "x.Pick", "success": s, "success_once": o,
+    rows = [{"episode_index": i, "house_index": i // 2, "task_cls": task_cls, "success": s, "success_once": o,
              "steps": 10, "seed": 1000 * seed + i, "error": "RuntimeError: boom" if i in errors else None,
-             "task_type": task(i)} for i, (s, o) in outcomes.items()]
+             "task_type": task(i), "horizon": horizon(i)} for i, (s, o) in outcomes.items()]
     (path / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
     (path / "results.json").write_text(json.dumps({"benchmark": {"name": "b", "sha256": sha, "n_episodes": 99},
-                                                   "policy": {"name": policy}, "seed": seed}))
+                                                   "policy": {"name": policy}, "seed": seed, **(header or {})}))
     return path
 
 
@@ -117,12 +118,93 @@ def test_cli_text_and_json(tmp_path, capsys):
     assert err.startswith("molmo-compare: error: refusing to compare") and err.count("\n") == 1
 
 
+TRIAL = {"timing": {"policy_dt_ms": 66.0, "ctrl_dt_ms": 2.0, "sim_dt_ms": 2.0}, "horizon": None,
+         "eval_options": {"horizons": {}, "custom_object": {"path": None}, "camera": {"randomization": 0}},
+         "thresholds": {"pick": {"succ_pos_threshold": 0.01, "horizon_steps": [303]}},
+         "versions": {"molmo-lerobot": "0.1.0", "mujoco": "3.3.0"},
+         "config": {"workers": 2, "episode_timeout_s": 900, "output_dir": "x"}}
+
+
+def _changed(path: str, value):
+    """A copy of TRIAL with the dotted ``path`` set to ``value``."""
+    header = json.loads(json.dumps(TRIAL))
+    *parents, last = path.split(".")
+    node = header
+    for key in parents:
+        node = node[key]
+    node[last] = value
+    return header
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "needle"),
+    [
+        ("timing.sim_dt_ms", 1.0, 'timing {"ctrl_dt_ms": 2.0, "policy_dt_ms": 66.0, "sim_dt_ms": 2.0} vs'),
+        ("horizon", 50, "horizon null vs 50"),
+        ("eval_options.horizons", {"pick": 5}, "eval_options"),
+        ("eval_options.camera.randomization", 2, "eval_options"),
+        ("eval_options.custom_object.path", "/x.xml", "eval_options"),
+        ("thresholds.pick.succ_pos_threshold", 0.05, "thresholds.pick"),
+    ],
+)
+def test_compare_refuses_runs_of_different_trials(tmp_path, path, value, needle):
+    """Issue 11.10: runs with different horizons, timing or eval options were paired without a word."""
+    a = _write_run(tmp_path / "a", {i: (True, True) for i in range(4)}, header=TRIAL)
+    b = _write_run(tmp_path / "b", {i: (False, True) for i in range(4)}, header=_changed(path, value))
+    with pytest.raises(CompareError, match="refusing to compare.*ran different trials") as info:
+        compare_runs(load_run(a), load_run(b))
+    assert needle in str(info.value) and "--allow-different-trials" in str(info.value)
+    rep = compare_runs(load_run(a), load_run(b), allow_different_trials=True)
+    assert any("ran different trials (compared anyway)" in n and needle in n for n in rep["notes"])
+
+
+def test_compare_refuses_different_per_episode_horizons_and_flags_the_rest(tmp_path, capsys):
+    a = _write_run(tmp_path / "a", {i: (True, True) for i in range(4)}, header=TRIAL)
+    b = _write_run(tmp_path / "b", {i: (True, True) for i in range(4)}, header=TRIAL, horizon=lambda i: 10 + (i == 2))
+    with pytest.raises(CompareError, match=r"horizon of 1 shared episodes \(episode 2: 10 vs 11 steps\)"):
+        compare_runs(load_run(a), load_run(b))
+    assert main([str(a), str(b)]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    assert main([str(a), str(b), "--allow-different-trials"]) == 0
+    assert "note: the runs ran different trials (compared anyway): horizon of 1" in capsys.readouterr().out
+    # flagged, not refused: versions and config keys that are not part of the trial's definition
+    c = _write_run(tmp_path / "c", {i: (True, True) for i in range(4)},
+                   header={**_changed("versions.mujoco", "3.4.0"),
+                           "config": {"workers": 8, "episode_timeout_s": 5, "output_dir": "y"}})
+    notes = compare_runs(load_run(a), load_run(c))["notes"]
+    assert "versions differ: mujoco 3.3.0 vs 3.4.0" in notes
+    assert "config differs: episode_timeout_s 900 vs 5" in notes  # workers and output_dir do not matter
+    # a run that does not record a trial field cannot be checked on it: say so
+    d = _write_run(tmp_path / "d", {i: (True, True) for i in range(4)})
+    assert any("not checked: timing, horizon, eval_options" in n for n in compare_runs(load_run(a), load_run(d))["notes"])
+
+
+def test_errored_episodes_without_a_task_type_stay_in_their_task(tmp_path):
+    """Issue 11.2: errored records (task_type null) were a separate "task" named by their task_cls."""
+    cls = "molmo_lerobot.tasks.pick.PickTask"
+    a = _write_run(tmp_path / "a", {i: (i < 4, i < 4) for i in range(8)}, task_cls=cls, errors={6, 7},
+                   task=lambda i: None if i >= 6 else "pick")
+    b = _write_run(tmp_path / "b", {i: (True, True) for i in range(8)}, task_cls=cls,
+                   task=lambda i: None if i >= 6 else "pick")  # older records: resolved from task_cls
+    rep = compare_runs(load_run(a), load_run(b))
+    assert list(rep["per_task"]) == ["pick"] and rep["per_task"]["pick"]["n"] == 8
+    assert rep["per_task"]["pick"]["rate_a"] == 0.5
+
+
 @pytest.mark.slow
 def test_compare_two_real_runs(small_bench, tmp_path, eval_config, capsys):
     run_evaluation = pytest.importorskip("molmo_lerobot.runner.evaluate").run_evaluation
-    run_evaluation(eval_config(small_bench, tmp_path / "random", "policy=random", "workers=2", "horizon=40"))
+    run_evaluation(eval_config(small_bench, tmp_path / "random", "policy=random", "workers=2"))  # same trial
     run_evaluation(eval_config(small_bench, tmp_path / "scripted", "policy=scripted", "workers=2"))
     assert main([str(tmp_path / "random"), str(tmp_path / "scripted"), "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["n_shared"] == 8 and rep["overall"]["diff"] > 0.5
     assert rep["overall"]["p_value"] < 0.05 and rep["overall"]["ci95"][0] > 0
+
+
+def test_deeply_nested_run_files_are_one_line(tmp_path, capsys):
+    a = _write_run(tmp_path / "a", {0: (True, True)})
+    b = _write_run(tmp_path / "b", {0: (True, True)})
+    (b / "results.json").write_text("[" * 100_000 + "]" * 100_000)
+    assert main([str(a), str(b)]) == 2
+    assert capsys.readouterr().err == f"molmo-compare: error: {b / 'results.json'}: JSON nested too deeply\n"

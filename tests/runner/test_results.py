@@ -40,3 +40,29 @@ def test_episode_result_roundtrip_keeps_contract_fields():
     for key in ("episode_index", "house_index", "task_cls", "success", "success_once", "steps", "seed", "error"):
         assert key in d
     assert EpisodeResult.from_dict(d) == r
+
+
+def test_no_episode_simulated_is_no_score_but_honest_counts():
+    from molmo_lerobot.runner.results import summary_lines
+
+    rs = [EpisodeResult.failed(i, 1, "a.Pick", i, "RuntimeError: boom", task_type="pick") for i in range(3)]
+    s = summarize(rs, benchmark={"name": "b"}, policy={"name": "p"})
+    assert (s["n_episodes"], s["n_valid"], s["n_errors"], s["n_success"]) == (3, 0, 3, 0)
+    assert s["success_rate"] is None and s["success_once_rate"] is None and s["ci95"] is None
+    assert s["per_task"]["pick"]["success_rate"] is None
+    lines = summary_lines(s)
+    assert lines[0] == "no episode ran: 3 of 3 episodes errored · b · p: no score"
+    assert not any("0.000" in ln for ln in lines)
+
+
+def test_errors_lead_the_headline_and_tasks_without_a_valid_episode_have_no_rate():
+    from molmo_lerobot.runner.results import summary_lines
+
+    rs = [EpisodeResult(0, 1, "a.Pick", True, True, 10, 1, task_type="pick"),
+          EpisodeResult.failed(1, 2, "a.Open", 3, "RuntimeError: boom", task_type="open")]
+    s = summarize(rs, benchmark={"name": "b"}, policy={"name": "p"})
+    assert s["n_valid"] == 1 and s["success_rate"] == 0.5
+    assert s["per_task"]["open"]["success_rate"] is None and s["per_task"]["pick"]["n_valid"] == 1
+    lines = summary_lines(s)
+    assert lines[0].startswith("1 of 2 episodes errored · b · p: success 0.500")
+    assert "  open: no episode ran (0/1, 1 errored)" in lines

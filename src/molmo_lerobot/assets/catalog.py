@@ -3,8 +3,11 @@
 ``annotation(uid)`` unions the metadata of every library that knows ``uid`` (higher
 priority wins per field); ``locate_uid`` / ``install_uid`` use the first library that holds
 it. Grasp lookups try grasp libraries in priority order — a newly registered one goes first —
-restricted to those mapped to a library holding the UID (or to any library). The built-in
-object library and its grasps are always registered, last.
+restricted to those mapped to a library holding the UID (or to any library): first those
+made for the requested robot, then (MolmoSpaces' unified TCP convention makes grasps transfer)
+those kept under another robot's name. The default catalog holds our built-in objects, the
+articulated kitchen items and MolmoSpaces' ``thor``/``objaverse`` libraries with their
+``droid``/``droid_objaverse`` grasps; user libraries in MolmoSpaces' format go first.
 """
 
 from __future__ import annotations
@@ -21,10 +24,20 @@ from molmo_lerobot.assets.libraries import (
     AssetError,
     AssetLibrary,
     BuiltinAssetLibrary,
-    DirectoryAssetLibrary,
     ResourceAssetLibrary,
     UidLocation,
 )
+from molmo_lerobot.assets.user import ASSETS_INDEX, UserAssetLibrary, load_user_grasp_libraries
+
+#: Object sources of MolmoSpaces that a user library may not be named after.
+RESERVED_LIBRARY_NAMES = ("thor", "objaverse", "objathor_metadata")
+#: A grasp-library robot name → our robots its grasps were made for (beyond the same name).
+GRASP_ROBOT_NAMES = {"droid": ("franka_droid",)}
+
+
+def _serves(library: GraspLibrary, robot: str) -> bool:
+    """Whether ``library`` holds grasps made for ``robot`` (libraries keyed by robot always do)."""
+    return library.robot is None or library.robot == robot or robot in GRASP_ROBOT_NAMES.get(library.robot, ())
 
 
 class AssetCatalog:
@@ -47,9 +60,50 @@ class AssetCatalog:
             self.register_grasp_library(grasps, asset_library=library.name, first=first)
         return library
 
-    def register_directory(self, root: str | os.PathLike, name: str | None = None) -> DirectoryAssetLibrary:
-        """Register a user library from a directory (see :class:`DirectoryAssetLibrary`)."""
-        return self.register_library(DirectoryAssetLibrary(root, name))  # type: ignore[return-value]
+    def register_user_asset_library(self, name: str, path: str | os.PathLike) -> UserAssetLibrary:
+        """Register a MolmoSpaces user asset library (``path/assets_index.json``), first in priority."""
+        if not isinstance(name, str) or not name or "/" in name:
+            raise AssetError(f"user asset library name {name!r} must be non-empty and contain no '/'")
+        if name in RESERVED_LIBRARY_NAMES:
+            raise AssetError(f"user asset library {name!r}: the name of a MolmoSpaces object source")
+        if not (Path(path) / ASSETS_INDEX).is_file():
+            raise AssetError(f"user asset library {name!r}: {Path(path) / ASSETS_INDEX}: file not found")
+        return self.register_library(UserAssetLibrary(name, path))  # type: ignore[return-value]
+
+    def register_user_grasp_library(self, name: str, path: str | os.PathLike,
+                                    asset_library_name: str) -> list[GraspLibrary]:
+        """Register a MolmoSpaces user grasp library as ``name/<robot>`` entries for one asset library."""
+        self.library(asset_library_name)  # must already be registered
+        libraries = load_user_grasp_libraries(name, path)
+        taken = {g.name for g, _ in self.grasp_libraries}
+        for lib in libraries:
+            if lib.name in taken:
+                raise GraspError(f"a grasp library named {lib.name!r} is already registered")
+        for lib in libraries:
+            self.register_grasp_library(lib, asset_library=asset_library_name)
+        return libraries  # type: ignore[return-value]
+
+    def ensure_user_asset_library(self, name: str, path: str | os.PathLike, field: str) -> None:
+        """Register unless the same library is registered already (a run config, once per process)."""
+        root = Path(path).expanduser().resolve()
+        for lib in self.libraries:
+            if lib.name == name and isinstance(lib, UserAssetLibrary) and lib.root == root:
+                return
+        try:
+            self.register_user_asset_library(name, root)
+        except AssetError as exc:
+            raise AssetError(f"{field}: {exc}") from None
+
+    def ensure_user_grasp_library(self, name: str, path: str | os.PathLike, asset_library: str, field: str) -> None:
+        root = Path(path).expanduser().resolve()
+        mine = [g for g, mapped in self.grasp_libraries if g.name.startswith(f"{name}/") and mapped == asset_library
+                and Path(g.root) == root]
+        if mine:
+            return
+        try:
+            self.register_user_grasp_library(name, root, asset_library)
+        except (AssetError, GraspError) as exc:
+            raise type(exc)(f"{field}: {exc}") from None
 
     def register_grasp_library(self, library: GraspLibrary | str | os.PathLike, asset_library: str | None = None,
                                first: bool = True) -> GraspLibrary:
@@ -80,7 +134,8 @@ class AssetCatalog:
         return owners[0]
 
     def _unknown(self, uid: str) -> AssetError:
-        known = [u for lib in self.libraries if not isinstance(lib, ResourceAssetLibrary) for u in lib.uids()]
+        known = [u for lib in self.libraries if getattr(lib, "enumerable", not isinstance(lib, ResourceAssetLibrary))
+                 for u in lib.uids()]
         close = difflib.get_close_matches(uid, known, n=3)
         hint = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
         return AssetError(f"unknown asset UID {uid!r} in libraries {[l.name for l in self.libraries]}{hint}")
@@ -105,17 +160,19 @@ class AssetCatalog:
     def mjcf(self, uid: str) -> str:
         return self._first(uid).mjcf(uid)
 
-    def _grasp_sources(self, uid: str) -> list[GraspLibrary]:
+    def _grasp_sources(self, uid: str, robot: str) -> list[GraspLibrary]:
+        """Grasp libraries for ``uid``: made for ``robot`` first, then other robots', each in priority order."""
         owners = self.owners(uid)
         names = {lib.name for lib in owners}
         for lib in owners:
             if isinstance(lib, ResourceAssetLibrary) and lib.grasps is not None:
                 lib.install(uid)  # grasp files of packed libraries arrive with the object's archive
-        return [g for g, mapped in self.grasp_libraries if mapped is None or mapped in names]
+        mapped = [g for g, owner in self.grasp_libraries if owner is None or owner in names]
+        return [g for g in mapped if _serves(g, robot)] + [g for g in mapped if not _serves(g, robot)]
 
     def get_grasps(self, uid: str, robot: str = "franka", joint: str | None = None) -> np.ndarray:
         """Grasps ``(N, 4, 4)`` in ``uid``'s frame from the first grasp library that has them."""
-        sources = self._grasp_sources(uid)
+        sources = self._grasp_sources(uid, robot)
         for lib in sources:
             got = lib.load(uid, robot, joint)
             if got is not None:
@@ -124,7 +181,7 @@ class AssetCatalog:
         raise GraspError(f"no grasps for {what} and robot {robot!r} in grasp libraries {[g.name for g in sources]}")
 
     def count_grasps(self, uid: str, robot: str = "franka", joint: str | None = None) -> int:
-        for lib in self._grasp_sources(uid):
+        for lib in self._grasp_sources(uid, robot):
             n = lib.count(uid, robot, joint)
             if n is not None:
                 return n
@@ -132,7 +189,7 @@ class AssetCatalog:
 
     def grasp_joints(self, uid: str, robot: str = "franka") -> list[str]:
         """Joints of an articulated ``uid`` that have per-joint grasps (first library that has any)."""
-        for lib in self._grasp_sources(uid):
+        for lib in self._grasp_sources(uid, robot):
             joints = lib.joints(uid, robot)
             if joints:
                 return joints
@@ -141,11 +198,17 @@ class AssetCatalog:
 
 @cache
 def default_catalog() -> AssetCatalog:
-    """The process-wide catalog (built-in and articulated objects); user libraries are added at runtime."""
+    """The process-wide catalog: built-in, articulated and MolmoSpaces objects; user libraries join at runtime."""
     from molmo_lerobot.assets.articulated import ArticulatedAssetLibrary
+    from molmo_lerobot.molmospaces.layout import OBJECT_LIBRARY_TO_GRASP_LIBRARIES
+    from molmo_lerobot.molmospaces.libraries import MolmoSpacesGrasps, MolmoSpacesObjects
 
     catalog = AssetCatalog()
     catalog.register_library(ArticulatedAssetLibrary(), first=False)
+    for source, grasp_sources in OBJECT_LIBRARY_TO_GRASP_LIBRARIES.items():
+        catalog.register_library(MolmoSpacesObjects(source), first=False)
+        for grasps in grasp_sources:
+            catalog.register_grasp_library(MolmoSpacesGrasps(grasps), asset_library=source, first=False)
     return catalog
 
 
@@ -161,8 +224,14 @@ def install_uid(uid: str) -> UidLocation:
     return default_catalog().install_uid(uid)
 
 
-def register_user_library(root: str | os.PathLike, name: str | None = None) -> DirectoryAssetLibrary:
-    return default_catalog().register_directory(root, name)
+def register_user_asset_library(name: str, path: str | os.PathLike) -> UserAssetLibrary:
+    """MolmoSpaces' ``register_user_asset_library(name, path)`` on the process-wide catalog."""
+    return default_catalog().register_user_asset_library(name, path)
+
+
+def register_user_grasp_library(name: str, path: str | os.PathLike, asset_library_name: str) -> list[GraspLibrary]:
+    """MolmoSpaces' ``register_user_grasp_library(name, path, asset_library_name)`` on the process-wide catalog."""
+    return default_catalog().register_user_grasp_library(name, path, asset_library_name)
 
 
 def register_grasp_library(root: str | os.PathLike | GraspLibrary, asset_library: str | None = None) -> GraspLibrary:

@@ -77,7 +77,13 @@ def save_grasp_file(path: str | os.PathLike, transforms: np.ndarray) -> Path:
 
 
 class GraspLibrary:
-    """A directory of grasp files (see the module docstring)."""
+    """A directory of grasp files (see the module docstring).
+
+    ``robot`` is ``None`` for libraries keyed by robot (one subdirectory each); libraries made
+    for one robot (MolmoSpaces' ``droid``, a user library's ``name/<robot>``) name it.
+    """
+
+    robot: str | None = None
 
     def __init__(self, root: str | os.PathLike, name: str | None = None) -> None:
         self.root = Path(root)

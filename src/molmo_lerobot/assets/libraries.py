@@ -1,15 +1,12 @@
 """Asset libraries: UID → MJCF + metadata document (MolmoSpaces' fields).
 
-Three kinds share one interface:
+Kinds sharing one interface:
 
 - :class:`BuiltinAssetLibrary` — the primitive objects of the procedural scenes;
-- :class:`DirectoryAssetLibrary` — a user library registered at runtime from a directory::
-
-      <dir>/library.json            {"name": "...", "objects": {"<uid>": "objects/<uid>.json", ...}}
-      <dir>/objects/<uid>.json      the metadata document + "mjcf": "<relative path>"
-                                    [+ "arrays": "<relative .npz>" whose arrays join the annotation]
-      <dir>/grasps/<robot>/<uid>.npz  (optional grasp library, see :mod:`.grasps`)
-
+- :class:`~molmo_lerobot.assets.user.UserAssetLibrary` — a user library in MolmoSpaces' own
+  format (``assets_index.json``), registered at runtime;
+- :class:`~molmo_lerobot.molmospaces.libraries.MolmoSpacesObjects` — MolmoSpaces' ``thor`` and
+  ``objaverse`` libraries in its assets dir;
 - :class:`ResourceAssetLibrary` — a big library installed through the resource manager
   (``objects/<source>@<version>``: ``<uid>/<uid>.xml`` per object and one ``metadata.jsonl``),
   whose metadata is kept in LMDB; ``install`` fetches the object's archive and its grasps.
@@ -28,7 +25,6 @@ from pathlib import Path
 from typing import Any
 
 import lmdb
-import numpy as np
 import zstandard
 
 from molmo_lerobot.assets.grasps import BuiltinGraspLibrary, GraspLibrary
@@ -132,85 +128,6 @@ class BuiltinAssetLibrary(ObjectTableLibrary):
         super().__init__("builtin", {**BUILTIN_OBJECTS, **BUILTIN_RECEPTACLES}, BuiltinGraspLibrary())
 
 
-def _read_json(path: Path) -> dict:
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise AssetError(f"{path}: file not found") from None
-    except ValueError as exc:
-        raise AssetError(f"{path}: invalid JSON ({exc})") from None
-    if not isinstance(data, dict):
-        raise AssetError(f"{path}: expected a JSON object")
-    return data
-
-
-class DirectoryAssetLibrary(AssetLibrary):
-    """A user library: ``library.json`` index, one JSON per object, optional NPZ arrays and grasps."""
-
-    INDEX = "library.json"
-
-    def __init__(self, root: str | os.PathLike, name: str | None = None) -> None:
-        self.root = Path(root).expanduser().resolve()
-        index_path = self.root / self.INDEX
-        index = _read_json(index_path)
-        objects = index.get("objects")
-        if not isinstance(objects, dict) or not all(isinstance(v, str) for v in objects.values()):
-            raise AssetError(f"{index_path}: field 'objects' must map UID → relative JSON path")
-        self.name = name or index.get("name") or self.root.name
-        self._objects: dict[str, Path] = {uid: self.root / rel for uid, rel in objects.items()}
-        for uid, path in self._objects.items():
-            if not path.resolve().is_relative_to(self.root):
-                raise AssetError(f"{index_path}: object {uid!r} points outside the library ({path})")
-            if not path.is_file():
-                raise AssetError(f"{index_path}: object {uid!r}: {path} not found")
-        self._docs: dict[str, dict] = {}
-        grasp_root = self.root / "grasps"
-        self._grasps = GraspLibrary(grasp_root, name=f"{self.name}-grasps") if grasp_root.is_dir() else None
-
-    def uids(self) -> Iterator[str]:
-        return iter(sorted(self._objects))
-
-    def __contains__(self, uid: object) -> bool:
-        return uid in self._objects
-
-    def _doc(self, uid: str) -> dict:
-        if uid not in self._objects:
-            raise self._unknown(uid)
-        if uid not in self._docs:
-            path = self._objects[uid]
-            doc = _read_json(path)
-            if doc.get("assetId", uid) != uid:
-                raise AssetError(f"{path}: field 'assetId' is {doc['assetId']!r}, the index says {uid!r}")
-            if not isinstance(doc.get("mjcf"), str):
-                raise AssetError(f"{path}: field 'mjcf' (relative path of the MJCF file) is missing")
-            self._docs[uid] = doc
-        return self._docs[uid]
-
-    def metadata(self, uid: str) -> dict:
-        doc = dict(self._doc(uid))
-        doc.setdefault("assetId", uid)
-        doc.pop("mjcf")
-        arrays = doc.pop("arrays", None)
-        if arrays is not None:
-            path = self._objects[uid].parent / arrays
-            try:
-                with np.load(path, allow_pickle=False) as npz:
-                    doc.update({k: npz[k] for k in npz.files})
-            except (OSError, ValueError) as exc:
-                raise AssetError(f"{self._objects[uid]}: field 'arrays': cannot read {path} ({exc})") from None
-        return doc
-
-    def locate(self, uid: str) -> UidLocation:
-        doc = self._doc(uid)
-        path = (self._objects[uid].parent / doc["mjcf"]).resolve()
-        if not path.is_file():
-            raise AssetError(f"{self._objects[uid]}: field 'mjcf': {path} not found")
-        return UidLocation(self.name, None, path)
-
-    def grasp_library(self) -> GraspLibrary | None:
-        return self._grasps
-
-
 class MetadataStore:
     """UID → metadata document in LMDB (zstd JSON values, a completion marker); fork-safe."""
 
@@ -225,12 +142,10 @@ class MetadataStore:
     @classmethod
     def build(cls, path: str | os.PathLike, jsonl: str | os.PathLike) -> MetadataStore:
         """Load ``metadata.jsonl`` (one document with ``assetId`` per line) into a new store at ``path``."""
-        path, jsonl = Path(path), Path(jsonl)
-        tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-        cctx = zstandard.ZstdCompressor(level=3)
-        env = lmdb.open(str(tmp), map_size=max(1 << 26, jsonl.stat().st_size * 4), sync=False)
-        try:
-            with env.begin(write=True) as txn, open(jsonl) as fh:
+        jsonl = Path(jsonl)
+
+        def docs() -> Iterator[tuple[str, Any]]:
+            with open(jsonl) as fh:
                 for lineno, line in enumerate(fh, 1):
                     if not line.strip():
                         continue
@@ -239,6 +154,22 @@ class MetadataStore:
                         uid = doc["assetId"]
                     except (ValueError, KeyError, TypeError):
                         raise AssetError(f"{jsonl}:{lineno}: expected a JSON object with field 'assetId'") from None
+                    yield uid, doc
+
+        return cls.build_from(path, docs(), size_hint=jsonl.stat().st_size)
+
+    @classmethod
+    def build_from(cls, path: str | os.PathLike, docs, size_hint: int = 0, where: str = "") -> MetadataStore:
+        """Write ``(uid, document)`` pairs into a new store at ``path`` (atomically)."""
+        path = Path(path)
+        tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+        cctx = zstandard.ZstdCompressor(level=3)
+        env = lmdb.open(str(tmp), map_size=max(1 << 30, size_hint * 4), sync=False)
+        try:
+            with env.begin(write=True) as txn:
+                for uid, doc in docs:
+                    if not isinstance(uid, str) or not isinstance(doc, dict):
+                        raise AssetError(f"{where or path}: entry {uid!r}: expected an object")
                     txn.put(uid.encode(), cctx.compress(json.dumps(doc).encode()))
                 txn.put(cls.COMPLETE, b"1")
             env.sync(True)

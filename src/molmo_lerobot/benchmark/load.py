@@ -1,23 +1,28 @@
 """Load a benchmark (either MolmoSpaces layout, or one JSON file) and hash its content.
 
-Layouts, tried in this order for a directory:
+Layouts of a directory (a directory holding both is refused as ambiguous):
 
 * ``benchmark.json``: a list of episode objects (+ optional ``benchmark_metadata.json``);
-* legacy ``house_<id>/episode_<8 digits>.json``: one episode per file, in MolmoSpaces'
-  order (house directories sorted by name, then episode files sorted by name), so episode
-  indices match theirs.
+* legacy ``house_<id>/episode_<n>.json`` (any integer ``n``; MolmoSpaces writes 8 digits):
+  one episode per file, in MolmoSpaces' order (house directories sorted by name, then episode
+  files sorted by name), so episode indices match theirs.
 
 A path to a ``.json`` file is read as a list of episodes or as a single episode.
 
 Every problem in every episode is collected before failing; :class:`BenchmarkError` lists
-them one per line as ``<file>: episode <i>: field <path>: <what is wrong>``.
+them one per line as ``<file>: episode <i>: field <path>: <what is wrong>``. Only regular
+files are read (a FIFO or device never blocks loading), JSON nested deeper than
+:data:`MAX_JSON_DEPTH` is refused, and two episodes with the same content are refused (the
+same trial would count twice).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
 import re
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -29,8 +34,10 @@ from molmo_lerobot.benchmark.schema import UNION_TAGS, BenchmarkMetadata, Episod
 BENCHMARK_FILE = "benchmark.json"
 METADATA_FILE = "benchmark_metadata.json"
 _HOUSE_DIR = re.compile(r"house_(-?\d+)")
-_EPISODE_FILE = re.compile(r"episode_\d{8}\.json")
+_EPISODE_FILE = re.compile(r"episode_-?\d+\.json")
 _UNREADABLE = object()  # stands for a file already reported as unreadable
+#: Deepest JSON nesting accepted (MolmoSpaces episodes nest about 6 levels).
+MAX_JSON_DEPTH = 64
 
 
 @dataclass(frozen=True)
@@ -41,9 +48,11 @@ class Problem:
     message: str
     episode_index: int | None = None
     field: str | None = None
+    #: the file is valid (MolmoSpaces accepts it) but cannot run here as it stands
+    warning: bool = False
 
     def __str__(self) -> str:
-        parts = [self.file]
+        parts = ["warning: " + self.file] if self.warning else [self.file]
         if self.episode_index is not None:
             parts.append(f"episode {self.episode_index}")
         if self.field:
@@ -118,13 +127,16 @@ def load_benchmark(path: str | Path) -> Benchmark:
 
     if path.is_dir():
         bench_file = path / BENCHMARK_FILE
-        if bench_file.is_file():
+        if bench_file.exists() and _has_legacy_episodes(path):
+            problems.append(Problem(str(path), f"ambiguous layout: holds both {BENCHMARK_FILE} and "
+                                               "house_<id>/episode_*.json files; keep only one"))
+        elif bench_file.exists():
             raw = _read_list_file(bench_file, problems)
         else:
             raw = _read_legacy_dir(path, problems)
             if not raw and not problems:
                 problems.append(
-                    Problem(str(path), f"no {BENCHMARK_FILE} and no house_<id>/episode_<8 digits>.json files")
+                    Problem(str(path), f"no {BENCHMARK_FILE} and no house_<id>/episode_<n>.json files")
                 )
         meta_file = path / METADATA_FILE
         if meta_file.is_file():
@@ -138,11 +150,14 @@ def load_benchmark(path: str | Path) -> Benchmark:
         meta_file = path.with_name(METADATA_FILE)
         if path.name == BENCHMARK_FILE and meta_file.is_file():
             metadata = _read_metadata(meta_file, problems)
+    elif path.exists():
+        problems.append(Problem(str(path), "not a regular file or directory"))
     else:
         problems.append(Problem(str(path), "no such benchmark file or directory"))
 
     episodes: list[EpisodeSpec] = []
     origins: list[Origin] = []
+    positions: list[int] = []
     for index, (origin, data) in enumerate(raw):
         if data is _UNREADABLE:
             continue
@@ -152,8 +167,10 @@ def load_benchmark(path: str | Path) -> Benchmark:
         try:
             episodes.append(EpisodeSpec.model_validate(data))
             origins.append(origin)
+            positions.append(index)
         except ValidationError as exc:
             problems.extend(Problem(origin.file, msg, index, loc) for loc, msg in validation_messages(exc))
+    problems.extend(_duplicates(episodes, origins, positions))
     if not raw and not problems:
         problems.append(Problem(str(path), "benchmark has no episodes"))
     if problems:
@@ -178,15 +195,64 @@ def _benchmark_name(path: Path, metadata: BenchmarkMetadata | None) -> str:
 
 def _read_json(file: Path, problems: list[Problem]) -> Any:
     try:
-        text = file.read_text(encoding="utf-8")
+        text = read_regular_file(file)
     except (OSError, UnicodeDecodeError) as exc:
         problems.append(Problem(str(file), f"cannot read: {exc}"))
         return _UNREADABLE
+    too_deep = Problem(str(file), f"JSON nested deeper than {MAX_JSON_DEPTH} levels")
     try:
-        return json.loads(text)
+        data = json.loads(text)
     except json.JSONDecodeError as exc:
         problems.append(Problem(str(file), f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"))
         return _UNREADABLE
+    except RecursionError:
+        problems.append(too_deep)
+        return _UNREADABLE
+    if json_depth(data) > MAX_JSON_DEPTH:
+        problems.append(too_deep)
+        return _UNREADABLE
+    return data
+
+
+def read_regular_file(file: Path) -> str:
+    """The UTF-8 text of ``file``; ``OSError`` if it is not a regular file (a FIFO never blocks)."""
+    fd = os.open(file, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError("not a regular file (a FIFO, device or socket)")
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            return f.read().decode("utf-8")
+    finally:
+        os.close(fd)
+
+
+def json_depth(data: Any) -> int:
+    """Nesting depth of parsed JSON (a scalar is 0), computed without recursion."""
+    depth, stack = 0, [(data, 1)]
+    while stack:
+        node, level = stack.pop()
+        children = node.values() if isinstance(node, dict) else node if isinstance(node, list) else None
+        if children is not None:
+            depth = max(depth, level)
+            stack.extend((child, level + 1) for child in children)
+    return depth
+
+
+def _has_legacy_episodes(root: Path) -> bool:
+    return any(house.is_dir() and any(house.glob("episode_*.json")) for house in root.glob("house_*"))
+
+
+def _duplicates(episodes: list[EpisodeSpec], origins: list[Origin], positions: list[int]) -> list[Problem]:
+    """A problem per episode whose content equals an earlier episode's (``positions``: benchmark indices)."""
+    seen: dict[str, int] = {}
+    out = []
+    for episode, origin, index in zip(episodes, origins, positions, strict=True):
+        key = canonical_json(episode)
+        if key in seen:
+            out.append(Problem(origin.file, f"duplicate of episode {seen[key]} (same content: the same trial "
+                                            "would count twice)", index))
+        seen.setdefault(key, index)
+    return out
 
 
 def _read_list_file(file: Path, problems: list[Problem]) -> list[tuple[Origin, Any]]:
@@ -209,7 +275,7 @@ def _read_legacy_dir(root: Path, problems: list[Problem]) -> list[tuple[Origin, 
             continue
         for ep_file in sorted(house_dir.glob("episode_*.json")):
             if not _EPISODE_FILE.fullmatch(ep_file.name):
-                problems.append(Problem(str(ep_file), "file name is not episode_<8 digits>.json"))
+                problems.append(Problem(str(ep_file), "file name is not episode_<integer>.json"))
                 continue
             # An unreadable file is already reported; it keeps its slot so later indices stay true.
             out.append((Origin(str(ep_file)), _read_json(ep_file, problems)))

@@ -22,6 +22,7 @@ from pydantic import (
     ConfigDict,
     Discriminator,
     Field,
+    Strict,
     Tag,
 )
 from pydantic_core import PydanticCustomError
@@ -57,11 +58,18 @@ def _finite_list(v: list[float]) -> list[float]:
     return v
 
 
+#: Largest image side in pixels (an 8K frame); larger asks the renderer for absurd buffers.
+MAX_IMG_SIDE = 8192
+#: Longest ``task_horizon_sec`` an episode may ask for (one hour of simulated time).
+MAX_TASK_HORIZON_SEC = 3600.0
+
+
 def _resolution(v: tuple[int, ...]) -> tuple[int, int]:
     if len(v) != 2:
         raise PydanticCustomError("vector_length", "expected 2 values (width, height), got {got}", {"got": len(v)})
-    if min(v) <= 0:
-        raise PydanticCustomError("resolution", "width and height must be positive, got {v}", {"v": list(v)})
+    if min(v) <= 0 or max(v) > MAX_IMG_SIDE:
+        raise PydanticCustomError("resolution", "width and height must be in 1..{max}, got {v}",
+                                  {"v": list(v), "max": MAX_IMG_SIDE})
     return (v[0], v[1])
 
 
@@ -71,6 +79,7 @@ Quat = _fixed_vector(4, quat_at=0)
 Pose7 = _fixed_vector(7, quat_at=3)
 FiniteList = Annotated[list[float], AfterValidator(_finite_list)]
 ImgResolution = Annotated[tuple[int, ...], AfterValidator(_resolution)]
+StrictInt = Annotated[int, Strict()]  # JSON true is not the integer 1
 
 
 # Robot, cameras, scene -------------------------------------------------------------------
@@ -177,7 +186,7 @@ class BaseTaskSpec(_Model):
     task_cls: str
     task_type: str | None = None
     robot_base_pose: Pose7
-    task_horizon_sec: float | None = Field(default=None, gt=0)
+    task_horizon_sec: float | None = Field(default=None, gt=0, le=MAX_TASK_HORIZON_SEC)
 
     @property
     def task_name(self) -> str:
@@ -285,15 +294,20 @@ NATIVE_TASK_CLS: dict[str, str] = {
 }
 
 
-def task_spec_model(task_cls: Any, task_type: Any = None) -> type[BaseTaskSpec]:
-    """The spec model for a task dict: by a known ``task_cls``, else by a known ``task_type``."""
+def known_task_type(task_cls: Any, task_type: Any = None) -> str | None:
+    """Our task type name for a task dict: by a known ``task_cls``, else by a known ``task_type``."""
     task_type = task_type if isinstance(task_type, str) else None
     name = None
     if isinstance(task_cls, str):
         name = NATIVE_TASK_CLS.get(task_cls) or molmospaces.known_task_name(task_cls, task_type)
     if name is None and task_type is not None:
         name = molmospaces.known_task_name(task_type)
-    return TASK_SPECS.get(name, GenericTaskSpec)
+    return name
+
+
+def task_spec_model(task_cls: Any, task_type: Any = None) -> type[BaseTaskSpec]:
+    """The spec model for a task dict: by a known ``task_cls``, else by a known ``task_type``."""
+    return TASK_SPECS.get(known_task_type(task_cls, task_type), GenericTaskSpec)
 
 
 def _task_tag(v: Any) -> str:
@@ -354,7 +368,7 @@ class EpisodeSpec(_Model):
     """
 
     source: SourceSpec | None = None
-    house_index: int
+    house_index: StrictInt
     scene_dataset: str
     data_split: str = "val"
     seed: int | None = None

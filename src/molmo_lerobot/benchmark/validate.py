@@ -3,7 +3,13 @@
 Every episode is checked and every problem returned (never raised), each naming the file,
 the episode index and the field: unknown task classes (with "did you mean"), robots no
 plugin provides, init_qpos that does not fit the robot's move groups, unknown scene
-datasets, missing or duplicate cameras, empty instructions.
+datasets, duplicate cameras, empty instructions.
+
+A file MolmoSpaces loads is valid here: what only stops it from *running here* is a
+``warning`` problem (a robot, task type or camera system no installed plugin provides,
+``init_qpos`` that does not fit our robot, scene assets not installed), each saying how to
+get it. ``cameras: []`` means the run's camera system (``camera.system``) or the episode's
+``source.camera_system_class``.
 """
 
 from __future__ import annotations
@@ -12,6 +18,7 @@ import re
 from collections.abc import Mapping
 from typing import Any
 
+from molmo_lerobot.benchmark import molmospaces
 from molmo_lerobot.benchmark.load import Benchmark, Problem
 from molmo_lerobot.benchmark.schema import EpisodeSpec
 from molmo_lerobot.plugins import PluginConflict, PluginError, Plugins, get_plugins
@@ -34,29 +41,44 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, *, index: int | Non
     def problem(field: str, message: str) -> None:
         out.append(Problem(file, message, index, field))
 
-    _lookup(plugins, "task_type", episode.task_name, "task.task_type" if _by_type(episode) else "task.task_cls", problem)
+    def warning(field: str, message: str) -> None:
+        out.append(Problem(file, message, index, field, warning=True))
 
-    robot = _lookup(plugins, "robot", episode.robot.robot_name, "robot.robot_name", problem, "robot")
+    task_report = warning if molmospaces.known_task_name(episode.task.task_cls, episode.task.task_type) else problem
+    _lookup(plugins, "task_type", episode.task_name, "task.task_type" if _by_type(episode) else "task.task_cls",
+            task_report)
+
+    robot = _lookup(plugins, "robot", episode.robot.robot_name, "robot.robot_name", warning, "robot",
+                    "install a robot plugin that provides it")
     sizes = getattr(robot, "move_groups", None)
     if isinstance(sizes, Mapping):
         for group, values in episode.robot.init_qpos.items():
             field = f"robot.init_qpos.{group}"
             if group not in sizes:
                 if values:  # MolmoSpaces writes empty lists for groups a robot lacks ("base": [])
-                    problem(field, f"robot {robot.name!r} has no move group {group!r} "
+                    warning(field, f"robot {robot.name!r} has no move group {group!r} "
                                    f"(move groups: {', '.join(sizes)})")
             elif hasattr(robot, "init_qpos"):
                 try:
                     robot.init_qpos(group, values)
                 except ValueError as exc:
-                    problem(field, str(exc))
+                    warning(field, str(exc))
             elif len(values) != sizes[group]:
-                problem(field, f"expected {sizes[group]} values, got {len(values)}")
+                warning(field, f"expected {sizes[group]} values, got {len(values)}")
 
-    _lookup(plugins, "scene_dataset", episode.scene_dataset, "scene_dataset", problem, "scene dataset")
+    scene = _lookup(plugins, "scene_dataset", episode.scene_dataset, "scene_dataset", problem, "scene dataset")
+    missing = getattr(scene, "missing", None)
+    reason = missing(episode) if missing is not None else None
+    if reason:
+        warning("scene_dataset", reason)
 
     if not episode.cameras:
-        problem("cameras", "no cameras (an episode needs at least one)")
+        system = episode.source.camera_system_class if episode.source else None
+        if system is None:
+            warning("cameras", "no cameras: the run's camera system (camera.system=...) places them")
+        else:
+            _lookup(plugins, "camera_system", system, "source.camera_system_class", warning, "camera system",
+                    "install a plugin that provides it, or set camera.system= for the run")
     seen: dict[str, int] = {}
     for i, cam in enumerate(episode.cameras):
         if cam.name in seen:
@@ -75,7 +97,8 @@ def _by_type(episode: EpisodeSpec) -> bool:
     return episode.task_name != episode.task.task_cls
 
 
-def _lookup(plugins: Plugins, kind: str, name: str, field: str, problem: Any, what: str | None = None) -> Any:
+def _lookup(plugins: Plugins, kind: str, name: str, field: str, problem: Any, what: str | None = None,
+            hint: str | None = None) -> Any:
     """The ``kind`` plugin object called ``name``, or record why not as a problem on ``field``.
 
     The message is the registry's first line ("unknown task 'x'; did you mean ...",
@@ -90,6 +113,8 @@ def _lookup(plugins: Plugins, kind: str, name: str, field: str, problem: Any, wh
         text = str(exc).splitlines()[0]
         if what is not None:
             text = re.sub(r"^unknown \w+ ", f"no {what} plugin provides ", text)
+        if hint:
+            text += f"; {hint}"
         for rec in plugins.broken():
             if rec.name in name or name in rec.name:
                 text += f"; plugin {rec.name!r} from {rec.distribution} failed to load: {rec.error}"

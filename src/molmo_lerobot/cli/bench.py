@@ -1,18 +1,22 @@
 """``molmo-bench``: check benchmark files and make new benchmarks.
 
-  molmo-bench validate PATH
+  molmo-bench validate PATH [KEY=VALUE ...]
   molmo-bench generate --task pick --houses 10 --episodes-per-house 5 --seed 0 --name pick_v1 [--out DIR]
 
-``validate`` prints a summary (name, episodes, tasks, content hash) or every problem
-(file, episode index, field) and exits 1. ``generate`` writes a deterministic benchmark
-(``benchmark.json`` + ``benchmark_metadata.json``) and validates it; the output directory
-appears only once it is complete.
+``validate`` prints a summary (name, episodes, tasks, content hash) and exits 0 for a valid
+file — one MolmoSpaces accepts — printing one ``warning:`` line per thing this machine lacks
+to run it (scene assets, robot, camera system) with how to get it; an invalid file gets every
+problem (file, episode index, field) and exit 1. ``KEY=VALUE`` are run-config overrides saying
+where data lives (``molmospaces.assets_dir=…``, ``scene_xml_paths=[…]``, ``+asset_libraries.x=…``).
+``generate`` writes a deterministic benchmark (``benchmark.json`` + ``benchmark_metadata.json``)
+and validates it; the output directory appears only once it is complete.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -32,6 +36,8 @@ def main(argv: list[str] | None = None) -> int:
     val = sub.add_parser("validate", help="check a benchmark directory or JSON file")
     val.add_argument("path", type=Path)
     val.add_argument("--schema-only", action="store_true", help="skip the checks against installed plugins")
+    val.add_argument("overrides", nargs="*", metavar="KEY=VALUE",
+                     help="run-config overrides that locate data (molmospaces.assets_dir=…, scene_xml_paths=[…], …)")
     gen = sub.add_parser("generate", help="generate a benchmark deterministically")
     gen.add_argument("--task", default="pick")
     gen.add_argument("--houses", type=int, required=True, help="number of scenes (houses)")
@@ -42,32 +48,66 @@ def main(argv: list[str] | None = None) -> int:
     gen.add_argument("--force", action="store_true", help="replace an existing output directory")
     args = parser.parse_args(argv)
     if args.command == "validate":
-        return _validate(args.path, schema_only=args.schema_only)
+        return _validate(args.path, schema_only=args.schema_only, overrides=args.overrides)
     return _generate(args)
 
 
-def _validate(path: Path, *, schema_only: bool) -> int:
+def _validate(path: Path, *, schema_only: bool, overrides: list[str] | None = None) -> int:
     try:
         bench = load_benchmark(path)
     except BenchmarkError as exc:
         return _report(exc.problems)
     if not schema_only:
+        from omegaconf import OmegaConf
+
         from molmo_lerobot.benchmark.validate import validate_benchmark
+        from molmo_lerobot.config import ConfigError, compose
+        from molmo_lerobot.molmospaces import configure
         from molmo_lerobot.plugins import PluginConflict, get_plugins
 
+        try:  # where MolmoSpaces data lives (assets dir, user scenes and libraries), as a run would see it
+            configure(OmegaConf.to_container(compose(list(overrides or [])), resolve=True))
+        except (ConfigError, ValueError, LookupError) as exc:
+            print(f"molmo-bench: error: {exc}", file=sys.stderr)
+            return 2
         plugins = get_plugins()
         try:
-            problems = validate_benchmark(bench, plugins)
+            found = validate_benchmark(bench, plugins)
         except PluginConflict as exc:
             print(f"molmo-bench: error: {exc}", file=sys.stderr)
             return 1
+        problems = [p for p in found if not p.warning]
         if problems:
             for rec in plugins.broken():
                 print(f"note: plugin {rec.name!r} from {rec.distribution} failed to load: {rec.error}", file=sys.stderr)
             return _report(problems)
+        warnings = [p for p in found if p.warning]
+        lines = _grouped(warnings)
+        for line in lines:  # valid, but not runnable here as it stands: one line per missing thing
+            print(line, file=sys.stderr)
     _print_summary(bench)
-    print("checked    " + ("schema only" if schema_only else "schema and installed plugins: ok"))
+    if schema_only:
+        print("checked    schema only")
+    elif warnings:
+        n_eps = len({p.episode_index for p in warnings})
+        print(f"checked    valid; {n_eps} of {len(bench.episodes)} episodes cannot run here yet "
+              f"({len(lines)} warning{'s' * (len(lines) != 1)} above)")
+    else:
+        print("checked    schema and installed plugins: ok")
     return 0
+
+
+def _grouped(warnings: list[Problem]) -> list[str]:
+    """One ``warning:`` line per (file, field, message), listing the episodes it concerns."""
+    groups: dict[tuple[str, str | None, str], list[int]] = {}
+    for p in warnings:
+        groups.setdefault((p.file, p.field, p.message), []).append(p.episode_index)
+    lines = []
+    for (file, field, message), eps in groups.items():
+        shown = ", ".join(map(str, eps[:10])) + (", ..." if len(eps) > 10 else "")
+        where = f"episode{'s' * (len(eps) != 1)} {shown}"
+        lines.append(f"warning: {file}: {where}: " + (f"field {field}: " if field else "") + message)
+    return lines
 
 
 def _report(problems: list[Problem]) -> int:
@@ -102,6 +142,10 @@ def _generate(args: argparse.Namespace) -> int:
 
     if args.houses < 1 or args.episodes_per_house < 1:
         print("molmo-bench: error: --houses and --episodes-per-house must be >= 1", file=sys.stderr)
+        return 2
+    if not args.out and not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]*", args.name):
+        print(f"molmo-bench: error: --name {args.name!r} names the output directory: use letters, digits, '.', '_' "
+              "and '-' (or give --out)", file=sys.stderr)
         return 2
     out: Path = args.out or Path("benchmarks") / args.name
     if out.exists() and not args.force:

@@ -1,4 +1,5 @@
-"""``molmo-compare RUN_A RUN_B [--metric success|success_once] [--json]``: paired comparison of two runs."""
+"""``molmo-compare RUN_A RUN_B [--metric success|success_once] [--json] [--allow-different-trials]``: paired
+comparison of two runs of the same trial."""
 
 from __future__ import annotations
 
@@ -19,9 +20,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--metric", choices=sorted(METRICS), default="success",
                         help="success (at the final step, the primary metric) or success_once (at any step)")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    parser.add_argument("--allow-different-trials", action="store_true",
+                        help="compare runs whose timing, horizons, eval options or thresholds differ "
+                             "(each difference is listed in the notes)")
     args = parser.parse_args(argv)
     try:
-        report = compare_runs(load_run(args.run_a), load_run(args.run_b), metric=args.metric)
+        report = compare_runs(load_run(args.run_a), load_run(args.run_b), metric=args.metric,
+                              allow_different_trials=args.allow_different_trials)
     except CompareError as exc:
         print(f"molmo-compare: error: {exc}", file=sys.stderr)
         return 2

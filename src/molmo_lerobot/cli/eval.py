@@ -88,9 +88,12 @@ def _job(cfg: Any, *, sweep: bool) -> int:
     from molmo_lerobot.config import ConfigError
     from molmo_lerobot.plugins import PluginError
     from molmo_lerobot.runner.evaluate import RunError, run_evaluation
+    from molmo_lerobot.runner.results import summary_lines
+    from molmo_lerobot.runner.run_config import RunConfigError
     from molmo_lerobot.runner.supervisor import WorkerStartError
 
-    expected: tuple[type[BaseException], ...] = (ConfigError, PluginError, RunError, WorkerStartError)
+    expected: tuple[type[BaseException], ...] = (ConfigError, PluginError, RunError, WorkerStartError,
+                                                 RunConfigError)
     try:
         from molmo_lerobot.benchmark.load import BenchmarkError
 
@@ -99,19 +102,11 @@ def _job(cfg: Any, *, sweep: bool) -> int:
             cfg.output_dir = HydraConfig.get().runtime.output_dir
         res = run_evaluation(cfg)
     except expected as exc:
-        print(f"molmo-eval: error: {exc}", file=sys.stderr)
+        for line in str(exc).splitlines() or [type(exc).__name__]:  # one line per problem
+            print(f"molmo-eval: error: {line}", file=sys.stderr)
         return 2
-    s = res.summary
-    lo, hi = s["ci95"]
-    print(f"{s['benchmark']['name']} · {s['policy']['name']}: success {s['success_rate']:.3f} "
-          f"[{lo:.3f}, {hi:.3f}] ({s['n_success']}/{s['n_episodes']}), success at any step "
-          f"{s['success_once_rate']:.3f}, errors {s['n_errors']}")
-    for task, block in s["per_task"].items():
-        print(f"  {task}: {block['success_rate']:.3f} ({block['n_success']}/{block['n_episodes']})")
-    for err in s["errors"][:10]:
-        print(f"  episode {err['episode_index']}: {err['error']}")
-    print(f"outputs: {res.output_dir}")
-    return 0
+    print("\n".join([*summary_lines(res.summary), f"outputs: {res.output_dir}"]))
+    return 0 if res.summary["success_rate"] is not None else 1  # 1: no episode ran, so there is no score
 
 
 if __name__ == "__main__":

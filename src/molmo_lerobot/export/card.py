@@ -7,11 +7,13 @@ from typing import Any
 TAGS = ["molmo-lerobot", "evaluation", "rollouts", "mujoco"]
 
 
-def _pct(x: float) -> str:
-    return f"{100.0 * float(x):.1f}%"
+def _pct(x: float | None) -> str:
+    return "n/a" if x is None else f"{100.0 * float(x):.1f}%"
 
 
 def _ci(ci: Any) -> str:
+    if ci is None:  # no episode simulated: no interval
+        return "n/a"
     lo, hi = (list(ci) + [0.0, 1.0])[:2]
     return f"[{_pct(lo)}, {_pct(hi)}]"
 

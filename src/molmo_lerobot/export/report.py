@@ -30,8 +30,8 @@ video{width:192px;border-radius:3px;background:#000;margin-right:4px}
 """
 
 
-def _pct(x: float) -> str:
-    return f"{100.0 * float(x):.1f}%"
+def _pct(x: float | None) -> str:
+    return "n/a" if x is None else f"{100.0 * float(x):.1f}%"
 
 
 def _e(x: Any) -> str:
@@ -53,8 +53,8 @@ def _bars_svg(summary: dict[str, Any]) -> str:
     for name, b in rows:
         parts.append(f'<text x="{left - 8}" y="{y + bar + 3}" text-anchor="end">{_e(name)} (n={b.get("n_episodes", 0)})</text>')
         for key, ci_key, color in (("success_rate", "ci95", "#1a73e8"), ("success_once_rate", "success_once_ci95", "#9bbcf3")):
-            rate = float(b.get(key, 0.0))
-            lo, hi = (list(b.get(ci_key) or (0.0, 1.0)) + [0.0, 1.0])[:2]
+            rate = float(b.get(key) or 0.0)  # null: no episode of this block simulated
+            lo, hi = (list(b.get(ci_key) or (rate, rate)) + [0.0, 1.0])[:2]
             parts.append(f'<rect x="{left}" y="{y}" width="{rate * width:.1f}" height="{bar}" fill="{color}">'
                          f'<title>{_e(name)} {key}: {_pct(rate)} (95% CI {_pct(lo)}–{_pct(hi)})</title></rect>')
             cy = y + bar / 2
@@ -80,8 +80,8 @@ def _task_table(summary: dict[str, Any]) -> str:
     out = ["<table><tr><th>task</th><th>episodes</th><th>success (end)</th><th>95% CI</th>"
            "<th>success (any step)</th><th>95% CI</th><th>errors</th></tr>"]
     for name, b in rows:
-        lo, hi = (list(b.get("ci95") or (0, 1)) + [0, 1])[:2]
-        lo2, hi2 = (list(b.get("success_once_ci95") or (0, 1)) + [0, 1])[:2]
+        lo, hi = (list(b.get("ci95") or (None, None)) + [0, 1])[:2]
+        lo2, hi2 = (list(b.get("success_once_ci95") or (None, None)) + [0, 1])[:2]
         out.append(f"<tr><td>{_e(name)}</td><td class=num>{b.get('n_episodes', 0)}</td>"
                    f"<td class=num>{_pct(b.get('success_rate', 0))}</td><td>{_pct(lo)} – {_pct(hi)}</td>"
                    f"<td class=num>{_pct(b.get('success_once_rate', 0))}</td><td>{_pct(lo2)} – {_pct(hi2)}</td>"
@@ -140,7 +140,7 @@ def render_report(summary: dict[str, Any], results: list[EpisodeResult],
     bench = summary.get("benchmark") or {}
     policy = summary.get("policy") or {}
     policy_name = policy.get("name", "?") if isinstance(policy, dict) else str(policy)
-    lo, hi = (list(summary.get("ci95") or (0, 1)) + [0, 1])[:2]
+    lo, hi = (list(summary.get("ci95") or (None, None)) + [0, 1])[:2]
     title = f"{policy_name} on {bench.get('name', '?')}"
     versions = ", ".join(f"{k} {v}" for k, v in (summary.get("versions") or {}).items())
     return "".join([

@@ -23,10 +23,11 @@ EPISODE_COLUMNS = ["episode_index", "house_index", "task", "prompt", "success", 
 def metrics(summary: dict[str, Any]) -> dict[str, float]:
     """Flat scalar metrics: overall and ``<task>/<metric>`` for every task."""
     keys = ("success_rate", "success_once_rate", "n_episodes", "n_success", "n_errors")
-    out = {k: summary[k] for k in keys if k in summary}
-    out.update({"ci95_lo": summary.get("ci95", [0, 1])[0], "ci95_hi": summary.get("ci95", [0, 1])[1]})
+    out = {k: summary[k] for k in keys if summary.get(k) is not None}  # null rates: no episode simulated
+    if summary.get("ci95") is not None:
+        out.update({"ci95_lo": summary["ci95"][0], "ci95_hi": summary["ci95"][1]})
     for task, block in (summary.get("per_task") or {}).items():
-        out.update({f"{task}/{k}": block[k] for k in keys if k in block})
+        out.update({f"{task}/{k}": block[k] for k in keys if block.get(k) is not None})
     return out
 
 

@@ -55,7 +55,7 @@ def object_grasps(env: Any, name: str) -> np.ndarray:
     try:
         from molmo_lerobot.plugins import get_plugins
 
-        objects = get_plugins().scene_dataset(env.spec.scene_dataset).metadata(env.spec.house_index)["objects"]
+        objects = get_plugins().scene_dataset(env.spec.scene_dataset).episode_metadata(env.spec)["objects"]
         uid = objects.get(name, {}).get("asset_id", name)
     except LookupError:
         pass

@@ -1,8 +1,12 @@
 """Paired comparison of two runs on the episodes they share (``molmo-compare RUN_A RUN_B``).
 
-Two runs are comparable only if they evaluated the same benchmark (same content sha256);
-episodes are paired by ``episode_index``. An episode that ended in an error counts as a
-failure, as in ``results.json``.
+Two runs are comparable only if they evaluated the same benchmark (same content sha256)
+under the same trial definition: timing, horizons (run-level and per shared episode),
+evaluation options and success-rule thresholds. A difference in any of these is refused
+(``allow_different_trials`` compares anyway and lists each difference); other differences
+(episode seeds, versions, other config keys) are flagged in the notes. Episodes are paired
+by ``episode_index``. An episode that ended in an error counts as a failure, as in
+``results.json``, and belongs to its task like any other.
 
 Statistics, per run pair and per task:
 
@@ -22,9 +26,17 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from molmo_lerobot.benchmark.schema import known_task_type
 from molmo_lerobot.runner.results import wilson_ci
 
 METRICS = {"success": "success at the final step", "success_once": "success at any step"}
+#: ``results.json`` fields that define the trial an episode is (besides the benchmark).
+TRIAL_FIELDS = ("timing", "horizon", "eval_options")
+#: ``config`` keys that do not change an episode's trial (who runs it, where its outputs go);
+#: a difference in any other key is flagged.
+NEUTRAL_CONFIG = frozenset({"policy", "benchmark", "seed", "limit", "workers", "executor", "output_dir", "record",
+                            "push", "resume", "progress", "hub", "wandb", "video", *TRIAL_FIELDS, "horizons",
+                            "custom_object", "camera"})
 Z95 = 1.959963984540054
 
 
@@ -41,6 +53,7 @@ class Run:
     benchmark: dict[str, Any]
     seed: Any
     episodes: dict[int, dict[str, Any]]
+    results: dict[str, Any]
 
 
 @dataclass
@@ -72,6 +85,10 @@ def load_run(path: str | Path) -> Run:
         results = json.loads(results_path.read_text())
     except json.JSONDecodeError as exc:
         raise CompareError(f"{results_path}: not valid JSON ({exc})") from None
+    except RecursionError:
+        raise CompareError(f"{results_path}: JSON nested too deeply") from None
+    if not isinstance(results, dict):
+        raise CompareError(f"{results_path}: expected a JSON object")
     bench = results.get("benchmark")
     if not isinstance(bench, dict) or not bench.get("sha256"):
         raise CompareError(f"{results_path}: field benchmark.sha256 is missing")
@@ -85,13 +102,17 @@ def load_run(path: str | Path) -> Run:
             ep = json.loads(line)
         except json.JSONDecodeError as exc:
             raise CompareError(f"{episodes_path}:{lineno}: not valid JSON ({exc})") from None
+        except RecursionError:
+            raise CompareError(f"{episodes_path}:{lineno}: JSON nested too deeply") from None
+        if not isinstance(ep, dict):
+            raise CompareError(f"{episodes_path}:{lineno}: expected a JSON object")
         for key in ("episode_index", "success", "success_once"):
             if key not in ep:
                 raise CompareError(f"{episodes_path}:{lineno}: field {key!r} is missing")
         episodes[int(ep["episode_index"])] = ep
     policy = results.get("policy") or {}
     return Run(root, str(policy.get("name", "?")) if isinstance(policy, dict) else str(policy), bench,
-               results.get("seed"), episodes)
+               results.get("seed"), episodes, results)
 
 
 def mcnemar_exact(only_a: int, only_b: int) -> float:
@@ -143,7 +164,60 @@ def _outcome(ep: dict[str, Any], metric: str) -> bool:
     return bool(ep.get(metric)) and ep.get("error") is None
 
 
-def compare_runs(run_a: Run, run_b: Run, metric: str = "success") -> dict[str, Any]:
+def _short(value: Any, limit: int = 80) -> str:
+    text = json.dumps(value, sort_keys=True, default=str)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def trial_differences(run_a: Run, run_b: Run, shared: list[int]) -> tuple[list[str], list[str]]:
+    """``(differences, unchecked)``: how the runs' trial definitions differ, and what one run does not record."""
+    diffs, unchecked = [], []
+    ra, rb = run_a.results, run_b.results
+    for key in TRIAL_FIELDS:
+        if key not in ra or key not in rb:
+            unchecked.append(key)
+        elif ra[key] != rb[key]:
+            diffs.append(f"{key} {_short(ra[key])} vs {_short(rb[key])}")
+    ta, tb = ra.get("thresholds") or {}, rb.get("thresholds") or {}
+    for task in sorted(set(ta) & set(tb)):  # horizon_steps depends on which episodes ran; checked per episode
+        rule_a = {k: v for k, v in ta[task].items() if k != "horizon_steps"}
+        rule_b = {k: v for k, v in tb[task].items() if k != "horizon_steps"}
+        if rule_a != rule_b:
+            diffs.append(f"thresholds.{task} {_short(rule_a)} vs {_short(rule_b)}")
+    horizons = [(i, run_a.episodes[i].get("horizon"), run_b.episodes[i].get("horizon")) for i in shared]
+    horizons = [h for h in horizons if h[1] is not None and h[2] is not None and h[1] != h[2]]
+    if horizons:
+        i, ha, hb = horizons[0]
+        diffs.append(f"horizon of {len(horizons)} shared episodes (episode {i}: {ha} vs {hb} steps)")
+    return diffs, unchecked
+
+
+def _flags(run_a: Run, run_b: Run) -> list[str]:
+    """Differences that do not change the trial but a reader should know of."""
+    notes = []
+    va, vb = run_a.results.get("versions") or {}, run_b.results.get("versions") or {}
+    changed = [f"{k} {va.get(k)} vs {vb.get(k)}" for k in sorted(set(va) | set(vb)) if va.get(k) != vb.get(k)]
+    if changed:
+        notes.append("versions differ: " + ", ".join(changed))
+    ca, cb = run_a.results.get("config") or {}, run_b.results.get("config") or {}
+    other = [k for k in sorted(set(ca) | set(cb)) if k not in NEUTRAL_CONFIG and ca.get(k) != cb.get(k)]
+    if other:
+        notes.append("config differs: " + ", ".join(f"{k} {_short(ca.get(k), 40)} vs {_short(cb.get(k), 40)}"
+                                                    for k in other))
+    return notes
+
+
+def _task(ea: dict[str, Any], eb: dict[str, Any]) -> str:
+    """The task an episode belongs to, also for records that carry no ``task_type`` (errors of older runs)."""
+    for ep in (ea, eb):
+        if ep.get("task_type"):
+            return str(ep["task_type"])
+    cls = ea.get("task_cls") or eb.get("task_cls")
+    return known_task_type(cls) or str(cls or "unknown")
+
+
+def compare_runs(run_a: Run, run_b: Run, metric: str = "success",
+                 allow_different_trials: bool = False) -> dict[str, Any]:
     """The comparison report (JSON-serializable); raises :class:`CompareError` if not comparable."""
     if metric not in METRICS:
         raise CompareError(f"unknown metric {metric!r} (available: {', '.join(METRICS)})")
@@ -156,6 +230,10 @@ def compare_runs(run_a: Run, run_b: Run, metric: str = "success") -> dict[str, A
     shared = sorted(set(run_a.episodes) & set(run_b.episodes))
     if not shared:
         raise CompareError(f"{run_a.path} and {run_b.path} share no episodes")
+    diffs, unchecked = trial_differences(run_a, run_b, shared)
+    if diffs and not allow_different_trials:
+        raise CompareError(f"refusing to compare: {run_a.path} and {run_b.path} ran different trials: "
+                           + "; ".join(diffs) + " (--allow-different-trials compares anyway)")
     by_task: dict[str, list[tuple[bool, bool]]] = defaultdict(list)
     pairs: list[tuple[bool, bool]] = []
     seed_mismatch = 0
@@ -163,9 +241,12 @@ def compare_runs(run_a: Run, run_b: Run, metric: str = "success") -> dict[str, A
         ea, eb = run_a.episodes[i], run_b.episodes[i]
         pair = (_outcome(ea, metric), _outcome(eb, metric))
         pairs.append(pair)
-        by_task[str(ea.get("task_type") or ea.get("task_cls") or "unknown")].append(pair)
+        by_task[_task(ea, eb)].append(pair)
         seed_mismatch += ea.get("seed") != eb.get("seed")
-    notes = []
+    notes = [f"the runs ran different trials (compared anyway): {d}" for d in diffs]
+    if unchecked:
+        notes.append(f"not recorded by both runs, so not checked: {', '.join(unchecked)}")
+    notes.extend(_flags(run_a, run_b))
     if seed_mismatch:
         notes.append(f"{seed_mismatch} shared episodes ran with different episode seeds "
                      f"(run seeds {run_a.seed!r} vs {run_b.seed!r}): pairs share the scene, not the randomization")

@@ -2,8 +2,14 @@
 
 Progress is durable: each finished episode is appended to ``episodes.jsonl`` (flushed and
 fsynced) as it completes, and ``results.json`` is written atomically only when every
-episode is accounted for, so an interrupted run never looks complete. ``resume=true`` on the
-same ``output_dir`` reruns only the episodes that are missing.
+episode is accounted for, so an interrupted run never looks complete. A write that fails
+(full disk) is rolled back to the last whole record. ``resume=true`` on the same
+``output_dir`` reruns only the episodes that are missing; it never drops a recorded
+episode (a larger ``limit`` extends the run, a smaller one is refused).
+
+Every attempted episode, even one that errors before it simulates, is recorded with its task
+type, prompt, horizon and where that horizon came from (``horizon_source``), all resolved
+here in the main process from the episode's spec.
 """
 
 from __future__ import annotations
@@ -12,6 +18,7 @@ import hashlib
 import json
 import os
 import platform
+import re
 import sys
 import time
 from dataclasses import dataclass
@@ -27,10 +34,13 @@ from tqdm import tqdm
 from molmo_lerobot.export.report import write_report
 from molmo_lerobot.export.wandb_log import log_run
 from molmo_lerobot.fileio import atomic_write
+from molmo_lerobot.molmospaces.preflight import preflight
+from molmo_lerobot.molmospaces.settings import resolve as molmospaces_settings
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.runner.results import EpisodeResult, summarize
-from molmo_lerobot.runner.rollout import resolve_horizon
+from molmo_lerobot.runner.rollout import horizon_with_source
+from molmo_lerobot.runner.run_config import check_run_config, episode_work_problem
 from molmo_lerobot.runner.supervisor import RunInterrupted
 from molmo_lerobot.runner.worker import WorkerJob, WorkItem
 
@@ -56,7 +66,8 @@ class EvalResults:
     output_dir: Path
 
     @property
-    def success_rate(self) -> float:
+    def success_rate(self) -> float | None:
+        """Success at the final step; ``None`` when no episode simulated (every one errored)."""
         return self.summary["success_rate"]
 
 
@@ -77,29 +88,51 @@ def _versions() -> dict[str, str]:
     return out
 
 
+def safe_name(name: str) -> str:
+    """``name`` as one harmless path component (no separators, no leading dot)."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._-")[:100] or "unnamed"
+
+
+def _write_error(out: Path, what: str, exc: OSError) -> RunError:
+    return RunError(f"cannot write {what} in output_dir {out}: {exc.strerror or exc}; finished episodes are kept in "
+                    f"{EPISODES_FILE} (fix it, then rerun with resume=true)")
+
+
+class _EpisodeLog:
+    """``episodes.jsonl`` opened for appending whole records: a failed write (full disk) is cut
+    back to the last whole record, so the file always parses for resume."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.fd = os.open(path, os.O_WRONLY | os.O_APPEND)
+
+    def append(self, result: EpisodeResult) -> None:
+        data = (json.dumps(result.to_dict()) + "\n").encode()
+        start = os.fstat(self.fd).st_size
+        try:
+            view = memoryview(data)
+            while view:
+                view = view[os.write(self.fd, view):]
+            os.fsync(self.fd)
+        except OSError as exc:
+            try:
+                os.ftruncate(self.fd, start)
+            except OSError:
+                pass
+            raise _write_error(self.path.parent, f"episode {result.episode_index}", exc) from None
+
+    def close(self) -> None:
+        os.close(self.fd)
+
+
 def resolve_benchmark_path(bench_cfg: dict[str, Any]) -> Path:
     if bench_cfg.get("path"):
         return Path(bench_cfg["path"]).expanduser()
     return data_path("benchmarks") / str(bench_cfg["name"])
 
 
-def _task_horizons(raw: dict[str, Any]) -> dict[str, float]:
-    """``horizons.<task>`` in seconds, each a positive number."""
-    out: dict[str, float] = {}
-    for task, value in raw.items():
-        try:
-            out[str(task)] = float(value)
-        except (TypeError, ValueError):
-            out[str(task)] = float("nan")
-        if not out[str(task)] > 0:
-            raise RunError(f"horizons.{task}: expected a positive number of seconds, got {value!r}")
-    return out
-
-
 def _make_executor(cfg: dict[str, Any]) -> Any:
     ex = cfg.get("executor") or {"name": "local"}
-    if int(cfg["workers"]) < 1:
-        raise RunError(f"workers must be at least 1, got {cfg['workers']}")
     common = dict(timeout_s=float(cfg.get("episode_timeout_s", 900)), retries=int(cfg.get("episode_retries", 1)))
     if ex["name"] == "local":
         from molmo_lerobot.runner.local import LocalExecutor
@@ -122,6 +155,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     from molmo_lerobot.benchmark.validate import validate_benchmark
 
     cfg = OmegaConf.to_container(config, resolve=True) if isinstance(config, DictConfig) else dict(config)
+    check_run_config(cfg)  # nonsense options stop here, before any work or output
     if cfg.get("push") and not cfg.get("record"):
         print("molmo-eval: push=true records the dataset it pushes (record=true)", file=sys.stderr)
         cfg["record"] = True
@@ -134,27 +168,36 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]))
     problems: dict[int, list[str]] = {}
     for p in validate_benchmark(bench, plugins):
-        problems.setdefault(p.episode_index, []).append(f"{p.field}: {p.message}" if p.field else p.message)
+        if not p.warning:  # warnings (not runnable here) are the preflight's to report
+            problems.setdefault(p.episode_index, []).append(f"{p.field}: {p.message}" if p.field else p.message)
 
     started = datetime.now(UTC)
-    out = Path(cfg.get("output_dir") or Path("runs") / f"{bench.name}-{policy_name}-{started:%Y%m%d-%H%M%S}")
+    out = Path(cfg.get("output_dir") or Path("runs") / f"{safe_name(bench.name)}-{safe_name(policy_name)}-"
+                                                        f"{started:%Y%m%d-%H%M%S}")
     cfg["output_dir"] = str(out)
     limit = cfg.get("limit")
-    indices = list(range(len(bench.episodes)))[: int(limit) if limit is not None else None]
+    indices = list(range(len(bench.episodes)))[:limit]
+    cannot = preflight(bench, plugins, cfg, indices, skip=problems)  # before any output or worker
+    if cannot:
+        raise RunError(cannot)
 
-    horizons = _task_horizons(cfg.get("horizons") or {})
+    horizons = {str(task): float(sec) for task, sec in (cfg.get("horizons") or {}).items()}
     items: list[WorkItem] = []
     errors: list[EpisodeResult] = []
+    described: dict[int, dict[str, Any]] = {}
     thresholds: dict[str, dict[str, Any]] = {}
+    too_long: list[tuple[int, str]] = []
     for i in indices:
+        original = bench.episodes[i]
         try:
-            spec = plugins.apply_episode_overrides(bench.episodes[i], cfg)
+            spec = plugins.apply_episode_overrides(original, cfg)
         except Exception as exc:  # an override that cannot apply to this episode fails it, not the run
-            original = bench.episodes[i]
+            described[i] = _describe(original, plugins, cfg, horizons)
             errors.append(EpisodeResult.failed(i, original.house_index, original.task.task_cls,
                                                episode_seed(cfg["seed"], original.model_dump(mode="json")),
                                                f"episode override failed: {type(exc).__name__}: {exc}"))
             continue
+        described[i] = _describe(spec, plugins, cfg, horizons)
         raw = spec.model_dump(mode="json", exclude_unset=False)
         seed = episode_seed(cfg["seed"], raw)
         if i in problems:
@@ -162,12 +205,17 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                                                "invalid episode: " + "; ".join(problems[i])))
             continue
         task_type = plugins.task_type(spec.task_name)
+        horizon = described[i]["horizon"]
+        work = episode_work_problem(horizon, cfg["timing"], f"{bench.where(i)} ({described[i]['horizon_source']})")
+        if work:
+            too_long.append((i, work))
         entry = thresholds.setdefault(task_type.name, {**task_type.thresholds(spec), "horizon_steps": []})
-        horizon = resolve_horizon(cfg.get("horizon"), spec.task, task_type.default_horizon_sec,
-                                  cfg["timing"]["policy_dt_ms"], horizons.get(task_type.name))
         if horizon not in entry["horizon_steps"]:
             entry["horizon_steps"].append(horizon)
         items.append(WorkItem(i, raw, seed, task_type.name, horizon))
+    if too_long:
+        more = f" (and {len(too_long) - 1} more episodes)" if len(too_long) > 1 else ""
+        raise RunError(too_long[0][1] + more)
 
     run_info = {
         "benchmark": {"name": bench.name, "sha256": bench.sha256, "n_episodes": len(bench.episodes),
@@ -175,49 +223,66 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         "policy": cfg["policy"], "seed": cfg["seed"], "limit": limit, "horizon": cfg.get("horizon"),
         "timing": cfg["timing"],
         "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
+                         "molmospaces": molmospaces_settings(cfg).to_config(),
                          **({"plugins_prefer": plugins.prefer} if plugins.prefer else {})},  # pinned providers
     }
     done = _prepare_output(out, run_info, bool(cfg.get("resume")))
-    results: dict[int, EpisodeResult] = {r.episode_index: r for r in done if r.episode_index in set(indices)}
+    outside = sorted(r.episode_index for r in done if r.episode_index not in described)
+    if outside:  # cannot happen with an unchanged benchmark and limit check; never drop them silently
+        raise RunError(f"cannot resume {out}: it records episodes {outside[:10]} that this run would not evaluate")
+
+    def complete(result: EpisodeResult) -> EpisodeResult:
+        """Fill what the main process knows of every attempted episode (task type, prompt, horizon)."""
+        for key, value in described[result.episode_index].items():
+            if getattr(result, key) is None:
+                setattr(result, key, value)
+        return result
+
+    results: dict[int, EpisodeResult] = {r.episode_index: complete(r) for r in done}
     episodes_path = out / EPISODES_FILE
     todo = [it for it in items if it.episode_index not in results]
     t0 = time.perf_counter()
-    with open(episodes_path, "a") as log, tqdm(total=len(indices), initial=len(results), disable=not cfg.get("progress", True),
-                                              desc=f"{bench.name} · {policy_name}", unit="ep", file=sys.stderr) as bar:
-        def record(result: EpisodeResult) -> None:
-            results[result.episode_index] = result
-            log.write(json.dumps(result.to_dict()) + "\n")
-            log.flush()
-            os.fsync(log.fileno())
-            bar.update(1)
-            n = len(results)
-            bar.set_postfix(success=f"{sum(r.success for r in results.values()) / n:.2f}",
-                            errors=sum(r.error is not None for r in results.values()))
+    log = _EpisodeLog(episodes_path)
+    try:
+        with tqdm(total=len(indices), initial=len(results), disable=not cfg.get("progress", True),
+                  desc=f"{bench.name} · {policy_name}", unit="ep", file=sys.stderr) as bar:
+            def record(result: EpisodeResult) -> None:
+                log.append(complete(result))
+                results[result.episode_index] = result
+                bar.update(1)
+                n = len(results)
+                bar.set_postfix(success=f"{sum(r.success for r in results.values()) / n:.2f}",
+                                errors=sum(r.error is not None for r in results.values()))
 
-        for failed in errors:
-            if failed.episode_index not in results:
-                record(failed)
-        if todo:
-            job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], output_dir=str(out),
-                            benchmark_name=bench.name, benchmark_sha256=bench.sha256, recorders=recorders,
-                            prefer=plugins.prefer)
-            try:
-                executor.run(job, todo, record)
-            except RunInterrupted as exc:
-                raise RunInterrupted(exc.signum, f"{exc}: {len(results)} of {len(indices)} episodes finished and "
-                                     f"kept in {episodes_path}; to continue, rerun with output_dir={out} "
-                                     "resume=true") from None
+            for failed in errors:
+                if failed.episode_index not in results:
+                    record(failed)
+            if todo:
+                job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], output_dir=str(out),
+                                benchmark_name=bench.name, benchmark_sha256=bench.sha256, recorders=recorders,
+                                prefer=plugins.prefer, molmospaces=run_info["eval_options"]["molmospaces"])
+                try:
+                    executor.run(job, todo, record)
+                except RunInterrupted as exc:
+                    raise RunInterrupted(exc.signum, f"{exc}: {len(results)} of {len(indices)} episodes finished "
+                                         f"and kept in {episodes_path}; to continue, rerun with output_dir={out} "
+                                         "resume=true") from None
+    finally:
+        log.close()
     ordered = [results[i] for i in sorted(results)]
     missing = sorted(set(indices) - set(results))
     if missing:
         raise RunError(f"run ended with {len(missing)} episodes unaccounted for: {missing[:10]}")
-    atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered))
     summary = summarize(
         ordered, **run_info, thresholds=thresholds, versions=_versions(), workers=cfg["workers"],
         executor=(cfg.get("executor") or {}).get("name", "local"), output_dir=str(out),
         started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=cfg,
     )
-    atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")  # the score, before any export
+    try:
+        atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered))
+        atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")  # the score, before any export
+    except OSError as exc:
+        raise _write_error(out, "the run's outputs", exc) from None
     failed = []
     for name, step in [*((f"export {type(f).__name__}", partial(f.finalize, out, ordered, summary)) for f in recorders),
                        ("report", partial(write_report, out, summary, ordered)),
@@ -232,39 +297,115 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     return EvalResults(summary=summary, episodes=ordered, output_dir=out)
 
 
+def _describe(spec: Any, plugins: Any, cfg: dict[str, Any], horizons: dict[str, float]) -> dict[str, Any]:
+    """Task type, prompt, horizon and its source of one episode, from its spec alone (never raises)."""
+    from molmo_lerobot.benchmark.schema import known_task_type
+    from molmo_lerobot.plugins import PluginError
+
+    try:
+        task_type = plugins.task_type(spec.task_name)
+        name, default_sec = task_type.name, task_type.default_horizon_sec
+    except PluginError:  # no plugin for it: the episode is invalid, but it still belongs to its task
+        name = known_task_type(spec.task.task_cls, spec.task.task_type) or spec.task_name
+        default_sec = None
+    horizon = source = None
+    if cfg.get("horizon") is not None or horizons.get(name) or spec.task.task_horizon_sec or default_sec:
+        horizon, source = horizon_with_source(cfg.get("horizon"), spec.task, default_sec,
+                                              cfg["timing"]["policy_dt_ms"], horizons.get(name))
+    return {"task_type": name, "prompt": spec.language.task_description, "horizon": horizon,
+            "horizon_source": source}
+
+
 def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool) -> list[EpisodeResult]:
     """Create ``out`` (or reopen it on resume) and return the episodes already done."""
     run_file = out / RUN_FILE
-    if out.exists() and any(out.iterdir()):
-        if not resume:
-            raise RunError(f"output_dir {out} already holds a run; pass resume=true to continue it "
-                           "or choose another output_dir")
-        if not run_file.exists():
-            raise RunError(f"cannot resume: {run_file} is missing")
-        previous = json.loads(run_file.read_text())
-        current = json.loads(json.dumps(run_info))  # compare as stored (JSON turns int keys into strings)
-        for key in ("benchmark", "policy", "seed", "horizon", "timing", "eval_options"):
-            if previous.get(key) != current.get(key):
-                raise RunError(f"cannot resume {out}: its {key} differs from this run's "
-                               f"({previous.get(key)!r} vs {current.get(key)!r})")
-        (out / RESULTS_FILE).unlink(missing_ok=True)
-        done = _read_episodes(out / EPISODES_FILE)
-        atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))
-        return done
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write(run_file, json.dumps(run_info, indent=2) + "\n")
-    (out / EPISODES_FILE).touch()
+    if out.exists() and not out.is_dir():
+        raise RunError(f"output_dir {out} is a file, not a directory; choose another output_dir")
+    try:
+        if out.exists() and any(out.iterdir()):
+            if not resume:
+                raise RunError(f"output_dir {out} already holds a run; pass resume=true to continue it "
+                               "or choose another output_dir")
+            return _reopen(out, run_info)
+        out.mkdir(parents=True, exist_ok=True)
+        atomic_write(run_file, json.dumps(run_info, indent=2) + "\n")
+        (out / EPISODES_FILE).touch()
+    except OSError as exc:
+        raise RunError(f"cannot write output_dir {out}: {exc.strerror or exc}") from None
     return []
 
 
+def _reopen(out: Path, run_info: dict[str, Any]) -> list[EpisodeResult]:
+    """Check that ``out`` holds this same run and return its recorded episodes (resume)."""
+    run_file = out / RUN_FILE
+    if not run_file.exists():
+        raise RunError(f"cannot resume: {run_file} is missing")
+    try:
+        previous = json.loads(run_file.read_text())
+    except (json.JSONDecodeError, RecursionError, UnicodeDecodeError):
+        previous = None
+    if not isinstance(previous, dict):
+        raise RunError(f"cannot resume: {run_file} is not a run description (not a JSON object)")
+    current = json.loads(json.dumps(run_info))  # compare as stored (JSON turns int keys into strings)
+    for key in ("benchmark", "policy", "seed", "horizon", "timing", "eval_options"):
+        if previous.get(key) != current.get(key):
+            raise RunError(f"cannot resume {out}: its {key} differs from this run's "
+                           f"({previous.get(key)!r} vs {current.get(key)!r})")
+    done = _read_episodes(out / EPISODES_FILE)
+    old, new = previous.get("limit"), current["limit"]
+    if new is not None and (old is None or new < old):
+        recorded, shown = len(done), "null" if old is None else old
+        raise RunError(f"cannot resume {out} with limit={new}: it was started with limit={shown} "
+                       f"({recorded} episode{'s' * (recorded != 1)} recorded) and a resume never drops recorded "
+                       + ("episodes; use limit=null" if old is None else
+                          f"episodes; use limit={old} or larger (or limit=null)"))
+    (out / RESULTS_FILE).unlink(missing_ok=True)
+    atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))
+    if new != old:  # a larger limit extends the run
+        atomic_write(run_file, json.dumps({**previous, "limit": new}, indent=2) + "\n")
+    return done
+
+
+#: ``episodes.jsonl`` fields a record must have, with their JSON types.
+_RECORD_TYPES: dict[str, tuple[type, ...]] = {
+    "episode_index": (int,), "house_index": (int, type(None)), "task_cls": (str, type(None)), "success": (bool,),
+    "success_once": (bool,), "steps": (int,), "seed": (int,), "error": (str, type(None)),
+}
+
+
 def _read_episodes(path: Path) -> list[EpisodeResult]:
-    """Episodes persisted so far; a torn last line (killed mid-write) is ignored."""
+    """Episodes persisted so far. A torn last line (killed mid-write) is dropped, its episode
+    rerun; any other unreadable record stops the resume with its line number."""
     done: dict[int, EpisodeResult] = {}
-    if path.exists():
-        for line in path.read_text().splitlines():
-            try:
-                r = EpisodeResult.from_dict(json.loads(line))
-            except (json.JSONDecodeError, TypeError):
-                continue
-            done[r.episode_index] = r
+    if not path.exists():
+        return []
+    text = path.read_text(errors="replace")
+    lines = text.splitlines()
+    for lineno, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            data = json.loads(line)
+            why = _record_problem(data)
+        except (json.JSONDecodeError, RecursionError) as exc:
+            if lineno == len(lines) and not text.endswith("\n"):
+                continue  # torn by a kill mid-write
+            why = "not valid JSON" if isinstance(exc, json.JSONDecodeError) else "JSON nested too deeply"
+        if why:
+            raise RunError(f"cannot resume: {path}:{lineno}: corrupt episode record ({why}); "
+                           "delete that line to rerun its episode")
+        r = EpisodeResult.from_dict(data)
+        done[r.episode_index] = r
     return list(done.values())
+
+
+def _record_problem(data: Any) -> str | None:
+    if not isinstance(data, dict):
+        return "not a JSON object"
+    for key, types in _RECORD_TYPES.items():
+        if key not in data:
+            return f"field {key!r} is missing"
+        value = data[key]
+        if not isinstance(value, types) or (isinstance(value, bool) and bool not in types):
+            return f"field {key!r} is {json.dumps(value)[:40]}"
+    return None

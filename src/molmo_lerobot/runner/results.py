@@ -1,7 +1,10 @@
 """Episode results and the run summary (``results.json``): honest counts and Wilson CIs.
 
-Every attempted episode counts. An episode that raised, timed out or whose worker died is
-a failure with its ``error`` recorded; it is never dropped from the denominator.
+Every attempted episode counts. An episode that raised, timed out, diverged or whose worker
+died is a failure with its ``error`` recorded; it is never dropped from the denominator.
+``n_valid`` counts the episodes that simulated (no error). A block in which no episode
+simulated measured nothing about the policy: its rates and intervals are ``null`` (not a
+0 % score) while every count stays recorded.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ class EpisodeResult:
     task_type: str | None = None
     prompt: str | None = None
     horizon: int | None = None
+    horizon_source: str | None = None  # cli | task_horizons | task_horizon_sec | default
     duration_s: float = 0.0
     attempts: int = 1
     extra: dict[str, Any] = field(default_factory=dict)
@@ -58,15 +62,18 @@ def _block(results: list[EpisodeResult]) -> dict[str, Any]:
     n = len(results)
     k = sum(r.success for r in results)
     k_once = sum(r.success_once for r in results)
+    n_errors = sum(r.error is not None for r in results)
+    scored = n > n_errors  # at least one episode simulated: errors count as failures
     return {
-        "success_rate": k / n if n else 0.0,
-        "success_once_rate": k_once / n if n else 0.0,
+        "success_rate": k / n if scored else None,
+        "success_once_rate": k_once / n if scored else None,
         "n_episodes": n,
+        "n_valid": n - n_errors,
         "n_success": k,
         "n_success_once": k_once,
-        "n_errors": sum(r.error is not None for r in results),
-        "ci95": list(wilson_ci(k, n)),
-        "success_once_ci95": list(wilson_ci(k_once, n)),
+        "n_errors": n_errors,
+        "ci95": list(wilson_ci(k, n)) if scored else None,
+        "success_once_ci95": list(wilson_ci(k_once, n)) if scored else None,
     }
 
 
@@ -82,3 +89,28 @@ def summarize(results: list[EpisodeResult], **context: Any) -> dict[str, Any]:
     ]
     summary.update(context)
     return summary
+
+
+def summary_lines(s: dict[str, Any], max_errors: int = 10) -> list[str]:
+    """The run's headline, per-task lines and first errors, for a terminal.
+
+    A run with errors leads with their count; one in which no episode simulated says
+    "no episode ran" instead of a score.
+    """
+    head = f"{s['benchmark']['name']} · {s['policy']['name']}"
+    errors = f"{s['n_errors']} of {s['n_episodes']} episodes errored"
+    if s["success_rate"] is None:
+        lines = [f"no episode ran: {errors} · {head}: no score"]
+    else:
+        lo, hi = s["ci95"]
+        lines = [f"{errors + ' · ' if s['n_errors'] else ''}{head}: success {s['success_rate']:.3f} "
+                 f"[{lo:.3f}, {hi:.3f}] ({s['n_success']}/{s['n_episodes']}), "
+                 f"success at any step {s['success_once_rate']:.3f}"]
+        for task, b in s["per_task"].items():
+            rate = "no episode ran" if b["success_rate"] is None else f"{b['success_rate']:.3f}"
+            tail = f", {b['n_errors']} errored" if b["n_errors"] else ""
+            lines.append(f"  {task}: {rate} ({b['n_success']}/{b['n_episodes']}{tail})")
+    lines.extend(f"  episode {e['episode_index']}: {e['error']}" for e in s["errors"][:max_errors])
+    if len(s["errors"]) > max_errors:
+        lines.append(f"  ... and {len(s['errors']) - max_errors} more errors (results.json)")
+    return lines

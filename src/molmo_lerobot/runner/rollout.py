@@ -6,6 +6,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+import mujoco
 import numpy as np
 
 if TYPE_CHECKING:
@@ -15,6 +16,31 @@ if TYPE_CHECKING:
 
 class ActionError(ValueError):
     """A policy returned something that is not a valid action or chunk."""
+
+
+class SimulationDiverged(RuntimeError):
+    """The physics blew up (non-finite state or a MuJoCo instability warning): the episode is an error."""
+
+
+#: MuJoCo warnings that mean the simulation state can no longer be trusted (MuJoCo resets
+#: the state after a bad acceleration, so a blow-up can look like a calm, failed episode).
+DIVERGENCE_WARNINGS = {name: int(getattr(mujoco.mjtWarning, name))
+                       for name in ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC", "mjWARN_BADCTRL")}
+
+
+def check_divergence(data: Any, when: str) -> None:
+    """Raise :class:`SimulationDiverged` if ``data`` (an ``MjData``) holds non-finite state or
+    has raised one of :data:`DIVERGENCE_WARNINGS` since it was reset; ``when`` locates it."""
+    for name, index in DIVERGENCE_WARNINGS.items():
+        info = data.warning[index]
+        if info.number > 0:
+            raise SimulationDiverged(f"simulation diverged {when} (t={data.time:.3f}s): MuJoCo {name} "
+                                     f"x{info.number} (dof/index {info.lastinfo}); check init_qpos and object poses")
+    for field in ("qpos", "qvel", "qacc"):
+        values = getattr(data, field)
+        if not np.all(np.isfinite(values)):
+            bad = int(np.flatnonzero(~np.isfinite(values))[0])
+            raise SimulationDiverged(f"simulation diverged {when} (t={data.time:.3f}s): non-finite {field}[{bad}]")
 
 
 def split_actions(out: Any, move_groups: dict[str, int], policy: str) -> list[Action]:
@@ -73,6 +99,9 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
     """
     policy.reset(ctx)
     task.setup()
+    data = getattr(env, "data", None)
+    if data is not None:
+        check_divergence(data, "at the initial state")
     for rec in recorders:
         rec.start_episode(info)
     record_images = any(r.wants_images for r in recorders)
@@ -85,6 +114,8 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
             queue.extend(split_actions(policy.act(obs), env.move_groups, policy_name))
         action = queue.popleft()
         env.step(action)
+        if data is not None:
+            check_divergence(data, f"at step {step}")
         success = bool(task.success())
         success_once |= success
         done = step == horizon - 1
@@ -102,7 +133,16 @@ def resolve_horizon(override: int | None, task_spec: Any, default_sec: float, po
                     task_sec: float | None = None) -> int:
     """Policy steps: CLI override (steps), else the run's per-task horizon (``task_sec``), else
     the episode's ``task_horizon_sec``, else the task type's default."""
+    return horizon_with_source(override, task_spec, default_sec, policy_dt_ms, task_sec)[0]
+
+
+def horizon_with_source(override: int | None, task_spec: Any, default_sec: float, policy_dt_ms: float,
+                        task_sec: float | None = None) -> tuple[int, str]:
+    """:func:`resolve_horizon` and where it came from: ``cli``, ``task_horizons``,
+    ``task_horizon_sec`` or ``default``."""
     if override is not None:
-        return int(override)
-    seconds = task_sec or getattr(task_spec, "task_horizon_sec", None) or default_sec
-    return max(1, int(round(float(seconds) * 1000.0 / policy_dt_ms)))
+        return int(override), "cli"
+    episode_sec = getattr(task_spec, "task_horizon_sec", None)
+    seconds, source = ((task_sec, "task_horizons") if task_sec else
+                       (episode_sec, "task_horizon_sec") if episode_sec else (default_sec, "default"))
+    return max(1, int(round(float(seconds) * 1000.0 / policy_dt_ms))), source

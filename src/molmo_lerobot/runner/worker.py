@@ -50,6 +50,7 @@ class WorkerJob:
     benchmark_name: str
     benchmark_sha256: str
     recorders: list[RecorderFactory] = field(default_factory=list)
+    molmospaces: dict[str, Any] = field(default_factory=dict)  # MolmoSpaces data settings, user libraries
     prefer: dict[str, dict[str, str]] = field(default_factory=dict)  # the run's plugins.prefer pins
 
 
@@ -61,12 +62,14 @@ class EpisodeWorker:
     """Loads plugins and the policy once, then runs episodes in sequence."""
 
     def __init__(self, job: WorkerJob, worker_id: str) -> None:
+        from molmo_lerobot.molmospaces import configure
         from molmo_lerobot.plugins import get_plugins
         from molmo_lerobot.runner.policy import make_policy
         from molmo_lerobot.sim.env import Timing
 
         self.job = job
         self.worker_id = worker_id
+        configure(job.molmospaces)
         self.plugins = get_plugins()
         self.plugins.set_preferences(job.prefer)
         self.timing = Timing(**job.timing)

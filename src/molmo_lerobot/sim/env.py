@@ -5,7 +5,8 @@
 with the physics timestep set from ``timing.sim_dt_ms`` (never taken from any XML) and
 the solver options every scene shares (:data:`PHYSICS_OPTIONS`: the ``implicitfast``
 integrator for stiff position actuators, elliptic friction cones and ``impratio`` 10 so
-that grasped objects do not creep out of the fingers).
+that grasped objects do not creep out of the fingers), unless the scene dataset keeps its
+scenes' own (``SceneDataset.physics_options``: MolmoSpaces' scene XMLs).
 
 One :meth:`Env.step` is one policy step: ``policy_dt / ctrl_dt`` controller ticks, each
 moving the position targets linearly from the previous command towards the new one, and
@@ -24,8 +25,6 @@ from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
-
-from molmo_lerobot.sim.scenes import attach_mjcf
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
@@ -89,8 +88,8 @@ _MODEL_CACHE_SIZE = 4
 
 def _model_key(spec: EpisodeSpec, timing: Timing, camera_system: str) -> str:
     mods = spec.scene_modifications.model_dump(mode="json", exclude={"object_poses"})
-    return json.dumps([spec.scene_dataset, spec.house_index, spec.robot.robot_name, spec.task.robot_base_pose,
-                       list(spec.img_resolution), [c.model_dump(mode="json") for c in spec.cameras], mods,
+    return json.dumps([spec.scene_dataset, spec.data_split, spec.house_index, spec.robot.robot_name,
+                       spec.task.robot_base_pose, list(spec.img_resolution), [c.model_dump(mode="json") for c in spec.cameras], mods,
                        timing.sim_dt_ms, camera_system], sort_keys=True)
 
 
@@ -116,16 +115,10 @@ def _add_primitive(world: mujoco.MjSpec, name: str, prim: Any) -> None:
 def _build_model(spec: EpisodeSpec, timing: Timing, plugins: Plugins, robot: RobotType,
                  camera_system: str) -> tuple[mujoco.MjModel, list[str]]:
     scene = plugins.scene_dataset(spec.scene_dataset)
-    world = scene.build(spec.house_index)
+    world = scene.build_episode(spec)
     robot.add_to(world, spec.task.robot_base_pose)
     mods = spec.scene_modifications
-    for name in mods.removed_objects:
-        body = world.body(name)
-        if body is None:
-            raise ValueError(f"scene_modifications.removed_objects: no body {name!r} in house {spec.house_index}")
-        world.delete(body)
-    for name, xml in mods.added_objects.items():
-        attach_mjcf(world, xml, name, source=f"scene_modifications.added_objects[{name!r}]")
+    scene.modify(world, spec)
     for name, prim in mods.primitive_objects.items():
         _add_primitive(world, name, prim)
     body_names = [b.name for b in world.bodies]
@@ -141,7 +134,7 @@ def _build_model(spec: EpisodeSpec, timing: Timing, plugins: Plugins, robot: Rob
     world.visual.global_.offwidth = max(world.visual.global_.offwidth, int(width))
     world.visual.global_.offheight = max(world.visual.global_.offheight, int(height))
     world.option.timestep = timing.sim_dt_s
-    for option, value in PHYSICS_OPTIONS.items():
+    for option, value in scene.physics_options(PHYSICS_OPTIONS).items():
         setattr(world.option, option, value)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)

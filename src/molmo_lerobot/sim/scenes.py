@@ -10,9 +10,12 @@ from __future__ import annotations
 
 import warnings
 from abc import ABC, abstractmethod
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import mujoco
+
+if TYPE_CHECKING:
+    from molmo_lerobot.benchmark.schema import EpisodeSpec
 
 
 class SceneDataset(ABC):
@@ -32,6 +35,30 @@ class SceneDataset(ABC):
     @abstractmethod
     def metadata(self, house_index: int) -> dict[str, Any]:
         """House description, JSON-ready. At least ``objects``: ``{body_name: {"asset_id": uid, ...}}``."""
+
+    # Per episode (datasets whose houses depend on more than the index override these) ----------
+    def build_episode(self, spec: EpisodeSpec) -> mujoco.MjSpec:
+        """The world spec of ``spec``'s house (default: :meth:`build` of its ``house_index``)."""
+        return self.build(spec.house_index)
+
+    def episode_metadata(self, spec: EpisodeSpec) -> dict[str, Any]:
+        """The metadata of ``spec``'s house (default: :meth:`metadata` of its ``house_index``)."""
+        return self.metadata(spec.house_index)
+
+    def modify(self, world: mujoco.MjSpec, spec: EpisodeSpec) -> None:
+        """Apply ``scene_modifications``: remove bodies (exact names), attach added MJCF files."""
+        mods = spec.scene_modifications
+        for name in mods.removed_objects:
+            body = world.body(name)
+            if body is None:
+                raise ValueError(f"scene_modifications.removed_objects: no body {name!r} in house {spec.house_index}")
+            world.delete(body)
+        for name, xml in mods.added_objects.items():
+            attach_mjcf(world, xml, name, source=f"scene_modifications.added_objects[{name!r}]")
+
+    def physics_options(self, defaults: dict[str, Any]) -> dict[str, Any]:
+        """Solver options to set on the compiled model (default: ``defaults``, the shared ones)."""
+        return defaults
 
     def check_house(self, house_index: int) -> None:
         """Raise a clear ``ValueError`` if ``house_index`` is out of range."""

@@ -1,0 +1,85 @@
+"""Before any worker starts: can every episode of this run simulate here?
+
+:func:`preflight` configures the MolmoSpaces settings of the run (assets dir, user scenes and
+libraries), then checks each episode's task type, robot, scene dataset (and its scene file and
+added objects), and camera system (for ``cameras: []``). It returns one line naming what is
+missing, where it looked and how to get it — or ``None`` when the run can go ahead.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+from molmo_lerobot.assets.grasps import GraspError
+from molmo_lerobot.assets.libraries import AssetError
+from molmo_lerobot.molmospaces.settings import SettingsError, configure
+
+
+def _missing(spec: Any, plugins: Any, camera_system: str | None) -> tuple[str, str] | None:
+    """(field, what is missing and how to get it) for the first thing ``spec`` lacks here, or ``None``."""
+    from molmo_lerobot.plugins import PluginError
+
+    checks = (("task type", "task_type", spec.task_name, "task.task_cls"),
+              ("robot", "robot", spec.robot.robot_name, "robot.robot_name"),
+              ("scene dataset", "scene_dataset", spec.scene_dataset, "scene_dataset"))
+    found = {}
+    for what, kind, name, field in checks:
+        try:
+            found[kind] = getattr(plugins, kind)(name)
+        except PluginError as exc:
+            return field, f"{what} {name!r}: {str(exc).splitlines()[0]} (install a plugin that provides it)"
+    scene = found["scene_dataset"]
+    if hasattr(scene, "fetch"):
+        scene.fetch(spec)  # scenes installed on demand arrive now, before any worker starts
+    reason = scene.missing(spec) if hasattr(scene, "missing") else None
+    if reason:
+        return ("house_index" if "scene_xml_paths" in reason else "scene_dataset"), reason
+    if hasattr(scene, "missing") and spec.scene_modifications.added_objects:
+        from molmo_lerobot.molmospaces.scenes import resolve_object_file
+
+        for name, rel in spec.scene_modifications.added_objects.items():
+            field = f"scene_modifications.added_objects[{name!r}]"
+            try:
+                resolve_object_file(rel, field)
+            except FileNotFoundError as exc:
+                return field, str(exc).removeprefix(f"{field}: ")
+    if not spec.cameras:
+        system = camera_system or (spec.source.camera_system_class if spec.source else None)
+        if system is None:
+            return "cameras", "cameras: [] and no camera system: set camera.system= or source.camera_system_class"
+        try:
+            plugins.camera_system(system)
+        except PluginError as exc:
+            return "cameras", f"cameras: [] needs camera system {system!r}: {str(exc).splitlines()[0]}"
+    return None
+
+
+def preflight(bench: Any, plugins: Any, config: Mapping[str, Any], indices: Iterable[int],
+              skip: Iterable[int] = ()) -> str | None:
+    """One line saying why the run cannot simulate (and how to fix it), or ``None``.
+
+    ``skip`` are episodes already failed as invalid (they are reported per episode instead).
+    """
+    try:
+        configure(config)
+    except (SettingsError, AssetError, GraspError) as exc:
+        return f"cannot set up MolmoSpaces data: {exc}"
+    camera_system = (config.get("camera") or {}).get("system")
+    skipped = set(skip)
+    reasons: dict[tuple[str, str, str], list[int]] = {}
+    for i in indices:
+        if i in skipped:
+            continue
+        found = _missing(bench.episodes[i], plugins, camera_system)
+        if found:
+            file = bench.origins[i].file if i < len(bench.origins) else str(bench.path)
+            reasons.setdefault((file, *found), []).append(i)
+    if not reasons:
+        return None
+    ((file, field, message), eps), *rest = reasons.items()
+    shown = ", ".join(map(str, eps[:5])) + (", ..." if len(eps) > 5 else "")
+    n_eps = sum(len(v) for v in reasons.values())
+    more = f"; {len(rest)} more missing resource{'s' * (len(rest) != 1)} (molmo-bench validate lists them)" if rest else ""
+    return (f"cannot simulate {n_eps} of {len(bench.episodes)} episodes: {file}: episode{'s' * (len(eps) != 1)} "
+            f"{shown}: field {field}: {message}{more}")

@@ -1,0 +1,33 @@
+"""Fixtures: the stand-in MolmoSpaces assets dir (built once) and the settings pointing at it."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from standin import build_assets  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def standin(tmp_path_factory):
+    root = tmp_path_factory.mktemp("mlspaces") / "assets"
+    houses = build_assets(root)
+    return root, houses
+
+
+@pytest.fixture
+def assets(standin, monkeypatch, tmp_path):
+    """The stand-in assets dir as ``MLSPACES_ASSETS_DIR``, with fresh process settings."""
+    from molmo_lerobot.assets.catalog import default_catalog
+    from molmo_lerobot.molmospaces import settings
+
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes MUJOCO_LOG.TXT (attach warnings) into the working directory
+    monkeypatch.setenv("MLSPACES_ASSETS_DIR", str(standin[0]))
+    monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(tmp_path / "home"))
+    monkeypatch.setattr(settings, "_CURRENT", None)
+    default_catalog.cache_clear()
+    yield standin
+    default_catalog.cache_clear()

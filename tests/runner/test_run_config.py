@@ -1,0 +1,60 @@
+"""Run options are checked up front: one line per problem, exit status 2, nothing written."""
+
+from __future__ import annotations
+
+import pytest
+
+from molmo_lerobot.cli.eval import main
+from molmo_lerobot.runner.run_config import MAX_PHYSICS_STEPS, config_problems, episode_work_problem
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["limit=-1"], "limit: expected a positive integer (or null for every episode), got -1"),
+        (["limit=0"], "limit: expected a positive integer (or null for every episode), got 0"),
+        (["limit=abc"], "limit: expected a positive integer (or null for every episode), got 'abc'"),
+        (["horizon=0"], "horizon: expected a whole number of policy steps in 1..100000 (or null), got 0"),
+        (["horizon=-5"], "horizon: expected a whole number of policy steps in 1..100000 (or null), got -5"),
+        (["horizon=1e99"], "horizon: expected a whole number of policy steps in 1..100000 (or null), got 1e+99"),
+        (["seed=abc"], "seed: expected an integer, got 'abc'"),
+        (["workers=abc"], "workers: expected a positive integer, got 'abc'"),
+        (["timing.policy_dt_ms=0"], "timing.policy_dt_ms: expected a positive number of milliseconds, got 0"),
+        (["timing.ctrl_dt_ms=abc"], "timing.ctrl_dt_ms: expected a positive number of milliseconds, got 'abc'"),
+        (["timing.ctrl_dt_ms=5"], "timing: policy_dt_ms / ctrl_dt_ms must be a whole multiple"),
+        (["+horizons.pick=1e12"], "horizons.pick: expected a positive number of seconds, got 1000000000000.0 (at most 3600)"),
+        (["episode_timeout_s=-1"], "episode_timeout_s: expected a positive number of seconds, got -1"),
+        (["resume=maybe"], "resume: expected true or false, got 'maybe'"),
+        # bounded work per episode: the run's horizon times the physics steps per policy step
+        (["horizon=100000"], "horizon: 100,000 policy steps x 33 physics steps each = 3,300,000 physics steps"),
+        # every pick episode's default horizon (15 s) at a 0.1 us physics step
+        (["timing.sim_dt_ms=0.0001"], "policy steps x 660,000 physics steps each"),
+    ],
+)
+def test_nonsense_options_are_one_line_and_write_nothing(args, needle, capsys, tmp_path):
+    out = tmp_path / "out"
+    assert main([*args, "limit=2" if not args[0].startswith("limit") else "workers=1", f"output_dir={out}"]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1 and err.startswith("molmo-eval: error: ")
+    assert not out.exists()
+
+
+def test_every_problem_is_listed_one_per_line(capsys, tmp_path):
+    assert main(["limit=0", "seed=x", "horizon=-1", "workers=0", f"output_dir={tmp_path / 'out'}"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 4 and all(ln.startswith("molmo-eval: error: ") for ln in lines)
+    assert {ln.split(": ")[2].split(" ")[0] for ln in lines} == {"limit", "seed", "horizon", "workers"}
+
+
+def test_defaults_are_valid():
+    from molmo_lerobot.config import compose
+    from omegaconf import OmegaConf
+
+    assert config_problems(OmegaConf.to_container(compose([]), resolve=True)) == []
+
+
+def test_episode_work_bound():
+    timing = {"policy_dt_ms": 66.0, "ctrl_dt_ms": 2.0, "sim_dt_ms": 2.0}
+    assert episode_work_problem(600, timing, "x") is None  # pick_and_place at 40 s
+    assert episode_work_problem(MAX_PHYSICS_STEPS // 33 + 1, timing, "x") is not None
