@@ -17,7 +17,13 @@ $(VENV): pyproject.toml $(PLUGINS)
 	@echo "using $(PYTHON312)"
 	test -x $(PY) || $(PYTHON312) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip 2>&1 | grep -v "^WARNING: Location" || true
-	$(PY) -m pip install -q -e ".[test,ray,training]" $(foreach p,$(dir $(PLUGINS)),-e ./$(p)) 2>&1 | grep -v "^WARNING: Location"; test $${PIPESTATUS[0]} -eq 0
+	$(PY) -m pip install -q -e ".[test,ray,training,viz]" $(foreach p,$(dir $(PLUGINS)),-e ./$(p)) 2>&1 | grep -v "^WARNING: Location"; test $${PIPESTATUS[0]} -eq 0
+	@# LeRobot decodes video with torchcodec when it is installed, else PyAV. torchcodec needs the
+	@# system's FFmpeg shared libraries; where they are missing it fails to load and LeRobot prints
+	@# a traceback before falling back. Removing it lets LeRobot pick PyAV by its own rule.
+	@$(PY) -c "import torchcodec" >/dev/null 2>&1 || { \
+	  echo "torchcodec cannot load here (no FFmpeg shared libraries): removing it, LeRobot will decode with PyAV"; \
+	  $(PY) -m pip uninstall -q -y torchcodec; }
 	touch $(VENV)
 
 eval: $(VENV)

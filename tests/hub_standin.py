@@ -101,6 +101,7 @@ class HubStandin:
         self.repos: dict[tuple[str, str], Repo] = {}
         self.lock = threading.RLock()
         self.requests: list[tuple[str, str]] = []  # (method, path) of every request, for assertions
+        self.fail_commits: int | None = None  # an HTTP status: every commit fails with it (a Hub outage)
         self.sent: dict[str, int] = {}  # file path in repo -> body bytes served
         self.ranges: list[tuple[str, int, int]] = []  # (file path, start, end) of every Range read
         self.faults: dict[str, str] = {}  # file path in repo -> "truncate"
@@ -350,6 +351,8 @@ class _Handler(BaseHTTPRequestHandler):
                 "siblings": [{"rfilename": p, "size": item[1]} for p, item in sorted(files.items())]}
 
     def _commit(self, repo: Repo, branch: str) -> None:
+        if self.hub.fail_commits:
+            raise HubError(self.hub.fail_commits, "stand-in: the Hub refuses commits")
         if branch not in repo.branches:
             raise HubError(404, f"Invalid rev id: {branch}", "RevisionNotFound")
         lines = [json.loads(line) for line in self._body().splitlines() if line.strip()]

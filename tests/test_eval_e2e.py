@@ -58,6 +58,20 @@ def test_contract_outputs(two_worker_run):
     assert "pick_v1 · scripted: success" in stdout
 
 
+def test_report_has_a_thumbnail_and_first_success_per_episode_without_recording(two_worker_run):
+    """record=false: the worker-side glance recorder still saves first | last exterior frame per episode."""
+    out, _ = two_worker_run
+    rows = _episodes(out)
+    page = (out / "report.html").read_text()
+    for r in rows:
+        assert r["extra"]["thumbnail"] == f"thumbnails/{r['episode_index']:06d}.jpg"
+        assert (out / r["extra"]["thumbnail"]).stat().st_size > 1000
+        assert f'<img src="{r["extra"]["thumbnail"]}"' in page
+        assert r["extra"]["object_category"]
+        assert (r["extra"]["first_success_step"] is not None) == r["success_once"]
+    assert not (out / "dataset").exists()
+
+
 def test_workers_do_not_change_outcomes(two_worker_run, tmp_path):
     out2, _ = two_worker_run
     res1 = run_evaluation(compose(["policy=scripted", "workers=1", "limit=4", f"output_dir={tmp_path / 'w1'}",
@@ -88,3 +102,25 @@ def test_random_floor(tmp_path):
                                   "progress=false"]))
     assert res.summary["n_episodes"] == 20 and res.summary["n_errors"] == 0
     assert res.summary["success_rate"] <= 0.10
+
+
+def test_a_failed_hub_push_exits_non_zero_and_keeps_every_local_file(hub_standin, tmp_path):
+    """The Hub refuses the commit: molmo-eval says so, exits 1, and every output is still written."""
+    hub_standin.fail_commits = 503
+    out = tmp_path / "run"
+    proc = subprocess.run(
+        [sys.executable, "-m", "molmo_lerobot.cli.eval", "policy=scripted", "benchmark=pick_v1", "workers=1",
+         "limit=1", "horizon=4", "record=true", "push=true", "hub.repo_id=molmo-test/failing-push",
+         f"output_dir={out}", "progress=false"],
+        capture_output=True, text=True, env={**os.environ, "MUJOCO_GL": "egl"}, timeout=600,
+    )
+    assert proc.returncode == 1, proc.stderr[-3000:]
+    assert "push to the Hub as molmo-test/failing-push failed" in proc.stderr
+    assert f"every local file is kept in {out}" in proc.stderr
+    results = json.loads((out / "results.json").read_text())
+    assert results["push"]["ok"] is False and "503" in results["push"]["error"]
+    assert results["n_episodes"] == 1
+    for name in ("episodes.jsonl", "run.json", "report.html", "dataset/meta/info.json", "dataset/results.json",
+                 "dataset/meta/eval/episodes.jsonl", "dataset/README.md"):
+        assert (out / name).is_file(), name
+    assert ("POST", "/api/datasets/molmo-test/failing-push/commit/main") in hub_standin.requests

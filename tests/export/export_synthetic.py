@@ -16,7 +16,8 @@ JOINTS = {"arm": ["j1", "j2", "j3"], "gripper": ["finger_left", "finger_right"]}
 def info(index: int, steps: int, prompt: str = "pick up the mug") -> EpisodeInfo:
     return EpisodeInfo(episode_index=index, house_index=index % 3, seed=1000 + index, prompt=prompt,
                        task_type="pick", fps=1000 / 66, horizon=steps, camera_names=list(CAMS),
-                       img_resolution=(W, H), joint_names=dict(JOINTS), move_groups=dict(MOVE_GROUPS))
+                       img_resolution=(W, H), joint_names=dict(JOINTS), move_groups=dict(MOVE_GROUPS),
+                       extra={"robot": "synth_arm"})
 
 
 def obs(index: int, step: int) -> dict:
@@ -64,12 +65,18 @@ class NullRecorder:
     def end_episode(self, result) -> None: ...
 
 
-def record_then_die(factory, out, worker_id: str, episodes: list[tuple]) -> None:
-    """Child process body: record ``episodes`` then die by SIGKILL without closing (a torn shard)."""
+def record_then_die(factory, out, worker_id: str, episodes: list[tuple], torn: tuple | None = None) -> None:
+    """Child process body: record ``episodes``, then ``torn`` = (index, steps) up to half its steps,
+    then die by SIGKILL without closing (the shard of the episode in flight is torn)."""
     import os
     import signal
 
     rec = factory.make(worker_id, out)
     for args in episodes:
         run_episode(rec, *args)
+    if torn is not None:
+        index, steps = torn
+        rec.start_episode(info(index, steps))
+        for t in range(steps // 2):
+            rec.record_step(obs(index, t), {"arm": np.zeros(3), "gripper": np.zeros(1)}, None, False, False)
     os.kill(os.getpid(), signal.SIGKILL)

@@ -48,6 +48,10 @@ def test_multi_worker_recording_loads_and_agrees_with_episodes_jsonl(recorded):
         assert rec["seed"] == truth["seed"] and rec["benchmark_sha256"] == res.summary["benchmark"]["sha256"]
     assert json.loads((out / "dataset" / "results.json").read_text())["n_episodes"] == 4
     assert not (out / "dataset_shards").exists()
+    # two workers finish in any order; the dataset still follows the benchmark, and names the robot
+    assert [(r["episode_index"], r["benchmark_episode_index"]) for r in stored] == [(i, i) for i in range(4)]
+    assert [int(ds[int(ds.meta.episodes[i]["dataset_from_index"])]["eval.episode_index"]) for i in range(4)] == [0, 1, 2, 3]
+    assert json.loads((out / "dataset" / "meta" / "info.json").read_text())["robot_type"] == "franka"
     page = write_report(out, res.summary, res.episodes).read_text()
     assert page.count("<video") == 8
 

@@ -37,7 +37,9 @@ def test_push_then_load_from_the_hub_gives_the_same_frames(hub, tmp_path):
 
     factory = LeRobotRecorderFactory.from_config(CFG)
     results = _record(tmp_path / "run", factory)
-    factory.finalize(tmp_path / "run", results, S.summary_for(results))  # merges and pushes
+    summary = S.summary_for(results)
+    factory.finalize(tmp_path / "run", results, summary)  # merges and pushes
+    assert summary["push"] == {"repo_id": factory.repo_id, "ok": True, "error": None}
     local = LeRobotDataset(factory.repo_id, root=tmp_path / "run" / "dataset", video_backend="pyav")
     remote = LeRobotDataset(factory.repo_id, root=tmp_path / "download", video_backend="pyav")
     assert remote.num_episodes == local.num_episodes == 2 and len(remote) == len(local) == 11
@@ -65,8 +67,8 @@ def test_failed_push_warns_and_keeps_local_files(tmp_path, monkeypatch, caplog):
     factory.finalize(out, results, S.summary_for(results))
     before = _snapshot(out)
     with caplog.at_level(logging.WARNING):
-        ok = push_dataset(out / "dataset", factory.repo_id, private=True)
-    assert ok is False
+        error = push_dataset(out / "dataset", factory.repo_id, private=True)
+    assert error and secret not in error
     assert "local files are intact" in caplog.text and secret not in caplog.text
     assert _snapshot(out) == before
 
@@ -79,3 +81,14 @@ def test_push_respects_private(hub, tmp_path, private):
     results = _record(tmp_path / "run", factory)
     factory.finalize(tmp_path / "run", results, S.summary_for(results))
     assert HfApi().dataset_info(factory.repo_id).private is private
+
+
+def test_a_refused_commit_is_recorded_in_the_summary(hub, tmp_path):
+    hub.fail_commits = 500
+    factory = LeRobotRecorderFactory.from_config(CFG)
+    out = tmp_path / "run"
+    results = _record(out, factory)
+    summary = S.summary_for(results)
+    factory.finalize(out, results, summary)
+    assert summary["push"]["ok"] is False and "500" in summary["push"]["error"]
+    assert (out / "dataset" / "meta" / "info.json").is_file() and (out / "dataset" / "results.json").is_file()

@@ -36,9 +36,9 @@ def two_worker_run(tmp_path_factory):
         0: S.run_episode(w0, 0, 10, success_from=5),
         2: S.run_episode(w0, 2, 8, success_from=3, error="RuntimeError: boom"),
     }
-    # worker w1g0 saves episodes 1 and 3, then is SIGKILLed: its shard is torn and must be skipped
+    # worker w1g0 saves episode 1, then is SIGKILLed inside episode 3: that shard is torn and skipped
     child = mp.get_context("fork").Process(target=S.record_then_die,
-                                           args=(factory, out, "w1g0", [(1, 12, None), (3, 7, 1)]))
+                                           args=(factory, out, "w1g0", [(1, 12, None)], (3, 7)))
     child.start()
     child.join(120)
     assert child.exitcode == -9
@@ -46,6 +46,7 @@ def two_worker_run(tmp_path_factory):
     w1b = factory.make("w1g1", out)  # the replacement worker reruns episode 3 (the one in flight)
     results[3] = S.run_episode(w1b, 3, 7, success_from=1)
     results[4] = S.run_episode(w0, 4, 9, success_from=8)
+    results[5] = S.run_episode(S.NullRecorder(), 5, 6, success_from=None)  # its recording was lost
     w0.close()
     w1b.close()
     ordered = [results[i] for i in sorted(results)]
@@ -58,7 +59,24 @@ def two_worker_run(tmp_path_factory):
 def test_shards_are_per_worker_and_a_torn_one_is_marked(two_worker_run):
     _, factory, _, _, shards = two_worker_run
     names = {s.root.name.split(f"{factory.session}-")[1]: s.complete for s in shards}
-    assert names == {"w0g0-s000": True, "w1g0-s000": False, "w1g1-s000": True}
+    # one episode per shard; the errored episode 2 is discarded without a shard of its own
+    assert names == {"w0g0-s000": True, "w0g0-s001": True, "w1g0-s000": True, "w1g0-s001": False,
+                     "w1g1-s000": True}
+
+
+def test_dataset_episodes_follow_benchmark_order_and_carry_their_provenance(two_worker_run):
+    """Workers finished 0, 4 (w0) before 1 (w1g0) and 3 (w1g1): the dataset still reads 0, 1, 3, 4."""
+    import pyarrow.dataset as pads
+
+    out, factory, _, _, _ = two_worker_run
+    records = [r for r in read_eval_records(out / "dataset") if r["episode_index"] is not None]
+    assert [(r["episode_index"], r["benchmark_episode_index"]) for r in records] == [(0, 0), (1, 1), (2, 3), (3, 4)]
+    frames = pads.dataset(str(out / "dataset" / "data"), format="parquet").to_table().to_pandas()
+    per_episode = frames.groupby("episode_index")[["eval.episode_index", "eval.seed"]].agg(set)
+    assert per_episode["eval.episode_index"].tolist() == [{0}, {1}, {3}, {4}]
+    assert per_episode["eval.seed"].tolist() == [{1000}, {1001}, {1003}, {1004}]
+    info = json.loads((out / "dataset" / "meta" / "info.json").read_text())
+    assert info["robot_type"] == "synth_arm"
 
 
 def test_merged_dataset_loads_and_matches_eval_records(two_worker_run):
@@ -66,10 +84,10 @@ def test_merged_dataset_loads_and_matches_eval_records(two_worker_run):
     ds = _load(out / "dataset", factory.repo_id)
     records = read_eval_records(out / "dataset")
     stored = [r for r in records if r["episode_index"] is not None]
-    # ep 2 errored (never saved); ep 1 and 3 of the torn shard are lost except the rerun of 3
-    assert {r["benchmark_episode_index"] for r in stored} == {0, 3, 4}
-    assert [r["benchmark_episode_index"] for r in records] == [0, 1, 2, 3, 4]
-    assert ds.num_episodes == 3 and ds.fps == 15
+    # ep 2 errored (never saved); the torn copy of ep 3 is skipped, its rerun stored
+    assert {r["benchmark_episode_index"] for r in stored} == {0, 1, 3, 4}
+    assert [r["benchmark_episode_index"] for r in records] == [0, 1, 2, 3, 4, 5]
+    assert ds.num_episodes == 4 and ds.fps == 15
     by_bench = {r.episode_index: r for r in results}
     for rec in stored:
         ep = ds.meta.episodes[rec["episode_index"]]
@@ -83,7 +101,7 @@ def test_merged_dataset_loads_and_matches_eval_records(two_worker_run):
         assert float(first["observation.images.exo"].mean()) == pytest.approx(level, abs=0.03)
         assert first["task"] == "pick up the mug"
     why = {r["benchmark_episode_index"]: r["not_recorded"] for r in records}
-    assert why[2] == "episode error" and "killed or crashed" in why[1]
+    assert why[2] == "episode error" and "killed or crashed" in why[5] and why[1] is None
     assert {"seed", "house_index", "success_once", "policy", "benchmark", "benchmark_sha256"} <= set(records[0])
 
 
@@ -99,11 +117,11 @@ def test_feature_names_are_joint_names(two_worker_run):
 def test_results_card_and_cleanup(two_worker_run):
     out, _, _, summary, _ = two_worker_run
     root = out / "dataset"
-    assert json.loads((root / "results.json").read_text())["n_episodes"] == summary["n_episodes"] == 5
+    assert json.loads((root / "results.json").read_text())["n_episodes"] == summary["n_episodes"] == 6
     card = (root / "README.md").read_text()
-    assert "| **all** | 5 | 60.0% |" in card and "meta/eval/episodes.jsonl" in card
+    assert "| **all** | 6 | 50.0% |" in card and "meta/eval/episodes.jsonl" in card
     info = json.loads((root / "meta/eval/info.json").read_text())
-    assert info["n_recorded"] == 3 and len(info["torn_shards"]) == 1 and info["fps_exact"] == pytest.approx(15.1515, 1e-3)
+    assert info["n_recorded"] == 4 and len(info["torn_shards"]) == 1 and info["fps_exact"] == pytest.approx(15.1515, 1e-3)
     assert not (out / SHARDS_DIR).exists()
     assert not list(out.glob(".dataset-merge-*"))
     assert (root / EVAL_EPISODES).is_file()
@@ -115,14 +133,14 @@ def test_resume_adds_new_shards_to_the_previous_dataset(two_worker_run, tmp_path
     shutil.copytree(out0, out)
     factory = LeRobotRecorderFactory.from_config(CFG)  # a new invocation: new session
     w = factory.make("w0g0", out)  # same worker id as the first run: must not collide
-    new = S.run_episode(w, 5, 6, success_from=0, reward=False)
+    new = S.run_episode(w, 6, 6, success_from=0, reward=False)
     w.close()
     everything = [*results, new]
     factory.finalize(out, everything, S.summary_for(everything))
     records = read_eval_records(out / "dataset")
     stored = {r["benchmark_episode_index"]: r["episode_index"] for r in records if r["episode_index"] is not None}
-    assert sorted(stored) == [0, 3, 4, 5] and sorted(stored.values()) == [0, 1, 2, 3]
-    assert _load(out / "dataset", factory.repo_id).num_episodes == 4
+    assert list(stored) == [0, 1, 3, 4, 6] and list(stored.values()) == [0, 1, 2, 3, 4]
+    assert _load(out / "dataset", factory.repo_id).num_episodes == 5
 
 
 def test_reward_feature_when_the_task_defines_one(tmp_path):
@@ -150,9 +168,9 @@ def test_frame_layout_rejects_mismatched_steps():
     bad = S.obs(0, 1)
     bad["images"]["wrist"] = np.zeros((S.H + 1, S.W, 3), np.uint8)
     with pytest.raises(FrameError, match="observation.images.wrist"):
-        layout.frame(bad, {"arm": np.zeros(3), "gripper": np.zeros(1)}, None, False, False, "t")
+        layout.frame(bad, {"arm": np.zeros(3), "gripper": np.zeros(1)}, None, False, False, "t", S.info(0, 5))
     with pytest.raises(FrameError, match="action: move group 'arm' has 2 values"):
-        layout.frame(S.obs(0, 1), {"arm": np.zeros(2), "gripper": np.zeros(1)}, None, False, False, "t")
+        layout.frame(S.obs(0, 1), {"arm": np.zeros(2), "gripper": np.zeros(1)}, None, False, False, "t", S.info(0, 5))
     no_cam = S.obs(0, 0)
     del no_cam["images"]["exo"]
     with pytest.raises(FrameError, match="camera 'exo'"):
@@ -194,9 +212,11 @@ def test_a_failed_save_leaves_the_shard_torn_and_never_merged(tmp_path, monkeypa
         S.run_episode(w, 1, 5, success_from=1)
     monkeypatch.undo()
     w.close()
-    assert [s.complete for s in list_shards(tmp_path)] == [False]
-    factory.finalize(tmp_path, [first], S.summary_for([first]))
-    assert not (tmp_path / "dataset").exists()  # the only shard was torn: nothing to merge
+    assert [s.complete for s in list_shards(tmp_path)] == [True, False]
+    second = S.run_episode(S.NullRecorder(), 1, 5, success_from=1)
+    factory.finalize(tmp_path, [first, second], S.summary_for([first, second]))
+    records = read_eval_records(tmp_path / "dataset")  # the torn shard's episode is never merged
+    assert [r["episode_index"] for r in records] == [0, None]
 
 
 def test_shards_rotate_and_merge_in_order(tmp_path):
@@ -227,3 +247,25 @@ def test_an_episode_stored_twice_is_merged_once(tmp_path):
     assert ds.num_episodes == 2 and sorted(stored) == [2, 3]
     last = ds[int(ds.meta.episodes[stored[3]]["dataset_to_index"]) - 1]
     assert bool(last["next.success"]) is True  # the copy that matches the result was kept
+
+
+def test_a_new_episode_between_previous_ones_keeps_benchmark_order(two_worker_run, tmp_path):
+    """Resume stores episode 2 (errored before): the previous dataset is cut around it, frames intact."""
+    out0, _, results, _, _ = two_worker_run
+    out = tmp_path / "run"
+    shutil.copytree(out0, out)
+    factory = LeRobotRecorderFactory.from_config(CFG)
+    w = factory.make("w0g0", out)
+    redo = S.run_episode(w, 2, 5, success_from=1)
+    w.close()
+    everything = [redo if r.episode_index == 2 else r for r in results]
+    factory.finalize(out, everything, S.summary_for(everything))
+    records = [r for r in read_eval_records(out / "dataset") if r["episode_index"] is not None]
+    assert [r["benchmark_episode_index"] for r in records] == [0, 1, 2, 3, 4]
+    ds = _load(out / "dataset", factory.repo_id)
+    for rec in records:
+        ep = ds.meta.episodes[rec["episode_index"]]
+        first = ds[ep["dataset_from_index"]]
+        assert int(first["eval.episode_index"]) == rec["benchmark_episode_index"]
+        level = (rec["benchmark_episode_index"] * 37) % 250 / 255.0
+        assert float(first["observation.images.exo"].mean()) == pytest.approx(level, abs=0.03)

@@ -7,7 +7,8 @@ import re
 
 import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
-from molmo_lerobot.export.report import write_report
+from molmo_lerobot.export.glance import GlanceRecorderFactory, exterior_camera, object_category
+from molmo_lerobot.export.report import render_report, task_label, write_report
 from molmo_lerobot.export.wandb_log import log_run, metrics
 from molmo_lerobot.runner.results import EpisodeResult
 
@@ -27,8 +28,8 @@ def test_report_without_recording_has_scores_plot_and_a_row_per_episode(tmp_path
     assert path.name == "report.html"
     assert "33.3%" in page and "66.7%" in page  # success at the end / at any step
     assert page.count("<svg") == 1 and page.count("<rect") >= 6  # bars: all, open, pick × 2 metrics
-    rows = re.findall(r"<tr><td class=num>(\d+)</td>", page)
-    assert rows == ["0", "1", "2"]
+    rows = re.findall(r"<tr id=ep(\d+) data-outcome=(\w+)>", page)
+    assert rows == [("0", "success"), ("1", "failure"), ("2", "error")]
     assert "&lt;boom&gt;" in page and "<boom>" not in page and "&lt;b&gt;mug" in page
     assert "<video" not in page
 
@@ -77,3 +78,66 @@ def test_wandb_offline_run_records_the_scores(tmp_path, monkeypatch):
 def test_metrics_are_flat_and_per_task():
     m = metrics(S.summary_for(_results()))
     assert m["n_errors"] == 1 and m["open/n_errors"] == 1 and m["pick/success_rate"] == 0.5
+
+
+def test_failures_are_grouped_with_counts_and_breakdowns_per_house_and_category():
+    timeouts = [EpisodeResult.failed(i, i % 2, "x.Pick", i, f"TimeoutError: episode {i} ran past {900 + i} s "
+                                     "(at local.py:12)", task_type="pick") for i in range(3)]
+    never = [EpisodeResult(3 + i, 0, "x.Pick", False, False, 30, 3 + i, task_type="pick") for i in range(2)]
+    late = EpisodeResult(5, 1, "x.Pick", False, True, 30, 5, task_type="pick_and_place_next_to",
+                         extra={"first_success_step": 10, "object_category": "can"})
+    wins = [EpisodeResult(6 + i, 1, "x.Pick", True, True, 30, 6 + i, task_type="pick",
+                          extra={"first_success_step": 5 * (i + 1), "object_category": "mug"}) for i in range(4)]
+    results = [*timeouts, *never, late, *wins]
+    page = render_report({**S.summary_for(results), "timing": {"policy_dt_ms": 100.0}}, results)
+    failures = page.split("<h2>Failures</h2>")[1].split("<h2>")[0]
+    groups = re.findall(r"<tr id=reason(\d+)><td class=num>F\d+</td><td title='[^']*'>([^<]+)</td>"
+                        r"<td class=num>(\d+)</td>", failures)
+    assert [(g, n) for _, g, n in groups] == [("error: TimeoutError: episode # ran past # s", "3"),
+                                              ("never succeeded", "2"),
+                                              ("succeeded at some step, not at the end", "1")]
+    assert "6 of 10 episodes failed" in failures
+    # each failing row links to its group instead of repeating the reason
+    assert re.search(r"<tr id=ep0 data-outcome=error>.*?href=\"#reason1\"", page)
+    assert page.count(">error: TimeoutError") == 1
+    breakdowns = page.split("<h2>Breakdowns</h2>")[1].split("<h2>")[0]
+    assert "Per object category" in breakdowns and "Per house" in breakdowns
+    assert re.search(r"<td>mug</td><td class=num>4</td><td class=num>100.0%", breakdowns)
+    assert re.search(r"<td>house 0</td><td class=num>4</td><td class=num>0.0%", breakdowns)
+    hist = page.split("<h2>Time to first success</h2>")[1].split("<h2>")[0]
+    assert "5 of 10 episodes succeeded at some step; median 1.0 s" in hist and "<svg" in hist
+    assert "Pick and place next to" in page and 'name=show value=failures' in page
+
+
+def test_task_labels_are_readable():
+    assert task_label("pick_and_place_next_to") == "Pick and place next to"
+    assert task_label("molmo_lerobot.tasks.pick_and_place.PickAndPlaceColorTask") == "Pick and place color"
+    assert task_label(None) == "unknown"
+
+
+def test_glance_recorder_saves_first_and_last_frame_and_first_success(tmp_path):
+    rec = GlanceRecorderFactory(width=16).make("w0g0", tmp_path)
+    info = S.info(4, 10)
+    info.extra["object"] = "builtin_grey_can"
+    assert [s for s in range(10) if rec.wants_images_at(s, 10)] == [0, 9]
+    rec.start_episode(info)
+    for t in range(10):
+        obs = S.obs(4, t) if t in (0, 9) else {**S.obs(4, t), "images": {}}
+        rec.record_step(obs, {}, None, t >= 6, t == 9)
+    result = EpisodeResult(4, 1, "x.Pick", True, True, 10, 1004, task_type="pick")
+    rec.end_episode(result)
+    assert result.extra == {"first_success_step": 7, "object_category": "can", "thumbnail": "thumbnails/000004.jpg"}
+    import cv2
+
+    img = cv2.imread(str(tmp_path / "thumbnails/000004.jpg"))
+    assert img.shape == (12, 34, 3)  # two 16 x 12 frames and a 2 px gap
+    first, last = img[:, :16].mean(), img[:, 18:].mean()
+    assert first == __import__("pytest").approx((4 * 37) % 250, abs=3)
+    assert last == __import__("pytest").approx((4 * 37 + 9 * 5) % 250, abs=3)
+
+
+def test_exterior_camera_and_object_category_fallbacks():
+    assert exterior_camera(["wrist", "exterior"]) == "exterior"
+    assert exterior_camera(["wrist_cam", "front"]) == "front"
+    assert exterior_camera([]) is None
+    assert object_category("Mug_17") == "mug" and object_category(None) is None

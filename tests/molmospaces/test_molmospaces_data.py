@@ -331,7 +331,8 @@ def test_install_uid_fetches_objaverse_objects_and_grasps_through_the_resource_m
 def test_one_warning_per_missing_resource_and_user_scenes_from_overrides(assets, tmp_path, capsys):
     _, houses = assets
     ithor = houses[0]
-    bench = _write_bench(tmp_path / "b", [pick_episode(ithor)] * 3 + [user_pick_episode()])
+    distinct = [{**pick_episode(ithor), "seed": i} for i in range(3)]  # duplicates are refused by content
+    bench = _write_bench(tmp_path / "b", distinct + [user_pick_episode()])
     assert bench_cli.main(["validate", str(bench), f"molmospaces.assets_dir={tmp_path / 'none'}"]) == 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and "episodes 0, 1, 2: field scene_dataset" in err[0] and "episode 3: field scene_dataset" in err[1]

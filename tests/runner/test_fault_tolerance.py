@@ -208,6 +208,8 @@ def test_a_failing_export_leaves_the_score_standing(faulty_policy, small_bench, 
         run_evaluation(cfg)
     summary = json.loads((out / "results.json").read_text())
     assert summary["n_episodes"] == 3 and summary["n_errors"] == 0
+    assert summary["export_errors"] == ["export TraceFactory: OSError: trace export: disk full "
+                                        "(trace_fail_finalize=true)"], "results.json records the failed export"
     rows = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
     assert [r["episode_index"] for r in rows] == [0, 1, 2]
     assert sorted(p.name for p in (tmp_path / "traces").iterdir()) == ["trace-0", "trace-1", "trace-2"]

@@ -41,7 +41,7 @@ def _common(faulty_policy, *more):
 def test_errored_and_invalid_episodes_count_in_their_task(faulty_policy, small_bench, tmp_path, eval_config):
     """Issue 11.2: pick showed 4/6 (errors filed under their task_cls) where the truth was 4/8."""
     def edit(eps):
-        eps[3]["robot"]["robot_name"] = "no_such_robot"  # invalid: fails before any worker sees it
+        eps[3]["cameras"][0]["fov"] = 200  # invalid: fails before any worker sees it
 
     bench = _bench(small_bench, tmp_path, edit)
     out = tmp_path / "run"

@@ -106,6 +106,11 @@ def _job(cfg: Any, *, sweep: bool) -> int:
             print(f"molmo-eval: error: {line}", file=sys.stderr)
         return 2
     print("\n".join([*summary_lines(res.summary), f"outputs: {res.output_dir}"]))
+    push = res.summary.get("push")
+    if push and not push["ok"]:
+        print(f"molmo-eval: error: push to the Hub as {push['repo_id']} failed ({push['error']}); every local "
+              f"file is kept in {res.output_dir} (results.json records the failure)", file=sys.stderr)
+        return 1
     return 0 if res.summary["success_rate"] is not None else 1  # 1: no episode ran, so there is no score
 
 

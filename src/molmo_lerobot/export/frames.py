@@ -1,8 +1,14 @@
 """How one rollout step becomes one LeRobot frame: the feature schema and the frame dict.
 
-The schema is fixed by the first step of an episode (cameras and their resolution, the
-move groups in ``EpisodeInfo.move_groups`` order, whether the task defines a reward), so
+The schema is fixed by the first step of an episode (robot, cameras and their resolution,
+the move groups in ``EpisodeInfo.move_groups`` order, whether the task defines a reward), so
 every frame of a dataset shard has exactly the same keys, shapes and names.
+
+Every frame also carries its provenance as plain data columns, which every LeRobot edit
+(``lerobot-edit-dataset`` delete / split / merge / modify_tasks / recompute_stats) keeps:
+``eval.episode_index`` (the benchmark episode: the key into ``meta/eval/episodes.jsonl``
+and ``episodes.jsonl``) and ``eval.seed``. LeRobot policies ignore them (only
+``observation.*`` and ``action`` keys become policy features).
 """
 
 from __future__ import annotations
@@ -15,6 +21,8 @@ import numpy as np
 from molmo_lerobot.runner.recorders import EpisodeInfo
 
 IMAGE_PREFIX = "observation.images."
+EVAL_EPISODE_INDEX = "eval.episode_index"
+EVAL_SEED = "eval.seed"
 
 
 class FrameError(ValueError):
@@ -45,6 +53,7 @@ class FrameLayout:
     action_names: tuple[str, ...]
     action_sizes: tuple[int, ...]
     has_reward: bool
+    robot_type: str | None = None
 
     @classmethod
     def from_step(cls, info: EpisodeInfo, obs: dict[str, Any], reward: float | None) -> FrameLayout:
@@ -72,6 +81,7 @@ class FrameLayout:
             cameras=tuple(cameras), groups=tuple(info.move_groups), state_names=tuple(state_names),
             state_sizes=tuple(state_sizes), action_names=tuple(action_names),
             action_sizes=tuple(int(d) for d in info.move_groups.values()), has_reward=reward is not None,
+            robot_type=info.extra.get("robot"),
         )
 
     def features(self) -> dict[str, dict[str, Any]]:
@@ -88,10 +98,12 @@ class FrameLayout:
             feats["next.reward"] = {"dtype": "float32", "shape": (1,), "names": None}
         feats["next.success"] = {"dtype": "bool", "shape": (1,), "names": None}
         feats["next.done"] = {"dtype": "bool", "shape": (1,), "names": None}
+        feats[EVAL_EPISODE_INDEX] = {"dtype": "int64", "shape": (1,), "names": None}
+        feats[EVAL_SEED] = {"dtype": "int64", "shape": (1,), "names": None}
         return feats
 
     def frame(self, obs: dict[str, Any], action: dict[str, Any], reward: float | None,
-              success: bool, done: bool, task: str) -> dict[str, Any]:
+              success: bool, done: bool, task: str, info: EpisodeInfo) -> dict[str, Any]:
         """One ``add_frame`` dict; raises :class:`FrameError` naming the field that does not fit."""
         frame: dict[str, Any] = {}
         images = obs.get("images") or {}
@@ -111,6 +123,8 @@ class FrameLayout:
             frame["next.reward"] = np.array([reward], dtype=np.float32)
         frame["next.success"] = np.array([bool(success)])
         frame["next.done"] = np.array([bool(done)])
+        frame[EVAL_EPISODE_INDEX] = np.array([info.episode_index], dtype=np.int64)
+        frame[EVAL_SEED] = np.array([info.seed], dtype=np.int64)
         frame["task"] = task
         return frame
 

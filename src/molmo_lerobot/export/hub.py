@@ -7,8 +7,9 @@ the Hub whose scores and frames disagree. (LeRobot's own ``push_to_hub`` makes a
 commit for a regenerated card.)
 
 The token comes from the environment (``HF_TOKEN`` or the huggingface_hub login), the
-endpoint from ``HF_ENDPOINT``. A failed push is a warning: every local file stays as it was.
-The token never appears in a message: it is masked out of any error text.
+endpoint from ``HF_ENDPOINT``. A failed push leaves every local file as it was and returns the
+reason, which ``molmo-eval`` records in ``results.json`` (``push``) and turns into a non-zero
+exit. The token never appears in a message: it is masked out of any error text.
 """
 
 from __future__ import annotations
@@ -30,8 +31,8 @@ def _mask(text: str) -> str:
     return text
 
 
-def push_dataset(root: Path, repo_id: str, *, private: bool = False) -> bool:
-    """Push the LeRobot dataset at ``root`` as dataset repo ``repo_id``; False (and a warning) on failure."""
+def push_dataset(root: Path, repo_id: str, *, private: bool = False) -> str | None:
+    """Push the LeRobot dataset at ``root`` as dataset repo ``repo_id``; the reason (one line) if it failed."""
     from huggingface_hub import HfApi
     from huggingface_hub.errors import RevisionNotFoundError
     from lerobot.datasets.dataset_metadata import CODEBASE_VERSION
@@ -49,8 +50,8 @@ def push_dataset(root: Path, repo_id: str, *, private: bool = False) -> bool:
             api.delete_tag(repo_id, tag=CODEBASE_VERSION, repo_type="dataset")
         api.create_tag(repo_id, tag=CODEBASE_VERSION, revision=commit.oid, repo_type="dataset")
     except Exception as exc:  # a push must never cost the local results
-        log.warning("push of %s to the Hub as %s failed; local files are intact: %s", root, repo_id,
-                    _mask(f"{type(exc).__name__}: {exc}").splitlines()[0])
-        return False
+        reason = (_mask(f"{type(exc).__name__}: {exc}").splitlines() or [type(exc).__name__])[0]
+        log.warning("push of %s to the Hub as %s failed; local files are intact: %s", root, repo_id, reason)
+        return reason
     log.info("pushed %s to the Hub as dataset %s", root, repo_id)
-    return True
+    return None

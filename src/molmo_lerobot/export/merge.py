@@ -9,6 +9,9 @@ never leaves a dataset that looks complete.
 
 Layout added to the LeRobot dataset root:
 
+Dataset episodes follow benchmark order (one episode per worker shard, so the merge only
+copies and concatenates, never re-encodes), and every frame carries ``eval.episode_index``.
+
 * ``meta/eval/episodes.jsonl``: one record per attempted episode: ``episode_index`` (the
   dataset episode, or null when not stored, with ``not_recorded``), ``benchmark_episode_index``,
   house, task, prompt, success, success_once, steps, seed, error, policy, benchmark + sha256;
@@ -26,6 +29,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.export.card import make_card
+from molmo_lerobot.export.frames import EVAL_EPISODE_INDEX
 from molmo_lerobot.export.shards import SHARDS_DIR, list_shards
 from molmo_lerobot.runner.results import EpisodeResult
 
@@ -84,6 +88,22 @@ def _choose(sources: list[_Source], by_index: dict[int, EpisodeResult]) -> dict[
     return {i: (k[1], k[2]) for i, k in best.items()}
 
 
+def _segments(order: list[int], chosen: dict[int, tuple[int, int]]) -> list[tuple[int, list[int]]]:
+    """Split the benchmark ``order`` into runs stored consecutively in one source: [(source, local episodes)].
+
+    With one episode per shard every run is a whole shard (copied, never re-encoded); only a
+    multi-episode source (a resumed run's previous dataset) may need cutting into subsets.
+    """
+    segments: list[tuple[int, list[int]]] = []
+    for b in order:
+        si, li = chosen[b]
+        if segments and segments[-1][0] == si and segments[-1][1][-1] < li:
+            segments[-1][1].append(li)
+        else:
+            segments.append((si, [li]))
+    return segments
+
+
 def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any],
                  factory: LeRobotRecorderFactory) -> Path | None:
     """Build ``output_dir/dataset`` from the shards; returns its root, or None when nothing was recorded."""
@@ -105,19 +125,13 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
     by_index = {r.episode_index: r for r in results}
     chosen = _choose(sources, by_index)
 
+    order = sorted(chosen)  # dataset episodes follow benchmark order, whatever the number of workers
+    dataset_index = {b: i for i, b in enumerate(order)}
     roots: list[Path] = []
-    dataset_index: dict[int, int] = {}
-    for si, src in enumerate(sources):
-        keep = sorted(li for s, li in chosen.values() if s == si)
-        if not keep:
-            continue
-        root = src.root
-        if len(keep) < len(src.episodes):
-            root = _subset(src, keep, work / f"subset-{si}", factory.repo_id)
-        bench_of_local = {li: int(src.episodes[li]["episode_index"]) for li in keep}
-        for li in keep:
-            dataset_index[bench_of_local[li]] = len(dataset_index)
-        roots.append(root)
+    for k, (si, keep) in enumerate(_segments(order, chosen)):
+        src = sources[si]
+        roots.append(src.root if len(keep) == len(src.episodes)
+                     else _subset(src, keep, work / f"subset-{k}", factory.repo_id))
 
     if not roots:
         log.warning("record=true but no episode finished without error: no dataset written")
@@ -189,7 +203,7 @@ def check_dataset(root: Path, results: list[EpisodeResult]) -> None:
     by_index = {r.episode_index: r for r in results}
     stored = {r["episode_index"]: r for r in read_eval_records(root) if r["episode_index"] is not None}
     table = pads.dataset(str(root / "data"), format="parquet").to_table(
-        columns=["episode_index", "frame_index", "next.success", "next.done"])
+        columns=["episode_index", "frame_index", "next.success", "next.done", EVAL_EPISODE_INDEX])
     frames = table.to_pandas()
     if set(frames["episode_index"].unique()) != set(stored):
         raise ExportError(f"{root}: data holds episodes {sorted(frames['episode_index'].unique())[:10]}…, "
@@ -198,6 +212,9 @@ def check_dataset(root: Path, results: list[EpisodeResult]) -> None:
         rec = stored[int(ep)]
         res = by_index[rec["benchmark_episode_index"]]
         last = g.loc[g["frame_index"].idxmax()]
+        if set(g[EVAL_EPISODE_INDEX]) != {res.episode_index}:
+            raise ExportError(f"{root}: dataset episode {ep} holds {EVAL_EPISODE_INDEX} "
+                              f"{sorted(set(g[EVAL_EPISODE_INDEX]))[:5]}, expected {res.episode_index}")
         if len(g) != res.steps or bool(last["next.success"]) != res.success or not bool(last["next.done"]):
             raise ExportError(
                 f"{root}: dataset episode {ep} (benchmark episode {res.episode_index}) has {len(g)} frames, "

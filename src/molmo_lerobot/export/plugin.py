@@ -1,4 +1,5 @@
-"""Built-in plugin: ``record=true`` subscribes the LeRobot dataset recorder to the rollout loop."""
+"""Built-in plugin: the report's per-episode glance (thumbnails, first success) on every run, and
+``record=true`` subscribes the LeRobot dataset recorder to the rollout loop."""
 
 from __future__ import annotations
 
@@ -9,8 +10,11 @@ from molmo_lerobot import hookimpl
 
 @hookimpl
 def molmo_recorders(config: dict[str, Any]) -> list[Any]:
-    if not config.get("record"):
-        return []
-    from molmo_lerobot.export.recorder import LeRobotRecorderFactory
+    from molmo_lerobot.export.glance import GlanceRecorderFactory
 
-    return [LeRobotRecorderFactory.from_config(config)]
+    factories: list[Any] = [GlanceRecorderFactory()]
+    if config.get("record"):
+        from molmo_lerobot.export.recorder import LeRobotRecorderFactory
+
+        factories.append(LeRobotRecorderFactory.from_config(config))
+    return factories

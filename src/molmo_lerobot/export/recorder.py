@@ -65,8 +65,9 @@ class LeRobotRecorderFactory(RecorderFactory):
     push: bool = False
     private: bool = False
     session: str = field(default_factory=new_session)
-    #: finalize a worker's shard after this many episodes (bounds what a killed worker loses)
-    shard_episodes: int = 50
+    #: finalize a worker's shard after this many episodes. One episode per shard lets the merge
+    #: put episodes in benchmark order without re-encoding, whatever the number of workers.
+    shard_episodes: int = 1
     video: VideoSettings = field(default_factory=VideoSettings)
 
     @classmethod
@@ -95,14 +96,19 @@ class LeRobotRecorderFactory(RecorderFactory):
         return LeRobotRecorder(self, worker_id, Path(output_dir))
 
     def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any]) -> None:
-        """Merge the shards into ``output_dir/dataset``; push it when ``push=true`` (failure = warning)."""
+        """Merge the shards into ``output_dir/dataset``; push it when ``push=true``.
+
+        The push outcome goes into ``summary["push"]`` (``repo_id``, ``ok``, ``error``): a failed
+        push keeps every local file and makes ``molmo-eval`` exit non-zero."""
         from molmo_lerobot.export.hub import push_dataset
         from molmo_lerobot.export.merge import merge_shards
 
         quiet_libraries()
         root = merge_shards(Path(output_dir), results, summary, self)
-        if self.push and root is not None:
-            push_dataset(root, self.repo_id, private=self.private)
+        if self.push:
+            error = (push_dataset(root, self.repo_id, private=self.private) if root is not None
+                     else "no episode finished without error, so there is no dataset to push")
+            summary["push"] = {"repo_id": self.repo_id, "ok": error is None, "error": error}
 
 
 def quiet_libraries() -> None:
@@ -155,7 +161,7 @@ class LeRobotRecorder(Recorder):
             if self._ds is None:
                 self._open_shard(layout, info.horizon)
         assert self._layout is not None
-        self._ds.add_frame(self._layout.frame(obs, action, reward, success, done, info.prompt or info.task_type))
+        self._ds.add_frame(self._layout.frame(obs, action, reward, success, done, info.prompt or info.task_type, info))
         self._frames += 1
 
     def end_episode(self, result: EpisodeResult) -> None:
@@ -198,7 +204,7 @@ class LeRobotRecorder(Recorder):
         video = self.factory.video
         self._ds = RecordingDataset.create(
             repo_id=self.factory.repo_id, fps=self.factory.fps, features=layout.features(), root=root,
-            robot_type=None, use_videos=True, streaming_encoding=True, video_backend="pyav",
+            robot_type=layout.robot_type, use_videos=True, streaming_encoding=True, video_backend="pyav",
             rgb_encoder=video.encoder_config(), encoder_threads=video.encoder_threads,
             # room for a whole episode per camera: the encoder may lag behind the rollout
             encoder_queue_maxsize=max(64, int(horizon) + 1),

@@ -29,7 +29,6 @@ from pathlib import Path
 from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
-from tqdm import tqdm
 
 from molmo_lerobot.export.report import write_report
 from molmo_lerobot.export.wandb_log import log_run
@@ -38,6 +37,8 @@ from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import resolve as molmospaces_settings
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.runner.fingerprint import policy_checkpoints
+from molmo_lerobot.runner.progress import Progress
 from molmo_lerobot.runner.results import EpisodeResult, summarize
 from molmo_lerobot.runner.rollout import horizon_with_source
 from molmo_lerobot.runner.run_config import check_run_config, episode_work_problem
@@ -220,7 +221,8 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     run_info = {
         "benchmark": {"name": bench.name, "sha256": bench.sha256, "n_episodes": len(bench.episodes),
                       "path": str(bench.path)},
-        "policy": cfg["policy"], "seed": cfg["seed"], "limit": limit, "horizon": cfg.get("horizon"),
+        "policy": cfg["policy"], "policy_checkpoint": policy_checkpoints(cfg["policy"]), "seed": cfg["seed"],
+        "limit": limit, "horizon": cfg.get("horizon"),
         "timing": cfg["timing"],
         "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
                          "molmospaces": molmospaces_settings(cfg).to_config(),
@@ -242,25 +244,27 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     episodes_path = out / EPISODES_FILE
     todo = [it for it in items if it.episode_index not in results]
     t0 = time.perf_counter()
+    progress = Progress(len(indices), len(results), f"{bench.name} · {policy_name}", out,
+                        enabled=bool(cfg.get("progress", True)),
+                        heartbeat_s=float(cfg.get("progress_interval_s") or 30.0))
+    progress.success = sum(r.success for r in results.values())
+    progress.errors = sum(r.error is not None for r in results.values())
     log = _EpisodeLog(episodes_path)
     try:
-        with tqdm(total=len(indices), initial=len(results), disable=not cfg.get("progress", True),
-                  desc=f"{bench.name} · {policy_name}", unit="ep", file=sys.stderr) as bar:
+        with progress:
             def record(result: EpisodeResult) -> None:
                 log.append(complete(result))
                 results[result.episode_index] = result
-                bar.update(1)
-                n = len(results)
-                bar.set_postfix(success=f"{sum(r.success for r in results.values()) / n:.2f}",
-                                errors=sum(r.error is not None for r in results.values()))
+                progress.episode_done(result.success, result.error is not None)
 
             for failed in errors:
                 if failed.episode_index not in results:
                     record(failed)
             if todo:
                 job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], output_dir=str(out),
-                                benchmark_name=bench.name, benchmark_sha256=bench.sha256, recorders=recorders,
-                                prefer=plugins.prefer, molmospaces=run_info["eval_options"]["molmospaces"])
+                                benchmark_name=bench.name, benchmark_sha256=bench.sha256,
+                                recorders=recorders + progress.factories(), prefer=plugins.prefer,
+                                molmospaces=run_info["eval_options"]["molmospaces"])
                 try:
                     executor.run(job, todo, record)
                 except RunInterrupted as exc:
@@ -278,9 +282,10 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         executor=(cfg.get("executor") or {}).get("name", "local"), output_dir=str(out),
         started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=cfg,
     )
+    scored = json.dumps(summary, indent=2) + "\n"
     try:
         atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered))
-        atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")  # the score, before any export
+        atomic_write(out / RESULTS_FILE, scored)  # the score, before any export
     except OSError as exc:
         raise _write_error(out, "the run's outputs", exc) from None
     failed = []
@@ -291,6 +296,10 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
             step()
         except Exception as exc:
             failed.append(f"{name}: {type(exc).__name__}: {exc}".splitlines()[0])
+    if failed:
+        summary["export_errors"] = failed
+    if json.dumps(summary, indent=2) + "\n" != scored:  # what the export did (push status, failures); same score
+        atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
     if failed:
         raise ExportError(f"export failed after the run was scored ({'; '.join(failed)}); the score stands: "
                           f"{summary['n_success']}/{summary['n_episodes']} successes in {out / RESULTS_FILE}")
@@ -347,7 +356,7 @@ def _reopen(out: Path, run_info: dict[str, Any]) -> list[EpisodeResult]:
     if not isinstance(previous, dict):
         raise RunError(f"cannot resume: {run_file} is not a run description (not a JSON object)")
     current = json.loads(json.dumps(run_info))  # compare as stored (JSON turns int keys into strings)
-    for key in ("benchmark", "policy", "seed", "horizon", "timing", "eval_options"):
+    for key in ("benchmark", "policy", "policy_checkpoint", "seed", "horizon", "timing", "eval_options"):
         if previous.get(key) != current.get(key):
             raise RunError(f"cannot resume {out}: its {key} differs from this run's "
                            f"({previous.get(key)!r} vs {current.get(key)!r})")

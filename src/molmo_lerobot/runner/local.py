@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
+from molmo_lerobot.runner.progress import redirect_worker_output
 from molmo_lerobot.runner.supervisor import DEAD, INIT_ERROR, READY, RESULT, Event, Supervisor, Transport, exit_reason
 from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob, WorkerStop, WorkItem
 
@@ -27,6 +28,7 @@ ORPHAN_GRACE_S = 10.0
 def _worker_main(conn: Connection, job: WorkerJob, worker_id: str) -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    redirect_worker_output(job.output_dir, worker_id)  # library prints go to logs/, not through the bar
     threading.Thread(target=_exit_when_orphaned, daemon=True).start()
     try:
         worker = EpisodeWorker(job, worker_id)

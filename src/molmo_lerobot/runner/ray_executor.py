@@ -16,6 +16,7 @@ import os
 from dataclasses import dataclass
 from typing import Any
 
+from molmo_lerobot.runner.progress import redirect_worker_output
 from molmo_lerobot.runner.supervisor import (DEAD, INIT_ERROR, READY, RESULT, Event, Supervisor, Transport,
                                              WorkerStartError)
 from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob, WorkItem
@@ -26,6 +27,7 @@ class SimulatorActor:
 
     def __init__(self, job: WorkerJob, worker_id: str) -> None:
         os.environ.setdefault("MUJOCO_GL", "egl")
+        redirect_worker_output(job.output_dir, worker_id)  # library prints go to logs/, not through the bar
         self.worker: EpisodeWorker | None = None
         self.init_error: str | None = None
         try:

@@ -42,6 +42,13 @@ class Recorder(ABC):
     #: Whether ``record_step`` needs rendered camera images in ``obs``.
     wants_images: bool = True
 
+    def wants_images_at(self, step: int, horizon: int) -> bool:
+        """Whether ``record_step`` at ``step`` (0 … horizon - 1) needs images; default ``wants_images``.
+
+        A recorder that needs a few frames (thumbnails) renders only those, not the whole episode.
+        """
+        return self.wants_images
+
     @abstractmethod
     def start_episode(self, info: EpisodeInfo) -> None: ...
 

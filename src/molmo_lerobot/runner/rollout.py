@@ -95,7 +95,7 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
     """Run one episode for ``horizon`` policy steps and report success at the end and at any step.
 
     Images are rendered only when someone needs them: the policy at the steps where it is
-    asked for a new action (chunks run open loop), recorders at every step.
+    asked for a new action (chunks run open loop), recorders at the steps they ask for.
     """
     policy.reset(ctx)
     task.setup()
@@ -104,8 +104,10 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
         check_divergence(data, "at the initial state")
     for rec in recorders:
         rec.start_episode(info)
-    record_images = any(r.wants_images for r in recorders)
-    obs = env.observe(images=policy.needs_images or record_images)
+    def record_images(step: int) -> bool:
+        return any(r.wants_images_at(step, horizon) for r in recorders)
+
+    obs = env.observe(images=policy.needs_images or record_images(0))
     obs["prompt"], obs["step"] = ctx.prompt, 0
     queue: deque[Action] = deque()
     success = success_once = False
@@ -124,7 +126,7 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
             for rec in recorders:
                 rec.record_step(obs, action, reward, success, done)
         if not done:
-            obs = env.observe(images=record_images or (policy.needs_images and not queue))
+            obs = env.observe(images=record_images(step + 1) or (policy.needs_images and not queue))
             obs["prompt"], obs["step"] = ctx.prompt, step + 1
     return RolloutOutcome(success=success, success_once=success_once, steps=horizon)
 
