@@ -10,7 +10,8 @@ result files). Per-episode outcomes are asserted identical.
 Each side is timed for ``M`` and ``N`` episodes: per-episode cost = (T_N - T_M) / (N - M), fixed
 cost (interpreter start, imports, plugin and policy loading, worker start-up, result files) =
 T_M - M x per-episode. Each episode's own time (scene build to last step: the raw loop's clock,
-the worker's ``duration_s``) is reported too, the less noisy per-episode figure on a shared
+the worker's ``duration_s``) is reported too, and the same split on CPU seconds (each process
+and every descendant it reaped: workers included), both far less noisy than walls on a shared
 machine. The configurations run interleaved, ``REPS`` times; the best of each is kept. The same
 is done for ``molmo-eval`` with 2 workers (throughput workers=2 / workers=1).
 
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import json
 import os
+import resource
 import subprocess
 import sys
 import textwrap
@@ -142,26 +144,30 @@ def perf_env(tmp_path_factory) -> dict[str, str]:
     return dict(os.environ, PYTHONPATH=path, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
 
 
-def _raw(n: int, env: dict[str, str]) -> tuple[float, list[dict]]:
-    args = json.dumps({"n": n, "horizon": HORIZON, "chunk": CHUNK, "benchmark": BENCHMARK})
+def _timed(cmd: list[str], env: dict[str, str]) -> tuple[float, float, str]:
+    """Wall seconds and CPU seconds (the process and every descendant it reaped) of ``cmd``."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    out = subprocess.run([sys.executable, "-c", RAW, args], capture_output=True, text=True, env=env)
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     assert out.returncode == 0, out.stderr[-2000:]
-    return wall, json.loads(out.stdout.strip().splitlines()[-1])
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), out.stdout
 
 
-def _harness(n: int, workers: int, out_dir: Path, env: dict[str, str]) -> tuple[float, list[dict]]:
+def _raw(n: int, env: dict[str, str]) -> tuple[float, float, list[dict]]:
+    args = json.dumps({"n": n, "horizon": HORIZON, "chunk": CHUNK, "benchmark": BENCHMARK})
+    wall, cpu, stdout = _timed([sys.executable, "-c", RAW, args], env)
+    return wall, cpu, json.loads(stdout.strip().splitlines()[-1])
+
+
+def _harness(n: int, workers: int, out_dir: Path, env: dict[str, str]) -> tuple[float, float, list[dict]]:
     args = [f"benchmark={BENCHMARK}", "policy=image_scripted", f"limit={n}", f"horizon={HORIZON}",
             f"workers={workers}", f"output_dir={out_dir}", "progress=false"]
-    t0 = time.perf_counter()
-    out = subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.eval", *args], capture_output=True, text=True,
-                         env=env)
-    wall = time.perf_counter() - t0
-    assert out.returncode == 0, out.stderr[-2000:]
+    wall, cpu, _ = _timed([sys.executable, "-m", "molmo_lerobot.cli.eval", *args], env)
     rows = [json.loads(line) for line in (out_dir / "episodes.jsonl").read_text().splitlines()]
     assert all(r["error"] is None for r in rows), [r["error"] for r in rows]
-    return wall, rows
+    return wall, cpu, rows
 
 
 def _split(t_m: float, t_n: float) -> tuple[float, float]:
@@ -184,13 +190,15 @@ def test_harness_vs_raw_loop_and_workers_scaling(perf_env, tmp_path):
             "harness_w2": lambda n, k: _harness(n, 2, tmp_path / f"w2-{n}-{k}", perf_env)}
     keys = ("episode_index", "success", "success_once", "steps")
     walls: dict[tuple[str, int], list[float]] = {}
+    cpus: dict[tuple[str, int], list[float]] = {}
     outcomes: dict[tuple[str, int], list[dict]] = {}
     episode_s: dict[tuple[str, int], float] = {}  # best time of each episode inside its process
     for k in range(REPS):  # interleaved: every configuration once per round
         for n in (M, N):
             for name, run in runs.items():
-                wall, rows = run(n, k)
+                wall, cpu, rows = run(n, k)
                 walls.setdefault((name, n), []).append(wall)
+                cpus.setdefault((name, n), []).append(cpu)
                 seen = [{key: r[key] for key in keys} for r in rows]
                 assert outcomes.setdefault((name, n), seen) == seen, f"{name} is not deterministic"
                 for r in rows:
@@ -199,6 +207,8 @@ def test_harness_vs_raw_loop_and_workers_scaling(perf_env, tmp_path):
     for name in runs:
         assert outcomes[(name, N)] == outcomes[("raw", N)], f"{name} and the raw loop disagree on outcomes"
     best = {key: min(v) for key, v in walls.items()}
+    best_cpu = {key: min(v) for key, v in cpus.items()}
+    cpu_split = {name: _split(best_cpu[(name, M)], best_cpu[(name, N)]) for name in runs}
     inner = {name: sum(episode_s[(name, i)] for i in range(N)) / N for name in runs}
     split = {name: _split(best[(name, M)], best[(name, N)]) for name in runs}
     (raw_ep, raw_fixed), (h1_ep, h1_fixed), (h2_ep, h2_fixed) = split["raw"], split["harness_w1"], split["harness_w2"]
@@ -212,6 +222,11 @@ def test_harness_vs_raw_loop_and_workers_scaling(perf_env, tmp_path):
         "raw_fixed_s": round(raw_fixed, 2), "harness_fixed_s": round(h1_fixed, 2),
         "workers2_per_episode_s": round(h2_ep, 3), "workers2_fixed_s": round(h2_fixed, 2),
         "throughput_workers2_over_workers1": round(h1_ep / h2_ep, 3),
+        "cpu_raw_per_episode_s": round(cpu_split["raw"][0], 3),
+        "cpu_harness_per_episode_s": round(cpu_split["harness_w1"][0], 3),
+        "cpu_per_episode_ratio": round(cpu_split["harness_w1"][0] / cpu_split["raw"][0], 3),
+        "cpu_raw_fixed_s": round(cpu_split["raw"][1], 2), "cpu_harness_fixed_s": round(cpu_split["harness_w1"][1], 2),
         "best_walls_s": {f"{name}@{n}": round(w, 2) for (name, n), w in sorted(best.items())},
+        "best_cpu_s": {f"{name}@{n}": round(c, 2) for (name, n), c in sorted(best_cpu.items())},
         "cpus": os.cpu_count(),
     })
