@@ -119,3 +119,76 @@ def test_refuses_checkpoint_whose_weights_did_not_load(act_dir, tmp_path):
     other = ACTPolicy(loaded.policy.config)
     with pytest.raises(WeightsNotLoadedError, match="differ from the checkpoint"):
         verify_weights_loaded(other, f"{act_dir}/model.safetensors")
+
+
+# Batched serving (issue 17): forks share the model, keep their own queues; one forward per batch.
+def varied_obs(seed: int) -> dict:
+    rng = np.random.default_rng(seed)
+    return {"images": {"front": rng.integers(0, 255, (48, 64, 3), dtype=np.uint8)},
+            "qpos": {"arm": rng.uniform(-1, 1, 7), "gripper": rng.uniform(0, 1, 1)}, "prompt": "pick the cube"}
+
+
+@pytest.mark.parametrize("mode", ["step", "chunk"])
+def test_batched_forks_match_in_process_policies_per_client(act_dir, mode):
+    cfg = {"name": "lerobot", "path": act_dir, "device": "cpu", "mode": mode}
+    proto = LeRobotPolicy(cfg)
+    assert proto.batched
+    forks = [proto.fork() for _ in range(3)]
+    alone = [LeRobotPolicy(cfg) for _ in range(3)]
+    assert all(f.policy is proto.policy for f in forks)  # one model copy
+    for p in forks + alone:
+        p.reset(ctx())
+    calls = []
+    inner = proto.policy.predict_action_chunk
+    proto.policy.predict_action_chunk = lambda b, **kw: calls.append(len(b["observation.state"])) or inner(b, **kw)
+    for step in range(2 * CHUNK + 1):
+        if step == 2:  # client 1 starts a new episode: only its queue is cleared
+            forks[1].reset(ctx())
+            alone[1].reset(ctx())
+        observations = [varied_obs(10 * c + step) for c in range(3)]
+        batched = LeRobotPolicy.act_batch(forks, observations)
+        for c in range(3):
+            expected = alone[c].act(observations[c])
+            for g in ("arm", "gripper"):
+                np.testing.assert_allclose(batched[c][g], expected[g], rtol=1e-4, atol=1e-5)
+    if mode == "step":  # one forward per chunk for all clients together, client 1 once more after its reset
+        assert calls == [3, 1, 2, 1, 2]
+    else:
+        assert calls == [3] * (2 * CHUNK + 1)
+
+
+def test_single_fork_is_bit_identical_to_in_process(act_dir):
+    cfg = {"name": "lerobot", "path": act_dir, "device": "cpu"}
+    fork, alone = LeRobotPolicy(cfg).fork(), LeRobotPolicy(cfg)
+    fork.reset(ctx())
+    alone.reset(ctx())
+    for step in range(CHUNK + 2):
+        o = varied_obs(step)
+        a, b = fork.act(o), alone.act(o)
+        assert all(np.array_equal(a[g], b[g]) for g in a)
+
+
+def test_bad_observation_in_a_batch_fails_only_its_item(act_dir):
+    proto = LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu"})
+    forks = [proto.fork() for _ in range(3)]
+    alone = LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu"})
+    for p in (*forks, alone):
+        p.reset(ctx())
+    bad = varied_obs(1)
+    bad["images"] = {"exo": bad["images"]["front"]}
+    out = LeRobotPolicy.act_batch(forks, [varied_obs(0), bad, varied_obs(2)])
+    assert isinstance(out[1], KeyError) and "wants camera 'front'" in str(out[1])
+    assert not forks[1]._queue  # its state is unchanged
+    np.testing.assert_allclose(out[0]["arm"], alone.act(varied_obs(0))["arm"], rtol=1e-4, atol=1e-5)
+    assert out[2]["arm"].shape == (7,)
+
+
+def test_temporal_ensembling_is_not_batched(tmp_path):
+    path = save_tiny_act(tmp_path / "te")
+    from lerobot.configs.policies import PreTrainedConfig
+
+    cfg = PreTrainedConfig.from_pretrained(path)
+    cfg.temporal_ensemble_coeff, cfg.n_action_steps = 0.01, 1
+    cfg.save_pretrained(path)
+    policy = LeRobotPolicy({"name": "lerobot", "path": path, "device": "cpu"})
+    assert not policy.batched and policy.fork() is None

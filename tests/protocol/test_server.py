@@ -43,7 +43,8 @@ OBS = {"qpos": {"arm": np.zeros(7), "gripper": np.zeros(1)}, "prompt": "pick"}
 @pytest.fixture
 def server():
     CountingPolicy.instances.clear()
-    srv = PolicyServer(CountingPolicy, port=0, metadata={"policy": "counting"}, max_clients=3, max_message_bytes=4096)
+    srv = PolicyServer(CountingPolicy, port=0, metadata={"policy": "counting"}, max_clients=3, max_message_bytes=4096,
+                      evict_idle_s=60)
     with serve_in_thread(srv) as running:
         yield running
 
@@ -54,7 +55,7 @@ def client(server, **kw) -> PolicyClient:
 
 def test_metadata_first_then_actions_per_client_state(server):
     a, b = client(server), client(server)
-    assert a.connect() == {"policy": "counting"}
+    assert a.connect() == {"policy": "counting", "needs_images": True, "batched": False}
     b.connect()
     for _ in range(3):
         out = a.infer(OBS)
@@ -68,7 +69,7 @@ def test_metadata_first_then_actions_per_client_state(server):
 
 def test_openpi_style_raw_client(server):
     with connect(f"ws://127.0.0.1:{server.port}", compression=None, max_size=None) as ws:
-        assert unpackb(ws.recv(timeout=5)) == {"policy": "counting"}
+        assert unpackb(ws.recv(timeout=5))["policy"] == "counting"
         ws.send(packb(OBS))
         assert unpackb(ws.recv(timeout=5))["gripper"].shape == (2, 1)
 

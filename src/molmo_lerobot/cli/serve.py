@@ -1,27 +1,53 @@
-"""``molmo-serve policy=P [host=127.0.0.1] [port=8000] [max_clients=8] …``: serve a policy plugin.
+"""molmo-serve: serve a policy plugin over the openpi-compatible protocol.
 
-Speaks the openpi-compatible protocol (see :mod:`molmo_lerobot.protocol.server`). Server
-options are ``key=value`` arguments; every other argument is a Hydra override of the eval
-config (``policy=lerobot policy.path=… policy.device=cuda``).
+usage: molmo-serve policy=P [host=127.0.0.1] [port=8000] [OPTION=VALUE …] [HYDRA_OVERRIDE …]
+
+Server options (key=value):
+  host, port                  where to listen (port=0 picks a free port)
+  max_clients=8               connections served at once; a new client evicts one idle >= evict_idle_s
+  max_batch=1                 batch requests from different clients (policies with a batched act)
+  batch_timeout_ms=20         longest a request waits for due clients to join its batch
+  max_concurrency=1           policy calls run at once without batching
+  max_message_bytes=67108864  largest request or reply
+  first_request_timeout_s=10  a connection must send its first request within this
+  idle_timeout_s=120          a connection is closed after this long without a request
+  evict_idle_s=2              connections idle this long may be evicted when the server is full
+
+Every other argument is a Hydra override of the eval config (policy=lerobot policy.path=…
+policy.device=cuda). Clients: molmo-eval policy=remote policy.host=… policy.port=… (any
+policy, native observations). Privileged scripted experts need the simulator and are refused.
 """
 
 from __future__ import annotations
 
 import logging
 import sys
-import threading
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from omegaconf import OmegaConf
+
+if TYPE_CHECKING:
+    from molmo_lerobot.protocol.server import PolicyServer
+
+#: ``policy.serve*`` switches of a run (see protocol/run_server.py), not the policy's own options
+RUN_SERVING_KEYS = frozenset({"serve", "serve_max_batch", "serve_batch_timeout_ms"})
 
 SERVER_OPTIONS = {
     "host": str,
     "port": int,
     "max_clients": int,
+    "max_batch": int,
+    "batch_timeout_ms": float,
     "max_concurrency": int,
     "max_message_bytes": int,
-    "recv_timeout_s": float,
+    "first_request_timeout_s": float,
+    "idle_timeout_s": float,
+    "evict_idle_s": float,
 }
+
+
+class _Usage(Exception):
+    pass
 
 
 def parse_args(argv: list[str]) -> tuple[dict[str, Any], list[str]]:
@@ -36,51 +62,52 @@ def parse_args(argv: list[str]) -> tuple[dict[str, Any], list[str]]:
             except ValueError:
                 raise SystemExit(f"molmo-serve: {key}={value!r} is not a valid {SERVER_OPTIONS[key].__name__}") from None
         elif arg in ("-h", "--help"):
-            raise SystemExit(__doc__)
+            raise _Usage
         else:
             overrides.append(arg)
     return options, overrides
 
 
-class _FirstThenFresh:
-    """Policy factory: hands out the instance built at start-up (to fail fast), then new ones."""
+def build_server(policy_cfg: dict[str, Any], **options: Any) -> PolicyServer:
+    """The server for the policy plugin ``policy_cfg`` names (built when the server starts)."""
+    from molmo_lerobot import __version__
+    from molmo_lerobot.protocol.server import PolicyServer
+    from molmo_lerobot.runner.policy import make_policy
 
-    def __init__(self, policy_cfg: dict[str, Any]) -> None:
-        from molmo_lerobot.runner.policy import make_policy
-
-        self._make = make_policy
-        self._cfg = policy_cfg
-        self._first = make_policy(policy_cfg)
-        self._lock = threading.Lock()
-
-    def __call__(self):
-        with self._lock:
-            first, self._first = self._first, None
-        return first if first is not None else self._make(self._cfg)
+    cfg = {k: v for k, v in policy_cfg.items() if k not in RUN_SERVING_KEYS}
+    metadata = {"server": "molmo-serve", "version": __version__, "policy": cfg.get("name")}
+    return PolicyServer(lambda: make_policy(cfg), metadata=metadata, **options)
 
 
 def main(argv: list[str] | None = None) -> int:
-    from molmo_lerobot import __version__
     from molmo_lerobot.config import ConfigError, compose
     from molmo_lerobot.plugins import PluginError
-    from molmo_lerobot.protocol.server import PolicyServer
+    from molmo_lerobot.protocol.server import PolicyNotServable, PolicyServer
 
+    try:
+        options, overrides = parse_args(sys.argv[1:] if argv is None else argv)
+    except _Usage:
+        print(__doc__.strip())
+        return 0
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    options, overrides = parse_args(sys.argv[1:] if argv is None else argv)
     try:
         cfg = compose(overrides)
-        policy_cfg = OmegaConf.to_container(cfg.policy, resolve=True)
-        factory = _FirstThenFresh(policy_cfg)  # type: ignore[arg-type]
+        policy_cfg: dict[str, Any] = OmegaConf.to_container(cfg.policy, resolve=True)  # type: ignore[assignment]
+        name = policy_cfg.get("name")
+        server = build_server(policy_cfg, **options)
     except (ConfigError, PluginError, ValueError, FileNotFoundError, ImportError) as exc:
         print(f"molmo-serve: {exc}", file=sys.stderr)
         return 2
-    metadata = {"server": "molmo-serve", "version": __version__, "policy": policy_cfg.get("name")}
-    server = PolicyServer(factory, metadata=metadata, **options)
 
     def ready(srv: PolicyServer) -> None:
-        print(f"molmo-serve: serving policy {policy_cfg.get('name')!r} on ws://{srv.host}:{srv.port}", flush=True)
+        print(f"molmo-serve: serving policy {name!r} on ws://{srv.host}:{srv.port}"
+              + (f" (batches of up to {srv.max_batch})" if srv.batching else ""), flush=True)
 
-    server.run(ready=ready)
+    try:
+        server.run(ready=ready)
+    except (PolicyNotServable, ConfigError, PluginError, ValueError, FileNotFoundError, ImportError) as exc:
+        print(f"molmo-serve: {exc}", file=sys.stderr)
+        return 2
     return 0
 
 

@@ -60,6 +60,11 @@ class Policy(ABC):
     #: Whether ``act`` needs camera images. Policies that do not (scripted experts) let the
     #: environment skip rendering unless a recorder asks for frames.
     needs_images: bool = True
+    #: Whether the policy reads the simulator (``ctx.env``): privileged scripted experts.
+    #: ``molmo-serve`` refuses such a policy (a server has no simulator).
+    needs_simulator: bool = False
+    #: Whether :meth:`act_batch` may serve this instance (``molmo-serve max_batch=N``).
+    batched: bool = False
 
     @abstractmethod
     def reset(self, ctx: EpisodeContext) -> None:
@@ -71,6 +76,24 @@ class Policy(ABC):
 
     def close(self) -> None:
         """Release resources (connections, GPU memory). Called once when the worker ends."""
+
+    def fork(self) -> Policy | None:
+        """Optional: a new instance with its own per-episode state that shares this one's model
+        (weights loaded once), for serving many clients. ``None`` (the default): the server
+        builds a fresh instance per client."""
+        return None
+
+    @classmethod
+    def act_batch(cls, policies: list[Policy], observations: list[Observation]) -> list[Action | Exception]:
+        """Optional batched ``act`` for ``molmo-serve`` (used when :attr:`batched` is true).
+
+        ``policies[i]`` is client i's instance (forks of one policy: its own episode state, one
+        shared model), ``observations[i]`` its observation. Returns one entry per client: its
+        action, or the exception its item raised, which fails only that client's request. A
+        client whose entry is an exception must keep its state; if the whole call raises, the
+        server retries each item alone.
+        """
+        raise NotImplementedError(f"{cls.__name__} has no batched act")
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,9 @@ actually end up in the model (some LeRobot policies silently keep random weights
 
 from __future__ import annotations
 
+import copy
 import os
+from collections import deque
 from pathlib import Path
 from typing import Any, Literal
 
@@ -48,6 +50,9 @@ class LeRobotPolicyConfig(BaseModel):
     resize: Literal["pad", "stretch", "none"] = "pad"
     verify_weights: bool = True
     max_unmatched_fraction: float = Field(default=0.01, ge=0.0, le=1.0)
+    serve: bool = False
+    serve_max_batch: int | None = Field(default=None, ge=1)
+    serve_batch_timeout_ms: float = Field(default=50.0, ge=0)
 
 
 def parse_config(cfg: dict[str, Any], model: type[BaseModel] = LeRobotPolicyConfig) -> Any:
@@ -137,8 +142,20 @@ def _suffixes(name: str) -> list[str]:
     return [".".join(parts[i:]) for i in range(min(3, len(parts) - 1) + 1)]
 
 
+#: LeRobot policy types whose ``select_action`` is ``predict_action_chunk`` plus an action queue,
+#: with stateless processors, so a batched forward with per-client queues reproduces it. Not
+#: (yet) pi0 / pi0.5: their relative-action processor step keeps the last observation's state.
+BATCHABLE_TYPES = frozenset({"act"})
+
+
 class LeRobotPolicy(Policy):
-    """A LeRobot ``PreTrainedPolicy`` with its processors, behind our Policy interface."""
+    """A LeRobot ``PreTrainedPolicy`` with its processors, behind our Policy interface.
+
+    Served (``molmo-serve``), each client gets a :meth:`fork`: the model and processors are
+    shared, the action queue is the fork's own, and :meth:`act_batch` stacks the clients'
+    observations into one forward pass and splits the chunks (types in
+    :data:`BATCHABLE_TYPES`, without ACT's temporal ensembling).
+    """
 
     def __init__(self, cfg: dict[str, Any]) -> None:
         self.cfg: LeRobotPolicyConfig = parse_config(cfg)
@@ -150,8 +167,11 @@ class LeRobotPolicy(Policy):
         self.image_features = {k: tuple(f.shape) for k, f in features.items() if f.type is FeatureType.VISUAL}
         self.state_dim = features[self.cfg.state_key].shape[0] if self.cfg.state_key in features else None
         self.needs_images = bool(self.image_features)
+        config = self.policy.config
+        self.batched = config.type in BATCHABLE_TYPES and getattr(config, "temporal_ensemble_coeff", None) is None
         self._groups: dict[str, int] = {}
         self._prompt = ""
+        self._queue: deque[np.ndarray] | None = None  # a fork's own action queue (None: LeRobot's queue)
 
     def _load(self) -> tuple[Any, Any, Any]:
         from lerobot.configs.policies import PreTrainedConfig
@@ -181,14 +201,72 @@ class LeRobotPolicy(Policy):
 
     # Policy interface ------------------------------------------------------------------
     def reset(self, ctx: EpisodeContext) -> None:
-        self.policy.reset()
-        for pipeline in (self.preprocessor, self.postprocessor):
-            pipeline.reset()
+        if self._queue is not None:  # a fork: its own queue only (shared processors of these types are stateless)
+            self._queue.clear()
+        else:
+            self.policy.reset()
+            for pipeline in (self.preprocessor, self.postprocessor):
+                pipeline.reset()
         self._groups = dict(ctx.move_groups)
         self._prompt = ctx.prompt
 
+    def fork(self) -> LeRobotPolicy | None:
+        """A client of the same model with its own action queue (batchable types only)."""
+        if not self.batched:
+            return None
+        twin = copy.copy(self)
+        twin._groups, twin._prompt, twin._queue = {}, "", deque()
+        return twin
+
+    @classmethod
+    def act_batch(cls, policies: list[Policy], observations: list[Observation]) -> list[Action | Exception]:
+        """One forward for every client whose queue is empty; see the class docstring."""
+        import torch
+
+        forks: list[LeRobotPolicy] = policies  # type: ignore[assignment]
+        results: list[Any] = [None] * len(forks)
+        todo: list[tuple[int, dict[str, Any]]] = []
+        for i, (p, obs) in enumerate(zip(forks, observations)):
+            if p._queue is None:
+                results[i] = TypeError("act_batch needs forks of a LeRobotPolicy (LeRobotPolicy.fork)")
+            elif p.cfg.mode == "step" and p._queue:
+                results[i] = p._to_action(p._queue.popleft()[None])
+            else:
+                try:
+                    todo.append((i, p._batch(obs)))
+                except Exception as exc:  # a bad observation fails its own request only
+                    results[i] = exc
+        if todo:
+            lead = forks[todo[0][0]]
+            batch = {key: (torch.stack([b[key] for _, b in todo]) if torch.is_tensor(value) else [b[key] for _, b in todo])
+                     for key, value in todo[0][1].items()}
+            with torch.inference_mode():
+                chunk = lead.policy.predict_action_chunk(lead.preprocessor(batch))
+                n = getattr(lead.policy.config, "n_action_steps", None)
+                chunk = lead.postprocessor(chunk[:, :n] if n else chunk)
+            chunks = chunk.detach().to("cpu", torch.float32).numpy()
+            for (i, _), actions in zip(todo, chunks):
+                p = forks[i]
+                try:
+                    if p.cfg.mode == "step":
+                        p._queue.extend(actions)  # type: ignore[union-attr]
+                        results[i] = p._to_action(p._queue.popleft()[None])  # type: ignore[union-attr]
+                    else:
+                        results[i] = p._to_action(actions)
+                except Exception as exc:
+                    results[i] = exc
+        return results
+
     def act(self, obs: Observation) -> Action:
-        actions = self.predict(obs)
+        if self._queue is not None:
+            result = self.act_batch([self], [obs])[0]
+            if isinstance(result, Exception):
+                raise result
+            return result
+        return self._to_action(self.predict(obs))
+
+    def _to_action(self, actions: np.ndarray) -> Action:
+        """(H, A) unnormalized actions -> our action (step mode) or chunk, split into move groups."""
         groups = self.cfg.action_groups or list(self._groups)
         dims = [self._groups.get(g, 0) for g in groups]
         if sum(dims) != actions.shape[-1]:

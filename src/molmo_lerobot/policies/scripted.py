@@ -117,6 +117,7 @@ class PhasedExpert(Policy):
     ``speed`` (rad/s)."""
 
     needs_images = False
+    needs_simulator = True
 
     def __init__(self, config: dict[str, Any]) -> None:
         self.chunk = int(config.get("chunk", 12))
@@ -277,6 +278,7 @@ class ScriptedExpert(Policy):
     """
 
     needs_images = False
+    needs_simulator = True
 
     def __init__(self, config: dict[str, Any]) -> None:
         self.config = config

@@ -50,7 +50,10 @@ class Episode:
     seed: int
 
     def step(self, action: Action) -> bool:
+        from molmo_lerobot.runner.rollout import check_divergence
+
         self.env.step(action)
+        check_divergence(self.env.data, "after a step")
         return bool(self.task.success())
 
     def close(self) -> None:
@@ -83,19 +86,26 @@ class EpisodeRunner:
     def open(self, bench: Benchmark, index: int) -> Episode:
         """Episode ``index`` of ``bench``, reset and ready for its first step."""
         from molmo_lerobot.benchmark.validate import validate_episode
+        from molmo_lerobot.molmospaces.preflight import preflight
         from molmo_lerobot.runner.evaluate import episode_seed
+        from molmo_lerobot.runner.rollout import check_divergence
         from molmo_lerobot.sim.env import make_env
 
         spec = self.plugins.apply_episode_overrides(bench.episodes[index], self.eval_options)
-        problems = validate_episode(spec, self.plugins, index=index, file=bench.origins[index].file)
+        problems = [p for p in validate_episode(spec, self.plugins, index=index, file=bench.origins[index].file)
+                    if not p.warning]  # warnings (not runnable here) are the preflight's
         if problems:
             raise EpisodeSetupError("; ".join(str(p) for p in problems))
+        cannot = preflight(bench, self.plugins, self.eval_options, [index])  # also applies MolmoSpaces settings
+        if cannot:
+            raise EpisodeSetupError(cannot)
         seed = episode_seed(self.run_seed, spec.model_dump(mode="json", exclude_unset=False))
         task_type = self.plugins.task_type(spec.task_name)
         horizon = self.horizon_of(spec)
         env = make_env(spec, self.timing, self.plugins)
         try:
             env.reset(seed)
+            check_divergence(env.data, "at the initial state")
             task = task_type.create(spec, env)
             task.setup()
         except Exception:

@@ -37,6 +37,7 @@ from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import resolve as molmospaces_settings
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.protocol.run_server import ServeError, served_policy
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
 from molmo_lerobot.runner.progress import Progress
 from molmo_lerobot.runner.results import EpisodeResult, summarize
@@ -261,12 +262,15 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                 if failed.episode_index not in results:
                     record(failed)
             if todo:
-                job = WorkerJob(policy=cfg["policy"], timing=cfg["timing"], output_dir=str(out),
-                                benchmark_name=bench.name, benchmark_sha256=bench.sha256,
-                                recorders=recorders + progress.factories(), prefer=plugins.prefer,
-                                molmospaces=run_info["eval_options"]["molmospaces"])
-                try:
-                    executor.run(job, todo, record)
+                try:  # policy.serve=true: one local policy server for the run, the workers its clients
+                    with served_policy(cfg["policy"], int(cfg["workers"]), out) as worker_policy:
+                        job = WorkerJob(policy=worker_policy, timing=cfg["timing"], output_dir=str(out),
+                                        benchmark_name=bench.name, benchmark_sha256=bench.sha256,
+                                        recorders=recorders + progress.factories(), prefer=plugins.prefer,
+                                        molmospaces=run_info["eval_options"]["molmospaces"])
+                        executor.run(job, todo, record)
+                except ServeError as exc:
+                    raise RunError(str(exc)) from None
                 except RunInterrupted as exc:
                     raise RunInterrupted(exc.signum, f"{exc}: {len(results)} of {len(indices)} episodes finished "
                                          f"and kept in {episodes_path}; to continue, rerun with output_dir={out} "

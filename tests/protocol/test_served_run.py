@@ -1,0 +1,82 @@
+"""``molmo-eval … policy=lerobot policy.serve=true`` (issue 17 item 2): one local server for the run,
+every worker its client; the run's results equal in-process evaluation for a deterministic policy
+(a tiny random-init ACT reading the exterior camera)."""
+
+from __future__ import annotations
+
+import json
+import multiprocessing as mp
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
+from test_lerobot_policy import save_tiny_act  # noqa: E402
+
+from molmo_lerobot.config import compose  # noqa: E402
+from molmo_lerobot.protocol.run_server import STATS_FILE  # noqa: E402
+from molmo_lerobot.runner.evaluate import RunError, run_evaluation  # noqa: E402
+
+HORIZON = 8
+
+
+@pytest.fixture(scope="module")
+def act_dir(tmp_path_factory):
+    return save_tiny_act(tmp_path_factory.mktemp("act"), image_hw=(56, 56))
+
+
+def evaluate(act_dir, out, *overrides):
+    cfg = compose(["policy=lerobot", f"policy.path={act_dir}", "policy.device=cpu",
+                   "+policy.cameras.exterior=observation.images.front", "benchmark=pick_v1", "limit=2",
+                   f"horizon={HORIZON}", "seed=3", f"output_dir={out}", "progress=false", "record=true", *overrides])
+    return run_evaluation(cfg)
+
+
+def actions(run) -> np.ndarray:
+    """Recorded actions, in benchmark episode order (workers finish episodes in any order)."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    root = run.output_dir / "dataset"
+    bench_index = {r["episode_index"]: r["benchmark_episode_index"]
+                   for r in map(json.loads, (root / "meta" / "eval" / "episodes.jsonl").read_text().splitlines())}
+    ds = LeRobotDataset(json.loads((root / "meta" / "info.json").read_text()).get("repo_id", "local/x"), root=root)
+    rows = sorted((bench_index[int(r["episode_index"])], int(r["frame_index"]), np.asarray(r["action"]))
+                  for r in ds.hf_dataset)
+    return np.stack([a for _, _, a in rows])
+
+
+def outcome(e) -> tuple:
+    return (e.episode_index, e.success, e.success_once, e.steps, e.seed, e.error)
+
+
+def test_served_batched_run_equals_in_process(act_dir, tmp_path):
+    local = evaluate(act_dir, tmp_path / "local", "workers=1")
+    batched = evaluate(act_dir, tmp_path / "batched", "workers=2", "policy.serve=true",
+                       "policy.serve_batch_timeout_ms=50")
+    assert local.summary["n_errors"] == 0 and len(local.episodes) == 2
+    assert [outcome(e) for e in batched.episodes] == [outcome(e) for e in local.episodes]
+    assert batched.summary["policy"]["name"] == "lerobot" and batched.summary["policy"]["serve"] is True
+    stats = json.loads((tmp_path / "batched" / STATS_FILE).read_text())
+    assert stats["batching"] and stats["max_batch"] == 2 and stats["served"] > 0
+    # one forward for several workers' requests rounds differently from one per request
+    np.testing.assert_allclose(actions(batched), actions(local), rtol=1e-4, atol=1e-5)
+    assert not mp.active_children()  # the server process was stopped and reaped
+
+
+@pytest.mark.slow
+def test_served_unbatched_run_is_bit_identical_to_in_process(act_dir, tmp_path):
+    local = evaluate(act_dir, tmp_path / "local", "workers=1", "limit=3")
+    served = evaluate(act_dir, tmp_path / "served", "workers=3", "limit=3", "policy.serve=true",
+                      "policy.serve_max_batch=1")
+    assert [outcome(e) for e in served.episodes] == [outcome(e) for e in local.episodes]
+    np.testing.assert_array_equal(actions(served), actions(local))
+
+
+def test_a_server_that_cannot_start_fails_the_run_with_one_line(tmp_path):
+    cfg = compose(["policy=lerobot", f"policy.path={tmp_path}/missing", "policy.serve=true", "benchmark=pick_v1",
+                   "limit=1", f"output_dir={tmp_path / 'run'}", "progress=false"])
+    with pytest.raises(RunError, match=r"policy.serve: the policy server did not start: FileNotFoundError: .*no such"):
+        run_evaluation(cfg)
