@@ -15,8 +15,9 @@ from molmo_lerobot.config import compose
 from molmo_lerobot.overrides import OverrideError, molmo_episode_overrides
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.runner.evaluate import RunError, run_evaluation
-from molmo_lerobot.sim.env import Timing, make_env
+from molmo_lerobot.sim.env import Timing
 
 CUSTOM_MJCF = """<mujoco><worldbody><body name="thing"><freejoint/>
 <geom type="box" size="0.025 0.025 0.04" rgba="0.1 0.8 0.2 1" mass="0.1"/></body></worldbody></mujoco>"""
@@ -47,7 +48,7 @@ def test_custom_object_replaces_the_target_keeping_its_pose(episode, custom_mjcf
     pose = new.scene_modifications.object_poses["thing"]
     assert pose[:2] == old_pose[:2] and pose[3:] == old_pose[3:]
     assert new.language.task_description == "pick up the green box"
-    env = make_env(new, Timing(), get_plugins())
+    env = build_env(new, Timing(), get_plugins())
     env.reset(0)
     mujoco_body = env.body_pose("thing")
     table_top = get_plugins().scene_dataset(new.scene_dataset).metadata(new.house_index)["table_height"]
@@ -74,7 +75,7 @@ def test_camera_randomization_is_seeded_by_the_episode(episode):
     exo0, exo2 = episode.cameras[0], a.cameras[0]
     assert 0 < np.linalg.norm(np.subtract(exo2.pos, exo0.pos)) <= 0.04 * np.sqrt(3) + 1e-9
     assert molmo_episode_overrides(episode, {"camera": {"randomization": 0}}) is None
-    env0, env2 = make_env(episode, Timing(), get_plugins()), make_env(a, Timing(), get_plugins())
+    env0, env2 = build_env(episode, Timing(), get_plugins()), build_env(a, Timing(), get_plugins())
     env0.reset(0)
     env2.reset(0)
     assert not np.array_equal(env0.render(exo0.name), env2.render(exo0.name))

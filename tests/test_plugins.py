@@ -62,7 +62,7 @@ def test_broken_plugins_are_recorded_and_the_rest_works(broken_dist, monkeypatch
     assert (rec["ur5"].status, rec["ur5"].error) == ("error", "RuntimeError: ur5 driver missing")
     assert rec["ur5"].distribution == "brokenbots" and rec["ur5"].version == "0.1"
     assert plugins.robot("gb").name == "goodbot"
-    assert plugins.robot("franka_droid").name == "franka"  # built-ins unaffected
+    assert plugins.robot("franka_droid").name == "franka_droid"  # built-ins unaffected (Robotiq, never the Panda)
     assert rec["kuka"].status == "error" and "molmo_robots() failed: RuntimeError: kuka meshes not found" in rec["kuka"].error
 
 
@@ -305,8 +305,8 @@ def test_a_clashing_name_fails_naming_both_providers(impostor_dist, monkeypatch)
     plugins = Plugins()
     clashes = plugins.clashes()
     assert [r.name for r in clashes[("robot", "franka")]] == ["franka", "impostor_franka"]
-    assert ("robot", "franka_droid") in clashes  # the aliases clash too
-    for name in ("franka", "franka_droid"):
+    assert ("robot", "franka_panda") in clashes  # the aliases clash too
+    for name in ("franka", "franka_panda"):
         with pytest.raises(PluginConflict) as info:
             plugins.robot(name)
         msg = str(info.value)
@@ -323,7 +323,7 @@ def test_a_pinned_provider_resolves_the_clash(impostor_dist, monkeypatch, pin):
     plugins = Plugins()
     plugins.set_preferences({"robot": {"franka": pin}})
     assert type(plugins.robot("franka")).__name__ == "Impostor"
-    assert type(plugins.robot("franka_droid")).__name__ == "Impostor"  # pinned by its primary name
+    assert type(plugins.robot("franka_panda")).__name__ == "Impostor"  # pinned by its primary name
     assert type(plugins.resolve("robot", "franka", prefer={"robot": {"franka": "franka"}})).__name__ == "Franka"
     plugins.set_preferences({})
     with pytest.raises(PluginConflict):
@@ -350,7 +350,7 @@ def test_molmo_plugins_lists_the_clash(impostor_dist):
     assert res.returncode == 0, res.stderr
     assert "CLASHES" in res.stdout
     line = next(ln for ln in res.stdout.splitlines() if ln.strip().startswith("robot 'franka' (and aliases "))
-    assert "franka_droid" in line and len([ln for ln in res.stdout.splitlines() if "impostor_franka' (" in ln]) == 1
+    assert "franka_panda" in line and len([ln for ln in res.stdout.splitlines() if "impostor_franka' (" in ln]) == 1
     assert "'franka' (molmo-lerobot " in line and "'impostor_franka' (impostor-bots 0.1)" in line
     assert "provides: robot:franka (clash)" in res.stdout
 

@@ -75,6 +75,14 @@ def molmo_policies() -> list[PolicyType]:
 
 
 @hookspec
+def molmo_experts() -> list[PolicyType]:
+    """Scripted experts, each a :class:`~molmo_lerobot.policies.base.PolicyType` whose ``name`` is
+    the task type it serves (``aliases``: further task types). ``policy=scripted`` plays the
+    expert of each episode's task type; task plugins never import their experts.
+    """
+
+
+@hookspec
 def molmo_config_dirs() -> list[str]:
     """Directories holding Hydra config groups (``policy/<name>.yaml`` …) to add to the search path.
 

@@ -36,13 +36,14 @@ KIND_HOOKS = {
     "molmo_camera_systems": "camera",
     "molmo_scene_datasets": "scene",
     "molmo_policies": "policy",
+    "molmo_experts": "expert",
     "molmo_config_dirs": "config",
     "molmo_episode_overrides": "override",
     "molmo_recorders": "recorder",
 }
 #: kinds whose items are looked up by name (``plugins.prefer.<kind>``) → their hook
 PROVIDER_HOOKS = {kind: hook for hook, kind in KIND_HOOKS.items()
-                  if kind in ("task", "robot", "camera", "scene", "policy")}
+                  if kind in ("task", "robot", "camera", "scene", "policy", "expert")}
 
 
 class PluginError(LookupError):
@@ -297,6 +298,10 @@ class Plugins:
 
     def policy(self, name: str) -> Any:
         return self.resolve("policy", name)
+
+    def expert(self, task_type: str) -> Any:
+        """The scripted expert registered for a task type (by the task type's name)."""
+        return self.resolve("expert", task_type)
 
     def names(self, kind: str) -> list[str]:
         return sorted({item.name for providers in self._index(kind).values() for item, _ in providers})

@@ -1,7 +1,7 @@
 """Fair harness timings, measured in one run: ``pytest -m perf -s tests/perf/test_harness_overhead.py``.
 
 Both sides run in fresh processes and do the same work on the same episodes of ``pick_v1``:
-the same scene build (``make_env``), the same ``reset``/``observe``/``step`` calls with the same
+the same scene build (``build_env``), the same ``reset``/``observe``/``step`` calls with the same
 renders (the policy consumes both 224² camera images at every call, so rendering is part of
 both), the same policy calls, the same seeds and horizons. The raw side is a bare loop in one
 process; the harness side is ``molmo-eval`` (plugins, validation, worker processes, supervision,
@@ -85,7 +85,8 @@ RAW = textwrap.dedent('''
     from molmo_lerobot.plugins import get_plugins
     from molmo_lerobot.policies.base import EpisodeContext
     from molmo_lerobot.runner.evaluate import episode_seed
-    from molmo_lerobot.sim.env import Timing, make_env
+    from molmo_lerobot.runner.episode_env import build_env
+    from molmo_lerobot.sim.env import Timing
     from molmo_perf_policies import ImageScripted
 
     args = json.loads(sys.argv[1])
@@ -99,7 +100,7 @@ RAW = textwrap.dedent('''
         spec = bench.episodes[i]
         seed = episode_seed(0, spec.model_dump(mode="json"))
         task_type = plugins.task_type(spec.task_name)
-        env = make_env(spec, timing, plugins)
+        env = build_env(spec, timing, plugins)
         env.reset(seed)
         task = task_type.create(spec, env)
         prompt = spec.language.task_description if spec.language else ""

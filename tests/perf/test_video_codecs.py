@@ -28,7 +28,8 @@ from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.runner.evaluate import episode_seed
 from molmo_lerobot.runner.policy import make_policy
 from molmo_lerobot.runner.rollout import resolve_horizon
-from molmo_lerobot.sim.env import Timing, make_env
+from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.sim.env import Timing
 
 pytestmark = pytest.mark.perf
 SETTINGS = [{"vcodec": "h264"}, {"vcodec": "libsvtav1"}, {"vcodec": "h264", "crf": 23},
@@ -42,7 +43,7 @@ def _render_episode() -> dict[str, np.ndarray]:
     timing = Timing()
     task_type = plugins.task_type(spec.task_name)
     horizon = resolve_horizon(None, spec.task, task_type.default_horizon_sec, timing.policy_dt_ms)
-    env = make_env(spec, timing, plugins)
+    env = build_env(spec, timing, plugins)
     seed = episode_seed(0, spec.model_dump(mode="json"))
     env.reset(seed)
     task = task_type.create(spec, env)

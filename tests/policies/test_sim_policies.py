@@ -14,7 +14,8 @@ from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
 from molmo_lerobot.plugins import get_plugins  # noqa: E402
 from molmo_lerobot.policies.base import EpisodeContext  # noqa: E402
 from molmo_lerobot.runner.rollout import rollout  # noqa: E402
-from molmo_lerobot.sim.env import Timing, make_env  # noqa: E402
+from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
+from molmo_lerobot.sim.env import Timing  # noqa: E402
 
 HORIZON = 100  # the script needs about 60 policy steps; 100 also checks that the hold lasts
 
@@ -29,7 +30,7 @@ def _run(raw, policy_name, horizon=HORIZON, config=None):
     spec = EpisodeSpec.model_validate(raw)
     timing = Timing()
     policy = plugins.policy(policy_name).factory({"name": policy_name, **(config or {})})
-    env = make_env(spec, timing, plugins)
+    env = build_env(spec, timing, plugins)
     try:
         env.reset(spec.seed)
         task = plugins.task_type(spec.task.task_cls).create(spec, env)
@@ -52,7 +53,7 @@ def test_scripted_returns_chunks_without_images(episodes):
     spec = EpisodeSpec.model_validate(episodes[0])
     policy = plugins.policy("scripted").factory({"name": "scripted", "chunk": 5})
     assert policy.needs_images is False
-    env = make_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), plugins)
     try:
         env.reset(0)
         policy.reset(EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=env.move_groups,
@@ -77,3 +78,99 @@ def test_random_is_seeded_and_fails(episodes):
     b, qb = _run(episodes[0], "random")
     assert np.array_equal(qa, qb)  # same episode seed, same rollout
     assert not a.success and not a.success_once
+
+
+class _Scripted:
+    """A test policy: plays fixed chunks, records what it was given."""
+
+    needs_images = False
+    needs_simulator = False
+
+    def __init__(self, chunks):
+        self.chunks, self.ctx = list(chunks), None
+
+    def reset(self, ctx):
+        self.ctx = ctx
+
+    def act(self, obs):
+        return self.chunks.pop(0) if self.chunks else {"gripper": np.zeros(1)}
+
+
+class _SuccessAt:
+    """A task that succeeds exactly at the given (1-based) steps."""
+
+    def __init__(self, steps):
+        self.steps, self.n = set(steps), 0
+
+    def setup(self):
+        pass
+
+    def success(self):
+        self.n += 1
+        return self.n in self.steps
+
+    def reward(self):
+        return None
+
+
+def _loop(episodes, policy, task, horizon=12, **kw):
+    plugins = get_plugins()
+    spec = EpisodeSpec.model_validate(episodes[0])
+    env = build_env(spec, Timing(), plugins)
+    try:
+        env.reset(0)
+        ctx = EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=env.move_groups,
+                             policy_dt_s=0.066, env=None)
+        return rollout(env, task, policy, ctx, horizon, [], None, "test", **kw), env.robot.targets(env.data, "arm"), env
+    finally:
+        env.close()
+
+
+def test_left_out_move_group_holds_its_target(episodes):
+    start = EpisodeSpec.model_validate(episodes[0]).robot.init_qpos["arm"]
+    out, arm, _ = _loop(episodes, _Scripted([{"gripper": np.ones((4, 1))}]), _SuccessAt([]), horizon=8)
+    assert out.steps == 8 and np.allclose(arm, start)
+
+
+def test_done_ends_the_episode_after_its_step(episodes):
+    chunk = {"gripper": np.zeros((4, 1)), "done": [False, True, False, False]}
+    out, _, _ = _loop(episodes, _Scripted([chunk]), _SuccessAt([]))
+    assert out.steps == 2 and out.ended_by == "done" and not out.success
+
+
+def test_end_on_success(episodes):
+    out, _, _ = _loop(episodes, _Scripted([]), _SuccessAt([3]), end_on_success=True)
+    assert out.steps == 3 and out.ended_by == "success" and out.success and out.success_once
+    out, _, _ = _loop(episodes, _Scripted([]), _SuccessAt([3]))
+    assert out.steps == 12 and out.ended_by == "horizon" and not out.success
+
+
+def test_success_once_is_sampled_at_chunk_ends(episodes):
+    """MolmoSpaces records success once per observation, i.e. after each chunk; the per-step figure is an extra."""
+    chunks = [{"gripper": np.zeros((4, 1))} for _ in range(3)]
+    out, _, _ = _loop(episodes, _Scripted(chunks), _SuccessAt([2]))  # mid-chunk only
+    assert not out.success_once and out.success_any_step
+    chunks = [{"gripper": np.zeros((4, 1))} for _ in range(3)]
+    out, _, _ = _loop(episodes, _Scripted(chunks), _SuccessAt([4]))  # a chunk's last step
+    assert out.success_once and out.success_any_step
+
+
+def test_only_privileged_policies_get_the_simulator(tmp_path, episodes):
+    """Through the worker: scripted experts see ctx.env, a policy under evaluation gets None."""
+    import json
+
+    from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob, WorkItem
+
+    seen = {}
+    plugins = get_plugins()
+    for name in ("scripted", "random"):
+        job = WorkerJob(policy={"name": name}, timing={"policy_dt_ms": 66.0, "ctrl_dt_ms": 2.0, "sim_dt_ms": 2.0},
+                        horizon=2, output_dir=str(tmp_path), benchmark_name="t", benchmark_sha256="0" * 64)
+        worker = EpisodeWorker(job, "w0")
+        original = worker.policy.reset
+        worker.policy.reset = lambda ctx, _o=original, _n=name: (seen.__setitem__(_n, ctx.env), _o(ctx))
+        result = worker.run(WorkItem(0, json.loads(json.dumps(episodes[0])), 0))
+        assert result.error is None and result.extra["ended_by"] == "horizon"
+        worker.close()
+    assert seen["scripted"] is not None and seen["random"] is None
+    assert plugins.policy("scripted").factory({}).needs_simulator and not plugins.policy("random").factory({}).needs_simulator

@@ -6,6 +6,15 @@ from molmo_lerobot.runner.rollout import ActionError, resolve_horizon, split_act
 GROUPS = {"arm": 7, "gripper": 1}
 
 
+def test_omitted_group_and_done():
+    """A left-out move group holds (absent from the step); ``done`` marks a step (a bool: the chunk's last)."""
+    steps = split_actions({"arm": np.zeros((3, 7)), "done": True}, GROUPS, "p")
+    assert [set(s) for s in steps] == [{"arm"}, {"arm"}, {"arm", "done"}]
+    steps = split_actions({"gripper": np.ones((2, 1)), "done": [True, False]}, GROUPS, "p")
+    assert [s.get("done", False) for s in steps] == [True, False]
+    assert split_actions({"done": True}, GROUPS, "p") == [{"done": True}]
+
+
 def test_single_action_and_chunk():
     one = split_actions({"arm": np.zeros(7), "gripper": [1.0]}, GROUPS, "p")
     assert len(one) == 1 and one[0]["arm"].shape == (7,)
@@ -17,8 +26,9 @@ def test_single_action_and_chunk():
     ("out", "needle"),
     [
         ({"arm": np.zeros(6), "gripper": [0.0]}, "'arm' with shape (6,), expected (7,) or (H, 7)"),
-        ({"arm": np.zeros(7)}, "missing ['gripper']"),
-        ({"arm": np.zeros(7), "gripper": [0.0], "base": [0.0]}, "unknown ['base']"),
+        ({}, "returned no move group"),
+        ({"arm": np.zeros(7), "gripper": [0.0], "base": [0.0]}, "unknown move groups ['base']"),
+        ({"arm": np.zeros((2, 7)), "done": [True, False, True]}, "'done'"),
         ({"arm": np.full(7, np.nan), "gripper": [0.0]}, "non-finite value in 'arm' (step 0, index 0)"),
         ({"arm": np.zeros((3, 7)), "gripper": np.zeros((2, 1))}, "chunks of different lengths"),
         ([0.0] * 8, "returned list, expected a dict"),

@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from molmo_lerobot.benchmark.schema import EpisodeSpec
-from molmo_lerobot.sim.env import Timing, make_env
+from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.sim.env import Timing
 
 
 def _rollout_state(spec, plugins, steps=5):
-    env = make_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), plugins)
     try:
         env.reset(spec.seed)
         q = env.robot.targets(env.data, "arm")
@@ -29,7 +30,7 @@ def test_scene_and_reset_are_deterministic(pick_spec, plugins):
 
 
 def test_reset_places_robot_and_objects(pick_spec, plugins):
-    env = make_env(pick_spec, Timing(), plugins)
+    env = build_env(pick_spec, Timing(), plugins)
     try:
         env.reset(1)
         assert np.allclose(env.robot.qpos(env.data, "arm"), pick_spec.robot.init_qpos["arm"])
@@ -54,7 +55,7 @@ def test_houses_differ_and_rebuild_identically(plugins):
 def test_cameras_follow_specs(pick_episodes, plugins):
     raw = dict(pick_episodes[0], img_resolution=[64, 48])
     spec = EpisodeSpec.model_validate(raw)
-    env = make_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), plugins)
     try:
         env.reset(0)
         assert env.camera_names == ["exterior", "wrist"]
@@ -78,7 +79,7 @@ def test_robot_camera_with_unknown_body_is_rejected(pick_episodes, plugins):
     raw = dict(pick_episodes[0])
     raw["cameras"] = [dict(raw["cameras"][1], reference_body_names=["no_such_body"])]
     with pytest.raises(ValueError, match=r"cameras\[0\] \(wrist\): none of the reference bodies"):
-        make_env(EpisodeSpec.model_validate(raw), Timing(), plugins)
+        build_env(EpisodeSpec.model_validate(raw), Timing(), plugins)
 
 
 @pytest.mark.parametrize(("action", "message"), [
@@ -89,7 +90,7 @@ def test_robot_camera_with_unknown_body_is_rejected(pick_episodes, plugins):
     ({"arm": np.zeros(7), "gripper": np.zeros(1), "base": np.zeros(3)}, "expected"),
 ])
 def test_bad_actions_are_rejected(pick_spec, plugins, action, message):
-    env = make_env(pick_spec, Timing(), plugins)
+    env = build_env(pick_spec, Timing(), plugins)
     try:
         env.reset(0)
         with pytest.raises(ValueError, match=message):
@@ -110,7 +111,7 @@ def test_bad_episode_fields_are_named(pick_episodes, plugins, edit, message):
 
     raw = copy.deepcopy(pick_episodes[0])
     edit(raw)
-    env = make_env(EpisodeSpec.model_validate(raw), Timing(), plugins)
+    env = build_env(EpisodeSpec.model_validate(raw), Timing(), plugins)
     try:
         with pytest.raises(ValueError, match=message):
             env.reset(0)

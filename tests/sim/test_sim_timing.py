@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from molmo_lerobot.sim.env import Timing, make_env
+from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.sim.env import Timing
 
 
 def test_defaults_match_molmospaces():
@@ -28,7 +29,7 @@ def test_bad_timing_is_rejected(policy, ctrl, sim, field):
 
 def test_timestep_and_substeps_from_timing(pick_spec, plugins):
     timing = Timing(policy_dt_ms=60.0, ctrl_dt_ms=4.0, sim_dt_ms=1.0)
-    env = make_env(pick_spec, timing, plugins)
+    env = build_env(pick_spec, timing, plugins)
     try:
         assert env.model.opt.timestep == pytest.approx(0.001)  # not the robot XML's 0.002
         env.reset(0)
@@ -41,7 +42,7 @@ def test_timestep_and_substeps_from_timing(pick_spec, plugins):
 
 
 def test_controller_ticks_interpolate_targets(pick_spec, plugins):
-    env = make_env(pick_spec, Timing(), plugins)
+    env = build_env(pick_spec, Timing(), plugins)
     try:
         env.reset(0)
         q0 = env.robot.targets(env.data, "arm")

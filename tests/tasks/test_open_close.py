@@ -12,7 +12,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from molmo_lerobot.benchmark.generate_articulated import generate_benchmark  # noqa: E402
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
 from molmo_lerobot.plugins import get_plugins  # noqa: E402
-from molmo_lerobot.sim.env import Timing, make_env  # noqa: E402
+from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
+from molmo_lerobot.sim.env import Timing  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -33,7 +34,7 @@ def close_episodes():
 def _setup(plugins, raw: dict, **task_update):
     raw = {**raw, "task": {**raw["task"], **task_update}}
     spec = EpisodeSpec.model_validate(raw)
-    env = make_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), plugins)
     env.reset(0)
     task = plugins.task_type(spec.task_name).create(spec, env)
     task.setup()
@@ -54,7 +55,7 @@ def test_open_and_close_resolve_from_molmospaces_opening_task(plugins, open_epis
     assert o.task.task_cls == c.task.task_cls == "molmo_spaces.tasks.opening_tasks.OpeningTask"
     assert plugins.task_type(o.task_name).name == "open" and plugins.task_type(c.task_name).name == "close"
     assert plugins.task_type("close").thresholds(c) == {"task_success_threshold": 0.2}
-    assert plugins.task_type("close").expert.__name__ == "ScriptedArticulated"
+    assert plugins.expert("close").factory.__name__ == "ScriptedArticulated"
 
 
 @pytest.mark.parametrize("fraction, expected", [(0.19, False), (0.21, True)])
@@ -94,18 +95,21 @@ def test_custom_threshold_is_used_and_reported(plugins, open_episodes):
     assert plugins.task_type("open").thresholds(spec) == {"task_success_threshold": 0.5}
 
 
-def test_start_state_per_joint_list(plugins, open_episodes):
+def test_start_state_list_gives_the_named_joint_its_first_value(plugins, open_episodes):
+    """MolmoSpaces reads ``joint_start_position[0]`` and sets ``joint_name`` only."""
     raw = next(e for e in open_episodes if e["task"]["pickup_obj_name"] == "kitchen_hinge_cabinet")
-    _, env, task = _setup(plugins, raw, joint_start_position=[-0.5, 0.25])
-    m = env.model
-    qs = [float(env.data.qpos[m.jnt_qposadr[j]]) for j in task.joints]
-    assert qs == pytest.approx([-0.5, 0.25])
+    spec, env, task = _setup(plugins, raw, joint_start_position=[-0.3, 9.0])  # the second value is ignored
+    m, q = env.model, -0.3
+    qs = {m.joint(j).name: float(env.data.qpos[m.jnt_qposadr[j]]) for j in task.joints}
+    assert qs.pop(m.joint(task.joint).name) == pytest.approx(q)
+    assert all(v == 0.0 for v in qs.values())
 
 
 @pytest.mark.parametrize("update, message", [
     ({"joint_name": "kitchen_microwave/nope"}, "task.joint_name: no joint"),
     ({"joint_start_position": 5.0}, "task.joint_start_position: 5.0 outside the range"),
-    ({"joint_start_position": [0.0, 0.0, 0.0]}, "task.joint_start_position: 3 values"),
+    ({"joint_start_position": []}, "task.joint_start_position: empty list"),
+    ({"joint_index": 7}, "task.joint_index: 7 out of range"),
     ({"pickup_obj_name": "table"}, "has no hinge or slide joint"),
 ])
 def test_bad_specs_name_the_field(plugins, open_episodes, update, message):

@@ -14,14 +14,15 @@ from molmo_lerobot.plugins import get_plugins  # noqa: E402
 from molmo_lerobot.policies.base import EpisodeContext  # noqa: E402
 from molmo_lerobot.policies.scripted import ScriptedExpert  # noqa: E402
 from molmo_lerobot.runner.rollout import resolve_horizon, rollout  # noqa: E402
-from molmo_lerobot.sim.env import Timing, make_env  # noqa: E402
+from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
+from molmo_lerobot.sim.env import Timing  # noqa: E402
 
 
 def _run(raw: dict, policy) -> tuple[bool, float]:
     plugins, timing = get_plugins(), Timing()
     spec = EpisodeSpec.model_validate(raw)
     task_type = plugins.task_type(spec.task_name)
-    env = make_env(spec, timing, plugins)
+    env = build_env(spec, timing, plugins)
     try:
         env.reset(spec.seed)
         task = task_type.create(spec, env)

@@ -9,6 +9,7 @@ import os
 import mujoco
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -17,8 +18,9 @@ from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
 from molmo_lerobot.plugins import get_plugins  # noqa: E402
 from molmo_lerobot.robots.franka import FINGER_TRAVEL  # noqa: E402
-from molmo_lerobot.sim.env import Timing, make_env  # noqa: E402
-from molmo_lerobot.tasks.pick_and_place import polygon_gap  # noqa: E402
+from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
+from molmo_lerobot.sim.env import Timing  # noqa: E402
+from molmo_lerobot.sim import geometry  # noqa: E402
 
 
 def _episode(task: str, seed: int = 3) -> dict:
@@ -28,7 +30,7 @@ def _episode(task: str, seed: int = 3) -> dict:
 def _make(raw: dict):
     plugins = get_plugins()
     spec = EpisodeSpec.model_validate(raw)
-    env = make_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), plugins)
     env.reset(0)
     task = plugins.task_type(spec.task_name).create(spec, env)
     task.setup()
@@ -98,14 +100,17 @@ def test_resting_in_the_receptacle_succeeds(pnp):
 
 @pytest.mark.parametrize("lift,ok", [(0.45, True), (0.55, False)])
 def test_support_fraction_threshold(pnp, lift, ok):
-    """An upward push of ``lift`` x weight on the object leaves 1 - lift for the receptacle to carry."""
+    """An upward push of ``lift`` x weight on the object leaves 1 - lift for the receptacle to carry:
+    the force rule fails past half, and MolmoSpaces' fallback (contact below the object's centre
+    with a near-vertical normal) still calls it supported."""
     env, task = pnp
     _put_in_receptacle(env, task)
     body = env.body_id(task.object_name)
     env.data.xfrc_applied[body, 2] = lift * env.model.body_subtreemass[body] * 9.81
     _settle(env, 4)
     assert task.support_fraction() == pytest.approx(1.0 - lift, abs=0.02)
-    assert task.success() is ok
+    assert task.supported_by_force() is ok
+    assert task.supported_by_fallback() and task.success()
 
 
 def test_robot_still_touching_fails(pnp):
@@ -125,53 +130,48 @@ def test_robot_still_touching_fails(pnp):
     env._place(task.receptacle_name, np.array([pos[0], pos[1], bottom + 0.001 + rec.half_extents[2]
                                                - 2 * rec.base_half_height, 1, 0, 0, 0]))
     mujoco.mj_forward(env.model, env.data)
-    task.setup()
+    task.start_pose = task._pose(env.body_id(task.receptacle_name))  # the receptacle counts as unmoved
     assert task.robot_touching() and task.support_fraction() >= 0.5 and task.receptacle_in_place()
     assert not task.success()
+
+
+def _turned(pose: np.ndarray, axis: np.ndarray, deg: float) -> np.ndarray:
+    out = pose.copy()
+    out[:3, :3] = Rotation.from_rotvec(np.radians(deg) * axis).as_matrix() @ pose[:3, :3]
+    return out
 
 
 def test_receptacle_displacement_limits(pnp):
     env, task = pnp
     _put_in_receptacle(env, task)
-    now = env.data.xpos[env.body_id(task.receptacle_name)].copy()
-    task.start_pos = now - np.array([0.14, 0.0, 0.0])
-    assert task.success()
-    task.start_pos = now - np.array([0.0, 0.16, 0.0])
-    assert not task.success()
-    task.start_pos = now
-    up = env.data.xmat[env.body_id(task.receptacle_name)].reshape(3, 3)[:, 2]
+    now = task._pose(env.body_id(task.receptacle_name))
+    assert task.max_pos == 0.15 and task.max_rot == pytest.approx(math.radians(60), abs=1e-4)  # pick_and_place_v1's
+    for shift, ok in (([0.14, 0, 0], True), ([0, 0.16, 0], False)):
+        task.start_pose = now.copy()
+        task.start_pose[:3, 3] -= shift
+        assert task.success() is ok
     for deg, ok in ((59.0, True), (61.0, False)):
-        a = math.radians(deg)
-        axis = np.cross(up, [1.0, 0.0, 0.0])
-        axis /= np.linalg.norm(axis)
-        task.start_up = up * math.cos(a) + np.cross(axis, up) * math.sin(a)
+        task.start_pose = _turned(now, np.array([1.0, 0.0, 0.0]), deg)
         assert task.success() is ok, deg
 
 
 def test_yaw_is_ignored(pnp):
     env, task = pnp
     _put_in_receptacle(env, task)
-    task.setup()  # start = the settled state, then turn receptacle and object together
-    rec = env.body_id(task.receptacle_name)
-    centre = env.data.xpos[rec].copy()
-    yaw = np.array([math.cos(0.5), 0, 0, math.sin(0.5)])  # a 1 rad turn about the vertical
-    for name in (task.receptacle_name, task.object_name):
-        pose = env.body_pose(name)
-        rel = pose[:3] - centre
-        rot = np.array([[math.cos(1), -math.sin(1), 0], [math.sin(1), math.cos(1), 0], [0, 0, 1]])
-        quat = np.zeros(4)
-        mujoco.mju_mulQuat(quat, yaw, pose[3:])
-        env._place(name, np.concatenate([centre + rot @ rel, quat]))
-    mujoco.mj_forward(env.model, env.data)
-    moved, tilted = task.receptacle_displacement()
-    assert moved < 1e-6 and tilted < 1e-6 and task.success()
+    task.setup()
+    now = task._pose(env.body_id(task.receptacle_name))
+    task.start_pose = _turned(now, np.array([0.0, 0.0, 1.0]), 170.0)  # turned 170° about the vertical
+    moved, tilted, turned = task.receptacle_displacement()
+    assert moved < 1e-9 and tilted < 1e-6 and turned == pytest.approx(math.radians(170)) and task.success()
 
 
 def test_polygon_gap():
-    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
-    assert polygon_gap(square, square + [0.5, 0.5]) == 0.0
-    assert polygon_gap(square, square + [1.25, 0.0]) == pytest.approx(0.25)
-    assert polygon_gap(square, square + [2.0, 2.0]) == pytest.approx(math.sqrt(2))
+    square = geometry.polygon(np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float))
+    shifted = geometry.polygon(np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float) + [1.25, 0.0])
+    assert geometry.gap(square, geometry.polygon(np.array([[0.5, 0.5], [1.5, 0.5], [1.5, 1.5]]))) == 0.0
+    assert geometry.gap(square, shifted) == pytest.approx(0.25)
+    a = (np.zeros(3), np.ones(3))
+    assert geometry.aabb_xy_gap(a, (np.array([2.0, 2.0, 0.0]), np.ones(3))) == pytest.approx(math.sqrt(2))
 
 
 def _beside(env, task, gap: float) -> float:
@@ -245,11 +245,11 @@ def test_color_task_paints_and_needs_the_named_receptacle():
     try:
         m = env.model
         for name, rgba in colors.items():
-            geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] == env.body_id(name)]
-            assert geoms and all(np.allclose(m.geom_rgba[g], rgba) for g in geoms)
+            geoms = geometry.body_geoms(m, env.subtree_bodies(name))  # the visible ones
+            assert geoms and all(np.allclose(m.geom_rgba[g], rgba) and m.geom_matid[g] == -1 for g in geoms)
         spec = EpisodeSpec.model_validate(raw)
-        fresh = make_env(spec, Timing(), get_plugins())  # same cached model: the paint must not leak
-        g0 = next(g for g in range(m.ngeom) if m.geom_bodyid[g] == env.body_id(task.receptacle_name))
+        fresh = build_env(spec, Timing(), get_plugins())  # same cached model: the paint must not leak
+        g0 = geometry.body_geoms(m, env.subtree_bodies(task.receptacle_name))[0]
         assert not np.allclose(fresh.model.geom_rgba[g0], colors[task.receptacle_name])
         fresh.close()
         other = raw["task"]["other_receptacle_names"][0]
@@ -265,7 +265,7 @@ def test_bad_receptacle_is_named():
     raw = _episode("pick_and_place")
     raw["task"]["place_receptacle_name"] = "unicorn"
     spec = EpisodeSpec.model_validate(raw)
-    env = make_env(spec, Timing(), get_plugins())
+    env = build_env(spec, Timing(), get_plugins())
     try:
         env.reset(0)
         with pytest.raises(ValueError, match="task.place_receptacle_name: no body 'unicorn'"):

@@ -14,7 +14,8 @@ from molmo_lerobot.plugins import get_plugins  # noqa: E402
 from molmo_lerobot.policies.base import EpisodeContext  # noqa: E402
 from molmo_lerobot.policies.scripted_place import ScriptedPlace  # noqa: E402
 from molmo_lerobot.runner.rollout import rollout  # noqa: E402
-from molmo_lerobot.sim.env import Timing, make_env  # noqa: E402
+from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
+from molmo_lerobot.sim.env import Timing  # noqa: E402
 
 HORIZON = 220  # the script takes about 150 policy steps; the rest checks that the result lasts
 
@@ -24,7 +25,7 @@ def _run(raw: dict, policy_name: str, horizon: int = HORIZON):
     spec = EpisodeSpec.model_validate(raw)
     timing = Timing()
     policy = plugins.policy(policy_name).factory({"name": policy_name})
-    env = make_env(spec, timing, plugins)
+    env = build_env(spec, timing, plugins)
     try:
         env.reset(spec.seed)
         task = plugins.task_type(spec.task_name).create(spec, env)
@@ -38,7 +39,7 @@ def _run(raw: dict, policy_name: str, horizon: int = HORIZON):
 @pytest.mark.parametrize("task", ["pick_and_place", "pick_and_place_next_to", "pick_and_place_color"])
 def test_expert_solves_an_episode(task):
     raw = generate_benchmark(task, 1, 1, 5, "test")[0][0]
-    assert get_plugins().task_type(task).expert is ScriptedPlace
+    assert get_plugins().expert(get_plugins().task_type(task).name).factory is ScriptedPlace
     outcome, policy = _run(raw, "scripted")
     assert isinstance(policy.current, ScriptedPlace)
     assert outcome.success, raw["language"]["task_description"]

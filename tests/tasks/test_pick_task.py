@@ -16,7 +16,8 @@ from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
 from molmo_lerobot.plugins import get_plugins  # noqa: E402
 from molmo_lerobot.robots.franka import FINGER_TRAVEL  # noqa: E402
-from molmo_lerobot.sim.env import Timing, make_env  # noqa: E402
+from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
+from molmo_lerobot.sim.env import Timing  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +29,7 @@ def raw_episode():
 def setup(raw_episode):
     plugins = get_plugins()
     spec = EpisodeSpec.model_validate(raw_episode)
-    env = make_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), plugins)
     env.reset(0)
     task = plugins.task_type(spec.task.task_cls).create(spec, env)
     task.setup()
@@ -116,7 +117,7 @@ def test_unknown_pick_object_is_named(raw_episode):
     raw = copy.deepcopy(raw_episode)
     raw["task"]["pickup_obj_name"] = "unicorn"
     spec = EpisodeSpec.model_validate(raw)
-    env = make_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), plugins)
     try:
         env.reset(0)
         with pytest.raises(ValueError, match="task.pickup_obj_name: no body 'unicorn'"):

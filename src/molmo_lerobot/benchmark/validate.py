@@ -72,9 +72,11 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, *, index: int | Non
     if reason:
         warning("scene_dataset", reason)
 
-    if not episode.cameras:
-        system = episode.source.camera_system_class if episode.source else None
-        if system is None:
+    if not episode.cameras:  # a camera system places them: camera.system=, source.camera_system_class, the robot's
+        from molmo_lerobot.cameras.base import STANDARD, choose_camera_system
+
+        system = choose_camera_system(episode, None, getattr(robot, "default_camera_system", None))
+        if system == STANDARD:
             warning("cameras", "no cameras: the run's camera system (camera.system=...) places them")
         else:
             _lookup(plugins, "camera_system", system, "source.camera_system_class", warning, "camera system",

@@ -1,18 +1,24 @@
-"""Camera systems: how an episode's camera specs become MuJoCo cameras.
+"""Camera systems: how an episode's cameras become MuJoCo cameras.
 
 A :class:`CameraSystem` is what a camera plugin returns from ``molmo_camera_systems()``.
 It edits the world spec before compilation; the environment then renders each named
-camera at the episode's ``img_resolution``.
+camera at the episode's ``img_resolution``. Which system an episode uses is
+:func:`choose_camera_system`'s answer.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import mujoco
 import numpy as np
+
+
+STANDARD = "standard"
 
 
 class CameraSystem(ABC):
@@ -23,12 +29,36 @@ class CameraSystem(ABC):
 
     @abstractmethod
     def add_cameras(self, world: mujoco.MjSpec, cameras: Sequence[Any],
-                    find_body: Callable[[str], mujoco.MjsBody | None]) -> list[str]:
-        """Add one MuJoCo camera per spec and return their names in order.
+                    find_body: Callable[[str], mujoco.MjsBody | None], episode: Any = None) -> list[str]:
+        """Add the system's MuJoCo cameras and return their names in order.
 
-        ``find_body`` resolves a body name from a camera spec (robot bodies may carry a
-        prefix in the assembled scene) and returns ``None`` when no such body exists.
+        ``cameras`` are the episode's camera specs (a system may ignore them), ``episode`` the
+        whole :class:`~molmo_lerobot.benchmark.schema.EpisodeSpec`. ``find_body`` resolves a
+        body name (robot bodies may carry a prefix in the assembled scene) and returns
+        ``None`` when no such body exists.
         """
+
+    def episode_key(self, episode: Any) -> str:
+        """What, besides the episode's scene and camera specs, makes this system's cameras differ
+        between episodes ("" for deterministic systems; randomized ones return their seed)."""
+        return ""
+
+
+def choose_camera_system(episode: Any, configured: str | None, robot_default: str | None = None) -> str:
+    """The camera system an episode runs with: ``standard`` for the episode's own ``cameras``,
+    else the run's ``camera.system``, else ``source.camera_system_class``, else the robot's
+    default (``franka_droid``: ``FrankaDroidCameraSystem``), else ``standard`` (no cameras)."""
+    if episode.cameras:
+        return STANDARD
+    source = getattr(episode, "source", None)
+    return configured or getattr(source, "camera_system_class", None) or robot_default or STANDARD
+
+
+def episode_rng(episode: Any) -> np.random.Generator:
+    """A generator seeded by the episode's content (its JSON): the same episode, the same draws."""
+    data = episode.model_dump(mode="json") if hasattr(episode, "model_dump") else episode
+    digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).digest()
+    return np.random.default_rng(list(digest[:16]))
 
 
 def look_rotation(forward: Sequence[float], up: Sequence[float]) -> np.ndarray:

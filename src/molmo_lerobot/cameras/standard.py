@@ -18,7 +18,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.cameras.base import CameraSystem, look_rotation, mat_to_quat
+from molmo_lerobot.cameras.base import STANDARD, CameraSystem, look_rotation, mat_to_quat
 
 
 def _lookat_quat(offset: Sequence[float], lookat: Sequence[float]) -> list[float]:
@@ -32,10 +32,10 @@ def _lookat_quat(offset: Sequence[float], lookat: Sequence[float]) -> list[float
 class StandardCameras(CameraSystem):
     """Cameras exactly as the episode's camera specs describe them."""
 
-    name = "standard"
+    name = STANDARD
 
     def add_cameras(self, world: mujoco.MjSpec, cameras: Sequence[Any],
-                    find_body: Callable[[str], mujoco.MjsBody | None]) -> list[str]:
+                    find_body: Callable[[str], mujoco.MjsBody | None], episode: Any = None) -> list[str]:
         names: list[str] = []
         for i, cam in enumerate(cameras):
             if cam.name in names:

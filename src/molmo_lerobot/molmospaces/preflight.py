@@ -45,8 +45,10 @@ def _missing(spec: Any, plugins: Any, camera_system: str | None) -> tuple[str, s
             except FileNotFoundError as exc:
                 return field, str(exc).removeprefix(f"{field}: ")
     if not spec.cameras:
-        system = camera_system or (spec.source.camera_system_class if spec.source else None)
-        if system is None:
+        from molmo_lerobot.cameras.base import STANDARD, choose_camera_system
+
+        system = choose_camera_system(spec, camera_system, getattr(found.get("robot"), "default_camera_system", None))
+        if system == STANDARD:
             return "cameras", "cameras: [] and no camera system: set camera.system= or source.camera_system_class"
         try:
             plugins.camera_system(system)

@@ -5,16 +5,28 @@ Observation (a plain dict, so it crosses process and network boundaries unchange
     {
       "images": {camera_name: uint8 array (H, W, 3)},      # only if the policy wants images
       "depth":  {camera_name: float32 array (H, W)},       # cameras with record_depth
-      "qpos":   {move_group: float array},                 # e.g. {"arm": (7,), "gripper": (1,)}
-      "qvel":   {move_group: float array},
+      "qpos":   {move_group: float array},                 # e.g. {"arm": (7,) rad, "gripper": (1,)}
+      "qvel":   {move_group: float array},                 # gripper: 0 open … 1 closed (and per second)
       "tcp_pose": float array (7,),                        # x, y, z, qw, qx, qy, qz in world
       "prompt": str,                                       # the episode's language instruction
       "step": int,                                         # policy step index in the episode
     }
 
-Action: a dict keyed by move group, ``{"arm": (7,) joint positions, "gripper": (1,)}`` with
-the gripper command normalized to [0, 1] (0 open, 1 closed). A *chunk* is the same dict
-with a leading time axis, ``{"arm": (H, 7), "gripper": (H, 1)}``; chunks run open loop.
+Action: a dict keyed by move group, ``{"arm": (7,) joint positions, "gripper": (1,)}``. A
+*chunk* is the same dict with a leading time axis, ``{"arm": (H, 7), "gripper": (H, 1)}``;
+chunks run open loop. Conventions (DROID's, LeRobot's and MolmoSpaces'):
+
+* **gripper**: one value normalized to [0, 1], **0 = open, 1 = closed**, in the action and in
+  the observed ``qpos["gripper"]`` (so ``observation.state``'s last entry) alike. Each robot maps
+  it linearly onto its gripper's full travel: the Panda hand's finger positions (0.04 … 0 m),
+  the Robotiq 2F-85's actuator (0 … 255, driver joints 0 … 0.8 rad).
+* **a left-out move group holds its position** (its current target), as in MolmoSpaces; a key
+  that is neither a move group nor ``done`` is an error.
+* **``done``** (optional): ``True`` ends the episode after that step (one bool per chunk step, or
+  one bool for the chunk's last step). With ``end_on_success: true`` in the run config the
+  episode also ends at its first successful step. Both are recorded per episode
+  (``episodes.jsonl`` ``extra.ended_by``: ``horizon`` / ``done`` / ``success``).
+
 The rollout loop validates every action (keys, shapes, finite values) and turns a bad one
 into a per-episode error that names the policy, the move group and what was wrong.
 """
@@ -40,8 +52,8 @@ Action = dict[str, np.ndarray]
 class EpisodeContext:
     """What a policy learns at reset.
 
-    ``env`` gives privileged simulator access; only scripted experts may use it, a policy
-    under evaluation must act on observations alone.
+    ``env`` gives privileged simulator access. It is set only for policies that declare
+    :attr:`Policy.needs_simulator` (scripted experts); a policy under evaluation gets ``None``.
     """
 
     spec: EpisodeSpec
@@ -61,7 +73,8 @@ class Policy(ABC):
     #: environment skip rendering unless a recorder asks for frames.
     needs_images: bool = True
     #: Whether the policy reads the simulator (``ctx.env``): privileged scripted experts.
-    #: ``molmo-serve`` refuses such a policy (a server has no simulator).
+    #: The runner hands the environment to no other policy; ``molmo-serve`` refuses such a
+    #: policy (a server has no simulator).
     needs_simulator: bool = False
     #: Whether :meth:`act_batch` may serve this instance (``molmo-serve max_batch=N``).
     batched: bool = False
@@ -108,3 +121,4 @@ class PolicyType:
     name: str
     factory: Callable[[dict[str, Any]], Policy]
     description: str = ""
+    aliases: tuple[str, ...] = ()

@@ -51,18 +51,26 @@ def object_grasps(env: Any, name: str) -> np.ndarray:
     The object's asset UID comes from the scene metadata; its grasps from the grasp
     libraries (user libraries first, then the built-in set's generated grasps).
     """
-    uid = name
+    uid = env.scene_metadata.get("objects", {}).get(name, {}).get("asset_id", name)
     try:
-        from molmo_lerobot.plugins import get_plugins
-
-        objects = get_plugins().scene_dataset(env.spec.scene_dataset).episode_metadata(env.spec)["objects"]
-        uid = objects.get(name, {}).get("asset_id", name)
-    except LookupError:
-        pass
-    try:
-        return get_grasps(uid, robot="franka")
+        return robot_grasps(uid, env.spec.robot.robot_name)
     except LookupError as exc:
         raise ValueError(f"scripted policy: no grasps for object {name!r} (asset {uid!r}): {exc}") from None
+
+
+#: the robot whose grasps stand in for any other (MolmoSpaces' unified gripper TCP convention:
+#: a grasp pose is the TCP pose, +z approach, fingers along ±y, so it transfers between grippers)
+FALLBACK_GRASP_ROBOT = "franka"
+
+
+def robot_grasps(uid: str, robot: str, joint: str | None = None) -> np.ndarray:
+    """Grasps of ``uid`` for ``robot``, else those made for :data:`FALLBACK_GRASP_ROBOT`."""
+    try:
+        return get_grasps(uid, robot=robot, joint=joint)
+    except LookupError:
+        if robot == FALLBACK_GRASP_ROBOT:
+            raise
+        return get_grasps(uid, robot=FALLBACK_GRASP_ROBOT, joint=joint)
 
 
 @cache
@@ -271,10 +279,10 @@ class ScriptedPick(PhasedExpert):
             self._move(self.q_cmd, 1.0, self.chunk * self.dt)
 
 class ScriptedExpert(Policy):
-    """``policy=scripted``: each episode is played by the expert its task type names.
+    """``policy=scripted``: each episode is played by the expert registered for its task type.
 
-    A task plugin brings its own expert (``TaskType.expert``, a Policy class taking the
-    policy config); this policy only dispatches, keeping one expert instance per task type.
+    Experts register through the ``molmo_experts`` hook (a PolicyType named after the task
+    type it serves); this policy only dispatches, keeping one expert instance per task type.
     """
 
     needs_images = False
@@ -288,12 +296,14 @@ class ScriptedExpert(Policy):
     def reset(self, ctx: EpisodeContext) -> None:
         from molmo_lerobot.plugins import get_plugins
 
-        task_type = get_plugins().task_type(ctx.spec.task_name)
+        plugins = get_plugins()
+        task_type = plugins.task_type(ctx.spec.task_name)
         if task_type.name not in self.experts:
-            expert_cls = getattr(task_type, "expert", None)
-            if expert_cls is None:
-                raise ValueError(f"scripted policy: task type {task_type.name!r} has no scripted expert")
-            self.experts[task_type.name] = expert_cls(self.config)
+            try:
+                expert = plugins.expert(task_type.name)
+            except LookupError:
+                raise ValueError(f"scripted policy: no scripted expert serves task type {task_type.name!r}") from None
+            self.experts[task_type.name] = expert.factory(self.config)
         self.current = self.experts[task_type.name]
         self.current.reset(ctx)
 
@@ -305,6 +315,18 @@ class ScriptedExpert(Policy):
     def close(self) -> None:
         for expert in self.experts.values():
             expert.close()
+
+
+@hookimpl
+def molmo_experts() -> list[PolicyType]:
+    from molmo_lerobot.policies.scripted_articulated import ScriptedArticulated
+    from molmo_lerobot.policies.scripted_place import ScriptedPlace
+
+    return [PolicyType(name="pick", factory=ScriptedPick, description="grasp library + IK, lift"),
+            PolicyType(name="pick_and_place", aliases=("pick_and_place_next_to", "pick_and_place_color"),
+                       factory=ScriptedPlace, description="pick, carry, place, release"),
+            PolicyType(name="open", aliases=("close",), factory=ScriptedArticulated,
+                       description="grasp the handle, move it along the joint")]
 
 
 @hookimpl

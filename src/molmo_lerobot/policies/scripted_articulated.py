@@ -18,9 +18,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from molmo_lerobot.assets.grasps import get_grasps
 from molmo_lerobot.policies.base import EpisodeContext
-from molmo_lerobot.policies.scripted import PhasedExpert
+from molmo_lerobot.policies.scripted import PhasedExpert, robot_grasps
 
 PREGRASP_DISTANCE = 0.10
 #: opening fraction the expert drives to when opening (the success threshold is 0.2 by default)
@@ -66,13 +65,7 @@ class ScriptedArticulated(PhasedExpert):
 
     # Geometry -----------------------------------------------------------------------------------
     def _uid(self) -> str:
-        from molmo_lerobot.plugins import get_plugins
-
-        try:
-            meta = get_plugins().scene_dataset(self.env.spec.scene_dataset).metadata(self.env.spec.house_index)
-            return meta["objects"].get(self.object_name, {}).get("asset_id", self.object_name)
-        except LookupError:
-            return self.object_name
+        return self.env.scene_metadata.get("objects", {}).get(self.object_name, {}).get("asset_id", self.object_name)
 
     def _body_T(self, q: float | None = None) -> np.ndarray:
         """World pose of the joint's moving body, now or with the joint at ``q``."""
@@ -90,7 +83,7 @@ class ScriptedArticulated(PhasedExpert):
         """(grasp pose in the moving body's frame, pre-grasp arm q) for the first reachable candidate."""
         uid = self._uid()
         try:
-            local = get_grasps(uid, robot="franka", joint=self.local_joint)
+            local = robot_grasps(uid, self.env.spec.robot.robot_name, joint=self.local_joint)
         except LookupError as exc:
             raise ValueError(f"scripted policy: no handle grasps for {uid!r} joint {self.local_joint!r}: "
                              f"{exc}") from None

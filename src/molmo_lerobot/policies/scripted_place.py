@@ -24,7 +24,7 @@ import numpy as np
 from molmo_lerobot.benchmark.schema import PickAndPlaceNextToTaskSpec
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.scripted import ScriptedPick
-from molmo_lerobot.tasks.pick_and_place import footprint, polygon_gap
+from molmo_lerobot.sim import geometry
 
 DROP_CLEARANCE = 0.02
 SET_DOWN_CLEARANCE = 0.006
@@ -89,6 +89,9 @@ class ScriptedPlace(ScriptedPick):
         return [env.subtree_bodies(m.body(b).name) for b in range(1, m.nbody)
                 if b not in skip and m.body_jntnum[b] > 0 and m.body_parentid[b] == 0]
 
+    def _footprint(self, bodies: frozenset[int]) -> np.ndarray:
+        return geometry.hull_points(geometry.footprint(self.env.model, self.env.data, bodies))
+
     def _goal_xy(self, turn: float) -> np.ndarray:
         """Where the object's centre (XY) goes, when the hand turns by ``turn`` about the vertical."""
         env = self.env
@@ -98,9 +101,9 @@ class ScriptedPlace(ScriptedPick):
             return centre
         obj_xy = env.data.xpos[env.body_id(self.target)][:2].copy()
         c, s = np.cos(turn), np.sin(turn)
-        obj_shape = (footprint(env, env.subtree_bodies(self.target)) - obj_xy) @ np.array([[c, s], [-s, c]])
-        rec_shape = footprint(env, rec)
-        others = [footprint(env, o) for o in self._others() if o != rec]
+        obj_shape = (self._footprint(env.subtree_bodies(self.target)) - obj_xy) @ np.array([[c, s], [-s, c]])
+        rec_shape = geometry.polygon(self._footprint(rec))
+        others = [geometry.polygon(self._footprint(o)) for o in self._others() if o != rec]
         fingers = np.array([[c, -s], [s, c]]) @ self._tcp()[:2, 1]
         fingers = fingers / max(np.linalg.norm(fingers), 1e-9)
         base = np.asarray(env.spec.task.robot_base_pose[:2])
@@ -109,13 +112,14 @@ class ScriptedPlace(ScriptedPick):
             u = np.array([np.cos(a), np.sin(a)])
             dist = 0.15
             for _ in range(4):  # move along u until the true footprint gap is NEXT_TO_GAP
-                gap = polygon_gap(obj_shape + centre + dist * u, rec_shape)
+                gap = geometry.gap(geometry.polygon(obj_shape + centre + dist * u), rec_shape)
                 dist += NEXT_TO_GAP - gap
             spot = centre + dist * u
             rel = spot - base
             if not (REACH_X[0] <= rel[0] <= REACH_X[1] and REACH_Y[0] <= rel[1] <= REACH_Y[1]):
                 continue
-            clear = min((polygon_gap(obj_shape + spot, q) for q in others), default=1.0)
+            moved = geometry.polygon(obj_shape + spot)
+            clear = min((geometry.gap(moved, q) for q in others), default=1.0)
             if clear < NEIGHBOUR_CLEARANCE:
                 continue
             cost = abs(u @ fingers) - 2.0 * min(clear, 0.08) + 0.5 * np.linalg.norm(spot - obj_xy)

@@ -64,6 +64,8 @@ class RobotType(ABC):
     joint_names: dict[str, list[str]]
     #: move group -> default initial positions, used where an episode gives none
     default_init_qpos: dict[str, list[float]]
+    #: camera system for episodes that name no cameras and no ``source.camera_system_class``
+    default_camera_system: str | None = None
 
     def init_qpos(self, group: str, values: Sequence[float]) -> np.ndarray:
         """An episode's ``robot.init_qpos[group]`` in public units; ``ValueError`` if it does not fit."""

@@ -27,7 +27,6 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.benchmark.molmospaces import FRANKA_ROBOT_NAMES
 from molmo_lerobot.paths import package_asset_dir
 from molmo_lerobot.robots.base import RobotHandle, RobotType
 
@@ -190,7 +189,7 @@ class Franka(RobotType):
     """Franka Panda arm + hand (gymnasium-robotics meshes), joint-position controlled."""
 
     name = "franka"
-    aliases = ("franka_panda", *FRANKA_ROBOT_NAMES)
+    aliases = ("franka_panda",)  # never franka_droid: that is a Robotiq 2F-85, see franka_droid.py
     move_groups = {"arm": 7, "gripper": 1}
     joint_names = {"arm": [f"panda_joint{k}" for k in range(1, 8)], "gripper": ["panda_gripper"]}
     #: hand pointing down above the table, fingers along the world y axis

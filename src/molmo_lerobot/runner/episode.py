@@ -88,8 +88,8 @@ class EpisodeRunner:
         from molmo_lerobot.benchmark.validate import validate_episode
         from molmo_lerobot.molmospaces.preflight import preflight
         from molmo_lerobot.runner.evaluate import episode_seed
+        from molmo_lerobot.runner.episode_env import build_env
         from molmo_lerobot.runner.rollout import check_divergence
-        from molmo_lerobot.sim.env import make_env
 
         spec = self.plugins.apply_episode_overrides(bench.episodes[index], self.eval_options)
         problems = [p for p in validate_episode(spec, self.plugins, index=index, file=bench.origins[index].file)
@@ -102,7 +102,7 @@ class EpisodeRunner:
         seed = episode_seed(self.run_seed, spec.model_dump(mode="json", exclude_unset=False))
         task_type = self.plugins.task_type(spec.task_name)
         horizon = self.horizon_of(spec)
-        env = make_env(spec, self.timing, self.plugins)
+        env = build_env(spec, self.timing, self.plugins, (self.eval_options.get("camera") or {}).get("system"))
         try:
             env.reset(seed)
             check_divergence(env.data, "at the initial state")

@@ -226,6 +226,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         "limit": limit, "horizon": cfg.get("horizon"),
         "timing": cfg["timing"],
         "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
+                         "end_on_success": bool(cfg.get("end_on_success", False)),
                          "molmospaces": molmospaces_settings(cfg).to_config(),
                          **({"plugins_prefer": plugins.prefer} if plugins.prefer else {})},  # pinned providers
     }
@@ -267,7 +268,9 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                         job = WorkerJob(policy=worker_policy, timing=cfg["timing"], output_dir=str(out),
                                         benchmark_name=bench.name, benchmark_sha256=bench.sha256,
                                         recorders=recorders + progress.factories(), prefer=plugins.prefer,
-                                        molmospaces=run_info["eval_options"]["molmospaces"])
+                                        molmospaces=run_info["eval_options"]["molmospaces"],
+                                        camera_system=(cfg.get("camera") or {}).get("system"),
+                                        end_on_success=bool(cfg.get("end_on_success", False)))
                         executor.run(job, todo, record)
                 except ServeError as exc:
                     raise RunError(str(exc)) from None

@@ -43,24 +43,29 @@ def check_divergence(data: Any, when: str) -> None:
             raise SimulationDiverged(f"simulation diverged {when} (t={data.time:.3f}s): non-finite {field}[{bad}]")
 
 
+#: the optional action key that ends the episode after its step (MolmoSpaces' ``done``)
+DONE_KEY = "done"
+
+
 def split_actions(out: Any, move_groups: dict[str, int], policy: str) -> list[Action]:
     """Validate a policy's output and split it into single-step actions.
 
     Accepts one action ``{group: (dim,)}`` or a chunk ``{group: (H, dim)}`` (same H for
-    every group). Raises :class:`ActionError` naming the policy, the group and the problem.
+    every group). A move group may be left out (it holds its position); ``done`` (a bool, or
+    one per chunk step; a single bool marks the chunk's last step) ends the episode after
+    that step. Raises :class:`ActionError` naming the policy, the group and the problem.
     """
     if not isinstance(out, dict):
         raise ActionError(f"policy {policy!r} returned {type(out).__name__}, expected a dict keyed by move group")
-    missing = sorted(set(move_groups) - set(out))
-    unknown = sorted(set(out) - set(move_groups))
-    if missing or unknown:
-        raise ActionError(
-            f"policy {policy!r} returned move groups {sorted(out)}, expected {sorted(move_groups)}"
-            + (f" (missing {missing})" if missing else "") + (f" (unknown {unknown})" if unknown else "")
-        )
+    unknown = sorted(set(out) - set(move_groups) - {DONE_KEY})
+    if unknown:
+        raise ActionError(f"policy {policy!r} returned unknown move groups {unknown} "
+                          f"(the robot has {sorted(move_groups)}; 'done' is the only other key)")
     arrays: dict[str, np.ndarray] = {}
     horizon = None
     for group, dim in move_groups.items():
+        if group not in out:
+            continue
         try:
             a = np.asarray(out[group], dtype=np.float64)
         except (TypeError, ValueError) as exc:
@@ -79,23 +84,47 @@ def split_actions(out: Any, move_groups: dict[str, int], policy: str) -> list[Ac
             t, j = map(int, np.argwhere(bad)[0])
             raise ActionError(f"policy {policy!r} returned a non-finite value in {group!r} (step {t}, index {j})")
         arrays[group] = a
-    assert horizon is not None
-    return [{g: a[t] for g, a in arrays.items()} for t in range(horizon)]
+    if horizon is None and DONE_KEY not in out:
+        raise ActionError(f"policy {policy!r} returned no move group (expected some of {sorted(move_groups)})")
+    horizon = horizon or 1
+    done = np.zeros(horizon, dtype=bool)
+    if DONE_KEY in out:
+        flag = np.asarray(out[DONE_KEY])
+        if flag.dtype.kind not in "bi" or flag.ndim > 1 or (flag.ndim == 1 and flag.shape[0] != horizon):
+            raise ActionError(f"policy {policy!r} returned 'done' as {flag.dtype} {flag.shape}: "
+                              f"expected a bool or {horizon} bools")
+        if flag.ndim == 0:
+            done[-1] = bool(flag)
+        else:
+            done[:] = flag.astype(bool)
+    steps: list[Action] = [{g: a[t] for g, a in arrays.items()} for t in range(horizon)]
+    for t in np.flatnonzero(done):
+        steps[int(t)][DONE_KEY] = True
+    return steps
 
 
 @dataclass
 class RolloutOutcome:
+    """``success_once`` is sampled where MolmoSpaces samples it (after each action chunk and at
+    the episode's end); ``success_any_step`` after every policy step (finer, an extra)."""
+
     success: bool
     success_once: bool
     steps: int
+    success_any_step: bool = False
+    ended_by: str = "horizon"  # "horizon" | "success" (end_on_success) | "done" (the policy said so)
 
 
 def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: int,
-            recorders: list[Recorder], info: EpisodeInfo, policy_name: str) -> RolloutOutcome:
-    """Run one episode for ``horizon`` policy steps and report success at the end and at any step.
+            recorders: list[Recorder], info: EpisodeInfo, policy_name: str,
+            end_on_success: bool = False) -> RolloutOutcome:
+    """Run one episode for up to ``horizon`` policy steps; report success at the end and at any step.
 
-    Images are rendered only when someone needs them: the policy at the steps where it is
-    asked for a new action (chunks run open loop), recorders at the steps they ask for.
+    A move group the policy leaves out holds its current target. The episode ends early
+    after a step whose action says ``done``, or, with ``end_on_success``, after the first
+    successful step. Images are rendered only when someone needs them: the policy at the
+    steps where it is asked for a new action (chunks run open loop), recorders at the steps
+    they ask for.
     """
     policy.reset(ctx)
     task.setup()
@@ -110,25 +139,39 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
     obs = env.observe(images=policy.needs_images or record_images(0))
     obs["prompt"], obs["step"] = ctx.prompt, 0
     queue: deque[Action] = deque()
-    success = success_once = False
+    success = success_once = any_step = False
+    ended_by, steps = "horizon", horizon
     for step in range(horizon):
         if not queue:
             queue.extend(split_actions(policy.act(obs), env.move_groups, policy_name))
-        action = queue.popleft()
+        action = dict(queue.popleft())
+        said_done = bool(action.pop(DONE_KEY, False))
+        for group in env.move_groups:  # a left-out group holds its target
+            if group not in action:
+                action[group] = env.robot.targets(env.data, group)
         env.step(action)
         if data is not None:
             check_divergence(data, f"at step {step}")
         success = bool(task.success())
-        success_once |= success
-        done = step == horizon - 1
+        any_step |= success
+        if said_done:
+            ended_by = "done"
+        elif end_on_success and success:
+            ended_by = "success"
+        done = step == horizon - 1 or ended_by != "horizon"
+        if not queue or done:  # an observation instant: MolmoSpaces samples success here
+            success_once |= success
         if recorders:
             reward = task.reward()
             for rec in recorders:
                 rec.record_step(obs, action, reward, success, done)
-        if not done:
-            obs = env.observe(images=record_images(step + 1) or (policy.needs_images and not queue))
-            obs["prompt"], obs["step"] = ctx.prompt, step + 1
-    return RolloutOutcome(success=success, success_once=success_once, steps=horizon)
+        if done:
+            steps = step + 1
+            break
+        obs = env.observe(images=record_images(step + 1) or (policy.needs_images and not queue))
+        obs["prompt"], obs["step"] = ctx.prompt, step + 1
+    return RolloutOutcome(success=success, success_once=success_once, steps=steps, success_any_step=any_step,
+                          ended_by=ended_by)
 
 
 def resolve_horizon(override: int | None, task_spec: Any, default_sec: float, policy_dt_ms: float,

@@ -52,6 +52,8 @@ class WorkerJob:
     recorders: list[RecorderFactory] = field(default_factory=list)
     molmospaces: dict[str, Any] = field(default_factory=dict)  # MolmoSpaces data settings, user libraries
     prefer: dict[str, dict[str, str]] = field(default_factory=dict)  # the run's plugins.prefer pins
+    camera_system: str | None = None
+    end_on_success: bool = False
 
 
 class WorkerStop(BaseException):
@@ -90,7 +92,7 @@ class EpisodeWorker:
         """Run one episode; any exception (a policy's ``KeyboardInterrupt`` or ``SystemExit``
         too) becomes this episode's recorded error. :class:`WorkerStop` propagates."""
         from molmo_lerobot.benchmark.schema import EpisodeSpec
-        from molmo_lerobot.sim.env import make_env
+        from molmo_lerobot.runner.episode_env import build_env
 
         t0 = time.perf_counter()
         raw_task = item.spec.get("task") or {}
@@ -102,13 +104,14 @@ class EpisodeWorker:
             task_type = self.plugins.task_type(item.task_type)
             horizon = item.horizon
             prompt = spec.language.task_description if spec.language else ""
-            env = make_env(spec, self.timing, self.plugins)
+            env = build_env(spec, self.timing, self.plugins, self.job.camera_system)
             try:
                 env.reset(item.seed)
                 task = task_type.create(spec, env)
                 ctx = EpisodeContext(
                     spec=spec, episode_index=item.episode_index, seed=item.seed, prompt=prompt,
-                    move_groups=dict(env.move_groups), policy_dt_s=self.timing.policy_dt_ms / 1000.0, env=env,
+                    move_groups=dict(env.move_groups), policy_dt_s=self.timing.policy_dt_ms / 1000.0,
+                    env=env if self.policy.needs_simulator else None,
                 )
                 info = EpisodeInfo(
                     episode_index=item.episode_index, house_index=house, seed=item.seed, prompt=prompt,
@@ -123,7 +126,8 @@ class EpisodeWorker:
                     raise WorkerStop
                 self._in_rollout = True
                 try:
-                    outcome = rollout(env, task, self.policy, ctx, horizon, self.recorders, info, self.policy_name)
+                    outcome = rollout(env, task, self.policy, ctx, horizon, self.recorders, info, self.policy_name,
+                                      end_on_success=self.job.end_on_success)
                 finally:
                     self._in_rollout = False
             finally:
@@ -132,6 +136,8 @@ class EpisodeWorker:
                 episode_index=item.episode_index, house_index=house, task_cls=task_cls,
                 success=outcome.success, success_once=outcome.success_once, steps=outcome.steps,
                 seed=item.seed, task_type=task_type.name, prompt=prompt, horizon=horizon,
+                extra={"ended_by": outcome.ended_by, "end_on_success": self.job.end_on_success,
+                       "success_any_step": outcome.success_any_step, "camera_system": env.camera_system},
             )
         except (Exception, KeyboardInterrupt, SystemExit) as exc:
             result = item.failed(_describe(exc))

@@ -1,6 +1,7 @@
 """The simulation environment: one episode's MuJoCo model and data, stepped at the policy rate.
 
-``make_env(spec, timing, plugins)`` assembles the scene with MjSpec — scene dataset house
+``make_env(spec, timing, scene, robot, cameras)`` assembles the scene with MjSpec from the
+plugin objects the caller resolved (this module never looks plugins up) — scene dataset house
 → robot at ``task.robot_base_pose`` → ``scene_modifications`` → cameras — and compiles it
 with the physics timestep set from ``timing.sim_dt_ms`` (never taken from any XML) and
 the solver options every scene shares (:data:`PHYSICS_OPTIONS`: the ``implicitfast``
@@ -28,10 +29,10 @@ import numpy as np
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
-    from molmo_lerobot.plugins import Plugins
+    from molmo_lerobot.cameras.base import CameraSystem
     from molmo_lerobot.robots.base import RobotType
+    from molmo_lerobot.sim.scenes import SceneDataset
 
-DEFAULT_CAMERA_SYSTEM = "standard"
 PHYSICS_OPTIONS = {"integrator": mujoco.mjtIntegrator.mjINT_IMPLICITFAST, "cone": mujoco.mjtCone.mjCONE_ELLIPTIC,
                    "impratio": 10.0}
 
@@ -86,11 +87,13 @@ _MODEL_CACHE: OrderedDict[str, tuple[mujoco.MjModel, list[str]]] = OrderedDict()
 _MODEL_CACHE_SIZE = 4
 
 
-def _model_key(spec: EpisodeSpec, timing: Timing, camera_system: str) -> str:
+def _model_key(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: RobotType,
+               cameras: CameraSystem) -> str:
     mods = spec.scene_modifications.model_dump(mode="json", exclude={"object_poses"})
-    return json.dumps([spec.scene_dataset, spec.data_split, spec.house_index, spec.robot.robot_name,
-                       spec.task.robot_base_pose, list(spec.img_resolution), [c.model_dump(mode="json") for c in spec.cameras], mods,
-                       timing.sim_dt_ms, camera_system], sort_keys=True)
+    return json.dumps([spec.scene_dataset, spec.data_split, spec.house_index, robot.name, spec.task.robot_base_pose,
+                       list(spec.img_resolution), [c.model_dump(mode="json") for c in spec.cameras], mods,
+                       timing.sim_dt_ms, type(scene).__qualname__, cameras.name,
+                       cameras.episode_key(spec)], sort_keys=True)
 
 
 def _add_primitive(world: mujoco.MjSpec, name: str, prim: Any) -> None:
@@ -112,9 +115,8 @@ def _add_primitive(world: mujoco.MjSpec, name: str, prim: Any) -> None:
             geom.friction = list(g.friction) + [0.005, 0.0001][: max(0, 3 - len(g.friction))]
 
 
-def _build_model(spec: EpisodeSpec, timing: Timing, plugins: Plugins, robot: RobotType,
-                 camera_system: str) -> tuple[mujoco.MjModel, list[str]]:
-    scene = plugins.scene_dataset(spec.scene_dataset)
+def _build_model(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: RobotType,
+                 camera_system: CameraSystem) -> tuple[mujoco.MjModel, list[str]]:
     world = scene.build_episode(spec)
     robot.add_to(world, spec.task.robot_base_pose)
     mods = spec.scene_modifications
@@ -129,7 +131,7 @@ def _build_model(spec: EpisodeSpec, timing: Timing, plugins: Plugins, robot: Rob
         suffixed = [n for n in body_names if n.endswith("/" + name)]
         return world.body(suffixed[0]) if len(suffixed) == 1 else None
 
-    cams = plugins.camera_system(camera_system).add_cameras(world, spec.cameras, find_body)
+    cams = camera_system.add_cameras(world, spec.cameras, find_body, episode=spec)
     width, height = spec.img_resolution
     world.visual.global_.offwidth = max(world.visual.global_.offwidth, int(width))
     world.visual.global_.offheight = max(world.visual.global_.offheight, int(height))
@@ -146,19 +148,25 @@ def _build_model(spec: EpisodeSpec, timing: Timing, plugins: Plugins, robot: Rob
     return model, cams
 
 
-def make_env(spec: EpisodeSpec, timing: Timing, plugins: Plugins,
-             camera_system: str = DEFAULT_CAMERA_SYSTEM) -> Env:
-    """Assemble, compile (cached per scene content) and wrap one episode's simulation."""
-    robot = plugins.robot(spec.robot.robot_name)
-    key = _model_key(spec, timing, camera_system)
+def make_env(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: RobotType,
+             camera_system: CameraSystem) -> Env:
+    """Assemble, compile (cached per scene content) and wrap one episode's simulation.
+
+    ``scene``, ``robot`` and ``camera_system`` are the plugin objects for the episode's
+    ``scene_dataset``, ``robot.robot_name`` and chosen camera system, resolved by the caller.
+    """
+    key = _model_key(spec, timing, scene, robot, camera_system)
     if key in _MODEL_CACHE:
         _MODEL_CACHE.move_to_end(key)
     else:
-        _MODEL_CACHE[key] = _build_model(spec, timing, plugins, robot, camera_system)
+        _MODEL_CACHE[key] = _build_model(spec, timing, scene, robot, camera_system)
         while len(_MODEL_CACHE) > _MODEL_CACHE_SIZE:
             _MODEL_CACHE.popitem(last=False)
     model, cams = _MODEL_CACHE[key]
-    return Env(spec, timing, copy.copy(model), robot, list(cams))
+    env = Env(spec, timing, copy.copy(model), robot, list(cams))
+    env.camera_system = camera_system.name
+    env._scene = scene
+    return env
 
 
 # The environment ---------------------------------------------------------------------------------
@@ -187,9 +195,14 @@ class Env:
         self.move_groups: dict[str, int] = dict(robot.move_groups)
         self.joint_names: dict[str, list[str]] = {g: list(n) for g, n in robot.joint_names.items()}
         self.camera_names = camera_names
+        #: name of the camera system that built the cameras
+        self.camera_system = ""
+        self._scene: SceneDataset | None = None
+        self._scene_metadata: dict[str, Any] | None = None
         self._depth_cameras = [c.name for c in spec.cameras if c.record_depth]
         self._renderer: mujoco.Renderer | None = None
         self._depth_renderer: mujoco.Renderer | None = None
+        self._view = self.camera_view_options()
         self.seed: int | None = None
         self.rng = np.random.default_rng()
 
@@ -287,6 +300,15 @@ class Env:
                 obs["depth"] = {name: self.render_depth(name) for name in self._depth_cameras}
         return obs
 
+    @staticmethod
+    def camera_view_options() -> mujoco.MjvOption:
+        """What a real camera sees: geom groups 0-2 (visual meshes), no sites, frames or other markers."""
+        opt = mujoco.MjvOption()
+        opt.sitegroup[:] = 0
+        opt.geomgroup[:] = 0
+        opt.geomgroup[:3] = 1
+        return opt
+
     def _make_renderer(self) -> mujoco.Renderer:
         width, height = self.spec.img_resolution
         return mujoco.Renderer(self.model, height=int(height), width=int(width))
@@ -295,7 +317,7 @@ class Env:
         """RGB uint8 image (H, W, 3) from ``camera``; the renderer is created once and reused."""
         if self._renderer is None:
             self._renderer = self._make_renderer()
-        self._renderer.update_scene(self.data, camera=camera)
+        self._renderer.update_scene(self.data, camera=camera, scene_option=self._view)
         return self._renderer.render()
 
     def render_depth(self, camera: str) -> np.ndarray:
@@ -303,10 +325,17 @@ class Env:
         if self._depth_renderer is None:
             self._depth_renderer = self._make_renderer()
             self._depth_renderer.enable_depth_rendering()
-        self._depth_renderer.update_scene(self.data, camera=camera)
+        self._depth_renderer.update_scene(self.data, camera=camera, scene_option=self._view)
         return self._depth_renderer.render().astype(np.float32)
 
     # Privileged access (tasks, scripted experts) --------------------------------------------------
+    @property
+    def scene_metadata(self) -> dict[str, Any]:
+        """The episode's scene metadata from its scene dataset (``objects``: body -> asset_id, category, …)."""
+        if self._scene_metadata is None:
+            self._scene_metadata = self._scene.episode_metadata(self.spec) if self._scene else {"objects": {}}
+        return self._scene_metadata
+
     def body_id(self, name: str, field: str = "body") -> int:
         bid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
         if bid < 0:

@@ -2,7 +2,8 @@
 
 A :class:`TaskType` is what a task plugin returns from ``molmo_task_types()``; it is keyed
 by ``name`` and ``aliases`` (MolmoSpaces' dotted ``task_cls`` paths). ``create(spec, env)``
-returns a :class:`Task` bound to one episode's environment.
+returns a :class:`Task` bound to one episode's environment. A task never imports its scripted
+expert: experts register for the task types they serve (hook ``molmo_experts``).
 """
 
 from __future__ import annotations
@@ -38,9 +39,6 @@ class TaskType(ABC):
     aliases: tuple[str, ...] = ()
     #: horizon used when neither the CLI nor the episode (``task_horizon_sec``) gives one
     default_horizon_sec: float
-    #: the privileged scripted expert for this task (a Policy class built from the policy
-    #: config), played by ``policy=scripted``; ``None`` when the task has none
-    expert: type | None = None
 
     @abstractmethod
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:

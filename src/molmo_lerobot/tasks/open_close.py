@@ -1,21 +1,25 @@
 """Open and close tasks on articulated objects (a task plugin: task types ``open`` and ``close``).
 
-Both are MolmoSpaces' ``OpeningTask``, told apart by ``task.task_type``. The opening fraction
-of a joint is ``|q - q_closed| / |range|`` with ``q_closed = 0`` (MolmoSpaces' convention:
-every articulated joint closes at 0, its range runs from 0 to fully open).
+Both are MolmoSpaces' ``OpeningTask`` (``molmo_spaces/tasks/opening_tasks.py``), told apart by
+``task.task_type``. The opening fraction of a joint is ``|q| / |range|`` (MolmoSpaces'
+convention: every articulated joint closes at 0, its range runs from 0 to fully open).
 
-* open: success when the largest opening fraction over the articulated joints of
-  ``task.pickup_obj_name`` is at least ``task_success_threshold`` (default 0.2);
-* close: success when ``1 -`` the opening fraction of ``task.joint_name`` is at least
-  ``task_success_threshold`` (default 0.2).
+* open: success when the largest opening fraction over the hinge and slide joints of
+  ``task.pickup_obj_name`` — or, with ``task.any_inst_of_category``, of every articulated
+  object of its category (scene metadata ``category``) — is at least ``task_success_threshold``
+  (default 0.2). Joints with a zero range are skipped.
+* close: success when ``1 -`` the opening fraction of the object's ``task.joint_index``-th
+  articulated joint is at least ``task_success_threshold``; a zero-range joint never counts as
+  closed (MolmoSpaces divides by the zero range).
 
-The episode's initial joint state is ``task.joint_start_position`` (a float for
-``joint_name``, or one value per articulated joint of the object in model order); it is
-applied when the task is created, right after the environment reset.
+The initial joint state is ``task.joint_start_position`` applied to ``task.joint_name`` (a list
+gives its first value, as MolmoSpaces reads it); it is applied when the task is created, right
+after the environment reset.
 """
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Any
 
 import mujoco
@@ -33,12 +37,18 @@ _ARTICULATED = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLID
 
 
 def opening_fraction(model: mujoco.MjModel, data: mujoco.MjData, joint: int) -> float:
-    """``|q| / |range|`` of a hinge or slide joint (0 closed, 1 fully open)."""
+    """``|q| / |range|`` of a hinge or slide joint (0 closed, 1 fully open; inf for a zero range)."""
     lo, hi = model.jnt_range[joint]
     span = abs(float(hi - lo))
-    if span <= 0:
-        raise ValueError(f"joint {model.joint(joint).name!r} has no range; cannot measure how open it is")
-    return abs(float(data.qpos[model.jnt_qposadr[joint]])) / span
+    q = abs(float(data.qpos[model.jnt_qposadr[joint]]))
+    return q / span if span > 0 else math.inf
+
+
+def articulated_joints(env: Env, body_name: str) -> list[int]:
+    """Hinge and slide joints of ``body_name``'s subtree, in model order."""
+    m = env.model
+    bodies = env.subtree_bodies(body_name)
+    return [j for j in range(m.njnt) if int(m.jnt_bodyid[j]) in bodies and int(m.jnt_type[j]) in _ARTICULATED]
 
 
 class OpenCloseTask(Task):
@@ -53,13 +63,29 @@ class OpenCloseTask(Task):
         self.threshold = float(getattr(t, "task_success_threshold", DEFAULT_THRESHOLD))
         env.body_id(self.object_name, "task.pickup_obj_name")
         m = env.model
-        bodies = env.subtree_bodies(self.object_name)
         #: articulated joints of the object, in model order
-        self.joints = [j for j in range(m.njnt)
-                       if int(m.jnt_bodyid[j]) in bodies and int(m.jnt_type[j]) in _ARTICULATED]
+        self.joints = articulated_joints(env, self.object_name)
         if not self.joints:
             raise ValueError(f"task.pickup_obj_name: {self.object_name!r} has no hinge or slide joint")
         self.joint = self._resolve_joint(t.joint_name)
+        index = int(getattr(t, "joint_index", 0) or 0)
+        if not 0 <= index < len(self.joints):
+            raise ValueError(f"task.joint_index: {index} out of range ({self.object_name!r} has "
+                             f"{len(self.joints)} articulated joints)")
+        #: the joint the close rule judges (MolmoSpaces: the joint_index-th joint of the object)
+        self.close_joint = self.joints[index]
+        #: joints the open rule judges: the object's, or every articulated object's of its category
+        self.open_joints = list(self.joints)
+        if getattr(t, "any_inst_of_category", False):
+            objects = env.scene_metadata.get("objects", {})
+            category = objects.get(self.object_name, {}).get("category")
+            if category is None:
+                raise ValueError(f"task.any_inst_of_category: no category for {self.object_name!r} in the "
+                                 "scene metadata")
+            for other, meta in objects.items():
+                if other != self.object_name and meta.get("category") == category and \
+                        mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, other) >= 0:
+                    self.open_joints += articulated_joints(env, other)
         self.start = t.joint_start_position
 
     def _resolve_joint(self, name: str) -> int:
@@ -75,31 +101,33 @@ class OpenCloseTask(Task):
         raise ValueError(f"task.joint_name: no joint {name!r} on {self.object_name!r} (joints: {', '.join(names)})")
 
     def apply_start_state(self) -> None:
-        """Put the joint(s) at ``joint_start_position`` (inside the joint range) and recompute kinematics."""
+        """Put ``joint_name`` at ``joint_start_position`` (its first value when a list) and recompute kinematics."""
         m, d = self.env.model, self.env.data
-        values = self.start if isinstance(self.start, list) else None
-        if values is not None and len(values) != len(self.joints):
-            raise ValueError(f"task.joint_start_position: {len(values)} values for the {len(self.joints)} "
-                             f"articulated joints of {self.object_name!r}")
-        pairs = zip(self.joints, values, strict=True) if values is not None else [(self.joint, float(self.start))]
-        for j, q in pairs:
-            lo, hi = m.jnt_range[j]
-            if not lo - 1e-9 <= q <= hi + 1e-9:
-                raise ValueError(f"task.joint_start_position: {q} outside the range [{lo:g}, {hi:g}] of joint "
-                                 f"{m.joint(j).name!r}")
-            d.qpos[m.jnt_qposadr[j]] = q
-            d.qvel[m.jnt_dofadr[j]] = 0.0
+        if isinstance(self.start, list):
+            if not self.start:
+                raise ValueError("task.joint_start_position: empty list")
+            q = float(self.start[0])
+        else:
+            q = float(self.start)
+        lo, hi = m.jnt_range[self.joint]
+        if not lo - 1e-9 <= q <= hi + 1e-9:
+            raise ValueError(f"task.joint_start_position: {q} outside the range [{lo:g}, {hi:g}] of joint "
+                             f"{m.joint(self.joint).name!r}")
+        d.qpos[m.jnt_qposadr[self.joint]] = q
+        d.qvel[m.jnt_dofadr[self.joint]] = 0.0
         mujoco.mj_forward(m, d)
 
     def setup(self) -> None:
         """Nothing to remember: the rule depends on the current joint state only."""
 
     def fraction(self) -> float:
-        """The opening fraction the rule judges: max over the object's joints (open), of the joint (close)."""
+        """The opening fraction the rule judges: max over the open rule's joints (zero ranges
+        skipped), or of the close rule's joint."""
         m, d = self.env.model, self.env.data
         if self.mode == "open":
-            return max(opening_fraction(m, d, j) for j in self.joints)
-        return opening_fraction(m, d, self.joint)
+            fractions = [f for j in self.open_joints if math.isfinite(f := opening_fraction(m, d, j))]
+            return max(fractions, default=0.0)
+        return opening_fraction(m, d, self.close_joint)
 
     def reward(self) -> float:
         """MolmoSpaces' reward: the opening fraction (open) or one minus it (close)."""
@@ -113,12 +141,6 @@ class OpenCloseTask(Task):
 class _OpenCloseType(TaskType):
     mode: str
     default_horizon_sec = 15.0
-
-    @property
-    def expert(self) -> type:
-        from molmo_lerobot.policies.scripted_articulated import ScriptedArticulated
-
-        return ScriptedArticulated
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
         return {"task_success_threshold": float(getattr(spec.task, "task_success_threshold", DEFAULT_THRESHOLD))}

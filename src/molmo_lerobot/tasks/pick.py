@@ -1,8 +1,9 @@
 """The pick task (a task plugin): lift the object and hold it, touching nothing but the robot.
 
-Success (MolmoSpaces' rule, evaluated every policy step): the object's height is at least
-``succ_pos_threshold`` (default 0.01 m) above its height at the start of the episode
-**and** it touches the robot and nothing else (no table, no other object).
+Success (MolmoSpaces' ``PickTask``, see docs/success_rules.md): the object's height is at
+least ``succ_pos_threshold`` (default 0.01 m) above ``task.pickup_obj_start_pose`` (its height at
+the start when the episode gives no start pose) **and** it touches the robot and nothing else
+(contacts between top-level bodies: no table, no other object).
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ class PickTask(Task):
         self.start_height: float | None = None
 
     def setup(self) -> None:
-        self.start_height = float(self.env.data.xpos[self._object][2])
+        start = getattr(self.env.spec.task, "pickup_obj_start_pose", None)
+        self.start_height = float(start[2]) if start else float(self.env.data.xpos[self._object][2])
 
     def lift(self) -> float:
         """Height gained since ``setup`` (metres)."""
@@ -57,12 +59,6 @@ class PickTaskType(TaskType):
     name = "pick"
     aliases = ("molmo_lerobot.tasks.pick.PickTask", *task_aliases("pick"))
     default_horizon_sec = 20.0
-
-    @property
-    def expert(self) -> type:
-        from molmo_lerobot.policies.scripted import ScriptedPick
-
-        return ScriptedPick
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
         return {"succ_pos_threshold": float(getattr(spec.task, "succ_pos_threshold", DEFAULT_SUCC_POS_THRESHOLD))}

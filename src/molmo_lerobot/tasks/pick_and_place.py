@@ -1,26 +1,30 @@
 """The pick-and-place task family (a task plugin): place in/on, place next to, and by colour.
 
-Success rules (MolmoSpaces', evaluated every policy step; thresholds are the task spec's
-fields with the defaults of :mod:`molmo_lerobot.benchmark.schema`):
+Success rules: MolmoSpaces' (``molmo_spaces/tasks/pick_and_place*_task.py``), evaluated after
+every policy step; docs/success_rules.md puts theirs and ours side by side. Thresholds are the
+task spec's fields with the defaults of :mod:`molmo_lerobot.benchmark.schema`.
 
 ``pick_and_place``
-    the receptacle carries at least ``receptacle_supported_weight_frac`` of the object's
-    weight (vertical components of the contact normal forces from ``mj_contactForce``
-    between the two, over the object's weight) **and** no robot body touches the object
-    **and** the receptacle moved at most ``max_place_receptacle_pos_displacement`` metres
-    and tilted at most ``max_place_receptacle_rot_displacement`` radians (the angle between
-    its start and current up axes, so yaw is ignored) since the start.
+    **supported**: the net contact force the receptacle (its whole top-level body) exerts on
+    the object is within 30° of vertical and its vertical part carries at least
+    ``receptacle_supported_weight_frac`` of the object's weight; failing that, the fallback
+    (a contact below the object's box centre whose normal is within 30° of vertical, or the
+    object's box centre over the receptacle's box and its base within [-half the receptacle's
+    height, +1 cm] of the receptacle's top); failing that, the object's pose in the
+    receptacle's frame is within 5 mm / 10° of a pose at which it was supported earlier
+    (carry-forward) — **and** no robot body touches the object **and** the receptacle moved at
+    most ``max_place_receptacle_pos_displacement`` from ``place_receptacle_start_pose`` and
+    tilted at most ``max_place_receptacle_rot_displacement`` (the angle the start-to-now rotation
+    turns the world's up axis by: any yaw, about any body axis, is 0 tilt).
 ``pick_and_place_next_to``
-    the XY surface-to-surface gap between object and receptacle (footprints projected on
-    the table, each the convex hull of its collision geoms) lies in
-    [``min_surface_to_surface_gap``, ``max_surface_to_surface_gap`` + :data:`GAP_TOLERANCE`]
-    **and** object and receptacle rest on the same body (the one carrying at least
-    ``receptacle_supported_weight_frac`` of each one's weight; the robot never counts, so
-    the object must have been released) **and** the receptacle stayed within the same
-    displacement limits.
+    the XY gap between the two boxes (visible geoms) lies in [``min_surface_to_surface_gap``,
+    ``max_surface_to_surface_gap`` + :data:`GAP_TOLERANCE`] **and** both rest on the same
+    top-level body (each one's supporting geom: a contact below its box centre whose normal is
+    within 80° of vertical) **and** the receptacle moved at most the position limit and turned
+    (any rotation, yaw included) at most the rotation limit.
 ``pick_and_place_color``
-    as ``pick_and_place``; the task paints the bodies of ``object_colors`` first, so the
-    instruction's colours are what the cameras see.
+    as ``pick_and_place``; the task first paints the visible geoms of ``object_colors`` (their
+    materials cleared), so the instruction's colours are what the cameras see.
 """
 
 from __future__ import annotations
@@ -28,12 +32,14 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
-import mujoco
 import numpy as np
+from scipy.spatial.transform import Rotation
+from shapely.geometry import Point
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.molmospaces import task_aliases
 from molmo_lerobot.benchmark.schema import PickAndPlaceNextToTaskSpec, PickAndPlaceTaskSpec
+from molmo_lerobot.sim import geometry
 from molmo_lerobot.tasks.base import Task, TaskType
 
 if TYPE_CHECKING:
@@ -42,8 +48,14 @@ if TYPE_CHECKING:
 
 #: slack added to the maximum next-to gap (MolmoSpaces' +0.01 m)
 GAP_TOLERANCE = 0.01
-#: points on each circle when a round geom's footprint is made a polygon
-_CIRCLE_POINTS = 32
+#: support: the net contact force must be this close to vertical (MolmoSpaces' 30°)
+SUPPORT_MAX_ANGLE = math.radians(30)
+#: next-to: a supporting contact's normal must be this close to vertical (MolmoSpaces' 80°)
+SURFACE_MAX_ANGLE = math.radians(80)
+#: contactless fallback: the object's base may float this far above the receptacle's top
+FALLBACK_ABOVE = 0.01
+#: carry-forward tolerances (MolmoSpaces' defaults; an episode may set its own)
+CARRY_FORWARD_POS, CARRY_FORWARD_ROT = 0.005, math.radians(10)
 
 _PLACE_FIELDS = ("receptacle_supported_weight_frac", "max_place_receptacle_pos_displacement",
                  "max_place_receptacle_rot_displacement")
@@ -59,106 +71,22 @@ def _resolved(spec: EpisodeSpec, fields: tuple[str, ...], model: type) -> dict[s
     return out
 
 
-# Simulator measurements --------------------------------------------------------------------------
+def _pose_matrix(pose: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_quat(np.asarray(pose[3:7], dtype=np.float64), scalar_first=True).as_matrix()
+    T[:3, 3] = pose[:3]
+    return T
 
 
-def upward_forces(env: Env, bodies: frozenset[int]) -> dict[int, float]:
-    """Per other body, the upward (world +z) part of the contact normal forces it exerts on ``bodies``."""
-    m, d = env.model, env.data
-    gb = m.geom_bodyid
-    out: dict[int, float] = {}
-    force = np.zeros(6)
-    for i in range(d.ncon):
-        c = d.contact[i]
-        b1, b2 = int(gb[c.geom1]), int(gb[c.geom2])
-        if (b1 in bodies) == (b2 in bodies):
-            continue
-        mujoco.mj_contactForce(m, d, i, force)
-        # the normal (frame row 0) points from geom1 to geom2; the normal force pushes geom2 along it
-        up = force[0] * c.frame[2]
-        other, up = (b1, up) if b2 in bodies else (b2, -up)
-        out[other] = out.get(other, 0.0) + float(up)
-    return out
+def tilt(start: np.ndarray, now: np.ndarray) -> float:
+    """Radians the rotation from ``start`` to ``now`` (3x3 world rotations) turns the world's up axis."""
+    up = (now @ start.T)[:, 2]
+    return float(np.arccos(np.clip(up[2], -1.0, 1.0)))
 
 
 def weight(env: Env, body: int) -> float:
     """Weight (N) of ``body`` and everything below it."""
     return float(env.model.body_subtreemass[body] * np.linalg.norm(env.model.opt.gravity))
-
-
-def _geom_footprint(m: mujoco.MjModel, d: mujoco.MjData, g: int) -> np.ndarray:
-    """Points (K, 2) whose convex hull is the XY projection of geom ``g``."""
-    pos, rot, size = d.geom_xpos[g], d.geom_xmat[g].reshape(3, 3), m.geom_size[g]
-    kind = m.geom_type[g]
-    if kind == mujoco.mjtGeom.mjGEOM_BOX:
-        corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * size
-        return (pos + corners @ rot.T)[:, :2]
-    t = np.linspace(0, 2 * np.pi, _CIRCLE_POINTS, endpoint=False)
-    circle = np.stack([np.cos(t), np.sin(t)], axis=1)
-    if kind == mujoco.mjtGeom.mjGEOM_CYLINDER:  # both rims of the caps, in 3D, projected
-        rim = np.stack([np.cos(t), np.sin(t), np.zeros_like(t)], axis=1) * size[0]
-        caps = [rim + [0.0, 0.0, s * size[1]] for s in (-1, 1)]
-        return (pos + np.concatenate(caps) @ rot.T)[:, :2]
-    if kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
-        ends = [pos + s * size[1] * rot[:, 2] for s in (-1, 1)]
-        return np.concatenate([e[:2] + size[0] * circle for e in ends])
-    radius = size[0] if kind == mujoco.mjtGeom.mjGEOM_SPHERE else m.geom_rbound[g]
-    return pos[:2] + radius * circle
-
-
-def _hull(points: np.ndarray) -> np.ndarray:
-    """Convex hull (counter-clockwise) of 2-D points (Andrew's monotone chain)."""
-    pts = sorted(set(map(tuple, np.round(points, 9).tolist())))
-    if len(pts) < 3:
-        return np.asarray(pts, dtype=float).reshape(-1, 2)
-
-    def half(seq: list) -> list:
-        out: list = []
-        for p in seq:
-            while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (p[1] - out[-2][1])
-                                     - (out[-1][1] - out[-2][1]) * (p[0] - out[-2][0])) <= 0:
-                out.pop()
-            out.append(p)
-        return out[:-1]
-
-    return np.asarray(half(pts) + half(pts[::-1]), dtype=float)
-
-
-def _separated(a: np.ndarray, b: np.ndarray) -> bool:
-    """Separating-axis test for two convex polygons (counter-clockwise vertices)."""
-    edges = np.concatenate([np.roll(a, -1, axis=0) - a, np.roll(b, -1, axis=0) - b])
-    normals = np.stack([-edges[:, 1], edges[:, 0]], axis=1)
-    pa, pb = a @ normals.T, b @ normals.T
-    return bool(np.any((pa.max(0) < pb.min(0)) | (pb.max(0) < pa.min(0))))
-
-
-def _point_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distances from points ``p`` (N, 2) to every segment ``a[k]``-``b[k]`` (K, 2): (N, K)."""
-    ab = b - a
-    t = np.clip(((p[:, None, :] - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-18), 0.0, 1.0)
-    return np.linalg.norm(p[:, None, :] - (a + t[..., None] * ab), axis=-1)
-
-
-def polygon_gap(a: np.ndarray, b: np.ndarray) -> float:
-    """Distance between two convex polygons given counter-clockwise (0 when they overlap)."""
-    if not _separated(a, b):
-        return 0.0
-    return float(min(_point_segment(a, b, np.roll(b, -1, axis=0)).min(),
-                     _point_segment(b, a, np.roll(a, -1, axis=0)).min()))
-
-
-def footprint(env: Env, bodies: frozenset[int]) -> np.ndarray:
-    """The XY footprint of ``bodies``: convex hull of their collision geoms projected on the table plane."""
-    m = env.model
-    geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] in bodies and (m.geom_contype[g] or m.geom_conaffinity[g])]
-    if not geoms:
-        raise ValueError(f"body {m.body(min(bodies)).name!r} has no collision geoms")
-    return _hull(np.concatenate([_geom_footprint(m, env.data, g) for g in geoms]))
-
-
-def surface_gap(env: Env, a: frozenset[int], b: frozenset[int]) -> float:
-    """XY surface-to-surface gap between the footprints of two sets of bodies (0 when they overlap)."""
-    return polygon_gap(footprint(env, a), footprint(env, b))
 
 
 # Tasks -------------------------------------------------------------------------------------------
@@ -172,52 +100,124 @@ class PickAndPlaceTask(Task):
             if not getattr(spec.task, field, None):
                 raise ValueError(f"task.{field}: missing (a {type(self).__name__} needs it)")
         self.env = env
+        m = env.model
         self.object_name = spec.task.pickup_obj_name
         self.receptacle_name = spec.task.place_receptacle_name
         self._object = env.body_id(self.object_name, "task.pickup_obj_name")
         self._receptacle = env.body_id(self.receptacle_name, "task.place_receptacle_name")
+        if geometry.root_body(m, self._object) != self._object:
+            raise ValueError(f"task.pickup_obj_name: {self.object_name!r} is not a top-level body")
         self.object_bodies = env.subtree_bodies(self.object_name)
         self.receptacle_bodies = env.subtree_bodies(self.receptacle_name)
         if self.object_bodies & self.receptacle_bodies:
             raise ValueError("task.place_receptacle_name: the receptacle must not be (part of) the object")
+        #: the receptacle's top-level body and everything in it: what "supported by" counts
+        self.receptacle_root = geometry.root_body(m, self._receptacle)
+        self.receptacle_root_bodies = geometry.subtree(m, self.receptacle_root)
         t = _resolved(spec, _PLACE_FIELDS, PickAndPlaceTaskSpec)
         self.min_support = t["receptacle_supported_weight_frac"]
         self.max_pos = t["max_place_receptacle_pos_displacement"]
         self.max_rot = t["max_place_receptacle_rot_displacement"]
-        self.start_pos: np.ndarray | None = None
-        self.start_up: np.ndarray | None = None
+        self.carry_pos = float(getattr(spec.task, "carry_forward_rel_pos_threshold", None) or CARRY_FORWARD_POS)
+        self.carry_rot = float(getattr(spec.task, "carry_forward_rel_rot_threshold", None) or CARRY_FORWARD_ROT)
+        self.start_pose: np.ndarray | None = None
+        self.supported_rel_poses: list[np.ndarray] = []
 
     def setup(self) -> None:
-        d = self.env.data
-        self.start_pos = d.xpos[self._receptacle].copy()
-        self.start_up = d.xmat[self._receptacle].reshape(3, 3)[:, 2].copy()
+        """The receptacle's start pose: ``place_receptacle_start_pose``, else its pose now."""
+        given = getattr(self.env.spec.task, "place_receptacle_start_pose", None)
+        pose = np.asarray(given, dtype=np.float64) if given else self.env.body_pose(self.receptacle_name)
+        self.start_pose = _pose_matrix(pose)
+        self.supported_rel_poses = []
 
     # measurements
+    def _pose(self, body: int) -> np.ndarray:
+        d = self.env.data
+        T = np.eye(4)
+        T[:3, :3] = d.xmat[body].reshape(3, 3)
+        T[:3, 3] = d.xpos[body]
+        return T
+
+    def support_force(self) -> np.ndarray:
+        """Net world contact force (N) the receptacle's top-level body exerts on the object."""
+        return geometry.net_contact_force(self.env.model, self.env.data, self.object_bodies,
+                                          self.receptacle_root_bodies)
+
     def support_fraction(self, bodies: frozenset[int] | None = None) -> float:
-        """Fraction of the object's weight carried by ``bodies`` (default: the receptacle)."""
-        bodies = self.receptacle_bodies if bodies is None else bodies
-        carried = sum(f for b, f in upward_forces(self.env, self.object_bodies).items() if b in bodies)
-        return carried / weight(self.env, self._object)
+        """Vertical part of the net contact force from ``bodies`` (default: the receptacle's
+        top-level body) over the object's weight."""
+        by = self.receptacle_root_bodies if bodies is None else bodies
+        force = geometry.net_contact_force(self.env.model, self.env.data, self.object_bodies, by)
+        return float(abs(force[2])) / weight(self.env, self._object)
+
+    def supported_by_force(self) -> bool:
+        """MolmoSpaces' ``is_object_supported_by_body``: net force within 30° of vertical carrying
+        at least ``receptacle_supported_weight_frac`` of the weight."""
+        force = self.support_force()
+        norm = float(np.linalg.norm(force))
+        if norm < 1e-6:
+            return False
+        vertical = force[2] / norm >= math.cos(SUPPORT_MAX_ANGLE)
+        return bool(vertical and abs(force[2]) >= self.min_support * weight(self.env, self._object))
+
+    def supported_by_fallback(self) -> bool:
+        """MolmoSpaces' ``objects_on_receptacle`` heuristic (contact below the object's centre with
+        a near-vertical normal, or resting on the receptacle's box without contact force)."""
+        m, d = self.env.model, self.env.data
+        centre, size = geometry.body_aabb(m, d, self._object)
+        gb = m.geom_bodyid
+        for i in range(d.ncon):
+            c = d.contact[i]
+            b1, b2 = int(gb[c.geom1]), int(gb[c.geom2])
+            if b1 in self.receptacle_bodies and b2 in self.object_bodies:
+                normal = c.frame[:3]
+            elif b2 in self.receptacle_bodies and b1 in self.object_bodies:
+                normal = -c.frame[:3]
+            else:
+                continue
+            normal = normal / np.linalg.norm(normal)
+            if c.pos[2] < centre[2] and normal[2] >= math.cos(SUPPORT_MAX_ANGLE):
+                return True
+        r_centre, r_size = geometry.body_aabb(m, d, self.receptacle_root)
+        if not geometry.xy_rect(r_centre, r_size).contains(Point(centre[:2])):
+            return False
+        base = centre[2] - size[2] / 2
+        top = r_centre[2] + r_size[2] / 2
+        return bool(-r_size[2] / 2 <= base - top <= FALLBACK_ABOVE)
+
+    def supported(self) -> bool:
+        """Force rule, else the fallback, else the carry-forward of a supported relative pose."""
+        rel = np.linalg.solve(self._pose(self._receptacle), self._pose(self._object))
+        if self.supported_by_force() or self.supported_by_fallback():
+            self.supported_rel_poses.append(rel)
+            return True
+        for seen in self.supported_rel_poses:
+            moved = float(np.linalg.norm(rel[:3, 3] - seen[:3, 3]))
+            turned = float(Rotation.from_matrix(rel[:3, :3] @ seen[:3, :3].T).magnitude())
+            if moved <= self.carry_pos and turned <= self.carry_rot:
+                return True
+        return False
 
     def robot_touching(self) -> bool:
         return bool(self.env.contact_bodies(self.object_bodies) & self.env.robot.body_ids)
 
-    def receptacle_displacement(self) -> tuple[float, float]:
-        """(metres moved, radians tilted) of the receptacle since ``setup``; yaw does not count."""
-        if self.start_pos is None or self.start_up is None:
+    def receptacle_displacement(self) -> tuple[float, float, float]:
+        """(metres moved, radians tilted, radians turned in all) of the receptacle since the start."""
+        if self.start_pose is None:
             raise RuntimeError(f"{type(self).__name__}.setup() must run before success()")
-        d = self.env.data
-        up = d.xmat[self._receptacle].reshape(3, 3)[:, 2]
-        tilt = math.acos(float(np.clip(up @ self.start_up, -1.0, 1.0)))
-        return float(np.linalg.norm(d.xpos[self._receptacle] - self.start_pos)), tilt
+        now = self._pose(self._receptacle)
+        moved = float(np.linalg.norm(now[:3, 3] - self.start_pose[:3, 3]))
+        turned = float(Rotation.from_matrix(self.start_pose[:3, :3].T @ now[:3, :3]).magnitude())
+        return moved, tilt(self.start_pose[:3, :3], now[:3, :3]), turned
 
     def receptacle_in_place(self) -> bool:
-        moved, tilted = self.receptacle_displacement()
+        moved, tilted, _ = self.receptacle_displacement()
         return moved <= self.max_pos and tilted <= self.max_rot
 
     def success(self) -> bool:
-        return (self.receptacle_in_place() and not self.robot_touching()
-                and self.support_fraction() >= self.min_support)
+        # supported() runs every step (it remembers supported poses for the carry-forward)
+        supported = self.supported()
+        return supported and not self.robot_touching() and self.receptacle_in_place()
 
     def reward(self) -> float:
         return 1.0 if self.success() else 0.0
@@ -234,24 +234,39 @@ class PickAndPlaceNextToTask(PickAndPlaceTask):
             raise ValueError(f"task.min_surface_to_surface_gap {self.min_gap} exceeds "
                              f"task.max_surface_to_surface_gap {self.max_gap}")
 
-    def supporting_body(self, bodies: frozenset[int], root: int) -> int | None:
-        """The non-robot body carrying at least ``min_support`` of ``root``'s weight, if any."""
-        forces = {b: f for b, f in upward_forces(self.env, bodies).items() if b not in self.env.robot.body_ids}
-        if not forces:
-            return None
-        best = max(forces, key=forces.__getitem__)
-        return best if forces[best] >= self.min_support * weight(self.env, root) else None
+    def supporting_root(self, body: int) -> int | None:
+        """Top-level body of the geom ``body`` rests on (MolmoSpaces' ``get_supporting_geom``:
+        the first contact below the body's box centre whose normal is within 80° of vertical)."""
+        m, d = self.env.model, self.env.data
+        mine = geometry.subtree(m, geometry.root_body(m, body))
+        centre, _ = geometry.body_aabb(m, d, body)
+        gb = m.geom_bodyid
+        for i in range(d.ncon):
+            c = d.contact[i]
+            b1, b2 = int(gb[c.geom1]), int(gb[c.geom2])
+            if (b1 in mine) == (b2 in mine):
+                continue
+            other = b2 if b1 in mine else b1
+            normal = c.frame[:3] / np.linalg.norm(c.frame[:3])
+            if b1 in mine:
+                normal = -normal
+            if c.pos[2] < centre[2] and normal[2] >= math.cos(SURFACE_MAX_ANGLE):
+                return geometry.root_body(m, other)
+        return None
 
     def gap(self) -> float:
-        return surface_gap(self.env, self.object_bodies, self.receptacle_bodies)
+        """XY gap between the object's and the receptacle's boxes (visible geoms)."""
+        m, d = self.env.model, self.env.data
+        return geometry.aabb_xy_gap(geometry.body_aabb(m, d, self._object), geometry.body_aabb(m, d, self._receptacle))
 
     def success(self) -> bool:
-        if not self.receptacle_in_place() or self.robot_touching():
+        moved, _, turned = self.receptacle_displacement()
+        if moved > self.max_pos or turned > self.max_rot:
             return False
-        under = self.supporting_body(self.object_bodies, self._object)
-        if under is None or under != self.supporting_body(self.receptacle_bodies, self._receptacle):
+        if not self.min_gap <= self.gap() <= self.max_gap + GAP_TOLERANCE:
             return False
-        return self.min_gap <= self.gap() <= self.max_gap + GAP_TOLERANCE
+        under = self.supporting_root(self._object)
+        return under is not None and under == self.supporting_root(self._receptacle)
 
 
 class PickAndPlaceColorTask(PickAndPlaceTask):
@@ -263,10 +278,9 @@ class PickAndPlaceColorTask(PickAndPlaceTask):
         m = env.model  # each Env owns its model copy, so painting never leaks into another episode
         for name, rgba in colors.items():
             env.body_id(name, "task.object_colors")
-            bodies = env.subtree_bodies(name)
-            for g in range(m.ngeom):
-                if m.geom_bodyid[g] in bodies:
-                    m.geom_rgba[g] = rgba
+            for g in geometry.body_geoms(m, env.subtree_bodies(name)):  # visible geoms, as MolmoSpaces
+                m.geom_matid[g] = -1
+                m.geom_rgba[g] = rgba
         for name in getattr(spec.task, "other_receptacle_names", None) or []:
             env.body_id(name, "task.other_receptacle_names")
 
@@ -279,12 +293,6 @@ class _PlaceFamily(TaskType):
     task_class: type[PickAndPlaceTask]
     spec_model: type = PickAndPlaceTaskSpec
     fields: tuple[str, ...] = _PLACE_FIELDS
-
-    @property
-    def expert(self) -> type:
-        from molmo_lerobot.policies.scripted_place import ScriptedPlace
-
-        return ScriptedPlace
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
         return _resolved(spec, self.fields, self.spec_model)

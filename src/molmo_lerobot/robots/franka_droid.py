@@ -1,0 +1,306 @@
+"""``franka_droid``: a Franka arm with a Robotiq 2F-85 gripper, DROID's set-up, named as in MolmoSpaces.
+
+Where MolmoSpaces' assets dir (:func:`molmo_lerobot.paths.molmospaces_assets_dir`) holds their
+robot (``robots/franka_droid/model.xml``), that model is loaded as is. Otherwise the robot is
+built at run time from registry packages (nothing is copied into this repository): the arm of
+:mod:`molmo_lerobot.robots.franka` (gymnasium-robotics' Panda meshes, standard joint zeros,
+joint-impedance gains) without its hand, and robosuite's ``robotiq_gripper_85.xml`` with its
+meshes, found through the installed package's path (robosuite is never imported).
+
+Both share MolmoSpaces' names under the namespace ``robot_0/``, so their camera specs and
+robot views resolve: bodies ``base`` (the mount), ``fr3_link0`` … and ``gripper/base``; arm
+joints and actuators ``fr3_joint1..7``; gripper driver joints ``gripper/left_driver_joint`` /
+``gripper/right_driver_joint`` (radians, 0 open … 0.8 closed) driven by one actuator
+``gripper/fingers_actuator`` (0 open … 255 closed); the TCP site ``gripper/grasp_site`` and the
+wrist camera ``gripper/wrist_camera``.
+
+The TCP site follows MolmoSpaces' unified gripper convention (+z approach, fingers opening
+along ±y, origin on the axis between the fingers), the same as the Panda's ``tcp`` site, at the
+Panda's depth behind the fingertips, so object-frame grasps (``transforms`` of their grasp files)
+transfer between the two grippers.
+
+Move groups: ``arm`` (7 joint positions, rad) and ``gripper`` (1 value, 0 open … 1 closed,
+mapped linearly onto the actuator's 0 … 255). ``init_qpos["gripper"]`` takes MolmoSpaces' two
+driver-joint angles in radians (``[0.00296, 0.00296]`` = open) or one normalized value.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from functools import cache
+from pathlib import Path
+from xml.etree import ElementTree
+
+import mujoco
+import numpy as np
+
+from molmo_lerobot import hookimpl
+from molmo_lerobot.paths import molmospaces_assets_dir, package_asset_dir
+from molmo_lerobot.robots.base import RobotHandle, RobotType
+from molmo_lerobot.robots.franka import load_franka_spec
+
+NAMESPACE = "robot_0/"
+#: driver joint travel (rad): 0 open … DRIVER_CLOSED closed
+DRIVER_CLOSED = 0.8
+#: MolmoSpaces' gripper actuator range (0 open … 255 closed)
+CTRL_CLOSED = 255.0
+#: flange of link 7 (where the Panda hand sits), metres along its z axis
+FLANGE = 0.107
+#: TCP along the approach axis: on the finger axis with the fingertips 3.2-3.5 cm beyond it over the
+#: grip range, as on the Panda (assets.builtin.TCP_TO_FINGERTIP), so grasps made for one hand suit the other
+TCP_DEPTH = 0.128
+#: gripper position gain (N·m per rad of driver angle on the coupled tendon) and damping; force limit
+GRIPPER_KP, GRIPPER_KV, GRIPPER_FORCE = 100.0, 5.0, 10.0
+#: wrist camera (ZED mini on DROID's mount) in the ``gripper/base`` frame: beside the gripper, looking along it
+WRIST_CAMERA_POS = (0.0, 0.078, 0.023)
+WRIST_CAMERA_QUAT = (0.0, 0.0, 0.9887, 0.1498)
+WRIST_CAMERA_FOVY = 52.0
+#: the gripper's finger chain: joints that follow the driver (+1) or mirror it (-1)
+_FOLLOWERS = {"left_inner_knuckle_joint": ("finger_joint", 1.0),
+              "left_inner_finger_joint": ("finger_joint", -1.0),
+              "right_inner_knuckle_joint": ("right_outer_knuckle_joint", 1.0),
+              "right_inner_finger_joint": ("right_outer_knuckle_joint", -1.0)}
+_DRIVERS = {"finger_joint": "left_driver_joint", "right_outer_knuckle_joint": "right_driver_joint"}
+
+
+def robotiq_xml() -> Path:
+    """robosuite's Robotiq 2F-85 MJCF inside the installed package (the package is not imported)."""
+    return package_asset_dir("robosuite", "models", "assets", "grippers", marker="robotiq_gripper_85.xml",
+                             what="the franka_droid robot (Robotiq 2F-85 gripper)") / "robotiq_gripper_85.xml"
+
+
+def molmospaces_model(assets_dir: Path | None = None) -> Path | None:
+    """MolmoSpaces' own ``franka_droid`` model in their assets dir, if installed."""
+    path = (assets_dir or molmospaces_assets_dir()) / "robots" / "franka_droid" / "model.xml"
+    return path if path.is_file() else None
+
+
+def _robotiq_spec() -> mujoco.MjSpec:
+    """robosuite's gripper with MolmoSpaces' names, a rigid finger linkage and one actuator."""
+    path = robotiq_xml()
+    root = ElementTree.parse(path).getroot()
+    root.insert(0, ElementTree.Element("compiler", angle="radian"))  # robosuite's top-level model says so
+    asset = root.find("asset")
+    seen: set[str] = set()
+    for mesh in list(asset.iter("mesh")):  # absolute paths; drop the repeated base mesh (its file is absent)
+        mesh.set("file", str(path.parent / mesh.get("file")))
+        if mesh.get("name") in seen:
+            asset.remove(mesh)
+        seen.add(mesh.get("name"))
+    spec = mujoco.MjSpec.from_string(ElementTree.tostring(root, encoding="unicode"))
+    for sensor in list(spec.sensors):
+        spec.delete(sensor)
+    for tendon in list(spec.tendons):
+        spec.delete(tendon)
+    for act in list(spec.actuators):
+        spec.delete(act)
+    for site in list(spec.sites):
+        spec.delete(site)
+    spec.delete(spec.body("eef"))
+    for geom in spec.geoms:  # robosuite's collision meshes are group 0: keep them out of camera images
+        if geom.contype or geom.conaffinity:
+            geom.group = 3
+    for old, new in _DRIVERS.items():
+        spec.joint(old).name = new
+    for follower, (driver, coef) in _FOLLOWERS.items():
+        spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1=follower, name2=_DRIVERS[driver],
+                          data=[0.0, coef] + [0.0] * 9 + [0.0], solref=[0.005, 1.0])
+    spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1="right_driver_joint", name2="left_driver_joint",
+                      data=[0.0, 1.0] + [0.0] * 10, solref=[0.005, 1.0])
+    for joint in spec.joints:
+        joint.armature = 0.005
+        joint.damping = [0.1, 0.0, 0.0]
+    split = spec.add_tendon(name="split")
+    split.wrap_joint("left_driver_joint", 0.5)
+    split.wrap_joint("right_driver_joint", 0.5)
+    gain = GRIPPER_KP * DRIVER_CLOSED / CTRL_CLOSED
+    spec.add_actuator(name="fingers_actuator", target="split", trntype=mujoco.mjtTrn.mjTRN_TENDON,
+                      gaintype=mujoco.mjtGain.mjGAIN_FIXED, biastype=mujoco.mjtBias.mjBIAS_AFFINE,
+                      gainprm=[gain] + [0.0] * 9, biasprm=[0.0, -GRIPPER_KP, -GRIPPER_KV] + [0.0] * 7,
+                      ctrlrange=[0.0, CTRL_CLOSED], forcerange=[-GRIPPER_FORCE, GRIPPER_FORCE])
+    return spec
+
+
+@cache
+def _registry_xml() -> str:
+    """The registry-built robot as MJCF text (absolute mesh paths), ``fr3_link0`` at the origin."""
+    arm = load_franka_spec()
+    for k in (1, 2):
+        arm.delete(arm.actuator(f"finger_actuator{k}"))
+    link7 = arm.body("panda0_link7")
+    for child in list(link7.bodies):
+        arm.delete(child)
+    for geom in list(link7.geoms):
+        if geom.meshname.startswith("hand"):
+            arm.delete(geom)
+    for site in list(link7.sites):
+        arm.delete(site)
+    for k in range(1, 8):
+        arm.body(f"panda0_link{k}").name = f"fr3_link{k}"
+        arm.joint(f"joint{k}").name = f"fr3_joint{k}"
+        act = arm.actuator(f"actuator{k}")
+        act.name = act.target = f"fr3_joint{k}"
+    arm.body("panda0_link0").name = "fr3_link0"
+    # link 7's frame is the standard one (see franka.py); the gripper at the flange, fingers
+    # along link 7's ±y rotated by the DROID mount so that q7 = 0 aligns them with the base
+    base = arm.body("fr3_link7").add_body(name="gripper/base", pos=[0.0, 0.0, FLANGE], mass=0.01,
+                                         inertia=[1e-5] * 3)
+    # robosuite's fingers open along its adapter's y; MolmoSpaces' gripper/base has them along x
+    # (their wrist camera sits at +y and sees the fingers close left-right)
+    quarter = [math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4)]
+    base.add_frame(quat=quarter).attach_body(_robotiq_spec().body("robotiq_85_adapter_link"), "gripper/", "")
+    # the TCP: fingers along its ±y (MolmoSpaces' unified convention), +z approach
+    base.add_site(name="gripper/grasp_site", pos=[0.0, 0.0, TCP_DEPTH], size=[0.005] * 3, group=4,
+                  quat=[math.cos(math.pi / 4), 0.0, 0.0, -math.sin(math.pi / 4)])
+    base.add_camera(name="gripper/wrist_camera", pos=list(WRIST_CAMERA_POS), quat=list(WRIST_CAMERA_QUAT),
+                    fovy=WRIST_CAMERA_FOVY)
+    for body in arm.bodies:
+        if body.name != "world":
+            body.gravcomp = 1.0
+    gripper_bodies = [b.name for b in arm.bodies if b.name.startswith("gripper/")]
+    for i, a in enumerate(gripper_bodies):  # the linkage's links overlap by design
+        for b in gripper_bodies[i + 1:]:
+            arm.add_exclude(bodyname1=a, bodyname2=b)
+    arm.add_exclude(bodyname1="fr3_link7", bodyname2="gripper/base")
+    return arm.to_xml()
+
+
+def load_droid_spec(assets_dir: Path | None = None) -> mujoco.MjSpec:
+    """The robot as a standalone spec at the origin: MolmoSpaces' model (top body ``base``) if
+    installed, else the registry-built one (top body ``fr3_link0``)."""
+    theirs = molmospaces_model(assets_dir)
+    if theirs is not None:
+        return mujoco.MjSpec.from_file(str(theirs))
+    return mujoco.MjSpec.from_string(_registry_xml())
+
+
+class FrankaDroidHandle(RobotHandle):
+    """Move-group access to a compiled model holding ``franka_droid`` under ``prefix``."""
+
+    def __init__(self, model: mujoco.MjModel, prefix: str = NAMESPACE) -> None:
+        arm = [model.joint(f"{prefix}fr3_joint{k}").id for k in range(1, 8)]
+        drivers = [model.joint(f"{prefix}gripper/{s}_driver_joint").id for s in ("left", "right")]
+        self._arm_q = np.array([model.jnt_qposadr[j] for j in arm])
+        self._arm_v = np.array([model.jnt_dofadr[j] for j in arm])
+        self._drv_q = np.array([model.jnt_qposadr[j] for j in drivers])
+        self._drv_v = np.array([model.jnt_dofadr[j] for j in drivers])
+        self._arm_u = np.array([model.actuator(f"{prefix}fr3_joint{k}").id for k in range(1, 8)])
+        self._grip_u = model.actuator(f"{prefix}gripper/fingers_actuator").id
+        self._g_lo, self._g_hi = (float(v) for v in model.actuator_ctrlrange[self._grip_u])
+        self._lo = model.actuator_ctrlrange[self._arm_u, 0].copy()
+        self._hi = model.actuator_ctrlrange[self._arm_u, 1].copy()
+        self._tcp = model.site(f"{prefix}gripper/grasp_site").id
+        root = model.body(f"{prefix}base").id
+        self._bodies = frozenset(b for b in range(model.nbody) if _descends(model, b, root))
+        # every joint of the finger linkage follows the drivers: teleports set them too
+        self._linkage = [(model.jnt_qposadr[j], model.jnt_dofadr[j], sign)
+                         for name, (_, sign) in _FOLLOWERS.items()
+                         if (j := mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{prefix}gripper/{name}")) >= 0]
+
+    def _check(self, group: str) -> None:
+        if group not in ("arm", "gripper"):
+            raise KeyError(f"franka_droid has move groups 'arm' and 'gripper', not {group!r}")
+
+    def qpos(self, data, group):
+        self._check(group)
+        if group == "arm":
+            return data.qpos[self._arm_q].copy()
+        return np.array([float(np.clip(data.qpos[self._drv_q].mean() / DRIVER_CLOSED, 0.0, 1.0))])
+
+    def qvel(self, data, group):
+        self._check(group)
+        if group == "arm":
+            return data.qvel[self._arm_v].copy()
+        return np.array([float(data.qvel[self._drv_v].mean() / DRIVER_CLOSED)])
+
+    def driver_angles(self, data: mujoco.MjData) -> np.ndarray:
+        """The two driver joints in radians (MolmoSpaces' gripper joint positions)."""
+        return data.qpos[self._drv_q].copy()
+
+    def set_qpos(self, data, group, values):
+        self._check(group)
+        values = np.asarray(values, dtype=np.float64)
+        if group == "arm":
+            data.qpos[self._arm_q] = values
+            data.qvel[self._arm_v] = 0.0
+        else:
+            angle = DRIVER_CLOSED * float(np.clip(values[0], 0.0, 1.0))
+            data.qpos[self._drv_q] = angle
+            data.qvel[self._drv_v] = 0.0
+            for qadr, dadr, sign in self._linkage:
+                data.qpos[qadr] = sign * angle
+                data.qvel[dadr] = 0.0
+        self.command(data, group, values)
+
+    def targets(self, data, group):
+        self._check(group)
+        if group == "arm":
+            return data.ctrl[self._arm_u].copy()
+        return np.array([(data.ctrl[self._grip_u] - self._g_lo) / (self._g_hi - self._g_lo)])
+
+    def command(self, data, group, values):
+        self._check(group)
+        values = np.asarray(values, dtype=np.float64)
+        if group == "arm":
+            data.ctrl[self._arm_u] = np.clip(values, self._lo, self._hi)
+        else:
+            data.ctrl[self._grip_u] = self._g_lo + float(np.clip(values[0], 0.0, 1.0)) * (self._g_hi - self._g_lo)
+
+    @property
+    def tcp_site(self) -> int:
+        return self._tcp
+
+    @property
+    def body_ids(self) -> frozenset[int]:
+        return self._bodies
+
+
+def _descends(model: mujoco.MjModel, body: int, root: int) -> bool:
+    while body > 0:
+        if body == root:
+            return True
+        body = int(model.body_parentid[body])
+    return False
+
+
+class FrankaDroid(RobotType):
+    """Franka arm + Robotiq 2F-85 (DROID), MolmoSpaces' names; see the module docstring."""
+
+    name = "franka_droid"
+    move_groups = {"arm": 7, "gripper": 1}
+    joint_names = {"arm": [f"fr3_joint{k}" for k in range(1, 8)], "gripper": ["robotiq_gripper"]}
+    default_camera_system = "FrankaDroidCameraSystem"
+    #: MolmoSpaces' FrankaRobotConfig.init_qpos (gripper open)
+    default_init_qpos = {"arm": [0.0, -0.7853, 0.0, -2.35619, 0.0, 1.57079, 0.0], "gripper": [0.0]}
+
+    def init_qpos(self, group: str, values: Sequence[float]) -> np.ndarray:
+        """MolmoSpaces' gripper ``init_qpos`` is the two driver angles (rad); one value is normalized."""
+        if group == "gripper" and len(values) == 2:
+            lo, hi = min(values), max(values)
+            if lo < -0.05 or hi > DRIVER_CLOSED + 0.05:
+                raise ValueError(f"gripper driver angles {list(values)} outside [0, {DRIVER_CLOSED}] rad")
+            return np.array([float(np.clip(np.mean(values) / DRIVER_CLOSED, 0.0, 1.0))])
+        return super().init_qpos(group, values)
+
+    def spec(self) -> mujoco.MjSpec:
+        return load_droid_spec()
+
+    def add_to(self, world: mujoco.MjSpec, base_pose: Sequence[float]) -> None:
+        pose = [float(v) for v in base_pose]
+        if len(pose) != 7:
+            raise ValueError(f"robot_base_pose needs 7 values (x, y, z, qw, qx, qy, qz), got {len(pose)}")
+        robot = load_droid_spec()
+        if robot.body("base") is not None:  # MolmoSpaces' model brings its mount body
+            world.worldbody.add_frame(pos=pose[:3], quat=pose[3:]).attach_body(robot.body("base"), NAMESPACE, "")
+        else:
+            mount = world.worldbody.add_body(name=NAMESPACE + "base", pos=pose[:3], quat=pose[3:])
+            mount.add_frame().attach_body(robot.body("fr3_link0"), NAMESPACE, "")
+
+    def bind(self, model: mujoco.MjModel) -> FrankaDroidHandle:
+        return FrankaDroidHandle(model, NAMESPACE)
+
+
+@hookimpl
+def molmo_robots() -> list[RobotType]:
+    return [FrankaDroid()]

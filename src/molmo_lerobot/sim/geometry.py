@@ -1,0 +1,171 @@
+"""Geometry the success rules and experts need, on shapely: AABBs, footprints, gaps, contact forces.
+
+Everything reads a compiled model and its data; nothing here changes the simulation.
+"visible" geoms are those in groups 0-2 (what a camera renders), as in MolmoSpaces.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import mujoco
+import numpy as np
+import shapely
+from shapely.geometry import MultiPoint, Polygon, box
+
+#: points on a circle when a round geom's footprint becomes a polygon
+CIRCLE_POINTS = 32
+VISIBLE_GROUPS = (0, 1, 2)
+
+
+def root_body(model: mujoco.MjModel, body: int) -> int:
+    """The top-level body (child of the world) that ``body`` belongs to."""
+    return int(model.body_rootid[body])
+
+
+def subtree(model: mujoco.MjModel, root: int) -> frozenset[int]:
+    """``root`` and every body below it."""
+    return frozenset(b for b in range(model.nbody) if _descends(model, b, root))
+
+
+def _descends(model: mujoco.MjModel, body: int, root: int) -> bool:
+    while body > 0:
+        if body == root:
+            return True
+        body = int(model.body_parentid[body])
+    return root == 0 and body == 0
+
+
+def body_geoms(model: mujoco.MjModel, bodies: Iterable[int], visible_only: bool = True,
+               collision_only: bool = False) -> list[int]:
+    """Geoms of ``bodies`` (visible ones: groups 0-2; collision ones: contype or conaffinity set)."""
+    bodies = set(bodies)
+    out = []
+    for g in range(model.ngeom):
+        if int(model.geom_bodyid[g]) not in bodies:
+            continue
+        if visible_only and int(model.geom_group[g]) not in VISIBLE_GROUPS:
+            continue
+        if collision_only and not (model.geom_contype[g] or model.geom_conaffinity[g]):
+            continue
+        out.append(g)
+    return out
+
+
+def geom_points(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> np.ndarray:
+    """World points (K, 3) whose convex hull bounds geom ``g`` (mesh vertices; sampled primitive surfaces)."""
+    pos, rot, size = data.geom_xpos[g], data.geom_xmat[g].reshape(3, 3), model.geom_size[g]
+    kind = model.geom_type[g]
+    if kind == mujoco.mjtGeom.mjGEOM_MESH:
+        mesh = model.geom_dataid[g]
+        start, n = model.mesh_vertadr[mesh], model.mesh_vertnum[mesh]
+        local = model.mesh_vert[start:start + n].astype(np.float64)
+    elif kind == mujoco.mjtGeom.mjGEOM_BOX:
+        local = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * size
+    else:
+        t = np.linspace(0, 2 * np.pi, CIRCLE_POINTS, endpoint=False)
+        ring = np.stack([np.cos(t), np.sin(t), np.zeros_like(t)], axis=1)
+        if kind == mujoco.mjtGeom.mjGEOM_CYLINDER:
+            local = np.concatenate([ring * size[0] + [0, 0, s * size[1]] for s in (-1, 1)])
+        elif kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
+            r = size[0]
+            rings = [np.stack([np.cos(t), np.sin(t), np.zeros_like(t)], 1), np.stack([np.cos(t), np.zeros_like(t),
+                     np.sin(t)], 1), np.stack([np.zeros_like(t), np.cos(t), np.sin(t)], 1)]
+            sphere = np.concatenate(rings) * r
+            local = np.concatenate([sphere + [0, 0, s * size[1]] for s in (-1, 1)])
+        elif kind == mujoco.mjtGeom.mjGEOM_ELLIPSOID:
+            rings = [np.stack([np.cos(t), np.sin(t), np.zeros_like(t)], 1), np.stack([np.cos(t), np.zeros_like(t),
+                     np.sin(t)], 1), np.stack([np.zeros_like(t), np.cos(t), np.sin(t)], 1)]
+            local = np.concatenate(rings) * size
+        elif kind == mujoco.mjtGeom.mjGEOM_SPHERE:
+            rings = [np.stack([np.cos(t), np.sin(t), np.zeros_like(t)], 1), np.stack([np.cos(t), np.zeros_like(t),
+                     np.sin(t)], 1), np.stack([np.zeros_like(t), np.cos(t), np.sin(t)], 1)]
+            local = np.concatenate(rings) * size[0]
+        else:  # planes, height fields: their bounding sphere
+            local = np.concatenate([ring, ring[:, [2, 0, 1]]]) * model.geom_rbound[g]
+    return pos + local @ rot.T
+
+
+def aabb(model: mujoco.MjModel, data: mujoco.MjData, geoms: Iterable[int]) -> tuple[np.ndarray, np.ndarray]:
+    """World axis-aligned box of ``geoms`` as (centre, size); ``ValueError`` when there are none."""
+    geoms = list(geoms)
+    if not geoms:
+        raise ValueError("no geoms to bound")
+    pts = np.concatenate([geom_points(model, data, g) for g in geoms])
+    lo, hi = pts.min(0), pts.max(0)
+    return (lo + hi) / 2, hi - lo
+
+
+def body_aabb(model: mujoco.MjModel, data: mujoco.MjData, body: int) -> tuple[np.ndarray, np.ndarray]:
+    """AABB (centre, size) of the visible geoms of ``body``'s subtree (MolmoSpaces' ``body_aabb``);
+    all its geoms when none is visible, its position with zero size when it has none."""
+    bodies = subtree(model, body)
+    geoms = body_geoms(model, bodies) or body_geoms(model, bodies, visible_only=False)
+    if not geoms:
+        return data.xpos[body].copy(), np.zeros(3)
+    return aabb(model, data, geoms)
+
+
+def xy_rect(centre: np.ndarray, size: np.ndarray) -> Polygon:
+    """The XY rectangle of an AABB."""
+    return box(centre[0] - size[0] / 2, centre[1] - size[1] / 2, centre[0] + size[0] / 2, centre[1] + size[1] / 2)
+
+
+def aabb_xy_gap(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> float:
+    """Surface-to-surface distance between two AABBs in the XY plane (0 when they overlap)."""
+    return float(xy_rect(*a).distance(xy_rect(*b)))
+
+
+def footprint(model: mujoco.MjModel, data: mujoco.MjData, bodies: Iterable[int]) -> Polygon:
+    """XY footprint of ``bodies``: the convex hull of their collision geoms projected on the table plane."""
+    geoms = body_geoms(model, bodies, visible_only=False, collision_only=True)
+    if not geoms:
+        raise ValueError(f"body {model.body(min(bodies)).name!r} has no collision geoms")
+    return MultiPoint(np.concatenate([geom_points(model, data, g)[:, :2] for g in geoms])).convex_hull
+
+
+def polygon(points: np.ndarray) -> Polygon:
+    """A polygon (the convex hull) from 2-D points (K, 2)."""
+    return MultiPoint(np.asarray(points, dtype=np.float64)).convex_hull
+
+
+def hull_points(shape: Polygon) -> np.ndarray:
+    """Vertices (K, 2) of a polygon's exterior (no repeated closing point)."""
+    return np.asarray(shape.exterior.coords, dtype=np.float64)[:-1]
+
+
+def gap(a: Polygon, b: Polygon) -> float:
+    """Distance between two shapes (0 when they overlap)."""
+    return float(shapely.distance(a, b))
+
+
+def net_contact_force(model: mujoco.MjModel, data: mujoco.MjData, on: frozenset[int], by: frozenset[int]) \
+        -> np.ndarray:
+    """World-frame net contact force (N, 3) that bodies ``by`` exert on bodies ``on``."""
+    gb = model.geom_bodyid
+    force = np.zeros(6)
+    net = np.zeros(3)
+    for i in range(data.ncon):
+        c = data.contact[i]
+        b1, b2 = int(gb[c.geom1]), int(gb[c.geom2])
+        if b1 in on and b2 in by:
+            sign = -1.0  # mj_contactForce gives the force on geom2 (normal from geom1 to geom2)
+        elif b2 in on and b1 in by:
+            sign = 1.0
+        else:
+            continue
+        mujoco.mj_contactForce(model, data, i, force)
+        net += sign * (c.frame.reshape(3, 3).T @ force[:3])
+    return net
+
+
+def touching_bodies(model: mujoco.MjModel, data: mujoco.MjData, bodies: frozenset[int]) -> set[int]:
+    """Bodies outside ``bodies`` in contact with any of them right now."""
+    gb = model.geom_bodyid
+    out: set[int] = set()
+    for i in range(data.ncon):
+        c = data.contact[i]
+        b1, b2 = int(gb[c.geom1]), int(gb[c.geom2])
+        if (b1 in bodies) != (b2 in bodies):
+            out.add(b2 if b1 in bodies else b1)
+    return out
