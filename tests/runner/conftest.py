@@ -15,7 +15,7 @@ misbehaves in the episodes named by ``policy.faults={episode_index: kind}``:
 
 ``policy.act_sleep_s`` slows every ``act``; every attempt appends the worker's pid to
 ``<marker_dir>/pids-<episode_index>`` at reset (so a test can ``kill -9`` it from outside);
-``policy.fail_init=true`` makes the policy constructor raise; ``policy.kill_starts=N`` makes the
+``policy.fail_init=true`` makes the policy constructor raise; ``+policy.kill_starts=N`` makes the
 first N workers that start after a ``sigkill*`` fault fired SIGKILL themselves while starting.
 
 The distribution also provides a recorder: with ``+trace_dir=D`` every finished episode writes
@@ -168,7 +168,6 @@ POLICY_YAML = textwrap.dedent("""\
     marker_dir: null
     act_sleep_s: 0.0
     fail_init: false
-    kill_starts: 0
 """)
 
 

@@ -104,7 +104,7 @@ def test_replacement_worker_killed_while_starting_is_a_worker_death(retries, fau
     episode is an error, with two it completes; the run goes on either way."""
     markers = faulty_policy.marker_dir
     cfg = eval_config(small_bench, tmp_path / "run", "policy=faulty", "workers=2", "horizon=3",
-                      f"episode_retries={retries}", "+policy.faults={1: sigkill_once}", "policy.kill_starts=1",
+                      f"episode_retries={retries}", "+policy.faults={1: sigkill_once}", "+policy.kill_starts=1",
                       f"policy.marker_dir={markers}")
     res = run_evaluation(cfg)
     by = {r.episode_index: r for r in res.episodes}
