@@ -1,39 +1,180 @@
-"""Spine timings, measured in one run (``make perf`` or ``pytest -m perf -s tests/perf``).
+"""Fair harness timings, measured in one run: ``pytest -m perf -s tests/perf/test_harness_overhead.py``.
 
-* harness / raw: ``run_evaluation`` with one worker process versus a bare in-process loop
-  over the same episodes that does the same physics steps, renders and policy calls with
-  plain ``mujoco`` calls (no plugins lookups, validation, recorders, result files,
-  worker supervision). Target <= 1.05.
-* workers=2 / workers=1 throughput on the same episodes. Target >= 1.8 on 2 cores.
+Both sides run in fresh processes and do the same work on the same episodes of ``pick_v1``:
+the same scene build (``build_env``), the same ``reset``/``observe``/``step`` calls with the same
+renders (the policy consumes both 224² camera images at every call, so rendering is part of
+both), the same policy calls, the same seeds and horizons. The raw side is a bare loop in one
+process; the harness side is ``molmo-eval`` (plugins, validation, worker processes, supervision,
+result files). Per-episode outcomes are asserted identical.
 
-Figures are printed (and appended to ``runs/perf.jsonl``); nothing is asserted about speed.
+Each side is timed for ``M`` and ``N`` episodes: per-episode cost = (T_N - T_M) / (N - M), fixed
+cost (interpreter start, imports, plugin and policy loading, worker start-up, result files) =
+T_M - M x per-episode. Each episode's own time (scene build to last step: the raw loop's clock,
+the worker's ``duration_s``) is reported too, and the same split on CPU seconds (each process
+and every descendant it reaped: workers included), both far less noisy than walls on a shared
+machine. The configurations run interleaved, ``REPS`` times; the best of each is kept. The same
+is done for ``molmo-eval`` with 2 workers (throughput workers=2 / workers=1).
+
+Figures are printed and appended to ``runs/perf.jsonl``; nothing is asserted about speed.
+Knobs: ``MOLMO_PERF_EPISODES`` (N, default 6; M = N / 3), ``MOLMO_PERF_HORIZON`` (policy steps,
+default 40), ``MOLMO_PERF_CHUNK`` (actions per policy call, default 4), ``MOLMO_PERF_REPS`` (3).
 """
 
 from __future__ import annotations
 
 import json
 import os
+import resource
+import subprocess
+import sys
+import textwrap
 import time
 from pathlib import Path
 
-import mujoco
-import numpy as np
 import pytest
 
-from molmo_lerobot.benchmark.load import load_benchmark
-from molmo_lerobot.config import compose
-from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import get_plugins
-from molmo_lerobot.policies.base import EpisodeContext
-from molmo_lerobot.runner.evaluate import episode_seed, run_evaluation
-from molmo_lerobot.runner.policy import make_policy
-from molmo_lerobot.runner.rollout import resolve_horizon
-from molmo_lerobot.runner.episode_env import build_env
-from molmo_lerobot.sim.env import Timing
-
 pytestmark = pytest.mark.perf
-N_EPISODES = int(os.environ.get("MOLMO_PERF_EPISODES", "20"))
-POLICY = os.environ.get("MOLMO_PERF_POLICY", "scripted")
+N = max(2, int(os.environ.get("MOLMO_PERF_EPISODES", "6")))
+M = max(1, N // 3)
+HORIZON = int(os.environ.get("MOLMO_PERF_HORIZON", "40"))
+CHUNK = int(os.environ.get("MOLMO_PERF_CHUNK", "4"))
+REPS = int(os.environ.get("MOLMO_PERF_REPS", "3"))
+BENCHMARK = "pick_v1"
+
+#: A policy plugin that consumes images: the scripted expert, reading every pixel of both cameras.
+PLUGIN = textwrap.dedent('''
+    """Perf-only policy: the scripted expert that reads both camera images at every call."""
+
+    from pathlib import Path
+
+    from molmo_lerobot import hookimpl
+    from molmo_lerobot.policies.base import PolicyType
+    from molmo_lerobot.policies.scripted import ScriptedExpert
+
+
+    class ImageScripted(ScriptedExpert):
+        needs_images = True
+
+        def act(self, obs):
+            images = obs["images"]
+            if len(images) != 2 or any(im.shape != (224, 224, 3) for im in images.values()):
+                raise ValueError(f"expected two 224x224 cameras, got {[im.shape for im in images.values()]}")
+            self.checksum = sum(int(im.sum(dtype="uint64")) for im in images.values())
+            return super().act(obs)
+
+
+    @hookimpl
+    def molmo_policies():
+        return [PolicyType("image_scripted", ImageScripted, "scripted expert that reads both images (perf)")]
+
+
+    @hookimpl
+    def molmo_config_dirs():
+        return [str(Path(__file__).parent / "conf")]
+''')
+
+#: The raw loop, run as ``python -c RAW '{"n": …}'``: prints one JSON line of outcomes.
+RAW = textwrap.dedent('''
+    import json, sys, time
+    from collections import deque
+
+    import numpy as np
+
+    from molmo_lerobot.benchmark.load import load_benchmark
+    from molmo_lerobot.paths import data_path
+    from molmo_lerobot.plugins import get_plugins
+    from molmo_lerobot.policies.base import EpisodeContext
+    from molmo_lerobot.runner.evaluate import episode_seed
+    from molmo_lerobot.runner.episode_env import build_env
+    from molmo_lerobot.sim.env import Timing
+    from molmo_perf_policies import ImageScripted
+
+    args = json.loads(sys.argv[1])
+    plugins = get_plugins()
+    bench = load_benchmark(data_path("benchmarks") / args["benchmark"])
+    timing = Timing()
+    policy = ImageScripted({"name": "image_scripted", "chunk": args["chunk"]})
+    out = []
+    for i in range(args["n"]):
+        t0 = time.perf_counter()
+        spec = bench.episodes[i]
+        seed = episode_seed(0, spec.model_dump(mode="json"))
+        task_type = plugins.task_type(spec.task_name)
+        env = build_env(spec, timing, plugins)
+        env.reset(seed)
+        task = task_type.create(spec, env)
+        prompt = spec.language.task_description if spec.language else ""
+        policy.reset(EpisodeContext(spec=spec, episode_index=i, seed=seed, prompt=prompt,
+                                    move_groups=dict(env.move_groups), policy_dt_s=timing.policy_dt_ms / 1000.0,
+                                    env=env))
+        task.setup()
+        obs = env.observe(images=True)
+        obs["prompt"], obs["step"] = prompt, 0
+        queue = deque()
+        success = success_once = False
+        for step in range(args["horizon"]):
+            if not queue:
+                chunk = {g: np.atleast_2d(np.asarray(a, dtype=np.float64)) for g, a in policy.act(obs).items()}
+                queue.extend({g: a[t] for g, a in chunk.items()} for t in range(len(next(iter(chunk.values())))))
+            env.step(queue.popleft())
+            success = bool(task.success())
+            success_once |= success
+            if step < args["horizon"] - 1:
+                obs = env.observe(images=not queue)
+                obs["prompt"], obs["step"] = prompt, step + 1
+        env.close()
+        out.append({"episode_index": i, "success": success, "success_once": success_once, "steps": args["horizon"],
+                    "duration_s": time.perf_counter() - t0})
+    print(json.dumps(out))
+''')
+
+
+@pytest.fixture(scope="module")
+def perf_env(tmp_path_factory) -> dict[str, str]:
+    """Environment with the ``molmo_perf_policies`` distribution on ``PYTHONPATH``."""
+    root = tmp_path_factory.mktemp("site")
+    pkg = root / "molmo_perf_policies"
+    (pkg / "conf" / "policy").mkdir(parents=True)
+    (pkg / "__init__.py").write_text(PLUGIN)
+    (pkg / "conf" / "policy" / "image_scripted.yaml").write_text(f"name: image_scripted\nchunk: {CHUNK}\n")
+    info = root / "molmo_perf_policies-0.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: molmo-perf-policies\nVersion: 0.0\n")
+    (info / "entry_points.txt").write_text("[molmo_lerobot]\nmolmo_perf_policies = molmo_perf_policies\n")
+    path = os.pathsep.join(p for p in (str(root), os.environ.get("PYTHONPATH")) if p)
+    return dict(os.environ, PYTHONPATH=path, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+
+
+def _timed(cmd: list[str], env: dict[str, str]) -> tuple[float, float, str]:
+    """Wall seconds and CPU seconds (the process and every descendant it reaped) of ``cmd``."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), out.stdout
+
+
+def _raw(n: int, env: dict[str, str]) -> tuple[float, float, list[dict]]:
+    args = json.dumps({"n": n, "horizon": HORIZON, "chunk": CHUNK, "benchmark": BENCHMARK})
+    wall, cpu, stdout = _timed([sys.executable, "-c", RAW, args], env)
+    return wall, cpu, json.loads(stdout.strip().splitlines()[-1])
+
+
+def _harness(n: int, workers: int, out_dir: Path, env: dict[str, str]) -> tuple[float, float, list[dict]]:
+    args = [f"benchmark={BENCHMARK}", "policy=image_scripted", f"limit={n}", f"horizon={HORIZON}",
+            f"workers={workers}", f"output_dir={out_dir}", "progress=false"]
+    wall, cpu, _ = _timed([sys.executable, "-m", "molmo_lerobot.cli.eval", *args], env)
+    rows = [json.loads(line) for line in (out_dir / "episodes.jsonl").read_text().splitlines()]
+    assert all(r["error"] is None for r in rows), [r["error"] for r in rows]
+    return wall, cpu, rows
+
+
+def _split(t_m: float, t_n: float) -> tuple[float, float]:
+    """(per-episode, fixed) seconds from the walls of M and N episodes."""
+    per = (t_n - t_m) / (N - M)
+    return per, t_m - M * per
 
 
 def _report(name: str, figures: dict) -> None:
@@ -44,81 +185,49 @@ def _report(name: str, figures: dict) -> None:
         f.write(line + "\n")
 
 
-def raw_loop(n: int, policy_name: str) -> tuple[float, int, int, int]:
-    """The same episodes as the harness, driven with bare mujoco calls in this process."""
-    plugins = get_plugins()
-    bench = load_benchmark(data_path("benchmarks") / "pick_v1")
-    timing = Timing()
-    policy = make_policy({"name": policy_name})
-    steps = renders = calls = 0
-    t0 = time.perf_counter()
-    for i in range(n):
-        spec = bench.episodes[i]
-        seed = episode_seed(0, spec.model_dump(mode="json"))
-        task_type = plugins.task_type(spec.task_name)
-        horizon = resolve_horizon(None, spec.task, task_type.default_horizon_sec, timing.policy_dt_ms)
-        env = build_env(spec, timing, plugins)
-        env.reset(seed)
-        task = task_type.create(spec, env)
-        m, d = env.model, env.data
-        renderer = mujoco.Renderer(m, height=spec.img_resolution[1], width=spec.img_resolution[0]) \
-            if policy.needs_images else None
-        policy.reset(EpisodeContext(spec=spec, episode_index=i, seed=seed, prompt=spec.language.task_description,
-                                    move_groups=env.move_groups, policy_dt_s=timing.policy_dt_s, env=env))
-        task.setup()
-        queue: list[dict] = []
-        for _ in range(horizon):
-            if not queue:
-                obs = env.observe(images=False)
-                if policy.needs_images:
-                    obs["images"] = {}
-                    for cam in env.camera_names:
-                        renderer.update_scene(d, camera=cam)
-                        obs["images"][cam] = renderer.render()
-                        renders += 1
-                obs["prompt"] = spec.language.task_description
-                out = policy.act(obs)
-                calls += 1
-                arm, grip = np.atleast_2d(out["arm"]), np.atleast_2d(out["gripper"])
-                queue = [{"arm": arm[t], "gripper": grip[t]} for t in range(len(arm))]
-            action = queue.pop(0)
-            start = d.ctrl.copy()
-            for g, goal in action.items():
-                env.robot.command(d, g, goal)
-            delta = d.ctrl - start
-            for k in range(1, timing.ctrl_ticks + 1):
-                d.ctrl[:] = start + delta * (k / timing.ctrl_ticks)
-                mujoco.mj_step(m, d, nstep=timing.substeps)
-            task.success()
-            steps += 1
-        if renderer is not None:
-            renderer.close()
-    return time.perf_counter() - t0, steps, renders, calls
-
-
-def harness(n: int, workers: int, policy_name: str, out: Path) -> float:
-    cfg = compose([f"policy={policy_name}", f"workers={workers}", f"limit={n}", f"output_dir={out}", "progress=false"])
-    t0 = time.perf_counter()
-    res = run_evaluation(cfg)
-    elapsed = time.perf_counter() - t0
-    assert res.summary["n_episodes"] == n and res.summary["n_errors"] == 0
-    return elapsed
-
-
-def test_harness_vs_raw_loop(tmp_path):
-    raw_s, steps, renders, calls = raw_loop(N_EPISODES, POLICY)
-    harness_s = harness(N_EPISODES, 1, POLICY, tmp_path / "w1")
-    _report("harness_vs_raw", {"policy": POLICY, "episodes": N_EPISODES, "raw_s": round(raw_s, 2),
-                               "harness_s": round(harness_s, 2), "ratio": round(harness_s / raw_s, 3),
-                               "steps": steps, "renders": renders, "policy_calls": calls})
-
-
-def test_workers_scaling(tmp_path):
-    one = harness(N_EPISODES, 1, POLICY, tmp_path / "w1")
-    two = harness(N_EPISODES, 2, POLICY, tmp_path / "w2")
-    a = [json.loads(x) for x in (tmp_path / "w1" / "episodes.jsonl").read_text().splitlines()]
-    b = [json.loads(x) for x in (tmp_path / "w2" / "episodes.jsonl").read_text().splitlines()]
-    assert [(r["episode_index"], r["success"], r["success_once"]) for r in a] == \
-        [(r["episode_index"], r["success"], r["success_once"]) for r in b]
-    _report("workers_scaling", {"policy": POLICY, "episodes": N_EPISODES, "workers1_s": round(one, 2),
-                                "workers2_s": round(two, 2), "throughput_ratio": round(one / two, 3)})
+def test_harness_vs_raw_loop_and_workers_scaling(perf_env, tmp_path):
+    runs = {"raw": lambda n, k: _raw(n, perf_env),
+            "harness_w1": lambda n, k: _harness(n, 1, tmp_path / f"w1-{n}-{k}", perf_env),
+            "harness_w2": lambda n, k: _harness(n, 2, tmp_path / f"w2-{n}-{k}", perf_env)}
+    keys = ("episode_index", "success", "success_once", "steps")
+    walls: dict[tuple[str, int], list[float]] = {}
+    cpus: dict[tuple[str, int], list[float]] = {}
+    outcomes: dict[tuple[str, int], list[dict]] = {}
+    episode_s: dict[tuple[str, int], float] = {}  # best time of each episode inside its process
+    for k in range(REPS):  # interleaved: every configuration once per round
+        for n in (M, N):
+            for name, run in runs.items():
+                wall, cpu, rows = run(n, k)
+                walls.setdefault((name, n), []).append(wall)
+                cpus.setdefault((name, n), []).append(cpu)
+                seen = [{key: r[key] for key in keys} for r in rows]
+                assert outcomes.setdefault((name, n), seen) == seen, f"{name} is not deterministic"
+                for r in rows:
+                    episode_s[(name, r["episode_index"])] = min(episode_s.get((name, r["episode_index"]), 1e9),
+                                                                r["duration_s"])
+    for name in runs:
+        assert outcomes[(name, N)] == outcomes[("raw", N)], f"{name} and the raw loop disagree on outcomes"
+    best = {key: min(v) for key, v in walls.items()}
+    best_cpu = {key: min(v) for key, v in cpus.items()}
+    cpu_split = {name: _split(best_cpu[(name, M)], best_cpu[(name, N)]) for name in runs}
+    inner = {name: sum(episode_s[(name, i)] for i in range(N)) / N for name in runs}
+    split = {name: _split(best[(name, M)], best[(name, N)]) for name in runs}
+    (raw_ep, raw_fixed), (h1_ep, h1_fixed), (h2_ep, h2_fixed) = split["raw"], split["harness_w1"], split["harness_w2"]
+    _report("harness_vs_raw", {
+        "episodes": [M, N], "horizon": HORIZON, "chunk": CHUNK, "reps": REPS, "cameras": "2 x 224x224",
+        "successes": sum(r["success"] for r in outcomes[("raw", N)]),
+        "raw_per_episode_s": round(raw_ep, 3), "harness_per_episode_s": round(h1_ep, 3),
+        "per_episode_ratio": round(h1_ep / raw_ep, 3),
+        "raw_episode_inside_s": round(inner["raw"], 3), "harness_episode_inside_s": round(inner["harness_w1"], 3),
+        "inside_ratio": round(inner["harness_w1"] / inner["raw"], 3),
+        "raw_fixed_s": round(raw_fixed, 2), "harness_fixed_s": round(h1_fixed, 2),
+        "workers2_per_episode_s": round(h2_ep, 3), "workers2_fixed_s": round(h2_fixed, 2),
+        "throughput_workers2_over_workers1": round(h1_ep / h2_ep, 3),
+        "cpu_raw_per_episode_s": round(cpu_split["raw"][0], 3),
+        "cpu_harness_per_episode_s": round(cpu_split["harness_w1"][0], 3),
+        "cpu_per_episode_ratio": round(cpu_split["harness_w1"][0] / cpu_split["raw"][0], 3),
+        "cpu_raw_fixed_s": round(cpu_split["raw"][1], 2), "cpu_harness_fixed_s": round(cpu_split["harness_w1"][1], 2),
+        "best_walls_s": {f"{name}@{n}": round(w, 2) for (name, n), w in sorted(best.items())},
+        "best_cpu_s": {f"{name}@{n}": round(c, 2) for (name, n), c in sorted(best_cpu.items())},
+        "cpus": os.cpu_count(),
+    })

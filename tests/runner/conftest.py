@@ -8,17 +8,24 @@ misbehaves in the episodes named by ``policy.faults={episode_index: kind}``:
 
 * ``sigkill`` — the worker SIGKILLs itself at the first ``act`` of that episode, every attempt;
 * ``sigkill_once`` — the same, on the first attempt only (a marker file in ``policy.marker_dir``);
-* ``hang`` — ``act`` never returns;
+* ``hang`` — ``act`` never returns; ``hang_once`` — the same, on the first attempt only;
 * ``raise`` — ``act`` raises ``RuntimeError``;
+* ``keyboard_interrupt`` / ``system_exit`` — ``act`` raises ``KeyboardInterrupt`` / calls ``sys.exit(7)``;
 * ``nan`` / ``wrong_shape`` — ``act`` returns a non-finite / wrongly shaped arm action.
 
 ``policy.act_sleep_s`` slows every ``act``; every attempt appends the worker's pid to
 ``<marker_dir>/pids-<episode_index>`` at reset (so a test can ``kill -9`` it from outside);
-``policy.fail_init=true`` makes the policy constructor raise.
+``policy.fail_init=true`` makes the policy constructor raise; ``+policy.kill_starts=N`` makes the
+first N workers that start after a ``sigkill*`` fault fired SIGKILL themselves while starting.
+
+The distribution also provides a recorder: with ``+trace_dir=D`` every finished episode writes
+``D/trace-<episode_index>``, a SHA-256 of every action and joint position of the episode;
+``+trace_fail_finalize=true`` makes its run-level ``finalize`` (the export step) raise.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import sys
@@ -33,8 +40,10 @@ from molmo_lerobot.plugins import get_plugins
 MODULE = textwrap.dedent('''
     """Test-only policies that misbehave on purpose (see tests/runner/conftest.py)."""
 
+    import hashlib
     import os
     import signal
+    import sys
     import time
     from pathlib import Path
 
@@ -42,6 +51,7 @@ MODULE = textwrap.dedent('''
 
     from molmo_lerobot import hookimpl
     from molmo_lerobot.policies.base import Policy, PolicyType
+    from molmo_lerobot.runner.recorders import Recorder, RecorderFactory
 
 
     class FaultyPolicy(Policy):
@@ -54,6 +64,13 @@ MODULE = textwrap.dedent('''
             self.marker_dir = Path(cfg.get("marker_dir") or ".")
             self.act_sleep_s = float(cfg.get("act_sleep_s") or 0.0)
             self.episode = -1
+            kill_starts = int(cfg.get("kill_starts") or 0)
+            if kill_starts and any(self.marker_dir.glob("crashed-*")):
+                counter = self.marker_dir / "start-kills"
+                if len(counter.read_text() if counter.exists() else "") < kill_starts:
+                    with open(counter, "a") as f:
+                        f.write("x")
+                    os.kill(os.getpid(), signal.SIGKILL)
 
         def reset(self, ctx):
             self.episode = ctx.episode_index
@@ -66,11 +83,17 @@ MODULE = textwrap.dedent('''
             if kind == "sigkill" or (kind == "sigkill_once" and not marker.exists()):
                 marker.touch()
                 os.kill(os.getpid(), signal.SIGKILL)
-            if kind == "hang":
+            hung = self.marker_dir / f"hung-{self.episode}"
+            if kind == "hang" or (kind == "hang_once" and not hung.exists()):
+                hung.touch()
                 while True:
                     time.sleep(60)
             if kind == "raise":
                 raise RuntimeError(f"faulty policy: raising in episode {self.episode}")
+            if kind == "keyboard_interrupt":
+                raise KeyboardInterrupt
+            if kind == "system_exit":
+                sys.exit(7)
             if self.act_sleep_s:
                 time.sleep(self.act_sleep_s)
             action = {g: (np.zeros(len(q)) if g == "gripper" else np.array(q, dtype=float))
@@ -94,6 +117,48 @@ MODULE = textwrap.dedent('''
     @hookimpl
     def molmo_config_dirs():
         return [str(Path(__file__).parent / "conf")]
+
+
+    class TraceFactory(RecorderFactory):
+        def __init__(self, out, fail_finalize=False):
+            self.out, self.fail_finalize = Path(out), fail_finalize
+
+        def make(self, worker_id, output_dir):
+            return TraceRecorder(self.out)
+
+        def finalize(self, output_dir, results, summary):
+            if self.fail_finalize:
+                raise OSError("trace export: disk full (trace_fail_finalize=true)")
+
+
+    class TraceRecorder(Recorder):
+        """SHA-256 of every action and joint position of an episode, written when it ends."""
+
+        wants_images = False
+
+        def __init__(self, out):
+            self.out, self.digest = out, None
+
+        def start_episode(self, info):
+            self.digest = hashlib.sha256()
+
+        def record_step(self, obs, action, reward, success, done):
+            for part in (action, obs["qpos"]):
+                for key in sorted(part):
+                    self.digest.update(np.asarray(part[key], dtype=np.float64).tobytes())
+
+        def end_episode(self, result):
+            if self.digest is not None and result.error is None:
+                self.out.mkdir(parents=True, exist_ok=True)
+                (self.out / f"trace-{result.episode_index}").write_text(self.digest.hexdigest())
+            self.digest = None
+
+
+    @hookimpl
+    def molmo_recorders(config):
+        if not config.get("trace_dir"):
+            return []
+        return [TraceFactory(config["trace_dir"], bool(config.get("trace_fail_finalize")))]
 ''')
 
 POLICY_YAML = textwrap.dedent("""\
@@ -168,3 +233,97 @@ def eval_config():
 def outcomes():
     """``outcomes(run_dir)``: the per-episode outcome fields of a run, sorted by episode."""
     return _outcomes
+
+
+def _traces(trace_dir: Path) -> dict[int, str]:
+    return {int(p.name.split("-")[1]): p.read_text() for p in sorted(trace_dir.glob("trace-*"))}
+
+
+@pytest.fixture
+def traces():
+    """``traces(trace_dir)``: ``{episode_index: sha256 of its actions and joint positions}``."""
+    return _traces
+
+
+SUBREAPER = textwrap.dedent(r'''
+    """Run molmo-eval as a child of this process, made a child subreaper (Linux): whatever
+    molmo-eval leaves behind (orphaned workers, unreaped helpers) becomes our child. Optionally
+    send it a signal once files reach a number of lines. Prints one JSON line."""
+
+    import ctypes, json, os, signal, subprocess, sys, time
+    from pathlib import Path
+
+    plan = json.loads(sys.argv[1])
+    ctypes.CDLL(None).prctl(36, 1, 0, 0, 0)  # PR_SET_CHILD_SUBREAPER
+
+    def children():
+        out = []
+        for task in Path(f"/proc/{os.getpid()}/task").iterdir():
+            out += [int(p) for p in (task / "children").read_text().split()]
+        return out
+
+    def state(pid):
+        try:
+            stat = Path(f"/proc/{pid}/stat").read_text()
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()[:120]
+        except OSError:
+            return "gone", ""
+        return stat.rsplit(")", 1)[1].split()[0], cmd
+
+    # output to files, not pipes: a worker left running would hold a pipe open forever
+    logs = {name: open(plan["log_prefix"] + name, "w+") for name in ("stdout", "stderr")}
+    proc = subprocess.Popen([sys.executable, "-m", "molmo_lerobot.cli.eval", *plan["args"]], **logs)
+    signalled = None
+    if plan.get("signal"):
+        def ready():
+            return all(Path(p).exists() and len(Path(p).read_text().splitlines()) >= n for p, n in plan["when"])
+        deadline = time.monotonic() + plan.get("when_timeout_s", 180)
+        while proc.poll() is None and not ready() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        if proc.poll() is None:
+            os.kill(proc.pid, plan["signal"])
+            signalled = time.monotonic()
+    try:
+        proc.wait(timeout=plan.get("timeout_s", 300))
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    exited = time.monotonic()
+    stdout, stderr = (Path(f.name).read_text() for f in logs.values())
+    # orphans still running after a grace period (a stopped worker may take a moment to end)
+    deadline = time.monotonic() + plan.get("orphan_grace_s", 0.0)
+    while time.monotonic() < deadline and any(state(p)[0] not in ("Z", "gone") for p in children()):
+        time.sleep(0.1)
+    left = {str(p): state(p) for p in children()}
+    for pid in left:
+        try:
+            os.kill(int(pid), signal.SIGKILL)
+            os.waitpid(int(pid), 0)
+        except (ProcessLookupError, ChildProcessError):
+            pass
+    print(json.dumps({"rc": proc.returncode, "stdout": stdout, "stderr": stderr, "left": left,
+                      "exit_after_signal_s": None if signalled is None else exited - signalled}))
+''')
+
+
+def _run_cli(log_dir: Path, *args: str, signal: int | None = None, when: list[tuple[Path, int]] = (),
+             orphan_grace_s: float = 0.0, timeout_s: float = 200) -> dict:
+    """Run ``molmo-eval *args`` under a child subreaper; see ``SUBREAPER``. Returns its report:
+    ``rc``, ``stdout``, ``stderr``, ``left`` (pid → (state, cmdline) of every process it left
+    behind, zombies included) and ``exit_after_signal_s``."""
+    import subprocess
+
+    plan = {"args": list(args), "signal": signal, "when": [(str(p), n) for p, n in when],
+            "orphan_grace_s": orphan_grace_s, "timeout_s": timeout_s,
+            "log_prefix": str(log_dir / "molmo-eval.")}
+    env = dict(os.environ, MUJOCO_GL="egl")
+    out = subprocess.run([sys.executable, "-c", SUBREAPER, json.dumps(plan)], capture_output=True, text=True,
+                         env=env, timeout=timeout_s + 60)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture
+def run_cli(tmp_path):
+    """``run_cli(*args, signal=…, when=[(file, lines)], orphan_grace_s=…)``: molmo-eval under a subreaper."""
+    return functools.partial(_run_cli, tmp_path)

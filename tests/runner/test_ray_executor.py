@@ -15,8 +15,8 @@ def test_executor_ray_config_reaches_the_executor():
                                           "executor.num_gpus_per_worker=0.5"]))
     ex = _make_executor(cfg)
     assert isinstance(ex, RayExecutor)
-    assert (ex.workers, ex.address, ex.include_dashboard) == (3, None, False)
-    assert (ex.timeout_s, ex.retries, ex.num_gpus_per_worker) == (12.0, 1, 0.5)
+    assert (ex.workers, ex.transport.address, ex.transport.include_dashboard) == (3, None, False)
+    assert (ex.timeout_s, ex.retries, ex.transport.num_gpus_per_worker) == (12.0, 1, 0.5)
     bad = dict(cfg, executor={"name": "ray", "adress": "auto"})
     with pytest.raises(RunError, match="executor=ray: bad option"):
         _make_executor(bad)
@@ -50,7 +50,7 @@ def test_local_and_ray_give_identical_outcomes_on_8_episodes(small_bench, tmp_pa
 def test_ray_policy_that_cannot_start_fails_the_run_clearly(faulty_policy, small_bench, tmp_path, eval_config):
     import ray
 
-    from molmo_lerobot.runner.local import WorkerStartError
+    from molmo_lerobot.runner.supervisor import WorkerStartError
 
     cfg = eval_config(small_bench, tmp_path / "run", "policy=faulty", "executor=ray", "workers=1", "horizon=2",
                       "policy.fail_init=true")
@@ -64,7 +64,7 @@ def test_joining_a_missing_cluster_is_a_clear_start_error(faulty_policy, small_b
                                                           monkeypatch):
     import ray
 
-    from molmo_lerobot.runner.local import WorkerStartError
+    from molmo_lerobot.runner.supervisor import WorkerStartError
 
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
     cfg = eval_config(small_bench, tmp_path / "run", "policy=faulty", "executor=ray", "executor.address=auto",
@@ -72,3 +72,20 @@ def test_joining_a_missing_cluster_is_a_clear_start_error(faulty_policy, small_b
     with pytest.raises(WorkerStartError, match="could not join the Ray cluster at 'auto'"):
         run_evaluation(cfg)
     assert not ray.is_initialized()
+
+
+@pytest.mark.slow
+def test_local_and_ray_random_policy_trajectories_are_identical(faulty_policy, small_bench, tmp_path, eval_config,
+                                                                outcomes, traces):
+    """The random policy's draws come from each episode's seed: local processes and Ray actors give the
+    same outcomes and the same trajectories (a hash of every action and joint position) on 8 episodes."""
+    runs = {}
+    for executor in ("local", "ray"):
+        runs[executor] = run_evaluation(eval_config(
+            small_bench, tmp_path / executor, "policy=random", "workers=2", "horizon=20", f"executor={executor}",
+            f"+trace_dir={tmp_path / f'traces-{executor}'}"))
+    assert outcomes(tmp_path / "ray") == outcomes(tmp_path / "local")
+    local_traces, ray_traces = traces(tmp_path / "traces-local"), traces(tmp_path / "traces-ray")
+    assert sorted(local_traces) == list(range(8)) and ray_traces == local_traces
+    assert len(set(local_traces.values())) == 8, "every episode's seed gives its own trajectory"
+    assert all(r.error is None for r in runs["ray"].episodes)

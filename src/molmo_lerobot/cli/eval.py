@@ -16,6 +16,13 @@ _CFG_TYPES = ("job", "hydra", "all")
 
 
 def main(argv: list[str] | None = None) -> int:
+    from molmo_lerobot.runner.supervisor import reaping_children
+
+    with reaping_children():  # exit only after every child process is reaped
+        return _main(argv)
+
+
+def _main(argv: list[str] | None = None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
     for i, a in enumerate(args):  # `--cfg` alone (our older form) means Hydra's `--cfg job`
         if a in ("--cfg", "-c") and (i + 1 == len(args) or args[i + 1] not in _CFG_TYPES):
@@ -31,6 +38,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from molmo_lerobot.config import config_message, primary_config_dir
     from molmo_lerobot.plugins import PluginError
+    from molmo_lerobot.runner.supervisor import RunInterrupted
 
     parser = get_args_parser()
     parser.prog = "molmo-eval"
@@ -61,6 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     except (HydraException, OmegaConfBaseException, PluginError) as exc:
         print(f"molmo-eval: error: {config_message(exc)}", file=sys.stderr)
         return 2
+    except RunInterrupted as exc:  # stops a sweep too
+        print(f"molmo-eval: {exc}", file=sys.stderr)
+        return 128 + exc.signum
     except KeyboardInterrupt:
         print("molmo-eval: interrupted; finished episodes are kept in episodes.jsonl "
               "(rerun with resume=true to continue)", file=sys.stderr)
@@ -77,9 +88,9 @@ def _job(cfg: Any, *, sweep: bool) -> int:
     from molmo_lerobot.config import ConfigError
     from molmo_lerobot.plugins import PluginError
     from molmo_lerobot.runner.evaluate import RunError, run_evaluation
-    from molmo_lerobot.runner.local import WorkerStartError
     from molmo_lerobot.runner.results import summary_lines
     from molmo_lerobot.runner.run_config import RunConfigError
+    from molmo_lerobot.runner.supervisor import WorkerStartError
 
     expected: tuple[type[BaseException], ...] = (ConfigError, PluginError, RunError, WorkerStartError,
                                                  RunConfigError)

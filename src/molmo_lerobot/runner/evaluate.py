@@ -23,6 +23,7 @@ import sys
 import time
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from functools import partial
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -42,6 +43,7 @@ from molmo_lerobot.runner.progress import Progress
 from molmo_lerobot.runner.results import EpisodeResult, summarize
 from molmo_lerobot.runner.rollout import horizon_with_source
 from molmo_lerobot.runner.run_config import check_run_config, episode_work_problem
+from molmo_lerobot.runner.supervisor import RunInterrupted
 from molmo_lerobot.runner.worker import WorkerJob, WorkItem
 
 RUN_FILE = "run.json"
@@ -51,6 +53,10 @@ RESULTS_FILE = "results.json"
 
 class RunError(RuntimeError):
     """The run cannot start or continue; the message says why and what to do."""
+
+
+class ExportError(RunError):
+    """The run is scored (``results.json`` written) but an export step after it failed."""
 
 
 @dataclass
@@ -208,7 +214,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         entry = thresholds.setdefault(task_type.name, {**task_type.thresholds(spec), "horizon_steps": []})
         if horizon not in entry["horizon_steps"]:
             entry["horizon_steps"].append(horizon)
-        items.append(WorkItem(i, raw, seed))
+        items.append(WorkItem(i, raw, seed, task_type.name, horizon))
     if too_long:
         more = f" (and {len(too_long) - 1} more episodes)" if len(too_long) > 1 else ""
         raise RunError(too_long[0][1] + more)
@@ -259,16 +265,19 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
             if todo:
                 try:  # policy.serve=true: one local policy server for the run, the workers its clients
                     with served_policy(cfg["policy"], int(cfg["workers"]), out) as worker_policy:
-                        job = WorkerJob(policy=worker_policy, timing=cfg["timing"], horizon=cfg.get("horizon"),
-                                        output_dir=str(out), benchmark_name=bench.name,
-                                        benchmark_sha256=bench.sha256, recorders=recorders + progress.factories(),
-                                        horizons=horizons, prefer=plugins.prefer,
+                        job = WorkerJob(policy=worker_policy, timing=cfg["timing"], output_dir=str(out),
+                                        benchmark_name=bench.name, benchmark_sha256=bench.sha256,
+                                        recorders=recorders + progress.factories(), prefer=plugins.prefer,
                                         molmospaces=run_info["eval_options"]["molmospaces"],
                                         camera_system=(cfg.get("camera") or {}).get("system"),
                                         end_on_success=bool(cfg.get("end_on_success", False)))
                         executor.run(job, todo, record)
                 except ServeError as exc:
                     raise RunError(str(exc)) from None
+                except RunInterrupted as exc:
+                    raise RunInterrupted(exc.signum, f"{exc}: {len(results)} of {len(indices)} episodes finished "
+                                         f"and kept in {episodes_path}; to continue, rerun with output_dir={out} "
+                                         "resume=true") from None
     finally:
         log.close()
     ordered = [results[i] for i in sorted(results)]
@@ -280,15 +289,27 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         executor=(cfg.get("executor") or {}).get("name", "local"), output_dir=str(out),
         started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=cfg,
     )
+    scored = json.dumps(summary, indent=2) + "\n"
     try:
         atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered))
-        for factory in recorders:
-            factory.finalize(out, ordered, summary)
-        atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
-        write_report(out, summary, ordered)
+        atomic_write(out / RESULTS_FILE, scored)  # the score, before any export
     except OSError as exc:
         raise _write_error(out, "the run's outputs", exc) from None
-    log_run(out, summary, ordered)
+    failed = []
+    for name, step in [*((f"export {type(f).__name__}", partial(f.finalize, out, ordered, summary)) for f in recorders),
+                       ("report", partial(write_report, out, summary, ordered)),
+                       ("W&B log", partial(log_run, out, summary, ordered))]:
+        try:
+            step()
+        except Exception as exc:
+            failed.append(f"{name}: {type(exc).__name__}: {exc}".splitlines()[0])
+    if failed:
+        summary["export_errors"] = failed
+    if json.dumps(summary, indent=2) + "\n" != scored:  # what the export did (push status, failures); same score
+        atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
+    if failed:
+        raise ExportError(f"export failed after the run was scored ({'; '.join(failed)}); the score stands: "
+                          f"{summary['n_success']}/{summary['n_episodes']} successes in {out / RESULTS_FILE}")
     return EvalResults(summary=summary, episodes=ordered, output_dir=out)
 
 

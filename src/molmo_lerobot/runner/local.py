@@ -1,13 +1,9 @@
-"""Local executor: supervised worker processes, one episode per work item.
+"""Process transport: each worker is a local process (spawn or forkserver) with its own pipe.
 
-Each worker is a separate process (spawn or forkserver) with its own pipe. The supervisor
-hands an episode to an idle worker and waits on every pipe and process sentinel at once:
-
-* a result comes back → reported;
-* a worker dies mid-episode (SIGKILL, segfault, OOM) → the episode is retried on a fresh
-  worker up to ``retries`` times, then recorded as an error; nothing else is lost;
-* an episode runs past ``timeout_s`` → its worker is killed and the episode recorded as a
-  timeout error; a fresh worker takes its place.
+:class:`LocalExecutor` is the :class:`~molmo_lerobot.runner.supervisor.Supervisor` over it.
+A worker ignores SIGINT (the supervisor decides when workers stop); SIGTERM aborts its running
+episode, closes its recorders and ends it. A worker whose supervisor process is gone stops the
+same way, then exits, so none is left running without one.
 """
 
 from __future__ import annotations
@@ -15,175 +11,137 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import signal
+import threading
 import time
-from collections import deque
-from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
 from molmo_lerobot.runner.progress import redirect_worker_output
-from molmo_lerobot.runner.results import EpisodeResult
-from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob, WorkItem
+from molmo_lerobot.runner.supervisor import DEAD, INIT_ERROR, READY, RESULT, Event, Supervisor, Transport, exit_reason
+from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob, WorkerStop, WorkItem
 
-
-class WorkerStartError(RuntimeError):
-    """A worker could not initialize (e.g. the policy failed to load): the run cannot start."""
+#: Seconds an orphaned worker has to stop gracefully before it exits regardless.
+ORPHAN_GRACE_S = 10.0
 
 
 def _worker_main(conn: Connection, job: WorkerJob, worker_id: str) -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the supervisor decides when workers stop
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     redirect_worker_output(job.output_dir, worker_id)  # library prints go to logs/, not through the bar
+    threading.Thread(target=_exit_when_orphaned, daemon=True).start()
     try:
         worker = EpisodeWorker(job, worker_id)
     except Exception as exc:
-        conn.send(("init_error", f"{type(exc).__name__}: {exc}"))
+        conn.send((INIT_ERROR, f"{type(exc).__name__}: {exc}"))
         return
-    conn.send(("ready", None))
+    signal.signal(signal.SIGTERM, lambda signum, frame: worker.request_stop())
+    conn.send((READY, None))
     try:
-        while (item := conn.recv()) is not None:
-            conn.send(("result", worker.run(item).to_dict()))
-    except (EOFError, BrokenPipeError, ConnectionResetError, KeyboardInterrupt):
-        pass  # EOF / broken pipe: the supervisor is gone (killed); close our outputs and exit quietly
+        while not worker.stopping and (item := conn.recv()) is not None:
+            result = worker.run(item)
+            conn.send((RESULT, result.to_dict()))
+    except (WorkerStop, EOFError, BrokenPipeError, ConnectionResetError):
+        pass  # asked to stop, or the supervisor is gone: close our outputs and exit quietly
     finally:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # closing is not interrupted twice
         worker.close()
-    try:
-        conn.send(("closed", None))
-    except OSError:
-        pass
+
+
+def _exit_when_orphaned() -> None:
+    """Stop this worker gracefully (then for sure) once its parent process has gone (the
+    supervisor, or with ``forkserver`` the server, which ends with the supervisor)."""
+    parent = os.getppid()
+    while os.getppid() == parent:
+        time.sleep(0.5)
+    os.kill(os.getpid(), signal.SIGTERM)
+    time.sleep(ORPHAN_GRACE_S)
+    os._exit(1)
 
 
 @dataclass
-class _Slot:
-    index: int
-    generation: int
+class _Worker:
     proc: Any
     conn: Connection
-    ready: bool = False
-    item: WorkItem | None = None
-    started: float = 0.0
-
-    @property
-    def worker_id(self) -> str:
-        return f"w{self.index}g{self.generation}"
+    dead: bool = False
+    events: list[Event] = field(default_factory=list)
 
 
-class LocalExecutor:
-    """Run work items on ``workers`` supervised processes."""
+class ProcessTransport(Transport):
+    """Workers as local processes of ``start_method`` (``spawn`` or ``forkserver``)."""
 
-    def __init__(self, workers: int, start_method: str = "spawn", timeout_s: float = 900.0,
-                 retries: int = 1, init_timeout_s: float = 600.0) -> None:
-        if workers < 1:
-            raise ValueError(f"workers must be >= 1, got {workers}")
-        self.workers = workers
+    def __init__(self, start_method: str = "spawn") -> None:
         self.ctx = mp.get_context(start_method)
-        self.timeout_s = timeout_s
-        self.retries = retries
-        self.init_timeout_s = init_timeout_s
 
-    def _start(self, index: int, generation: int, job: WorkerJob) -> _Slot:
+    def start(self, worker_id: str, job: WorkerJob) -> _Worker:
         parent, child = self.ctx.Pipe()
-        slot = _Slot(index, generation, None, parent)
-        proc = self.ctx.Process(target=_worker_main, args=(child, job, slot.worker_id),
-                                name=f"molmo-{slot.worker_id}", daemon=True)
+        proc = self.ctx.Process(target=_worker_main, args=(child, job, worker_id),
+                                name=f"molmo-{worker_id}", daemon=True)
         proc.start()
         child.close()
-        slot.proc, slot.started = proc, time.monotonic()
-        return slot
+        return _Worker(proc, parent)
 
-    def run(self, job: WorkerJob, items: list[WorkItem], on_result: Callable[[EpisodeResult], None]) -> None:
-        if not items:
-            return
-        pending: deque[WorkItem] = deque(items)
-        attempts: dict[int, int] = {}
-        slots = [self._start(i, 0, job) for i in range(min(self.workers, len(items)))]
+    def submit(self, handle: _Worker, item: WorkItem) -> None:
         try:
-            while pending or any(s.item is not None for s in slots):
-                for slot in slots:
-                    if slot.ready and slot.item is None and pending:
-                        slot.item, slot.started = pending.popleft(), time.monotonic()
-                        attempts[slot.item.episode_index] = attempts.get(slot.item.episode_index, 0) + 1
-                        slot.conn.send(slot.item)
-                waitables = [s.conn for s in slots] + [s.proc.sentinel for s in slots]
-                wait(waitables, timeout=1.0)
-                for i, slot in enumerate(slots):
-                    slots[i] = self._poll(slot, job, pending, attempts, on_result)
-        finally:
-            self._shutdown(slots)
+            handle.conn.send(item)
+        except (BrokenPipeError, ConnectionResetError, OSError):
+            pass  # it died: its sentinel says so
 
-    def _poll(self, slot: _Slot, job: WorkerJob, pending: deque[WorkItem], attempts: dict[int, int],
-              on_result: Callable[[EpisodeResult], None]) -> _Slot:
-        """Handle whatever happened to one worker; returns the slot (a fresh one if it was replaced)."""
+    def wait(self, handles: list[_Worker], timeout: float) -> None:
+        live = [h for h in handles if not h.dead]
+        wait([h.conn for h in live] + [h.proc.sentinel for h in live], timeout=timeout)
+
+    def events(self, handle: _Worker) -> list[Event]:
+        if handle.dead:
+            return []
+        out = self._drain(handle)
+        if not handle.proc.is_alive():
+            out += self._drain(handle)  # what it sent just before it ended
+            handle.proc.join()
+            handle.dead = True
+            handle.conn.close()
+            out.append((DEAD, exit_reason(handle.proc.exitcode)))
+        return out
+
+    @staticmethod
+    def _drain(handle: _Worker) -> list[Event]:
+        out: list[Event] = []
         try:
-            while slot.conn.poll():
-                kind, payload = slot.conn.recv()
-                if kind == "ready":
-                    slot.ready = True
-                elif kind == "init_error":
-                    raise WorkerStartError(f"worker could not start: {payload}")
-                elif kind == "result":
-                    result = EpisodeResult.from_dict(payload)
-                    result.attempts = attempts.get(result.episode_index, 1)
-                    on_result(result)
-                    slot.item = None
-        except (EOFError, ConnectionResetError, BrokenPipeError):
+            while handle.conn.poll():
+                out.append(handle.conn.recv())
+        except (EOFError, ConnectionResetError, BrokenPipeError, OSError):
             pass
-        now = time.monotonic()
-        if not slot.proc.is_alive():
-            code = slot.proc.exitcode
-            if not slot.ready:
-                raise WorkerStartError(f"worker process exited with {_exit_reason(code)} while starting")
-            if slot.item is not None:
-                item = slot.item
-                reason = f"worker process died with {_exit_reason(code)} during the episode"
-                if attempts[item.episode_index] <= self.retries:
-                    pending.appendleft(item)
-                else:
-                    on_result(_failure(item, reason, attempts[item.episode_index]))
-            return self._replace(slot, job)
-        if slot.item is not None and now - slot.started > self.timeout_s:
-            item = slot.item
-            slot.proc.kill()
-            slot.proc.join(5)
-            on_result(_failure(item, f"episode timed out after {self.timeout_s:g} s (watchdog)",
-                               attempts[item.episode_index]))
-            return self._replace(slot, job)
-        if not slot.ready and now - slot.started > self.init_timeout_s:
-            raise WorkerStartError(f"worker did not start within {self.init_timeout_s:g} s")
-        return slot
+        return out
 
-    def _replace(self, slot: _Slot, job: WorkerJob) -> _Slot:
-        slot.conn.close()
-        return self._start(slot.index, slot.generation + 1, job)
-
-    def _shutdown(self, slots: list[_Slot]) -> None:
-        for slot in slots:
-            try:
-                if slot.proc.is_alive():
-                    slot.conn.send(None)
-            except (BrokenPipeError, OSError):
-                pass
-        deadline = time.monotonic() + 120
-        for slot in slots:
-            slot.proc.join(max(0.1, deadline - time.monotonic()))
-            if slot.proc.is_alive():
-                slot.proc.kill()
-                slot.proc.join(5)
-            slot.conn.close()
-
-
-def _failure(item: WorkItem, reason: str, attempts: int) -> EpisodeResult:
-    spec = item.spec
-    task = spec.get("task") if isinstance(spec.get("task"), dict) else {}
-    return EpisodeResult.failed(item.episode_index, spec.get("house_index"), task.get("task_cls"),
-                                item.seed, reason, attempts=attempts)
-
-
-def _exit_reason(code: int | None) -> str:
-    if code is not None and code < 0:
+    def stop(self, handle: _Worker) -> None:
         try:
-            return f"signal {signal.Signals(-code).name}"
-        except ValueError:
-            return f"signal {-code}"
-    return f"exit code {code}"
+            handle.conn.send(None)  # idle: close and exit
+        except (BrokenPipeError, ConnectionResetError, OSError):
+            pass
+        if handle.proc.is_alive():
+            try:
+                os.kill(handle.proc.pid, signal.SIGTERM)  # busy: abort the episode, close and exit
+            except ProcessLookupError:
+                pass
+
+    def ended(self, handle: _Worker) -> bool:
+        if handle.proc.is_alive():
+            return False
+        handle.proc.join()
+        handle.conn.close()
+        handle.dead = True
+        return True
+
+    def kill(self, handle: _Worker) -> None:
+        if handle.proc.is_alive():
+            handle.proc.kill()
+        handle.proc.join()
+        handle.conn.close()
+        handle.dead = True
+
+
+class LocalExecutor(Supervisor):
+    """The supervisor over worker processes: ``LocalExecutor(workers, start_method, timeout_s=…)``."""
+
+    def __init__(self, workers: int, start_method: str = "spawn", **options: Any) -> None:
+        super().__init__(ProcessTransport(start_method), workers, **options)

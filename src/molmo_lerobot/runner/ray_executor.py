@@ -1,34 +1,24 @@
-"""Ray executor: episodes as work items over simulator actors, supervised like the local pool.
+"""Ray transport: each worker is a Ray actor wrapping one :class:`EpisodeWorker`.
 
-Each actor wraps one :class:`~molmo_lerobot.runner.worker.EpisodeWorker` (plugins and policy
-loaded once) and runs one episode per call. The driver hands an episode to an idle actor
-and waits on every outstanding call at once:
-
-* a result comes back → reported;
-* the actor dies mid-episode (SIGKILL, segfault, OOM, node loss: ``RayActorError``) or its
-  call fails outside the episode's own error handling → the actor is replaced and the
-  episode retried up to ``retries`` times, then recorded as an error;
-* an episode runs past ``timeout_s`` → the actor is killed, the episode recorded as a
-  timeout error, and a fresh actor takes its place.
+:class:`RayExecutor` is the :class:`~molmo_lerobot.runner.supervisor.Supervisor` over it. An
+actor's death (SIGKILL, segfault, OOM, node loss: ``RayActorError``) or a call failing outside
+the episode's own error handling is a worker death to the supervisor.
 
 ``address=None`` starts a local cluster with ``num_cpus=workers`` (shut down at the end);
-``"auto"`` or ``"ray://…"`` joins a running one. A Ray session that is already initialized
-in this process is used as is and left running.
+``"auto"`` or ``"ray://…"`` joins a running one. A Ray session that is already initialized in
+this process is used as is and left running.
 """
 
 from __future__ import annotations
 
 import logging
 import os
-import time
-from collections import deque
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from molmo_lerobot.runner.local import WorkerStartError, _failure
 from molmo_lerobot.runner.progress import redirect_worker_output
-from molmo_lerobot.runner.results import EpisodeResult
+from molmo_lerobot.runner.supervisor import (DEAD, INIT_ERROR, READY, RESULT, Event, Supervisor, Transport,
+                                             WorkerStartError)
 from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob, WorkItem
 
 
@@ -47,11 +37,12 @@ class SimulatorActor:
 
     def ready(self) -> tuple[str, Any]:
         if self.init_error is not None:
-            return "init_error", self.init_error
-        return "ready", os.getpid()
+            return INIT_ERROR, self.init_error
+        return READY, os.getpid()
 
     def run(self, item: WorkItem) -> dict[str, Any]:
-        assert self.worker is not None
+        if self.worker is None:
+            raise RuntimeError(f"worker could not start: {self.init_error}")
         return self.worker.run(item).to_dict()
 
     def close(self) -> None:
@@ -60,175 +51,137 @@ class SimulatorActor:
 
 
 @dataclass
-class _Slot:
-    index: int
-    generation: int
+class _Actor:
     actor: Any
     ready_ref: Any
-    ready: bool = False
     pid: int | None = None
-    item: WorkItem | None = None
-    ref: Any = None
-    started: float = 0.0
-
-    @property
-    def worker_id(self) -> str:
-        return f"r{self.index}g{self.generation}"
+    ready: bool = False
+    ref: Any = None  # the running episode's call
+    close_ref: Any = None
+    dead: bool = False
 
 
-class RayExecutor:
-    """Run work items on ``workers`` Ray simulator actors (same contract as ``LocalExecutor``)."""
+class RayTransport(Transport):
+    """Workers as Ray actors (one CPU each unless configured), started with ``max_restarts=0``."""
 
-    def __init__(self, workers: int, address: str | None = None, timeout_s: float = 900.0, retries: int = 1,
-                 init_timeout_s: float = 600.0, include_dashboard: bool = False,
+    def __init__(self, address: str | None = None, include_dashboard: bool = False,
                  num_cpus_per_worker: float = 1.0, num_gpus_per_worker: float = 0.0) -> None:
-        if workers < 1:
-            raise ValueError(f"workers must be >= 1, got {workers}")
-        self.workers = workers
         self.address = address
-        self.timeout_s = timeout_s
-        self.retries = retries
-        self.init_timeout_s = init_timeout_s
         self.include_dashboard = include_dashboard
         self.num_cpus_per_worker = num_cpus_per_worker
         self.num_gpus_per_worker = num_gpus_per_worker
+        self._owned = False
+        self._actor_cls: Any = None
 
-    def _connect(self) -> bool:
-        """Initialize Ray if needed; returns whether this executor owns (and must end) the session."""
+    def open(self, workers: int) -> None:
         import ray
 
+        self._actor_cls = ray.remote(SimulatorActor)
         if ray.is_initialized():
-            return False
+            return
         os.environ.setdefault("MUJOCO_GL", "egl")  # local-cluster workers inherit the driver's environment
         kwargs: dict[str, Any] = dict(include_dashboard=self.include_dashboard, logging_level=logging.WARNING)
         if self.address is None:
-            kwargs["num_cpus"] = max(1, int(round(self.workers * self.num_cpus_per_worker)))
+            kwargs["num_cpus"] = max(1, int(round(workers * self.num_cpus_per_worker)))
         try:
             ray.init(address=self.address, **kwargs)
         except (ConnectionError, RuntimeError, ValueError) as exc:
             where = "start a local Ray cluster" if self.address is None else f"join the Ray cluster at {self.address!r}"
             raise WorkerStartError(f"could not {where}: {_short(exc)}") from None
-        return True
+        self._owned = True
 
-    def _start(self, actor_cls: Any, index: int, generation: int, job: WorkerJob) -> _Slot:
-        slot = _Slot(index, generation, None, None)
-        slot.actor = actor_cls.options(max_restarts=0, max_task_retries=0,
-                                       num_cpus=self.num_cpus_per_worker,
-                                       num_gpus=self.num_gpus_per_worker).remote(job, slot.worker_id)
-        slot.ready_ref = slot.actor.ready.remote()
-        slot.started = time.monotonic()
-        return slot
-
-    def run(self, job: WorkerJob, items: list[WorkItem], on_result: Callable[[EpisodeResult], None]) -> None:
-        if not items:
-            return
+    def close(self) -> None:
         import ray
 
-        owned = self._connect()
-        actor_cls = ray.remote(SimulatorActor)
-        pending: deque[WorkItem] = deque(items)
-        attempts: dict[int, int] = {}
-        slots: list[_Slot] = []
-        try:
-            slots = [self._start(actor_cls, i, 0, job) for i in range(min(self.workers, len(items)))]
-            while pending or any(s.item is not None for s in slots):
-                for slot in slots:
-                    if slot.ready and slot.item is None and pending:
-                        slot.item, slot.started = pending.popleft(), time.monotonic()
-                        attempts[slot.item.episode_index] = attempts.get(slot.item.episode_index, 0) + 1
-                        slot.ref = slot.actor.run.remote(slot.item)
-                waiting = [s.ref if s.ready else s.ready_ref for s in slots if s.ref is not None or not s.ready]
-                done = set(ray.wait(waiting, num_returns=1, timeout=1.0)[0]) if waiting else set()
-                for i, slot in enumerate(slots):
-                    slots[i] = self._poll(actor_cls, slot, done, job, pending, attempts, on_result)
-        finally:
-            self._shutdown(slots)
-            if owned:
-                ray.shutdown()
+        if self._owned:
+            ray.shutdown()
+            self._owned = False
 
-    def _poll(self, actor_cls: Any, slot: _Slot, done: set[Any], job: WorkerJob, pending: deque[WorkItem],
-              attempts: dict[int, int], on_result: Callable[[EpisodeResult], None]) -> _Slot:
-        """Handle whatever happened to one actor; returns the slot (a fresh one if it was replaced)."""
+    def start(self, worker_id: str, job: WorkerJob) -> _Actor:
+        actor = self._actor_cls.options(max_restarts=0, max_task_retries=0, num_cpus=self.num_cpus_per_worker,
+                                        num_gpus=self.num_gpus_per_worker).remote(job, worker_id)
+        return _Actor(actor, actor.ready.remote())
+
+    def submit(self, handle: _Actor, item: WorkItem) -> None:
+        handle.ref = handle.actor.run.remote(item)
+
+    def wait(self, handles: list[_Actor], timeout: float) -> None:
+        import ray
+
+        refs = [r for h in handles if not h.dead
+                for r in (h.ready_ref if not h.ready else None, h.ref, h.close_ref) if r is not None]
+        if refs:
+            ray.wait(refs, num_returns=1, timeout=timeout)
+
+    def events(self, handle: _Actor) -> list[Event]:
         import ray
         from ray.exceptions import RayActorError, RayError
 
-        now = time.monotonic()
-        if not slot.ready:
-            if slot.ready_ref in done:
-                try:
-                    status, payload = ray.get(slot.ready_ref)
-                except RayError as exc:
-                    raise WorkerStartError(f"simulator actor died while starting: {_short(exc)}") from None
-                if status == "init_error":
-                    raise WorkerStartError(f"worker could not start: {payload}")
-                slot.ready, slot.pid = True, payload
-            elif now - slot.started > self.init_timeout_s:
-                raise WorkerStartError(f"simulator actor did not start within {self.init_timeout_s:g} s "
-                                       "(does the cluster have free CPUs/GPUs for every worker?)")
-            return slot
-        if slot.item is None:
-            return slot
-        item = slot.item
-        if slot.ref in done:
-            try:
-                result = EpisodeResult.from_dict(ray.get(slot.ref))
-            except RayActorError as exc:
-                return self._retry_or_fail(actor_cls, slot, job, pending, attempts, on_result,
-                                           f"worker process died during the episode (Ray actor pid {slot.pid}: "
-                                           f"{_short(exc)})")
-            except RayError as exc:
-                return self._retry_or_fail(actor_cls, slot, job, pending, attempts, on_result,
-                                           f"worker failed outside the episode: {_short(exc)}")
-            result.attempts = attempts.get(result.episode_index, 1)
-            on_result(result)
-            slot.item = slot.ref = None
-            return slot
-        if now - slot.started > self.timeout_s:
-            ray.kill(slot.actor, no_restart=True)
-            on_result(_failure(item, f"episode timed out after {self.timeout_s:g} s (watchdog)",
-                               attempts[item.episode_index]))
-            return self._start(actor_cls, slot.index, slot.generation + 1, job)
-        return slot
+        if handle.dead:
+            return []
+        out: list[Event] = []
+        try:
+            if not handle.ready and _done(handle.ready_ref):
+                status, payload = ray.get(handle.ready_ref)
+                if status == INIT_ERROR:
+                    return [(INIT_ERROR, payload)]
+                handle.ready, handle.pid = True, payload
+                out.append((READY, payload))
+            if handle.ref is not None and _done(handle.ref):
+                ref, handle.ref = handle.ref, None
+                out.append((RESULT, ray.get(ref)))
+        except RayActorError as exc:
+            out.append(self._dead(handle, f"Ray actor error (pid {handle.pid}: {_short(exc)})"))
+        except RayError as exc:
+            out.append(self._dead(handle, f"a failure outside the episode ({_short(exc)})"))
+        return out
 
-    def _retry_or_fail(self, actor_cls: Any, slot: _Slot, job: WorkerJob, pending: deque[WorkItem],
-                       attempts: dict[int, int], on_result: Callable[[EpisodeResult], None], reason: str) -> _Slot:
-        import ray
+    def _dead(self, handle: _Actor, reason: str) -> Event:
+        self.kill(handle)
+        return DEAD, reason
 
-        assert slot.item is not None
-        item = slot.item
-        ray.kill(slot.actor, no_restart=True)
-        if attempts[item.episode_index] <= self.retries:
-            pending.appendleft(item)
+    def stop(self, handle: _Actor) -> None:
+        if handle.dead:
+            return
+        if handle.ready and handle.ref is None:
+            handle.close_ref = handle.actor.close.remote()  # idle: let it close its recorders
         else:
-            on_result(_failure(item, reason, attempts[item.episode_index]))
-        return self._start(actor_cls, slot.index, slot.generation + 1, job)
+            self.kill(handle)  # mid-episode or starting: Ray cannot abort the call, end the actor
 
-    def _shutdown(self, slots: list[_Slot]) -> None:
-        """Let live actors close their recorders, then end them all."""
+    def ended(self, handle: _Actor) -> bool:
+        if handle.dead:
+            return True
+        if handle.close_ref is not None and _done(handle.close_ref):
+            self.kill(handle)
+            return True
+        return False
+
+    def kill(self, handle: _Actor) -> None:
         import ray
-        from ray.exceptions import RayError
 
-        closing = {s.actor.close.remote(): s for s in slots if s.ready and s.item is None}
-        if closing:
-            try:
-                ray.wait(list(closing), num_returns=len(closing), timeout=120)
-                for ref in closing:
-                    try:
-                        ray.get(ref, timeout=0)
-                    except RayError:
-                        pass
-            except RayError:
-                pass
-        for slot in slots:
-            ray.kill(slot.actor, no_restart=True)
+        if not handle.dead:
+            ray.kill(handle.actor, no_restart=True)
+            handle.dead = True
+
+
+def _done(ref: Any) -> bool:
+    import ray
+
+    return bool(ray.wait([ref], num_returns=1, timeout=0)[0])
 
 
 def _short(exc: BaseException) -> str:
     """One line for a Ray error: the task's own exception if there is one, else Ray's first line."""
     cause = getattr(exc, "cause", None)
-    if isinstance(cause, BaseException):
-        text = f"{type(cause).__name__}: {cause}"
-    else:
-        text = str(exc)
+    text = f"{type(cause).__name__}: {cause}" if isinstance(cause, BaseException) else str(exc)
     lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
     return lines[0] if lines else type(exc).__name__
+
+
+class RayExecutor(Supervisor):
+    """The supervisor over Ray actors: ``RayExecutor(workers, address=…, timeout_s=…)``."""
+
+    def __init__(self, workers: int, address: str | None = None, include_dashboard: bool = False,
+                 num_cpus_per_worker: float = 1.0, num_gpus_per_worker: float = 0.0, **options: Any) -> None:
+        super().__init__(RayTransport(address, include_dashboard, num_cpus_per_worker, num_gpus_per_worker),
+                         workers, **options)

@@ -1,7 +1,8 @@
-"""Per-worker state and the work item an executor hands it: one episode at a time.
+"""Per-worker state and the work item the supervisor hands it: one episode at a time.
 
-The same :class:`EpisodeWorker` runs inside local worker processes and Ray actors, so
-every executor shares the one rollout loop and gives the same per-episode outcomes.
+The same :class:`EpisodeWorker` runs inside worker processes and Ray actors, so every
+transport shares the one rollout loop and gives the same per-episode outcomes. The main
+process resolves each episode's task type and horizon once; they travel in the work item.
 """
 
 from __future__ import annotations
@@ -16,16 +17,27 @@ from typing import Any
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.runner.recorders import EpisodeInfo, RecorderFactory
 from molmo_lerobot.runner.results import EpisodeResult
-from molmo_lerobot.runner.rollout import resolve_horizon, rollout
+from molmo_lerobot.runner.rollout import rollout
 
 
 @dataclass(frozen=True)
 class WorkItem:
-    """One episode: its position in the benchmark, its (overridden) spec and its seed."""
+    """One episode: its position in the benchmark, its (overridden) spec, its seed, and the
+    task type name and horizon (policy steps) resolved for it in the main process."""
 
     episode_index: int
     spec: dict[str, Any]
     seed: int
+    task_type: str
+    horizon: int
+
+    def failed(self, error: str, **kw: Any) -> EpisodeResult:
+        """This episode as an error record (keeping its task type, prompt and horizon)."""
+        task, language = self.spec.get("task"), self.spec.get("language")
+        return EpisodeResult.failed(
+            self.episode_index, self.spec.get("house_index"), task.get("task_cls") if isinstance(task, dict) else None,
+            self.seed, error, task_type=self.task_type, horizon=self.horizon,
+            prompt=language.get("task_description") if isinstance(language, dict) else "", **kw)
 
 
 @dataclass
@@ -34,16 +46,18 @@ class WorkerJob:
 
     policy: dict[str, Any]
     timing: dict[str, float]
-    horizon: int | None
     output_dir: str
     benchmark_name: str
     benchmark_sha256: str
     recorders: list[RecorderFactory] = field(default_factory=list)
-    horizons: dict[str, float] = field(default_factory=dict)
     molmospaces: dict[str, Any] = field(default_factory=dict)  # MolmoSpaces data settings, user libraries
     prefer: dict[str, dict[str, str]] = field(default_factory=dict)  # the run's plugins.prefer pins
     camera_system: str | None = None
     end_on_success: bool = False
+
+
+class WorkerStop(BaseException):
+    """The supervisor asked this worker to stop while it ran an episode (not an episode error)."""
 
 
 class EpisodeWorker:
@@ -64,9 +78,19 @@ class EpisodeWorker:
         self.policy_name = str(job.policy["name"])
         self.policy = make_policy(job.policy)
         self.recorders = [f.make(worker_id, Path(job.output_dir)) for f in job.recorders]
+        self.stopping = False
+        self._in_rollout = False
+
+    def request_stop(self) -> None:
+        """Stop: abort the running rollout (raises :class:`WorkerStop`), else stop after this episode."""
+        self.stopping = True
+        if self._in_rollout:
+            self._in_rollout = False
+            raise WorkerStop
 
     def run(self, item: WorkItem) -> EpisodeResult:
-        """Run one episode; any exception becomes this episode's recorded error."""
+        """Run one episode; any exception (a policy's ``KeyboardInterrupt`` or ``SystemExit``
+        too) becomes this episode's recorded error. :class:`WorkerStop` propagates."""
         from molmo_lerobot.benchmark.schema import EpisodeSpec
         from molmo_lerobot.runner.episode_env import build_env
 
@@ -77,9 +101,8 @@ class EpisodeWorker:
         result: EpisodeResult
         try:
             spec = EpisodeSpec.model_validate(item.spec)
-            task_type = self.plugins.task_type(spec.task_name)
-            horizon = resolve_horizon(self.job.horizon, spec.task, task_type.default_horizon_sec,
-                                      self.timing.policy_dt_ms, self.job.horizons.get(task_type.name))
+            task_type = self.plugins.task_type(item.task_type)
+            horizon = item.horizon
             prompt = spec.language.task_description if spec.language else ""
             env = build_env(spec, self.timing, self.plugins, self.job.camera_system)
             try:
@@ -99,8 +122,14 @@ class EpisodeWorker:
                            "object": getattr(spec.task, "pickup_obj_name", None),
                            "benchmark": self.job.benchmark_name, "benchmark_sha256": self.job.benchmark_sha256},
                 )
-                outcome = rollout(env, task, self.policy, ctx, horizon, self.recorders, info, self.policy_name,
-                                  end_on_success=self.job.end_on_success)
+                if self.stopping:
+                    raise WorkerStop
+                self._in_rollout = True
+                try:
+                    outcome = rollout(env, task, self.policy, ctx, horizon, self.recorders, info, self.policy_name,
+                                      end_on_success=self.job.end_on_success)
+                finally:
+                    self._in_rollout = False
             finally:
                 env.close()
             result = EpisodeResult(
@@ -110,8 +139,8 @@ class EpisodeWorker:
                 extra={"ended_by": outcome.ended_by, "end_on_success": self.job.end_on_success,
                        "success_any_step": outcome.success_any_step, "camera_system": env.camera_system},
             )
-        except Exception as exc:
-            result = EpisodeResult.failed(item.episode_index, house, task_cls, item.seed, _describe(exc))
+        except (Exception, KeyboardInterrupt, SystemExit) as exc:
+            result = item.failed(_describe(exc))
             if os.environ.get("MOLMO_DEBUG"):
                 traceback.print_exc()
         result.duration_s = time.perf_counter() - t0
