@@ -55,7 +55,8 @@ def test_scene_paths_follow_molmospaces(tmp_path):
 
 def test_scene_loads_with_its_physics_metadata_and_modifications(assets, tmp_path):
     root, houses = assets
-    from molmo_lerobot.sim.env import PHYSICS_OPTIONS, Timing, make_env
+    from molmo_lerobot.runner.episode_env import build_env
+    from molmo_lerobot.sim.env import PHYSICS_OPTIONS, Timing
     from molmo_lerobot.benchmark.schema import EpisodeSpec
 
     house = houses[0]  # iTHOR FloorPlan15
@@ -68,7 +69,7 @@ def test_scene_loads_with_its_physics_metadata_and_modifications(assets, tmp_pat
     ep["task"]["pickup_obj_name"] = "place_receptacle/0/Bowl_27"
     spec = EpisodeSpec.model_validate(ep)
     plugins = get_plugins()
-    env = make_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), plugins)
     m = env.model
     names = {m.body(i).name for i in range(m.nbody)}
     assert {"place_receptacle/0/Bowl_27", "extra", "table_1_0_0"} <= names and "Mug_1_15_0_0" not in names
@@ -81,7 +82,7 @@ def test_scene_loads_with_its_physics_metadata_and_modifications(assets, tmp_pat
     write_user_library(tmp_path)
     configure({"scene_xml_paths": [str(tmp_path / "scene.xml")],
                "molmospaces": {"physics_options": {"integrator": "rk4", "cone": "pyramidal"}}})
-    env = make_env(EpisodeSpec.model_validate(user_pick_episode()), Timing(), plugins)
+    env = build_env(EpisodeSpec.model_validate(user_pick_episode()), Timing(), plugins)
     assert env.model.opt.timestep == 0.002 and env.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
     assert env.model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL and PHYSICS_OPTIONS["cone"] != env.model.opt.cone
 

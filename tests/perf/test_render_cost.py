@@ -18,7 +18,8 @@ from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder
 from molmo_lerobot.runner.rollout import rollout
-from molmo_lerobot.sim.env import Timing, make_env
+from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.sim.env import Timing
 
 CHUNK = 4
 
@@ -27,7 +28,7 @@ def episode(resolution=None):
     spec = load_benchmark(data_path("benchmarks") / "pick_v1").episodes[0]
     if resolution is not None:
         spec = spec.model_copy(update={"img_resolution": resolution})
-    env = make_env(spec, Timing(), get_plugins())
+    env = build_env(spec, Timing(), get_plugins())
     env.reset(0)
     return spec, env
 
