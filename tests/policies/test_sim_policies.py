@@ -165,11 +165,11 @@ def test_only_privileged_policies_get_the_simulator(tmp_path, episodes):
     plugins = get_plugins()
     for name in ("scripted", "random"):
         job = WorkerJob(policy={"name": name}, timing={"policy_dt_ms": 66.0, "ctrl_dt_ms": 2.0, "sim_dt_ms": 2.0},
-                        horizon=2, output_dir=str(tmp_path), benchmark_name="t", benchmark_sha256="0" * 64)
+                        output_dir=str(tmp_path), benchmark_name="t", benchmark_sha256="0" * 64)
         worker = EpisodeWorker(job, "w0")
         original = worker.policy.reset
         worker.policy.reset = lambda ctx, _o=original, _n=name: (seen.__setitem__(_n, ctx.env), _o(ctx))
-        result = worker.run(WorkItem(0, json.loads(json.dumps(episodes[0])), 0))
+        result = worker.run(WorkItem(0, json.loads(json.dumps(episodes[0])), 0, task_type="pick", horizon=2))
         assert result.error is None and result.extra["ended_by"] == "horizon"
         worker.close()
     assert seen["scripted"] is not None and seen["random"] is None

@@ -1,5 +1,6 @@
 """One benchmark episode set up for stepping: overrides applied, seed derived, env built and
-reset, task ready. ``molmo-eval``'s workers and the Gymnasium env both start episodes here, so
+reset, task ready. ``molmo-eval``'s workers and the Gymnasium env both start episodes with
+:func:`start_episode` and step them with :func:`~molmo_lerobot.runner.rollout.advance`, so
 episode ``i`` with run seed ``s`` is the same trial wherever it runs."""
 
 from __future__ import annotations
@@ -11,8 +12,9 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
     from molmo_lerobot.benchmark.schema import EpisodeSpec
+    from molmo_lerobot.plugins import Plugins
     from molmo_lerobot.policies.base import Action
-    from molmo_lerobot.sim.env import Env
+    from molmo_lerobot.sim.env import Env, Timing
     from molmo_lerobot.tasks.base import Task, TaskType
 
 
@@ -50,11 +52,9 @@ class Episode:
     seed: int
 
     def step(self, action: Action) -> bool:
-        from molmo_lerobot.runner.rollout import check_divergence
+        from molmo_lerobot.runner.rollout import advance
 
-        self.env.step(action)
-        check_divergence(self.env.data, "after a step")
-        return bool(self.task.success())
+        return advance(self.env, self.task, action, "after a step")
 
     def close(self) -> None:
         self.env.close()
@@ -88,7 +88,6 @@ class EpisodeRunner:
         from molmo_lerobot.benchmark.validate import validate_episode
         from molmo_lerobot.molmospaces.preflight import preflight
         from molmo_lerobot.runner.evaluate import episode_seed
-        from molmo_lerobot.runner.episode_env import build_env
         from molmo_lerobot.runner.rollout import check_divergence
 
         spec = self.plugins.apply_episode_overrides(bench.episodes[index], self.eval_options)
@@ -102,14 +101,28 @@ class EpisodeRunner:
         seed = episode_seed(self.run_seed, spec.model_dump(mode="json", exclude_unset=False))
         task_type = self.plugins.task_type(spec.task_name)
         horizon = self.horizon_of(spec)
-        env = build_env(spec, self.timing, self.plugins, (self.eval_options.get("camera") or {}).get("system"))
+        env, task = start_episode(spec, seed, task_type, self.plugins, self.timing,
+                                  (self.eval_options.get("camera") or {}).get("system"))
         try:
-            env.reset(seed)
             check_divergence(env.data, "at the initial state")
-            task = task_type.create(spec, env)
             task.setup()
         except Exception:
             env.close()
             raise
         prompt = spec.language.task_description if spec.language else ""
         return Episode(index, spec, env, task, task_type, horizon, prompt, seed)
+
+
+def start_episode(spec: EpisodeSpec, seed: int, task_type: TaskType, plugins: Plugins, timing: Timing,
+                  camera_system: str | None) -> tuple[Env, Task]:
+    """The episode's environment reset with ``seed`` and its task (not yet set up). The worker's
+    rollout and :meth:`EpisodeRunner.open` both start episodes here."""
+    from molmo_lerobot.runner.episode_env import build_env
+
+    env = build_env(spec, timing, plugins, camera_system)
+    try:
+        env.reset(seed)
+        return env, task_type.create(spec, env)
+    except BaseException:
+        env.close()
+        raise

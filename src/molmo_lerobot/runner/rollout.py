@@ -115,6 +115,17 @@ class RolloutOutcome:
     ended_by: str = "horizon"  # "horizon" | "success" (end_on_success) | "done" (the policy said so)
 
 
+def advance(env: Any, task: Any, action: Action, when: str) -> bool:
+    """One policy step of ``env`` towards a complete ``action``; divergence is an error naming
+    ``when``. Returns the task's success in the new state. The rollout and the Gymnasium env both
+    step episodes here."""
+    env.step(action)
+    data = getattr(env, "data", None)
+    if data is not None:
+        check_divergence(data, when)
+    return bool(task.success())
+
+
 def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: int,
             recorders: list[Recorder], info: EpisodeInfo, policy_name: str,
             end_on_success: bool = False) -> RolloutOutcome:
@@ -149,10 +160,7 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
         for group in env.move_groups:  # a left-out group holds its target
             if group not in action:
                 action[group] = env.robot.targets(env.data, group)
-        env.step(action)
-        if data is not None:
-            check_divergence(data, f"at step {step}")
-        success = bool(task.success())
+        success = advance(env, task, action, f"at step {step}")
         any_step |= success
         if said_done:
             ended_by = "done"

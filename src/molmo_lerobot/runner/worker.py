@@ -92,7 +92,7 @@ class EpisodeWorker:
         """Run one episode; any exception (a policy's ``KeyboardInterrupt`` or ``SystemExit``
         too) becomes this episode's recorded error. :class:`WorkerStop` propagates."""
         from molmo_lerobot.benchmark.schema import EpisodeSpec
-        from molmo_lerobot.runner.episode_env import build_env
+        from molmo_lerobot.runner.episode import start_episode
 
         t0 = time.perf_counter()
         raw_task = item.spec.get("task") or {}
@@ -104,10 +104,8 @@ class EpisodeWorker:
             task_type = self.plugins.task_type(item.task_type)
             horizon = item.horizon
             prompt = spec.language.task_description if spec.language else ""
-            env = build_env(spec, self.timing, self.plugins, self.job.camera_system)
+            env, task = start_episode(spec, item.seed, task_type, self.plugins, self.timing, self.job.camera_system)
             try:
-                env.reset(item.seed)
-                task = task_type.create(spec, env)
                 ctx = EpisodeContext(
                     spec=spec, episode_index=item.episode_index, seed=item.seed, prompt=prompt,
                     move_groups=dict(env.move_groups), policy_dt_s=self.timing.policy_dt_ms / 1000.0,
