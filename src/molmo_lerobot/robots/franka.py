@@ -29,6 +29,7 @@ import numpy as np
 from molmo_lerobot import hookimpl
 from molmo_lerobot.paths import package_asset_dir
 from molmo_lerobot.robots.base import RobotHandle, RobotType
+from molmo_lerobot.sim.geometry import subtree
 
 PREFIX = "robot/"
 #: finger joint travel (each finger, metres)
@@ -125,7 +126,7 @@ class FrankaHandle(RobotHandle):
         self._hi = model.actuator_ctrlrange[self._arm_u, 1].copy()
         self._tcp = model.site(prefix + "tcp").id
         root = model.body(prefix + "panda0_link0").id
-        self._bodies = frozenset(b for b in range(model.nbody) if _descends(model, b, root))
+        self._bodies = subtree(model, root)
 
     def _check(self, group: str) -> None:
         if group not in ("arm", "gripper"):
@@ -175,14 +176,6 @@ class FrankaHandle(RobotHandle):
     @property
     def body_ids(self) -> frozenset[int]:
         return self._bodies
-
-
-def _descends(model: mujoco.MjModel, body: int, root: int) -> bool:
-    while body > 0:
-        if body == root:
-            return True
-        body = int(model.body_parentid[body])
-    return False
 
 
 class Franka(RobotType):

@@ -39,6 +39,7 @@ from molmo_lerobot import hookimpl
 from molmo_lerobot.paths import molmospaces_assets_dir, package_asset_dir
 from molmo_lerobot.robots.base import RobotHandle, RobotType
 from molmo_lerobot.robots.franka import load_franka_spec
+from molmo_lerobot.sim.geometry import subtree
 
 NAMESPACE = "robot_0/"
 #: driver joint travel (rad): 0 open … DRIVER_CLOSED closed
@@ -193,7 +194,7 @@ class FrankaDroidHandle(RobotHandle):
         self._hi = model.actuator_ctrlrange[self._arm_u, 1].copy()
         self._tcp = model.site(f"{prefix}gripper/grasp_site").id
         root = model.body(f"{prefix}base").id
-        self._bodies = frozenset(b for b in range(model.nbody) if _descends(model, b, root))
+        self._bodies = subtree(model, root)
         # every joint of the finger linkage follows the drivers: teleports set them too
         self._linkage = [(model.jnt_qposadr[j], model.jnt_dofadr[j], sign)
                          for name, (_, sign) in _FOLLOWERS.items()
@@ -255,14 +256,6 @@ class FrankaDroidHandle(RobotHandle):
     @property
     def body_ids(self) -> frozenset[int]:
         return self._bodies
-
-
-def _descends(model: mujoco.MjModel, body: int, root: int) -> bool:
-    while body > 0:
-        if body == root:
-            return True
-        body = int(model.body_parentid[body])
-    return False
 
 
 class FrankaDroid(RobotType):
