@@ -101,9 +101,10 @@ def test_replacement_worker_killed_while_starting_is_a_worker_death(retries, fau
                                                                      eval_config):
     """Episode 1's worker is SIGKILLed; its replacement is SIGKILLed while starting (as an OOM kill
     would). That start-up death is charged to episode 1 like any worker death: with one retry the
-    episode is an error, with two it completes; the run goes on either way."""
+    episode is an error, with two it completes; the run goes on either way. One worker slot, so the
+    replacement is started for episode 1 (with two, a free slot may take the retry first)."""
     markers = faulty_policy.marker_dir
-    cfg = eval_config(small_bench, tmp_path / "run", "policy=faulty", "workers=2", "horizon=3",
+    cfg = eval_config(small_bench, tmp_path / "run", "policy=faulty", "workers=1", "horizon=3",
                       f"episode_retries={retries}", "+policy.faults={1: sigkill_once}", "+policy.kill_starts=1",
                       f"policy.marker_dir={markers}")
     res = run_evaluation(cfg)
