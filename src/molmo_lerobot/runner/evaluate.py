@@ -270,7 +270,8 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                                         recorders=recorders + progress.factories(), prefer=plugins.prefer,
                                         molmospaces=run_info["eval_options"]["molmospaces"],
                                         camera_system=(cfg.get("camera") or {}).get("system"),
-                                        end_on_success=bool(cfg.get("end_on_success", False)))
+                                        end_on_success=bool(cfg.get("end_on_success", False)),
+                                        threads=cfg.get("worker_threads", 1))
                         executor.run(job, todo, record)
                 except ServeError as exc:
                     raise RunError(str(exc)) from None

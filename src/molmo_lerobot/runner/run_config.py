@@ -67,6 +67,9 @@ def config_problems(cfg: Mapping[str, Any]) -> list[str]:
     timeout = cfg.get("episode_timeout_s", 900)
     if not (_is_number(timeout) and timeout > 0):
         out.append(f"episode_timeout_s: expected a positive number of seconds, got {timeout!r}")
+    threads = cfg.get("worker_threads", 1)
+    if threads is not None and not (_is_int(threads) and threads >= 1):
+        out.append(f"worker_threads: expected a positive integer (or null for the libraries' default), got {threads!r}")
     retries = cfg.get("episode_retries", 1)
     if not (_is_int(retries) and retries >= 0):
         out.append(f"episode_retries: expected a non-negative integer, got {retries!r}")

@@ -8,6 +8,7 @@ process resolves each episode's task type and horizon once; they travel in the w
 from __future__ import annotations
 
 import os
+import sys
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -54,6 +55,23 @@ class WorkerJob:
     prefer: dict[str, dict[str, str]] = field(default_factory=dict)  # the run's plugins.prefer pins
     camera_system: str | None = None
     end_on_success: bool = False
+    threads: int | None = 1  # CPU threads for torch/BLAS in this worker (None: the libraries' default)
+
+
+def cap_threads(n: int | None) -> None:
+    """Give this worker process ``n`` CPU threads for torch and BLAS (None: leave their default).
+
+    Every library otherwise starts one thread per core in every worker, so W workers run
+    W × cores threads: with a learned policy on CPU that oversubscription costs more than
+    the workers gain. A fixed count also keeps CPU kernels' rounding the same for any
+    worker count.
+    """
+    if n is None:
+        return
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[var] = str(n)
+    if "torch" in sys.modules:  # already imported (a policy plugin's import): set it directly
+        sys.modules["torch"].set_num_threads(n)
 
 
 class WorkerStop(BaseException):
@@ -71,12 +89,14 @@ class EpisodeWorker:
 
         self.job = job
         self.worker_id = worker_id
+        cap_threads(job.threads)
         configure(job.molmospaces)
         self.plugins = get_plugins()
         self.plugins.set_preferences(job.prefer)
         self.timing = Timing(**job.timing)
         self.policy_name = str(job.policy["name"])
         self.policy = make_policy(job.policy)
+        cap_threads(job.threads)  # a policy that imported torch reads the cap now
         self.recorders = [f.make(worker_id, Path(job.output_dir)) for f in job.recorders]
         self.stopping = False
         self._in_rollout = False
