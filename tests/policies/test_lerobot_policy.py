@@ -192,3 +192,43 @@ def test_temporal_ensembling_is_not_batched(tmp_path):
     cfg.save_pretrained(path)
     policy = LeRobotPolicy({"name": "lerobot", "path": path, "device": "cpu"})
     assert not policy.batched and policy.fork() is None
+
+
+def _with_relative_actions(policy: LeRobotPolicy) -> None:
+    """Give ``policy`` pi0 / pi0.5's relative-action steps: the preprocessor caches the state,
+    the postprocessor adds it back to the predicted offsets."""
+    from lerobot.processor import AbsoluteActionsProcessorStep, RelativeActionsProcessorStep
+
+    relative = RelativeActionsProcessorStep(enabled=True)
+    policy.preprocessor.steps.insert(0, relative)
+    policy.postprocessor.steps.append(AbsoluteActionsProcessorStep(enabled=True, relative_step=relative))
+
+
+def test_relative_action_steps_batch_per_client(act_dir):
+    """pi0 / pi0.5 keep the last state in their relative-action step between pre- and
+    postprocessing; one batched call caches every client's state, so each gets its own offsets."""
+    cfg = {"name": "lerobot", "path": act_dir, "device": "cpu", "mode": "chunk"}
+    proto = LeRobotPolicy(cfg)
+    _with_relative_actions(proto)
+    forks = [proto.fork() for _ in range(3)]
+    alone = [LeRobotPolicy(cfg) for _ in range(3)]
+    for p in alone:
+        _with_relative_actions(p)
+    for p in forks + alone:
+        p.reset(ctx())
+    observations = [varied_obs(c) for c in range(3)]
+    batched = LeRobotPolicy.act_batch(forks, observations)
+    for c in range(3):
+        expected = alone[c].act(observations[c])
+        np.testing.assert_allclose(batched[c]["arm"], expected["arm"], rtol=1e-4, atol=1e-5)
+    # the offsets really are relative: the same network output lands on each client's own state
+    plain = LeRobotPolicy(cfg)
+    plain.reset(ctx())
+    shift = alone[0].act(observations[0])["arm"] - plain.act(observations[0])["arm"]
+    np.testing.assert_allclose(shift, np.broadcast_to(observations[0]["qpos"]["arm"], shift.shape), atol=1e-5)
+
+
+def test_pi0_family_is_batched():
+    from molmo_lerobot.policies.lerobot_policy import BATCHABLE_TYPES
+
+    assert {"act", "pi0", "pi05"} <= BATCHABLE_TYPES

@@ -8,8 +8,8 @@ import pytest
 
 from molmo_lerobot.assets.builtin import (
     BUILTIN_OBJECTS,
-    MAX_GRASP_WIDTH,
-    TCP_TO_FINGERTIP,
+    FINGERTIP_CLEARANCE,
+    HANDS,
     BuiltinObject,
     analytic_grasps,
 )
@@ -35,9 +35,11 @@ def test_object_mjcf_and_metadata(obj):
     assert max(meta["boundingBox"].values()) <= 2 * model.geom_rbound[0] + 1e-9
 
 
+@pytest.mark.parametrize("robot", sorted(HANDS))
 @pytest.mark.parametrize("obj", list(BUILTIN_OBJECTS.values()), ids=list(BUILTIN_OBJECTS))
-def test_grasps_are_valid_poses_that_fit_the_hand(obj):
-    grasps = analytic_grasps(obj)
+def test_grasps_are_valid_poses_that_fit_the_hand(obj, robot):
+    hand = HANDS[robot]
+    grasps = analytic_grasps(obj, hand)
     assert grasps.ndim == 3 and grasps.shape[1:] == (4, 4) and grasps.dtype == np.float64 and len(grasps) >= 4
     R = grasps[:, :3, :3]
     assert np.allclose(R @ R.transpose(0, 2, 1), np.eye(3), atol=1e-9)
@@ -47,9 +49,17 @@ def test_grasps_are_valid_poses_that_fit_the_hand(obj):
     for g in grasps:
         # the finger axis spans at most the hand's opening; the fingertips stay inside the far side
         span = 2 * np.abs(g[:3, 1]) @ half if obj.shape == "box" else 2 * obj.size[0]
-        assert span <= MAX_GRASP_WIDTH + 1e-9
-        tip = g[:3, 3] + TCP_TO_FINGERTIP * g[:3, 2]
+        assert span <= hand.max_grasp_width + 1e-9
+        tip = g[:3, 3] + hand.tcp_to_fingertip * g[:3, 2]
         assert np.all(np.abs(tip) <= half + 1e-9)
+        # the TCP (gripping centre) sits as deep as the fingertips allow: at the centre, or with
+        # the fingertips at the clearance from the far side, or the palm at it from the near side
+        depth = float(g[:3, 3] @ g[:3, 2])
+        far = float(np.abs(g[:3, 2]) @ half) if obj.shape == "box" else None
+        if depth < -1e-9 and far is not None:
+            palm_gap = far + depth - hand.palm_to_tcp  # near side to the palm, negative: inside
+            tip_gap = far - depth - hand.tcp_to_fingertip
+            assert min(abs(tip_gap - FINGERTIP_CLEARANCE), abs(-palm_gap - FINGERTIP_CLEARANCE)) < 1e-9
     # top-down grasps (approach -z in the object frame) exist at several yaws
     top = grasps[grasps[:, 2, 2] < -0.99]
     assert len({round(float(np.arctan2(g[1, 1], g[0, 1])), 3) for g in top}) >= 2

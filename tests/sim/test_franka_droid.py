@@ -108,27 +108,72 @@ def test_gripper_command_spans_the_full_robotiq_travel():
         env.close()
 
 
-def test_tcp_follows_the_unified_convention():
-    """On the axis between the fingers, +z towards the fingertips, fingers opening along ±y, fingertips
-    3.5 cm beyond it (like the Panda's tcp)."""
+def _in_tcp(d, site, points):
+    R, p = d.site_xmat[site].reshape(3, 3), d.site_xpos[site]
+    return (np.atleast_2d(points) - p) @ R
+
+
+def _geom_points(m, d, g):
+    """The geom's mesh vertices or bounding-box corners (box, capsule), in world coordinates."""
+    corners = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)])
+    if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
+        mid = m.geom_dataid[g]
+        local = m.mesh_vert[m.mesh_vertadr[mid]:m.mesh_vertadr[mid] + m.mesh_vertnum[mid]]
+    elif m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE:
+        r, half = m.geom_size[g][:2]
+        local = corners * [r, r, half + r]
+    else:
+        local = corners * m.geom_size[g]
+    return local @ d.geom_xmat[g].reshape(3, 3).T + d.geom_xpos[g]
+
+
+def test_tcp_is_the_pinch_point_in_the_unified_convention():
+    """The TCP is where the pad centres meet when the fingers close (MolmoSpaces' gripping centre):
+    +z towards the fingertips, fingers along ±y; ROBOTIQ_2F85 (the hand the built-in grasps and the
+    expert assume) matches the model: fingertip reach, palm distance, open span."""
+    from molmo_lerobot.assets.builtin import ROBOTIQ_2F85
+
     env = _env(ms_pick_episode())
     m, d = env.model, env.data
+    site = env.robot.tcp_site
+    pads = [m.geom(f"robot_0/gripper/{s}_fingerpad_collision").id for s in ("left", "right")]
+    tips = [m.geom(f"robot_0/gripper/{s}_fingertip_collision").id for s in ("left", "right")]
     try:
-        env.robot.set_qpos(d, "gripper", [0.5])
+        env.robot.set_qpos(d, "gripper", [1.0])
         mujoco.mj_forward(m, d)
-        site = env.robot.tcp_site
-        R, p = d.site_xmat[site].reshape(3, 3), d.site_xpos[site]
-        l, r = (m.geom(f"robot_0/gripper/{s}_fingerpad_collision").id for s in ("left", "right"))
-        mid = R.T @ ((d.geom_xpos[l] + d.geom_xpos[r]) / 2 - p)
-        across = R.T @ (d.geom_xpos[l] - d.geom_xpos[r])
-        assert np.abs(mid[:2]).max() < 1e-3 and 0.0 < mid[2] < 0.02  # pads just beyond it, centred
-        from molmo_lerobot.assets.builtin import TCP_TO_FINGERTIP
-        tip = m.geom("robot_0/gripper/left_fingertip_collision").id
-        depth = (R.T @ (d.geom_xpos[tip] - p))[2] + m.geom_size[tip][2]
-        assert depth == pytest.approx(TCP_TO_FINGERTIP, abs=0.004)
-        assert abs(across[1]) == pytest.approx(np.linalg.norm(across), rel=1e-3)
+        mid = _in_tcp(d, site, (d.geom_xpos[pads[0]] + d.geom_xpos[pads[1]]) / 2)[0]
+        assert np.abs(mid).max() < 2e-3  # closed: the pads' centre is the TCP
+        reach = max(_in_tcp(d, site, _geom_points(m, d, g))[:, 2].max() for g in tips)
+        assert reach == pytest.approx(ROBOTIQ_2F85.tcp_to_fingertip, abs=2e-3)
+        env.robot.set_qpos(d, "gripper", [0.0])
+        mujoco.mj_forward(m, d)
+        across = _in_tcp(d, site, d.geom_xpos[pads[0]])[0] - _in_tcp(d, site, d.geom_xpos[pads[1]])[0]
+        assert abs(across[1]) == pytest.approx(np.linalg.norm(across), rel=1e-3)  # fingers open along ±y
+        assert max(np.abs(_in_tcp(d, site, _geom_points(m, d, g))[:, 1]).max() for g in tips) <= ROBOTIQ_2F85.open_half_span
+        palm = _in_tcp(d, site, _geom_points(m, d, m.geom("robot_0/gripper/hand_collision").id))[:, 2].max()
+        assert -palm == pytest.approx(ROBOTIQ_2F85.palm_to_tcp, abs=2e-3)
         base = d.xpos[m.body("robot_0/gripper/base").id]
-        assert (R.T @ (p - base))[2] > 0.1  # +z points from the wrist to the fingertips
+        assert -_in_tcp(d, site, base)[0, 2] > 0.1  # +z points from the wrist to the fingertips
+    finally:
+        env.close()
+
+
+def test_panda_hand_geometry_matches_the_model():
+    """PANDA_HAND (franka's analytic grasps and expert): the tcp site sits mid-way along the
+    fingers' contact capsules, with the fingertips tcp_to_fingertip beyond it."""
+    from molmo_lerobot.assets.builtin import PANDA_HAND
+
+    raw = pick_episode(0)
+    env = _env(raw)
+    m, d = env.model, env.data
+    try:
+        mujoco.mj_forward(m, d)
+        fingers = [g for g in range(m.ngeom) if "finger" in m.body(m.geom_bodyid[g]).name
+                   and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE and m.geom_contype[g]]
+        assert len(fingers) >= 2
+        z = np.concatenate([_in_tcp(d, env.robot.tcp_site, _geom_points(m, d, g))[:, 2] for g in fingers])
+        assert z.max() == pytest.approx(PANDA_HAND.tcp_to_fingertip, abs=2e-3)
+        assert abs((z.max() + z.min()) / 2) < 2e-3
     finally:
         env.close()
 
@@ -140,22 +185,27 @@ def test_franka_keeps_its_panda_hand():
 
 
 def test_molmospaces_grasp_file_transfers(tmp_path):
-    """A grasp written in MolmoSpaces' convention (``transforms``: the TCP pose in the object's frame,
-    +z approach, fingers along ±y) for franka_droid is what the expert uses, and it picks the object
-    up with it. (The file sits in our grasp-library layout, ``<robot>/<uid>.npz``.)"""
-    raw = droid_episode(pick_episode(0))
+    """A user grasp library exactly as MolmoSpaces' custom-assets tutorial writes one
+    (``<uid>/droid/grasps.npz`` + ``grasps_index.json``, ``transforms`` float16 as their pipeline
+    saves them): one top-down grasp with the TCP at the block's origin, +y fingers along the
+    object's -y, +z approach pointing down. The expert uses it on franka_droid and picks the
+    block: the pinch point at the block's centre keeps the fingertips off the table."""
+    raw = droid_episode(next(e for e in map(pick_episode, range(60))
+                             if e["task"]["pickup_obj_name"].startswith("builtin_red_block")))
     uid = raw["task"]["pickup_obj_name"]
-    # one top-down grasp: TCP 1 cm above the object's origin, approach -z (world down), fingers along x
     T = np.eye(4)
-    T[:3, :3] = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-    T[2, 3] = 0.01
-    (tmp_path / "franka_droid").mkdir(parents=True)
-    np.savez(tmp_path / "franka_droid" / f"{uid}.npz", transforms=T[None])
+    T[:3, 1] = [0, -1, 0]
+    T[:3, 2] = [0, 0, -1]
+    lib = tmp_path / "grasp_library"
+    (lib / uid / "droid").mkdir(parents=True)
+    np.savez_compressed(lib / uid / "droid" / "grasps.npz", transforms=T.reshape(1, 4, 4).astype(np.float16))
+    (lib / "grasps_index.json").write_text(json.dumps(
+        {"grasp_paths": {"droid": {uid: f"{uid}/droid/grasps.npz"}}, "articulated_grasp_paths": {}}))
     catalog = default_catalog()
     saved = list(catalog.grasp_libraries)
-    catalog.register_grasp_library(tmp_path)
-    from molmo_lerobot.policies.scripted import ScriptedPick, object_grasps
+    catalog.register_user_grasp_library("tutorial", lib, "builtin")
     from molmo_lerobot.policies.base import EpisodeContext
+    from molmo_lerobot.policies.scripted import ScriptedPick, object_grasps
     from molmo_lerobot.runner.rollout import rollout
     env = _env(raw)
     try:
@@ -164,7 +214,9 @@ def test_molmospaces_grasp_file_transfers(tmp_path):
         task = get_plugins().task_type(spec.task_name).create(spec, env)
         ctx = EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=dict(env.move_groups),
                              policy_dt_s=0.066, env=env)
-        out = rollout(env, task, ScriptedPick({}), ctx, 120, [], None, "scripted")
+        expert = ScriptedPick({})
+        out = rollout(env, task, expert, ctx, 120, [], None, "scripted")
+        assert expert.grasp_local == pytest.approx(T)
         assert out.success
     finally:
         env.close()

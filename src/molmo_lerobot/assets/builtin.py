@@ -2,8 +2,10 @@
 
 Every object is one MuJoCo primitive geom on one free body, sized for the Franka hand
 (at most :data:`MAX_GRASP_WIDTH` across the grasped dimension). Grasps are poses of the
-gripper TCP in the object frame: origin between the finger pads, ``+z`` the approach
-direction (palm → fingertips), ``+y`` the finger opening/closing axis.
+gripper TCP in the object frame (MolmoSpaces' unified convention): origin at the gripping
+centre between the finger pads, ``+z`` the approach direction (palm → fingertips), ``+y`` the
+finger opening/closing axis. Where the TCP sits along the approach depends on the object's
+size and the hand's reach (:class:`HandGeometry`), so the analytic grasps are computed per hand.
 """
 
 from __future__ import annotations
@@ -12,16 +14,39 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: widest object dimension the Franka hand grasps reliably (it opens to 0.08 m)
-MAX_GRASP_WIDTH = 0.07
-#: distance along the approach axis from the TCP to the fingertips
-TCP_TO_FINGERTIP = 0.035
-#: clearance kept between the fingertips and the far side of the object
+
+@dataclass(frozen=True)
+class HandGeometry:
+    """A parallel-jaw hand seen from its TCP, in metres along the approach / finger axes."""
+
+    #: TCP to the fingertips (the farthest they reach while closing)
+    tcp_to_fingertip: float
+    #: palm (where an object stops between the fingers) to the TCP
+    palm_to_tcp: float
+    #: widest object dimension the hand grasps reliably
+    max_grasp_width: float
+    #: half the finger pad width along the TCP x axis; grasps keep the pads on the object
+    pad_half_width: float
+    #: half the open hand's span along the finger axis, fingers included
+    open_half_span: float
+
+
+#: the Panda hand of ``franka`` (gymnasium-robotics): long fingers, the TCP mid-way along them
+PANDA_HAND = HandGeometry(tcp_to_fingertip=0.035, palm_to_tcp=0.058, max_grasp_width=0.07, pad_half_width=0.01,
+                          open_half_span=0.052)
+#: the Robotiq 2F-85 of ``franka_droid``: the TCP is the pinch point (pads' centre, fingers closed);
+#: closing swings the pads 1.4 cm forward, so the fingertips end 1.8 cm beyond it
+ROBOTIQ_2F85 = HandGeometry(tcp_to_fingertip=0.018, palm_to_tcp=0.054, max_grasp_width=0.075, pad_half_width=0.01,
+                            open_half_span=0.06)
+#: robot -> the hand its analytic built-in grasps are computed for (others use ``franka``'s)
+HANDS: dict[str, HandGeometry] = {"franka": PANDA_HAND, "franka_droid": ROBOTIQ_2F85}
+
+#: widest object dimension a built-in object may have across a grasped dimension (the Panda's limit)
+MAX_GRASP_WIDTH = PANDA_HAND.max_grasp_width
+#: clearance kept between the fingertips / palm and the object's far / near side
 FINGERTIP_CLEARANCE = 0.005
-#: distance along the approach axis from the palm (base of the fingers) to the TCP
-PALM_TO_TCP = 0.058
-#: half the finger width along the TCP x axis; grasps keep the pads on the object
-PAD_HALF_WIDTH = 0.01
+#: how far the fingertips reach into an object with flat gripped faces at the least
+MIN_FLAT_GRIP = 0.03
 
 SHAPES = ("box", "cylinder", "sphere", "capsule")
 
@@ -128,14 +153,18 @@ def _pose(approach: np.ndarray, finger: np.ndarray, pos: np.ndarray) -> np.ndarr
     return T
 
 
-def _depth(half: float) -> float | None:
+def _depth(half: float, hand: HandGeometry, flat: bool = False) -> float | None:
     """TCP offset along the approach from the centre, or None when the pads cannot reach the object.
 
     The TCP sits at the centre unless that would push the fingertips past the far side or
-    the palm into the near side. The pads must still reach the object's mid-plane.
+    the palm into the near side. The pads must still reach the object's mid-plane, or, where
+    the gripped faces run straight along the approach (``flat``: box faces, a cylinder's wall
+    seen from its end), reach :data:`MIN_FLAT_GRIP` into the object.
     """
-    s = min(0.0, half - TCP_TO_FINGERTIP - FINGERTIP_CLEARANCE, PALM_TO_TCP - FINGERTIP_CLEARANCE - half)
-    return s if s + TCP_TO_FINGERTIP - FINGERTIP_CLEARANCE >= 0 else None
+    tip, palm, gap = hand.tcp_to_fingertip, hand.palm_to_tcp, FINGERTIP_CLEARANCE
+    s = min(0.0, half - tip - gap, palm - gap - half)
+    reach = s + tip - gap if not flat else s + tip + half - MIN_FLAT_GRIP
+    return s if reach >= 0 else None
 
 
 def _perpendicular(v: np.ndarray) -> np.ndarray:
@@ -150,20 +179,20 @@ def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
     return v * c + np.cross(axis, v) * s + axis * np.dot(axis, v) * (1 - c)
 
 
-def _box_grasps(half: np.ndarray) -> list[np.ndarray]:
+def _box_grasps(half: np.ndarray, hand: HandGeometry) -> list[np.ndarray]:
     out = []
     for k in range(3):  # face normal axis; the palm is outside that face
-        s = _depth(half[k])
+        s = _depth(half[k], hand, flat=True)
         if s is None:
             continue
         for sign in (1.0, -1.0):
             approach = np.zeros(3)
             approach[k] = -sign
             for j in range(3):
-                if j == k or 2 * half[j] > MAX_GRASP_WIDTH:
+                if j == k or 2 * half[j] > hand.max_grasp_width:
                     continue
                 m = 3 - k - j  # the axis along the finger width
-                if half[m] < PAD_HALF_WIDTH:
+                if half[m] < hand.pad_half_width:
                     continue
                 for fs in (1.0, -1.0):
                     finger = np.zeros(3)
@@ -172,14 +201,15 @@ def _box_grasps(half: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def _round_side_grasps(radius: float, half_len: float, n_azimuth: int, n_along: int) -> list[np.ndarray]:
+def _round_side_grasps(radius: float, half_len: float, n_azimuth: int, n_along: int,
+                       hand: HandGeometry) -> list[np.ndarray]:
     """Approach perpendicular to the local z axis, fingers closing across the diameter."""
-    if 2 * radius > MAX_GRASP_WIDTH:
+    if 2 * radius > hand.max_grasp_width:
         return []
-    s = _depth(radius)
+    s = _depth(radius, hand)
     if s is None:
         return []
-    reach = max(0.0, half_len - PAD_HALF_WIDTH)
+    reach = max(0.0, half_len - hand.pad_half_width)
     offsets = np.linspace(-reach, reach, n_along) if n_along > 1 and reach > 0 else np.zeros(1)
     out = []
     for phi in np.arange(n_azimuth) * 2 * np.pi / n_azimuth:
@@ -191,11 +221,11 @@ def _round_side_grasps(radius: float, half_len: float, n_azimuth: int, n_along: 
     return out
 
 
-def _round_end_grasps(radius: float, half_height: float, n_yaw: int) -> list[np.ndarray]:
+def _round_end_grasps(radius: float, half_height: float, n_yaw: int, hand: HandGeometry) -> list[np.ndarray]:
     """Approach along ±z (top-down when upright), fingers at ``n_yaw`` yaws."""
-    if 2 * radius > MAX_GRASP_WIDTH:
+    if 2 * radius > hand.max_grasp_width:
         return []
-    s = _depth(half_height)
+    s = _depth(half_height, hand, flat=True)
     if s is None:
         return []
     out = []
@@ -207,10 +237,10 @@ def _round_end_grasps(radius: float, half_height: float, n_yaw: int) -> list[np.
     return out
 
 
-def _sphere_grasps(radius: float) -> list[np.ndarray]:
-    if 2 * radius > MAX_GRASP_WIDTH:
+def _sphere_grasps(radius: float, hand: HandGeometry) -> list[np.ndarray]:
+    if 2 * radius > hand.max_grasp_width:
         return []
-    s = _depth(radius)
+    s = _depth(radius, hand)
     if s is None:
         return []
     dirs = [np.eye(3)[i] * sg for i in range(3) for sg in (1.0, -1.0)]
@@ -223,20 +253,20 @@ def _sphere_grasps(radius: float) -> list[np.ndarray]:
     return out
 
 
-def analytic_grasps(obj: BuiltinObject) -> np.ndarray:
-    """Grasp poses ``(N, 4, 4)`` of the gripper TCP in ``obj``'s frame (see the module docstring)."""
+def analytic_grasps(obj: BuiltinObject, hand: HandGeometry = PANDA_HAND) -> np.ndarray:
+    """Grasp poses ``(N, 4, 4)`` of ``hand``'s TCP in ``obj``'s frame (see the module docstring)."""
     if obj.shape == "box":
-        grasps = _box_grasps(np.asarray(obj.size, dtype=float))
+        grasps = _box_grasps(np.asarray(obj.size, dtype=float), hand)
     elif obj.shape == "cylinder":
         r, hh = obj.size
-        grasps = _round_end_grasps(r, hh, 8) + _round_side_grasps(r, hh, 8, 3)
+        grasps = _round_end_grasps(r, hh, 8, hand) + _round_side_grasps(r, hh, 8, 3, hand)
     elif obj.shape == "sphere":
-        grasps = _sphere_grasps(obj.size[0])
+        grasps = _sphere_grasps(obj.size[0], hand)
     else:  # capsule: the ends are hemispheres, so the end grasps see radius + half-length
         r, hl = obj.size
-        grasps = _round_end_grasps(r, hl + r, 8) + _round_side_grasps(r, hl, 8, 3)
+        grasps = _round_end_grasps(r, hl + r, 8, hand) + _round_side_grasps(r, hl, 8, 3, hand)
     if not grasps:
-        raise ValueError(f"object {obj.uid!r}: no grasp fits a {MAX_GRASP_WIDTH} m wide gripper")
+        raise ValueError(f"object {obj.uid!r}: no grasp fits a {hand.max_grasp_width} m wide gripper")
     return np.stack(grasps).astype(np.float64)
 
 

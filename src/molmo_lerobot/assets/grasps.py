@@ -120,25 +120,24 @@ def builtin_grasp_dir() -> Path:
 
 
 class BuiltinGraspLibrary(GraspLibrary):
-    """Grasps of the built-in objects: generated NPZ files, else the analytic grasps computed now."""
-
-    ROBOT = "franka"  # the analytic grasps are sized for the Franka hand
+    """Grasps of the built-in objects: generated NPZ files, else the analytic grasps computed now
+    for the robot's hand (robots in :data:`~molmo_lerobot.assets.builtin.HANDS`)."""
 
     def __init__(self, root: str | os.PathLike | None = None) -> None:
         super().__init__(root or builtin_grasp_dir(), name="builtin")
 
     def has(self, uid: str, robot: str = "franka", joint: str | None = None) -> bool:
-        from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
+        from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, HANDS
 
-        return super().has(uid, robot, joint) or (uid in BUILTIN_OBJECTS and robot == self.ROBOT and joint is None)
+        return super().has(uid, robot, joint) or (uid in BUILTIN_OBJECTS and robot in HANDS and joint is None)
 
     def load(self, uid: str, robot: str = "franka", joint: str | None = None) -> np.ndarray | None:
-        got = super().load(uid, robot, joint)
-        if got is not None or joint is not None or robot != self.ROBOT:
-            return got
-        from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, analytic_grasps
+        from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, HANDS, analytic_grasps
 
-        return analytic_grasps(BUILTIN_OBJECTS[uid]) if uid in BUILTIN_OBJECTS else None
+        got = super().load(uid, robot, joint)
+        if got is not None or joint is not None or robot not in HANDS:
+            return got
+        return analytic_grasps(BUILTIN_OBJECTS[uid], HANDS[robot]) if uid in BUILTIN_OBJECTS else None
 
     def count(self, uid: str, robot: str = "franka", joint: str | None = None) -> int | None:
         got = super().count(uid, robot, joint)
@@ -149,12 +148,13 @@ class BuiltinGraspLibrary(GraspLibrary):
 
 def generate_builtin_grasps(out: str | os.PathLike | None = None, robot: str = "franka") -> list[Path]:
     """Write ``<out>/<robot>/<uid>.npz`` for every built-in object; returns the files written."""
-    from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, analytic_grasps
+    from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, HANDS, analytic_grasps
 
-    if robot != BuiltinGraspLibrary.ROBOT:
-        raise GraspError(f"analytic built-in grasps exist for robot {BuiltinGraspLibrary.ROBOT!r} only, not {robot!r}")
+    if robot not in HANDS:
+        raise GraspError(f"analytic built-in grasps exist for robots {sorted(HANDS)} only, not {robot!r}")
     root = Path(out) if out is not None else builtin_grasp_dir()
-    return [save_grasp_file(root / robot / f"{uid}.npz", analytic_grasps(obj)) for uid, obj in sorted(BUILTIN_OBJECTS.items())]
+    return [save_grasp_file(root / robot / f"{uid}.npz", analytic_grasps(obj, HANDS[robot]))
+            for uid, obj in sorted(BUILTIN_OBJECTS.items())]
 
 
 def get_grasps(uid: str, robot: str = "franka", joint: str | None = None) -> np.ndarray:

@@ -143,9 +143,12 @@ def _suffixes(name: str) -> list[str]:
 
 
 #: LeRobot policy types whose ``select_action`` is ``predict_action_chunk`` plus an action queue,
-#: with stateless processors, so a batched forward with per-client queues reproduces it. Not
-#: (yet) pi0 / pi0.5: their relative-action processor step keeps the last observation's state.
-BATCHABLE_TYPES = frozenset({"act"})
+#: so a batched forward with per-client queues reproduces it. Their processors keep no state
+#: across calls: pi0 / pi0.5's relative-action step caches the state only from its preprocessing
+#: to the postprocessing of the same call, which :meth:`LeRobotPolicy.act_batch` runs back to
+#: back for the whole batch. (pi0 / pi0.5 draw flow-matching noise per batch item, so their
+#: batched actions equal in-process ones in distribution, not bit for bit; no weights here.)
+BATCHABLE_TYPES = frozenset({"act", "pi0", "pi05"})
 
 
 class LeRobotPolicy(Policy):

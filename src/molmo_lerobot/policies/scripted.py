@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.assets.builtin import TCP_TO_FINGERTIP
+from molmo_lerobot.assets.builtin import HANDS, PANDA_HAND
 from molmo_lerobot.assets.grasps import get_grasps
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
 
@@ -32,8 +32,6 @@ MAX_TILT_DEG = 40.0
 #: clearance kept between open fingers and neighbouring objects / between fingertips and the support
 FINGER_CLEARANCE = 0.012
 TABLE_CLEARANCE = 0.004
-#: half the open gripper span along its finger axis, fingers included
-OPEN_HALF_SPAN = 0.052
 
 
 def _pose_matrix(pose7: np.ndarray) -> np.ndarray:
@@ -53,7 +51,7 @@ def object_grasps(env: Any, name: str) -> np.ndarray:
     """
     uid = env.scene_metadata.get("objects", {}).get(name, {}).get("asset_id", name)
     try:
-        return robot_grasps(uid, env.spec.robot.robot_name)
+        return robot_grasps(uid, env.robot_type.name)
     except LookupError as exc:
         raise ValueError(f"scripted policy: no grasps for object {name!r} (asset {uid!r}): {exc}") from None
 
@@ -209,13 +207,14 @@ class ScriptedPick(PhasedExpert):
         world = T_obj @ local
         approach = world[:, :3, 2]
         down = -approach[:, 2]
-        tips = world[:, :3, 3] + TCP_TO_FINGERTIP * approach
+        hand = HANDS.get(env.robot_type.name, PANDA_HAND)  # other robots: fingers as long as the Panda's
+        tips = world[:, :3, 3] + hand.tcp_to_fingertip * approach
         support = self._support_height(T_obj)
         ok = (down >= np.cos(np.radians(MAX_TILT_DEG))) & (tips[:, 2] >= support + TABLE_CLEARANCE)
         fingers = world[:, :3, 1]
         for centre, radius in self._neighbours():
             for sign in (1.0, -1.0):
-                tip_xy = (world[:, :3, 3] + sign * OPEN_HALF_SPAN * fingers)[:, :2]
+                tip_xy = (world[:, :3, 3] + sign * hand.open_half_span * fingers)[:, :2]
                 ok &= np.linalg.norm(tip_xy - centre[:2], axis=1) >= radius + FINGER_CLEARANCE
         if not ok.any():
             raise RuntimeError(f"scripted policy: no collision-free top grasp for {self.target!r}")

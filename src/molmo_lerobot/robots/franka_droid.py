@@ -15,9 +15,11 @@ joints and actuators ``fr3_joint1..7``; gripper driver joints ``gripper/left_dri
 wrist camera ``gripper/wrist_camera``.
 
 The TCP site follows MolmoSpaces' unified gripper convention (+z approach, fingers opening
-along ±y, origin on the axis between the fingers), the same as the Panda's ``tcp`` site, at the
-Panda's depth behind the fingertips, so object-frame grasps (``transforms`` of their grasp files)
-transfer between the two grippers.
+along ±y, origin at the gripping centre between the pads), like the Panda's ``tcp`` site: it is
+the Robotiq's pinch point, where the pad centres meet when the fingers close (MolmoSpaces'
+Robotiq grasp generator puts its TCP there, 0.155 m from the coupling face). So an object-frame
+grasp (``transforms`` of their grasp files) centres the pads on the same point of the object
+on either hand.
 
 Move groups: ``arm`` (7 joint positions, rad) and ``gripper`` (1 value, 0 open … 1 closed,
 mapped linearly onto the actuator's 0 … 255). ``init_qpos["gripper"]`` takes MolmoSpaces' two
@@ -48,9 +50,9 @@ DRIVER_CLOSED = 0.8
 CTRL_CLOSED = 255.0
 #: flange of link 7 (where the Panda hand sits), metres along its z axis
 FLANGE = 0.107
-#: TCP along the approach axis: on the finger axis with the fingertips 3.2-3.5 cm beyond it over the
-#: grip range, as on the Panda (assets.builtin.TCP_TO_FINGERTIP), so grasps made for one hand suit the other
-TCP_DEPTH = 0.128
+#: TCP along the approach axis from ``gripper/base``: the pads' centre with the fingers closed (open,
+#: the pads sit 1.4 cm behind it and swing forward as they close); see assets.builtin.ROBOTIQ_2F85
+TCP_DEPTH = 0.144
 #: gripper position gain (N·m per rad of driver angle on the coupled tendon) and damping; force limit
 GRIPPER_KP, GRIPPER_KV, GRIPPER_FORCE = 100.0, 5.0, 10.0
 #: wrist camera (ZED mini on DROID's mount) in the ``gripper/base`` frame: beside the gripper, looking along it
