@@ -82,7 +82,7 @@ def build_server(policy_cfg: dict[str, Any], **options: Any) -> PolicyServer:
 def main(argv: list[str] | None = None) -> int:
     from molmo_lerobot.config import ConfigError, compose
     from molmo_lerobot.plugins import PluginError
-    from molmo_lerobot.protocol.server import PolicyNotServable, PolicyServer
+    from molmo_lerobot.protocol.server import PolicyNotServable
 
     try:
         options, overrides = parse_args(sys.argv[1:] if argv is None else argv)

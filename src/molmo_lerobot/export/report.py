@@ -247,7 +247,7 @@ def _episode_rows(results: list[EpisodeResult], videos: dict[int, list[tuple[str
     for r in sorted(results, key=lambda r: r.episode_index):
         extra = r.extra or {}
         if r.error is not None:
-            status = f'<span class="fail">error</span>'
+            status = '<span class="fail">error</span>'
         else:
             status = '<span class="ok">success</span>' if r.success else '<span class="fail">failure</span>'
         if r.episode_index in groups:

@@ -14,6 +14,8 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
+from molmo_lerobot.sim.geometry import subtree
+
 
 class RobotHandle(ABC):
     """A robot bound to one compiled model: state per move group and low-level commands."""
@@ -51,6 +53,87 @@ class RobotHandle(ABC):
     @abstractmethod
     def body_ids(self) -> frozenset[int]:
         """Ids of every body that belongs to the robot (for contact tests)."""
+
+
+class ArmGripperHandle(RobotHandle):
+    """A position-controlled arm (move group ``arm``) plus one gripper value (``gripper``,
+    0 open … 1 closed). The arm half lives here; a subclass maps the gripper value onto its
+    hand's joints and actuators (the ``_gripper_*`` methods)."""
+
+    robot_name: str
+
+    def __init__(self, model: mujoco.MjModel, arm_joints: Sequence[str], arm_actuators: Sequence[str],
+                 tcp_site: str, root_body: str) -> None:
+        joints = [model.joint(name).id for name in arm_joints]
+        self._arm_q = np.array([model.jnt_qposadr[j] for j in joints])
+        self._arm_v = np.array([model.jnt_dofadr[j] for j in joints])
+        self._arm_u = np.array([model.actuator(name).id for name in arm_actuators])
+        self._lo = model.actuator_ctrlrange[self._arm_u, 0].copy()
+        self._hi = model.actuator_ctrlrange[self._arm_u, 1].copy()
+        self._tcp = model.site(tcp_site).id
+        self._bodies = subtree(model, model.body(root_body).id)
+
+    def _check(self, group: str) -> None:
+        if group not in ("arm", "gripper"):
+            raise KeyError(f"{self.robot_name} has move groups 'arm' and 'gripper', not {group!r}")
+
+    def qpos(self, data, group):
+        self._check(group)
+        return data.qpos[self._arm_q].copy() if group == "arm" else np.array([self._gripper_qpos(data)])
+
+    def qvel(self, data, group):
+        self._check(group)
+        return data.qvel[self._arm_v].copy() if group == "arm" else np.array([self._gripper_qvel(data)])
+
+    def set_qpos(self, data, group, values):
+        self._check(group)
+        values = np.asarray(values, dtype=np.float64)
+        if group == "arm":
+            data.qpos[self._arm_q] = values
+            data.qvel[self._arm_v] = 0.0
+        else:
+            self._gripper_set_qpos(data, float(np.clip(values[0], 0.0, 1.0)))
+        self.command(data, group, values)
+
+    def targets(self, data, group):
+        self._check(group)
+        return data.ctrl[self._arm_u].copy() if group == "arm" else np.array([self._gripper_target(data)])
+
+    def command(self, data, group, values):
+        self._check(group)
+        values = np.asarray(values, dtype=np.float64)
+        if group == "arm":
+            data.ctrl[self._arm_u] = np.clip(values, self._lo, self._hi)
+        else:
+            self._gripper_command(data, float(np.clip(values[0], 0.0, 1.0)))
+
+    @property
+    def tcp_site(self) -> int:
+        return self._tcp
+
+    @property
+    def body_ids(self) -> frozenset[int]:
+        return self._bodies
+
+    @abstractmethod
+    def _gripper_qpos(self, data: mujoco.MjData) -> float:
+        """The gripper's opening, 0 open … 1 closed."""
+
+    @abstractmethod
+    def _gripper_qvel(self, data: mujoco.MjData) -> float:
+        """Its rate of closing per second."""
+
+    @abstractmethod
+    def _gripper_set_qpos(self, data: mujoco.MjData, closed: float) -> None:
+        """Teleport the hand's joints to ``closed`` (0 … 1) at rest."""
+
+    @abstractmethod
+    def _gripper_target(self, data: mujoco.MjData) -> float:
+        """The commanded closing, 0 … 1, read back from ``data.ctrl``."""
+
+    @abstractmethod
+    def _gripper_command(self, data: mujoco.MjData, closed: float) -> None:
+        """Write the actuator targets for ``closed`` (0 … 1)."""
 
 
 class RobotType(ABC):

@@ -28,8 +28,7 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.paths import package_asset_dir
-from molmo_lerobot.robots.base import RobotHandle, RobotType
-from molmo_lerobot.sim.geometry import subtree
+from molmo_lerobot.robots.base import ArmGripperHandle, RobotType
 
 PREFIX = "robot/"
 #: finger joint travel (each finger, metres)
@@ -107,75 +106,34 @@ def load_franka_spec() -> mujoco.MjSpec:
     return spec
 
 
-class FrankaHandle(RobotHandle):
+class FrankaHandle(ArmGripperHandle):
     """Move-group access to a compiled model holding the Franka under ``prefix``."""
 
-    def __init__(self, model: mujoco.MjModel, prefix: str) -> None:
-        def jid(name: str) -> int:
-            return model.joint(prefix + name).id
+    robot_name = "franka"
 
-        arm = [jid(f"joint{k}") for k in range(1, 8)]
-        fingers = [jid("finger_joint1"), jid("finger_joint2")]
-        self._arm_q = np.array([model.jnt_qposadr[j] for j in arm])
-        self._arm_v = np.array([model.jnt_dofadr[j] for j in arm])
+    def __init__(self, model: mujoco.MjModel, prefix: str) -> None:
+        super().__init__(model, [f"{prefix}joint{k}" for k in range(1, 8)],
+                         [f"{prefix}actuator{k}" for k in range(1, 8)], prefix + "tcp", prefix + "panda0_link0")
+        fingers = [model.joint(prefix + name).id for name in ("finger_joint1", "finger_joint2")]
         self._fin_q = np.array([model.jnt_qposadr[j] for j in fingers])
         self._fin_v = np.array([model.jnt_dofadr[j] for j in fingers])
-        self._arm_u = np.array([model.actuator(f"{prefix}actuator{k}").id for k in range(1, 8)])
         self._fin_u = np.array([model.actuator(f"{prefix}finger_actuator{k}").id for k in (1, 2)])
-        self._lo = model.actuator_ctrlrange[self._arm_u, 0].copy()
-        self._hi = model.actuator_ctrlrange[self._arm_u, 1].copy()
-        self._tcp = model.site(prefix + "tcp").id
-        root = model.body(prefix + "panda0_link0").id
-        self._bodies = subtree(model, root)
 
-    def _check(self, group: str) -> None:
-        if group not in ("arm", "gripper"):
-            raise KeyError(f"franka has move groups 'arm' and 'gripper', not {group!r}")
+    def _gripper_qpos(self, data):
+        return float(1.0 - data.qpos[self._fin_q].sum() / (2 * FINGER_TRAVEL))
 
-    def qpos(self, data, group):
-        self._check(group)
-        if group == "arm":
-            return data.qpos[self._arm_q].copy()
-        return np.array([1.0 - data.qpos[self._fin_q].sum() / (2 * FINGER_TRAVEL)])
+    def _gripper_qvel(self, data):
+        return float(-data.qvel[self._fin_v].sum() / (2 * FINGER_TRAVEL))
 
-    def qvel(self, data, group):
-        self._check(group)
-        if group == "arm":
-            return data.qvel[self._arm_v].copy()
-        return np.array([-data.qvel[self._fin_v].sum() / (2 * FINGER_TRAVEL)])
+    def _gripper_set_qpos(self, data, closed):
+        data.qpos[self._fin_q] = FINGER_TRAVEL * (1.0 - closed)
+        data.qvel[self._fin_v] = 0.0
 
-    def set_qpos(self, data, group, values):
-        self._check(group)
-        values = np.asarray(values, dtype=np.float64)
-        if group == "arm":
-            data.qpos[self._arm_q] = values
-            data.qvel[self._arm_v] = 0.0
-        else:
-            data.qpos[self._fin_q] = FINGER_TRAVEL * (1.0 - float(np.clip(values[0], 0.0, 1.0)))
-            data.qvel[self._fin_v] = 0.0
-        self.command(data, group, values)
+    def _gripper_target(self, data):
+        return float(1.0 - data.ctrl[self._fin_u[0]] / FINGER_TRAVEL)
 
-    def targets(self, data, group):
-        self._check(group)
-        if group == "arm":
-            return data.ctrl[self._arm_u].copy()
-        return np.array([1.0 - data.ctrl[self._fin_u[0]] / FINGER_TRAVEL])
-
-    def command(self, data, group, values):
-        self._check(group)
-        values = np.asarray(values, dtype=np.float64)
-        if group == "arm":
-            data.ctrl[self._arm_u] = np.clip(values, self._lo, self._hi)
-        else:
-            data.ctrl[self._fin_u] = FINGER_TRAVEL * (1.0 - float(np.clip(values[0], 0.0, 1.0)))
-
-    @property
-    def tcp_site(self) -> int:
-        return self._tcp
-
-    @property
-    def body_ids(self) -> frozenset[int]:
-        return self._bodies
+    def _gripper_command(self, data, closed):
+        data.ctrl[self._fin_u] = FINGER_TRAVEL * (1.0 - closed)
 
 
 class Franka(RobotType):

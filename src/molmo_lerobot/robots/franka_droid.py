@@ -39,9 +39,8 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.paths import molmospaces_assets_dir, package_asset_dir
-from molmo_lerobot.robots.base import RobotHandle, RobotType
+from molmo_lerobot.robots.base import ArmGripperHandle, RobotType
 from molmo_lerobot.robots.franka import load_franka_spec
-from molmo_lerobot.sim.geometry import subtree
 
 NAMESPACE = "robot_0/"
 #: driver joint travel (rad): 0 open … DRIVER_CLOSED closed
@@ -179,85 +178,47 @@ def load_droid_spec(assets_dir: Path | None = None) -> mujoco.MjSpec:
     return mujoco.MjSpec.from_string(_registry_xml())
 
 
-class FrankaDroidHandle(RobotHandle):
+class FrankaDroidHandle(ArmGripperHandle):
     """Move-group access to a compiled model holding ``franka_droid`` under ``prefix``."""
 
+    robot_name = "franka_droid"
+
     def __init__(self, model: mujoco.MjModel, prefix: str = NAMESPACE) -> None:
-        arm = [model.joint(f"{prefix}fr3_joint{k}").id for k in range(1, 8)]
+        names = [f"{prefix}fr3_joint{k}" for k in range(1, 8)]  # joints and actuators share names
+        super().__init__(model, names, names, f"{prefix}gripper/grasp_site", f"{prefix}base")
         drivers = [model.joint(f"{prefix}gripper/{s}_driver_joint").id for s in ("left", "right")]
-        self._arm_q = np.array([model.jnt_qposadr[j] for j in arm])
-        self._arm_v = np.array([model.jnt_dofadr[j] for j in arm])
         self._drv_q = np.array([model.jnt_qposadr[j] for j in drivers])
         self._drv_v = np.array([model.jnt_dofadr[j] for j in drivers])
-        self._arm_u = np.array([model.actuator(f"{prefix}fr3_joint{k}").id for k in range(1, 8)])
         self._grip_u = model.actuator(f"{prefix}gripper/fingers_actuator").id
         self._g_lo, self._g_hi = (float(v) for v in model.actuator_ctrlrange[self._grip_u])
-        self._lo = model.actuator_ctrlrange[self._arm_u, 0].copy()
-        self._hi = model.actuator_ctrlrange[self._arm_u, 1].copy()
-        self._tcp = model.site(f"{prefix}gripper/grasp_site").id
-        root = model.body(f"{prefix}base").id
-        self._bodies = subtree(model, root)
         # every joint of the finger linkage follows the drivers: teleports set them too
         self._linkage = [(model.jnt_qposadr[j], model.jnt_dofadr[j], sign)
                          for name, (_, sign) in _FOLLOWERS.items()
                          if (j := mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{prefix}gripper/{name}")) >= 0]
 
-    def _check(self, group: str) -> None:
-        if group not in ("arm", "gripper"):
-            raise KeyError(f"franka_droid has move groups 'arm' and 'gripper', not {group!r}")
+    def _gripper_qpos(self, data):
+        return float(np.clip(data.qpos[self._drv_q].mean() / DRIVER_CLOSED, 0.0, 1.0))
 
-    def qpos(self, data, group):
-        self._check(group)
-        if group == "arm":
-            return data.qpos[self._arm_q].copy()
-        return np.array([float(np.clip(data.qpos[self._drv_q].mean() / DRIVER_CLOSED, 0.0, 1.0))])
-
-    def qvel(self, data, group):
-        self._check(group)
-        if group == "arm":
-            return data.qvel[self._arm_v].copy()
-        return np.array([float(data.qvel[self._drv_v].mean() / DRIVER_CLOSED)])
+    def _gripper_qvel(self, data):
+        return float(data.qvel[self._drv_v].mean() / DRIVER_CLOSED)
 
     def driver_angles(self, data: mujoco.MjData) -> np.ndarray:
         """The two driver joints in radians (MolmoSpaces' gripper joint positions)."""
         return data.qpos[self._drv_q].copy()
 
-    def set_qpos(self, data, group, values):
-        self._check(group)
-        values = np.asarray(values, dtype=np.float64)
-        if group == "arm":
-            data.qpos[self._arm_q] = values
-            data.qvel[self._arm_v] = 0.0
-        else:
-            angle = DRIVER_CLOSED * float(np.clip(values[0], 0.0, 1.0))
-            data.qpos[self._drv_q] = angle
-            data.qvel[self._drv_v] = 0.0
-            for qadr, dadr, sign in self._linkage:
-                data.qpos[qadr] = sign * angle
-                data.qvel[dadr] = 0.0
-        self.command(data, group, values)
+    def _gripper_set_qpos(self, data, closed):
+        angle = DRIVER_CLOSED * closed
+        data.qpos[self._drv_q] = angle
+        data.qvel[self._drv_v] = 0.0
+        for qadr, dadr, sign in self._linkage:
+            data.qpos[qadr] = sign * angle
+            data.qvel[dadr] = 0.0
 
-    def targets(self, data, group):
-        self._check(group)
-        if group == "arm":
-            return data.ctrl[self._arm_u].copy()
-        return np.array([(data.ctrl[self._grip_u] - self._g_lo) / (self._g_hi - self._g_lo)])
+    def _gripper_target(self, data):
+        return float((data.ctrl[self._grip_u] - self._g_lo) / (self._g_hi - self._g_lo))
 
-    def command(self, data, group, values):
-        self._check(group)
-        values = np.asarray(values, dtype=np.float64)
-        if group == "arm":
-            data.ctrl[self._arm_u] = np.clip(values, self._lo, self._hi)
-        else:
-            data.ctrl[self._grip_u] = self._g_lo + float(np.clip(values[0], 0.0, 1.0)) * (self._g_hi - self._g_lo)
-
-    @property
-    def tcp_site(self) -> int:
-        return self._tcp
-
-    @property
-    def body_ids(self) -> frozenset[int]:
-        return self._bodies
+    def _gripper_command(self, data, closed):
+        data.ctrl[self._grip_u] = self._g_lo + closed * (self._g_hi - self._g_lo)
 
 
 class FrankaDroid(RobotType):
