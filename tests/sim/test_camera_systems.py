@@ -61,17 +61,19 @@ def test_empty_cameras_run_with_the_droid_system():
     env = _env(droid_episode(_pick()))
     try:
         assert env.camera_system == "FrankaDroidCameraSystem"
-        assert env.camera_names == ["wrist_camera", "exo_camera_1", "exo_camera_2"]
+        assert env.camera_names == ["wrist_camera", "exo_camera_1"]  # MolmoSpaces' FrankaDroidCameraSystem
         m = env.model
         assert m.cam_bodyid[m.camera("wrist_camera").id] == m.body("robot_0/gripper/base").id
         assert m.cam_bodyid[m.camera("exo_camera_1").id] == m.body("robot_0/fr3_link0").id
         assert m.cam_fovy[m.camera("exo_camera_1").id] == pytest.approx(71.0)
         assert m.cam_pos[m.camera("exo_camera_1").id] == pytest.approx([0.1, 0.57, 0.66])
-        assert m.cam_pos[m.camera("exo_camera_2").id] == pytest.approx([0.1, -0.57, 0.66])
         for name in env.camera_names:
             assert env.render(name).std() > 5  # not a blank image
     finally:
         env.close()
+
+
+EXO = ("exo_camera_1", "exo_camera_2", "exo_camera_3")
 
 
 def test_randomized_placement_is_reproducible_per_episode():
@@ -79,22 +81,57 @@ def test_randomized_placement_is_reproducible_per_episode():
     e1, e2, e3 = _env(a, "FrankaRandomizedDroidCameraSystem"), _env(copy.deepcopy(a), "droid_randomized"), \
         _env(b, "FrankaRandomizedDroidCameraSystem")
     try:
+        assert e1.camera_names == ["wrist_camera", *EXO]
         fixed = _env(a)
-        for name in ("wrist_camera", "exo_camera_1", "exo_camera_2"):
+        for name in ("wrist_camera", *EXO):
             assert _cam_pose(e1, name) == pytest.approx(_cam_pose(e2, name))  # same episode, same cameras
             assert not np.allclose(_cam_pose(e1, name), _cam_pose(e3, name))  # another episode, others
         assert not np.allclose(_cam_pose(e1, "wrist_camera"), _cam_pose(fixed, "wrist_camera"))
         fixed.close()
-        target = np.asarray(a["scene_modifications"]["object_poses"][a["task"]["pickup_obj_name"]][:3])
-        for name in ("exo_camera_1", "exo_camera_2"):
+        target = a["task"]["pickup_obj_name"]
+        gripper = "robot_0/gripper/base"
+        centre = (e1.body_pose(target)[:3] + e1.data.site_xpos[e1.robot.tcp_site]) / 2  # objects + TCP
+        for name, fov, (near, far) in zip(EXO, (72, 72, 140), ((0.2, 0.8), (0.2, 0.8), (0.2, 0.5))):
             c = e1.model.camera(name).id
             pos, rot = e1.data.cam_xpos[c], e1.data.cam_xmat[c].reshape(3, 3)
-            to_target = (target - pos) / np.linalg.norm(target - pos)
-            assert -rot[:, 2] @ to_target > np.cos(np.radians(15))  # it looks at the workspace centre
-            assert 0.05 <= pos[2] - target[2] <= 0.6 + 0.1
+            to_centre = (centre - pos) / np.linalg.norm(centre - pos)
+            assert -rot[:, 2] @ to_centre > np.cos(np.radians(15))  # it looks at the workspace centre
+            assert near <= np.linalg.norm((pos - centre)[:2]) <= far
+            assert fov - 8 <= e1.model.cam_fovy[c] <= fov
+            seen = e1.visible_fractions(name, [target, gripper])
+            assert min(seen.values()) >= 1e-4, (name, seen)  # the target and the gripper are in view
     finally:
         for e in (e1, e2, e3):
             e.close()
+
+
+class _Scene:
+    """A stand-in for the reset scene: the first ``hidden`` draws see nothing."""
+
+    def __init__(self, env, hidden: int) -> None:
+        self.spec, self.model, self.data, self.robot = env.spec, env.model, env.data, env.robot
+        self.body_id, self.hidden, self.draws = env.body_id, hidden, []
+
+    def visible_fractions(self, camera, bodies):
+        self.draws.append((camera, self.model.cam_pos[self.model.camera(camera).id].copy()))
+        return {b: (0.0 if len(self.draws) <= self.hidden else 0.5) for b in bodies}
+
+
+def test_an_occluded_draw_is_drawn_again_and_a_hopeless_one_fails_the_episode():
+    from molmo_lerobot.cameras.droid import FrankaRandomizedDroidCameraSystem
+
+    system = FrankaRandomizedDroidCameraSystem()
+    env = _env(droid_episode(_pick(0)), "FrankaRandomizedDroidCameraSystem")
+    try:
+        scene = _Scene(env, hidden=3)
+        poses = system.place(scene)
+        assert [c for c, _ in scene.draws[:5]] == ["exo_camera_1"] * 4 + ["exo_camera_2"]
+        assert poses["exo_camera_1"][0] == pytest.approx(scene.draws[3][1])  # the fourth draw, the first seen
+        assert not np.allclose(scene.draws[0][1], scene.draws[3][1])
+        with pytest.raises(ValueError, match="no placement of exo_camera_1 in 100 draws sees all of"):
+            system.place(_Scene(env, hidden=10_000))
+    finally:
+        env.close()
 
 
 def test_no_debug_geometry_in_camera_images():

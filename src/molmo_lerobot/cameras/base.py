@@ -43,6 +43,16 @@ class CameraSystem(ABC):
         between episodes ("" for deterministic systems; randomized ones return their seed)."""
         return ""
 
+    #: whether :meth:`place` needs to run on the compiled scene
+    places_in_scene: bool = False
+
+    def place(self, env: Any) -> dict[str, tuple[Sequence[float], Sequence[float], float]]:
+        """Poses that depend on the compiled scene in its initial state (``env``: a reset
+        :class:`~molmo_lerobot.sim.env.Env` on a scratch copy of the model): camera name ->
+        (position, wxyz quaternion in its parent body's frame, fovy). Called once per built
+        model when :attr:`places_in_scene`; the returned poses are written into the model."""
+        return {}
+
 
 def choose_camera_system(episode: Any, configured: str | None, robot_default: str | None = None) -> str:
     """The camera system an episode runs with: ``standard`` for the episode's own ``cameras``,
@@ -54,11 +64,12 @@ def choose_camera_system(episode: Any, configured: str | None, robot_default: st
     return configured or getattr(source, "camera_system_class", None) or robot_default or STANDARD
 
 
-def episode_rng(episode: Any) -> np.random.Generator:
-    """A generator seeded by the episode's content (its JSON): the same episode, the same draws."""
+def episode_rng(episode: Any, stream: int = 0) -> np.random.Generator:
+    """A generator seeded by the episode's content (its JSON): the same episode, the same draws;
+    ``stream`` picks an independent sequence for another use."""
     data = episode.model_dump(mode="json") if hasattr(episode, "model_dump") else episode
     digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).digest()
-    return np.random.default_rng(list(digest[:16]))
+    return np.random.default_rng([*digest[:16], stream] if stream else list(digest[:16]))
 
 
 def look_rotation(forward: Sequence[float], up: Sequence[float]) -> np.ndarray:

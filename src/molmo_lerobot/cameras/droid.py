@@ -1,21 +1,23 @@
-"""DROID camera systems for ``franka_droid`` (a camera plugin), as MolmoSpaces places them.
+"""DROID camera systems for ``franka_droid`` (a camera plugin), as MolmoSpaces configures them
+(``molmo_spaces/configs/camera_configs.py``).
 
 ``FrankaDroidCameraSystem`` (alias ``droid``): fixed cameras, no noise —
 
 * ``wrist_camera``: the robot's own ``gripper/wrist_camera`` (on ``gripper/base``), fov 56.74°;
-* ``exo_camera_1``: DROID's left shoulder camera, fixed to ``fr3_link0`` at
-  ``[0.1, 0.57, 0.66]``, fov 71° (MolmoSpaces' placement);
-* ``exo_camera_2``: the right shoulder camera, its mirror image in the x-z plane
-  (MolmoSpaces keeps a right shoulder camera commented out; DROID has both).
+* ``exo_camera_1``: DROID's shoulder camera, fixed to ``fr3_link0`` at ``[0.1, 0.57, 0.66]``, fov 71°.
 
-``FrankaRandomizedDroidCameraSystem`` (alias ``droid_randomized``): MolmoSpaces' randomized
-variant — the wrist camera with fov noise ±4°, position noise (±15/±5/±10 mm in the camera
-frame) and orientation noise (±8°/±4°/±4° about x/y/z), and two exocentric cameras looking at
-the workspace centre (the task's target object) from a distance of 0.2–0.8 m, 0.05–0.6 m above
-it, any azimuth, fov 64–72°, look-at point jittered ±0.1 m. Every draw comes from a generator
-seeded by the episode's content, so an episode always gets the same cameras, on any worker.
-MolmoSpaces also re-draws exocentric placements until the target is visible (rendered
-visibility); we do not render at build time, so a drawn camera may be occluded.
+``FrankaRandomizedDroidCameraSystem`` (alias ``droid_randomized``): the wrist camera with fov
+noise ±4°, position noise (±15/±5/±10 mm in the camera frame) and orientation noise
+(±8°/±4°/±4° about x/y/z); ``exo_camera_1`` and ``exo_camera_2`` (ZED 2 analogues: 0.2–0.8 m
+from the workspace centre, 0.05–0.6 m above it, any azimuth, fov 64–72°) and ``exo_camera_3``
+(a GoPro analogue: 0.2–0.5 m, 0.1–0.6 m above, fov 137–140°), each looking at the workspace
+centre with the look-at point jittered ±0.1 m. The workspace centre is the centroid of the
+task's objects (``task_relevant_objects``, else the target, the receptacle and the other
+receptacles) and the gripper's TCP in the reset scene. An exocentric placement is drawn again
+until every task object and the gripper cover at least 1e-4 of its pixels (a segmentation
+render), at most 100 times (20 for ``exo_camera_3``); when no draw passes, the episode fails to
+build, as in MolmoSpaces. Every draw comes from generators seeded by the episode's content, so
+an episode always gets the same cameras, on any worker.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import hashlib
 import json
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import mujoco
@@ -35,28 +38,34 @@ from molmo_lerobot.cameras.base import CameraSystem, episode_rng, look_rotation,
 
 WRIST_MJCF_NAME = "gripper/wrist_camera"
 ARM_ROOT = "fr3_link0"
-LEFT_SHOULDER = ((0.1, 0.57, 0.66), (-0.3633, -0.1241, 0.4263, 0.8191))
-
-
-def _mirrored(offset: Sequence[float], quat: Sequence[float]) -> tuple[tuple[float, ...], list[float]]:
-    """The same camera mirrored in the base's x-z plane (left shoulder -> right shoulder)."""
-    rot = Rotation.from_quat(np.asarray(quat, dtype=np.float64), scalar_first=True).as_matrix()
-    flip = np.array([1.0, -1.0, 1.0])
-    forward, up = -rot[:, 2] * flip, rot[:, 1] * flip
-    return tuple(np.asarray(offset) * flip), mat_to_quat(look_rotation(forward, up))
-
-
-#: (name, offset in fr3_link0's frame, wxyz camera quaternion in that frame, fov)
-SHOULDER_CAMERAS = (
-    ("exo_camera_1", *LEFT_SHOULDER, 71.0),
-    ("exo_camera_2", *_mirrored(*LEFT_SHOULDER), 71.0),
-)
+#: DROID's shoulder camera: offset and wxyz quaternion in fr3_link0's frame, fov
+EXO_CAMERA_1 = ((0.1, 0.57, 0.66), (-0.3633, -0.1241, 0.4263, 0.8191), 71.0)
 FIXED_WRIST_FOV = 56.74
 RANDOM_WRIST_FOV, RANDOM_WRIST_FOV_NOISE = 52.0, (-4.0, 4.0)
 RANDOM_WRIST_POS_NOISE = ((-0.015, -0.005, -0.01), (0.015, 0.005, 0.01))
 RANDOM_WRIST_ROT_NOISE_DEG = (8.0, 4.0, 4.0)
-EXO_DISTANCE, EXO_HEIGHT, EXO_AZIMUTH, EXO_FOV, EXO_LOOKAT_NOISE = (0.2, 0.8), (0.05, 0.6), (0.0, 2 * math.pi), \
-    (64.0, 72.0), (-0.1, 0.1)
+
+
+@dataclass(frozen=True)
+class ExoDraw:
+    """A randomized exocentric camera around the workspace centre (ranges in metres, radians, degrees)."""
+
+    name: str
+    distance: tuple[float, float]
+    height: tuple[float, float]
+    fov: tuple[float, float]
+    attempts: int
+    azimuth: tuple[float, float] = (0.0, 2 * math.pi)
+    lookat_noise: tuple[float, float] = (-0.1, 0.1)
+
+
+RANDOM_EXO_CAMERAS = (
+    ExoDraw("exo_camera_1", (0.2, 0.8), (0.05, 0.6), (64.0, 72.0), 100),
+    ExoDraw("exo_camera_2", (0.2, 0.8), (0.05, 0.6), (64.0, 72.0), 100),
+    ExoDraw("exo_camera_3", (0.2, 0.5), (0.1, 0.6), (137.0, 140.0), 20),
+)
+#: the least fraction of an exocentric camera's pixels each task object and the gripper must cover
+MIN_VISIBLE_FRACTION = 1e-4
 
 
 def _wrist_mount(world: mujoco.MjSpec) -> mujoco.MjsCamera:
@@ -80,7 +89,7 @@ def _add_wrist(world: mujoco.MjSpec, pos: Sequence[float], quat: Sequence[float]
 
 
 class FrankaDroidCameraSystem(CameraSystem):
-    """Wrist camera + both DROID shoulder cameras, fixed (module docstring)."""
+    """Wrist camera + DROID's shoulder camera, fixed (module docstring)."""
 
     name = "FrankaDroidCameraSystem"
     aliases = ("droid",)
@@ -89,34 +98,29 @@ class FrankaDroidCameraSystem(CameraSystem):
                     find_body: Callable[[str], mujoco.MjsBody | None], episode: Any = None) -> list[str]:
         mount = _wrist_mount(world)
         _add_wrist(world, mount.pos, mount.quat, FIXED_WRIST_FOV)
-        root = _arm_root(find_body)
-        for name, offset, quat, fov in SHOULDER_CAMERAS:
-            root.add_camera(name=name, pos=list(offset), quat=list(quat), fovy=fov)
-        return ["wrist_camera"] + [c[0] for c in SHOULDER_CAMERAS]
+        offset, quat, fov = EXO_CAMERA_1
+        _arm_root(find_body).add_camera(name="exo_camera_1", pos=list(offset), quat=list(quat), fovy=fov)
+        return ["wrist_camera", "exo_camera_1"]
 
 
-def workspace_centre(world: mujoco.MjSpec, episode: Any, find_body: Callable[[str], mujoco.MjsBody | None]) \
-        -> np.ndarray:
-    """Where the randomized exocentric cameras look: the task's target object (its episode pose,
-    else its body position), else 0.5 m in front of the robot base."""
+def task_objects(episode: Any) -> list[str]:
+    """The bodies the exocentric cameras must see: ``task_relevant_objects``, else the task's
+    target, receptacle and other receptacles."""
+    if episode.task_relevant_objects:
+        return list(dict.fromkeys(episode.task_relevant_objects))
     task = episode.task
-    name = getattr(task, "pickup_obj_name", None)
-    poses = episode.scene_modifications.object_poses
-    if name and name in poses:
-        return np.asarray(poses[name][:3], dtype=np.float64)
-    body = find_body(name) if name else None
-    if body is not None and body.parent is not None and body.parent.name == "world":
-        return np.asarray(body.pos, dtype=np.float64)
-    base = np.asarray(task.robot_base_pose, dtype=np.float64)
-    forward = Rotation.from_quat(base[3:], scalar_first=True).apply([0.5, 0.0, 0.0])
-    return base[:3] + forward + [0.0, 0.0, 0.2]
+    names = [getattr(task, "pickup_obj_name", None), getattr(task, "place_receptacle_name", None),
+             *(getattr(task, "other_receptacle_names", None) or [])]
+    return list(dict.fromkeys(n for n in names if n))
 
 
 class FrankaRandomizedDroidCameraSystem(CameraSystem):
-    """Wrist camera with noise + two randomized exocentric cameras, seeded by the episode (module docstring)."""
+    """Wrist camera with noise + three randomized exocentric cameras that see the task, seeded by
+    the episode (module docstring)."""
 
     name = "FrankaRandomizedDroidCameraSystem"
     aliases = ("droid_randomized",)
+    places_in_scene = True
 
     def episode_key(self, episode: Any) -> str:
         data = episode.model_dump(mode="json")
@@ -134,17 +138,37 @@ class FrankaRandomizedDroidCameraSystem(CameraSystem):
         limit = np.asarray(RANDOM_WRIST_ROT_NOISE_DEG)
         rot = rot * Rotation.from_euler("xyz", rng.uniform(-limit, limit, size=3), degrees=True)
         _add_wrist(world, pos, rot.as_quat(scalar_first=True), fov)
-        centre = workspace_centre(world, episode, find_body)
-        names = ["wrist_camera"]
-        for k in (1, 2):
-            distance, azimuth = rng.uniform(*EXO_DISTANCE), rng.uniform(*EXO_AZIMUTH)
-            height, exo_fov = rng.uniform(*EXO_HEIGHT), rng.uniform(*EXO_FOV)
-            lookat = centre + rng.uniform(*EXO_LOOKAT_NOISE, size=3)
-            cam_pos = centre + [distance * math.cos(azimuth), distance * math.sin(azimuth), height]
-            quat = mat_to_quat(look_rotation(lookat - cam_pos, (0.0, 0.0, 1.0)))
-            world.worldbody.add_camera(name=f"exo_camera_{k}", pos=cam_pos.tolist(), quat=quat, fovy=float(exo_fov))
-            names.append(f"exo_camera_{k}")
-        return names
+        for cam in RANDOM_EXO_CAMERAS:  # placed by place() once the scene is compiled
+            world.worldbody.add_camera(name=cam.name, pos=[0.0, 0.0, 0.0])
+        return ["wrist_camera"] + [cam.name for cam in RANDOM_EXO_CAMERAS]
+
+    def place(self, env: Any) -> dict[str, tuple[Sequence[float], Sequence[float], float]]:
+        spec, m, d = env.spec, env.model, env.data
+        objects = task_objects(spec)
+        points = [d.xpos[env.body_id(name, "task_relevant_objects")] for name in objects]
+        tcp = env.robot.tcp_site
+        centre = np.mean([*points, d.site_xpos[tcp]], axis=0)
+        must_see = [*objects, m.body(int(m.site_bodyid[tcp])).name]  # and the gripper
+        rng = episode_rng(spec, stream=1)
+        poses: dict[str, tuple[Sequence[float], Sequence[float], float]] = {}
+        for cam in RANDOM_EXO_CAMERAS:
+            cid = m.camera(cam.name).id
+            m.cam_fovy[cid] = fovy = float(rng.uniform(*cam.fov))
+            for _ in range(cam.attempts):
+                distance, azimuth, height = (rng.uniform(*cam.distance), rng.uniform(*cam.azimuth),
+                                             rng.uniform(*cam.height))
+                pos = centre + [distance * math.cos(azimuth), distance * math.sin(azimuth), height]
+                lookat = centre + rng.uniform(*cam.lookat_noise, size=3)
+                quat = mat_to_quat(look_rotation(lookat - pos, (0.0, 0.0, 1.0)))
+                m.cam_pos[cid], m.cam_quat[cid] = pos, quat
+                seen = env.visible_fractions(cam.name, must_see)
+                if min(seen.values()) >= MIN_VISIBLE_FRACTION:
+                    poses[cam.name] = (pos.tolist(), quat, fovy)
+                    break
+            else:
+                raise ValueError(f"{self.name}: no placement of {cam.name} in {cam.attempts} draws sees all of "
+                                 f"{must_see} (each must cover {MIN_VISIBLE_FRACTION:g} of the image)")
+        return poses
 
 
 @hookimpl

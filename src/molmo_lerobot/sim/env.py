@@ -21,11 +21,14 @@ import json
 import math
 import warnings
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
+
+from molmo_lerobot.sim.geometry import subtree
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
@@ -148,6 +151,21 @@ def _build_model(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: 
     return model, cams
 
 
+def _place_cameras(spec: EpisodeSpec, timing: Timing, model: mujoco.MjModel, robot: RobotType, cams: list[str],
+                   camera_system: CameraSystem) -> None:
+    """Let ``camera_system`` place its cameras in the reset scene (on a scratch copy), then fix
+    the poses it chose in ``model``."""
+    probe = Env(spec, timing, copy.copy(model), robot, list(cams))
+    try:
+        probe.reset(0)
+        poses = camera_system.place(probe)
+    finally:
+        probe.close()
+    for name, (pos, quat, fovy) in poses.items():
+        cam = model.camera(name).id
+        model.cam_pos[cam], model.cam_quat[cam], model.cam_fovy[cam] = pos, quat, fovy
+
+
 def make_env(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: RobotType,
              camera_system: CameraSystem) -> Env:
     """Assemble, compile (cached per scene content) and wrap one episode's simulation.
@@ -159,7 +177,10 @@ def make_env(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: Robo
     if key in _MODEL_CACHE:
         _MODEL_CACHE.move_to_end(key)
     else:
-        _MODEL_CACHE[key] = _build_model(spec, timing, scene, robot, camera_system)
+        model, cams = _build_model(spec, timing, scene, robot, camera_system)
+        if camera_system.places_in_scene:
+            _place_cameras(spec, timing, model, robot, cams, camera_system)
+        _MODEL_CACHE[key] = model, cams
         while len(_MODEL_CACHE) > _MODEL_CACHE_SIZE:
             _MODEL_CACHE.popitem(last=False)
     model, cams = _MODEL_CACHE[key]
@@ -202,6 +223,7 @@ class Env:
         self._depth_cameras = [c.name for c in spec.cameras if c.record_depth]
         self._renderer: mujoco.Renderer | None = None
         self._depth_renderer: mujoco.Renderer | None = None
+        self._seg_renderer: mujoco.Renderer | None = None
         self._view = self.camera_view_options()
         self.seed: int | None = None
         self.rng = np.random.default_rng()
@@ -248,10 +270,10 @@ class Env:
                              "top-level body")
 
     def close(self) -> None:
-        for r in (self._renderer, self._depth_renderer):
+        for r in (self._renderer, self._depth_renderer, self._seg_renderer):
             if r is not None:
                 r.close()
-        self._renderer = self._depth_renderer = None
+        self._renderer = self._depth_renderer = self._seg_renderer = None
 
     # Stepping ------------------------------------------------------------------------------------
     def _validate(self, action: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -320,6 +342,22 @@ class Env:
         self._renderer.update_scene(self.data, camera=camera, scene_option=self._view)
         return self._renderer.render()
 
+    def visible_fractions(self, camera: str, bodies: Sequence[str]) -> dict[str, float]:
+        """For each body, the fraction of ``camera``'s pixels showing a geom of its subtree
+        (a segmentation render at the episode's resolution, what the camera sees)."""
+        if self._seg_renderer is None:
+            self._seg_renderer = self._make_renderer()
+            self._seg_renderer.enable_segmentation_rendering()
+        mujoco.mj_camlight(self.model, self.data)  # cameras the caller just moved
+        self._seg_renderer.update_scene(self.data, camera=camera, scene_option=self._view)
+        seg = self._seg_renderer.render()
+        geom_ids = np.where(seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM, seg[..., 0], -1)
+        out = {}
+        for name in bodies:
+            owned = np.isin(self.model.geom_bodyid, list(self.subtree_bodies(name)))
+            out[name] = float(np.isin(geom_ids, np.flatnonzero(owned)).mean())
+        return out
+
     def render_depth(self, camera: str) -> np.ndarray:
         """Depth in metres, float32 (H, W), from ``camera``."""
         if self._depth_renderer is None:
@@ -349,12 +387,7 @@ class Env:
 
     def subtree_bodies(self, name: str) -> frozenset[int]:
         """Ids of ``name`` and every body below it."""
-        root = self.body_id(name)
-        out = {root}
-        for b in range(root + 1, self.model.nbody):
-            if int(self.model.body_parentid[b]) in out:
-                out.add(b)
-        return frozenset(out)
+        return subtree(self.model, self.body_id(name))
 
     def contact_bodies(self, bodies: frozenset[int]) -> set[int]:
         """Bodies (outside ``bodies``) in contact with any of ``bodies`` right now."""
