@@ -59,7 +59,8 @@ def two_worker_run(tmp_path_factory):
 def test_shards_are_per_worker_and_a_torn_one_is_marked(two_worker_run):
     _, factory, _, _, shards = two_worker_run
     names = {s.root.name.split(f"{factory.session}-")[1]: s.complete for s in shards}
-    # one episode per shard; the errored episode 2 is discarded without a shard of its own
+    # a shard ends where a worker's episodes stop being consecutive (w0: 0, then 2 and 4); the
+    # errored episode 2 is discarded without a shard of its own
     assert names == {"w0g0-s000": True, "w0g0-s001": True, "w1g0-s000": True, "w1g0-s001": False,
                      "w1g1-s000": True}
 
@@ -201,6 +202,7 @@ def test_a_failed_save_leaves_the_shard_torn_and_never_merged(tmp_path, monkeypa
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     factory = LeRobotRecorderFactory.from_config(CFG)
+    factory.shard_episodes = 1  # episode 0's shard is finished before episode 1's save fails
     w = factory.make("w0g0", tmp_path)
     first = S.run_episode(w, 0, 5, success_from=1)
 

@@ -9,8 +9,8 @@ never leaves a dataset that looks complete.
 
 Layout added to the LeRobot dataset root:
 
-Dataset episodes follow benchmark order (one episode per worker shard, so the merge only
-copies and concatenates, never re-encodes), and every frame carries ``eval.episode_index``.
+Dataset episodes follow benchmark order (each worker shard holds consecutive episodes, so the
+merge only copies and concatenates, never re-encodes), and every frame carries ``eval.episode_index``.
 
 * ``meta/eval/episodes.jsonl``: one record per attempted episode: ``episode_index`` (the
   dataset episode, or null when not stored, with ``not_recorded``), ``benchmark_episode_index``,
@@ -91,8 +91,9 @@ def _choose(sources: list[_Source], by_index: dict[int, EpisodeResult]) -> dict[
 def _segments(order: list[int], chosen: dict[int, tuple[int, int]]) -> list[tuple[int, list[int]]]:
     """Split the benchmark ``order`` into runs stored consecutively in one source: [(source, local episodes)].
 
-    With one episode per shard every run is a whole shard (copied, never re-encoded); only a
-    multi-episode source (a resumed run's previous dataset) may need cutting into subsets.
+    Shards hold consecutive episodes, so every run is a whole shard (copied, never re-encoded);
+    only a source with episodes not chosen (a resumed run's previous dataset, a shard whose
+    episode was chosen from a retry) needs cutting into a subset.
     """
     segments: list[tuple[int, list[int]]] = []
     for b in order:

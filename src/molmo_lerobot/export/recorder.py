@@ -65,9 +65,12 @@ class LeRobotRecorderFactory(RecorderFactory):
     push: bool = False
     private: bool = False
     session: str = field(default_factory=new_session)
-    #: finalize a worker's shard after this many episodes. One episode per shard lets the merge
-    #: put episodes in benchmark order without re-encoding, whatever the number of workers.
-    shard_episodes: int = 1
+    #: finalize a worker's shard after this many episodes (a killed worker or a failed save loses
+    #: its open shard's episodes from the dataset, never from the results), or before an episode
+    #: that does not follow the previous one in benchmark order: the supervisor gives each worker
+    #: consecutive stretches, so shards concatenate in benchmark order without re-encoding, and
+    #: the merge (about a second per shard) sees a few shards, not one per episode
+    shard_episodes: int = 8
     video: VideoSettings = field(default_factory=VideoSettings)
 
     @classmethod
@@ -144,10 +147,13 @@ class LeRobotRecorder(Recorder):
         self._discarded: list[dict[str, Any]] = []
         self._info: EpisodeInfo | None = None
         self._frames = 0
+        self._last_index = -1
 
     # Recorder interface -------------------------------------------------------------
     def start_episode(self, info: EpisodeInfo) -> None:
-        self._info, self._frames = info, 0
+        if self._saved and info.episode_index != self._last_index + 1:
+            self._close_shard()  # out of benchmark order: the next shard starts here
+        self._info, self._frames, self._last_index = info, 0, info.episode_index
 
     def record_step(self, obs: dict[str, Any], action: dict[str, Any], reward: float | None,
                     success: bool, done: bool) -> None:

@@ -9,6 +9,10 @@ episode. For every slot the supervisor waits on the transport and reacts:
 * the worker dies (SIGKILL, segfault, OOM, node loss), during an episode or while starting →
   the episode is retried on a fresh worker up to ``retries`` times, then recorded as an error
   naming the death; the run goes on;
+* a slot is free → it gets the pending item that follows its previous one in run order, else
+  the start of the longest run of pending items that no slot continues (or that run's second
+  half), so each worker plays stretches of consecutive episodes and its dataset shards are in
+  benchmark order (see :func:`take_next`);
 * a worker cannot start (its policy raised, or it did not start within ``init_timeout_s``)
   before any worker ever started → :class:`WorkerStartError` (nothing can run); later, such a
   start is treated like a death;
@@ -29,7 +33,6 @@ import signal
 import threading
 import time
 from abc import ABC, abstractmethod
-from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -103,11 +106,29 @@ class _Slot:
     handle: Any = None
     ready: bool = False
     item: WorkItem | None = None
+    last: int | None = None  # run-order position of the last item this slot was given
     since: float = 0.0  # start of the worker (not ready yet) or of the episode (ready)
 
     @property
     def worker_id(self) -> str:
         return f"w{self.index}g{self.generation}"
+
+
+def take_next(pending: dict[int, WorkItem], last: int | None, others: list[int | None]) -> int:
+    """The run-order position a free slot takes next: the one after its ``last``; else the start
+    of the longest run of consecutive pending positions, or its middle when another slot's next
+    item starts it (``others``: the other slots' last positions)."""
+    if last is not None and last + 1 in pending:
+        return last + 1
+    continued = {o + 1 for o in others if o is not None}
+    best: list[int] = []
+    run: list[int] = []
+    for p in sorted(pending):
+        if run and p != run[-1] + 1:
+            best, run = max(best, run, key=len), []
+        run.append(p)
+    best = max(best, run, key=len)
+    return best[len(best) // 2] if best[0] in continued else best[0]
 
 
 class Supervisor:
@@ -130,7 +151,8 @@ class Supervisor:
         if not items:
             return
         self._job, self._on_result = job, on_result
-        self._pending: deque[WorkItem] = deque(items)
+        self._position = {item.episode_index: k for k, item in enumerate(items)}
+        self._pending: dict[int, WorkItem] = dict(enumerate(items))  # by run-order position
         self._attempts: dict[int, int] = {}
         self._retiring: list[tuple[Any, float]] = []  # stopped workers and when to kill them
         self._any_ready = False
@@ -166,7 +188,8 @@ class Supervisor:
         for slot in self._slots:
             if slot.item is not None or not self._pending:
                 continue
-            item = slot.item = self._pending.popleft()
+            slot.last = take_next(self._pending, slot.last, [s.last for s in self._slots if s is not slot])
+            item = slot.item = self._pending.pop(slot.last)
             self._attempts[item.episode_index] = self._attempts.get(item.episode_index, 0) + 1
             if slot.handle is None:
                 slot.generation += 1
@@ -224,7 +247,9 @@ class Supervisor:
         if n <= self.retries:
             log.warning("episode %d: %s; retrying (attempt %d of %d)", item.episode_index, reason, n + 1,
                         self.retries + 1)
-            self._pending.appendleft(item)
+            position = self._position[item.episode_index]
+            self._pending[position] = item
+            slot.last = position - 1  # the slot's next worker retries it first
         else:
             self._on_result(item.failed(reason, attempts=n))
 
