@@ -24,16 +24,12 @@ def root_body(model: mujoco.MjModel, body: int) -> int:
 
 
 def subtree(model: mujoco.MjModel, root: int) -> frozenset[int]:
-    """``root`` and every body below it."""
-    return frozenset(b for b in range(model.nbody) if _descends(model, b, root))
-
-
-def _descends(model: mujoco.MjModel, body: int, root: int) -> bool:
-    while body > 0:
-        if body == root:
-            return True
-        body = int(model.body_parentid[body])
-    return root == 0 and body == 0
+    """``root`` and every body below it (MuJoCo numbers a parent before its children)."""
+    inside = {root}
+    for b in range(root + 1, model.nbody):
+        if int(model.body_parentid[b]) in inside:
+            inside.add(b)
+    return frozenset(inside)
 
 
 def body_geoms(model: mujoco.MjModel, bodies: Iterable[int], visible_only: bool = True,
