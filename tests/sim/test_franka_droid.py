@@ -188,14 +188,19 @@ def test_molmospaces_grasp_file_transfers(tmp_path):
     """A user grasp library exactly as MolmoSpaces' custom-assets tutorial writes one
     (``<uid>/droid/grasps.npz`` + ``grasps_index.json``, ``transforms`` float16 as their pipeline
     saves them): one top-down grasp with the TCP at the block's origin, +y fingers along the
-    object's -y, +z approach pointing down. The expert uses it on franka_droid and picks the
-    block: the pinch point at the block's centre keeps the fingertips off the table."""
+    object's -y (turned 0.5 rad about z), +z approach pointing down. The expert uses it on
+    franka_droid and picks the block: the pinch point at the block's centre keeps the fingertips
+    off the table."""
     raw = droid_episode(next(e for e in map(pick_episode, range(60))
                              if e["task"]["pickup_obj_name"].startswith("builtin_red_block")))
     uid = raw["task"]["pickup_obj_name"]
     T = np.eye(4)
     T[:3, 1] = [0, -1, 0]
     T[:3, 2] = [0, 0, -1]
+    yaw = 0.5  # turned about the block's z, so float16 rounds the rotation as in their files
+    T[:3, :3] = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]]) @ T[:3, :3]
+    T = T.astype(np.float16).astype(np.float64)
+    assert not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-6)  # not quite a rotation
     lib = tmp_path / "grasp_library"
     (lib / uid / "droid").mkdir(parents=True)
     np.savez_compressed(lib / uid / "droid" / "grasps.npz", transforms=T.reshape(1, 4, 4).astype(np.float16))
