@@ -180,13 +180,9 @@ def test_four_concurrent_installers_do_the_work_once(kind, bucket, hub_standin, 
 
 
 # -- faults: one line, nothing that looks complete, retry succeeds ---------------------------------------------
-def _fault_install(tmp_path, remote, capsys, fault=None):
+def _fault_install(tmp_path, remote, capsys):
     rc = _install(tmp_path, remote, "objects/objaverse@1")
-    err = capsys.readouterr().err
-    if fault is not None:
-        with capsys.disabled():
-            print(f"\n[{fault}] rc={rc} {err.strip()}")
-    return rc, err
+    return rc, capsys.readouterr().err
 
 
 def _assert_failed_cleanly(tmp_path, rc, err, pattern):
@@ -243,7 +239,7 @@ def test_hf_faults_are_one_line_and_retry_succeeds(fault, bucket, hub_standin, t
         monkeypatch.delenv("HF_TOKEN", raising=False)
         monkeypatch.setenv("HF_HUB_DISABLE_IMPLICIT_TOKEN", "1")
         pattern = r"denied \(HTTP 401\); set HF_TOKEN"
-    rc, err = _fault_install(tmp_path, HF, capsys, f"hf {fault}")
+    rc, err = _fault_install(tmp_path, HF, capsys)
     _assert_failed_cleanly(tmp_path, rc, err, pattern)
     assert "secret-token-123" not in err
 
@@ -277,7 +273,7 @@ def test_bucket_faults_are_one_line_and_retry_succeeds(fault, bucket, tmp_path, 
         path.write_bytes(good[:20] + bytes(len(good) - 40) + good[-20:])
     else:
         bucket.faults[rel] = fault
-    rc, err = _fault_install(tmp_path, bucket.url, capsys, f"bucket {fault}")
+    rc, err = _fault_install(tmp_path, bucket.url, capsys)
     pattern = {"truncate": "transfer of the file failed|truncated response", "404": r"not found \(HTTP 404\)",
                "401": r"denied \(HTTP 401\); the bucket is not public", "corrupt": "cannot be read"}[fault]
     _assert_failed_cleanly(tmp_path, rc, err, pattern)
@@ -295,7 +291,7 @@ def test_bucket_archive_inflating_past_the_ratio_cap_is_refused_once(bucket, tmp
     (tree / "bomb").mkdir(parents=True)
     (tree / "bomb" / "zeros.bin").write_bytes(bytes(32 << 20))
     groups = publish_bucket(tree, bucket.root, "objects", "objaverse", "1")
-    rc, err = _fault_install(tmp_path, bucket.url, capsys, "bucket bomb")
+    rc, err = _fault_install(tmp_path, bucket.url, capsys)
     _assert_failed_cleanly(tmp_path, rc, err, "past its limit of .* bytes")
     assert bucket.archive_gets() == {f"objects/objaverse/1/{next(iter(groups))}": 1}  # no second download
     written = sum(p.stat().st_size for p in (tmp_path / "cache").rglob("*") if p.is_file())
