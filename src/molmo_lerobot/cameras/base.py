@@ -17,7 +17,6 @@ from typing import Any
 import mujoco
 import numpy as np
 
-
 STANDARD = "standard"
 
 
