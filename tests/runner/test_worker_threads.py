@@ -24,13 +24,13 @@ def _threads_in_fresh_process(code: str, env_threads: str | None = None) -> int:
 @pytest.mark.parametrize("torch_first", [False, True], ids=["before-torch", "after-torch"])
 def test_cap_threads_sets_torch_threads_before_or_after_its_import(torch_first):
     code = ("import torch; torch.set_num_threads(3)\n" if torch_first else "") + (
-        "from molmo_lerobot.runner.worker import cap_threads\ncap_threads(1)\n"
+        "from molmo_lerobot.cpu_threads import cap_threads\ncap_threads(1)\n"
         "import torch\nprint(torch.get_num_threads())")
     assert _threads_in_fresh_process(code) == 1
 
 
 def test_null_leaves_the_default():
-    code = "from molmo_lerobot.runner.worker import cap_threads\ncap_threads(None)\nimport torch\nprint(torch.get_num_threads())"
+    code = "from molmo_lerobot.cpu_threads import cap_threads\ncap_threads(None)\nimport torch\nprint(torch.get_num_threads())"
     assert _threads_in_fresh_process(code, env_threads="2") == 2
 
 

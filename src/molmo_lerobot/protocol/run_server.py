@@ -18,6 +18,8 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
+from molmo_lerobot.cpu_threads import cap_threads
+
 STATS_FILE = "serve_stats.json"
 
 
@@ -34,10 +36,11 @@ def serve_options(policy_cfg: dict[str, Any], workers: int) -> dict[str, Any] | 
             "max_clients": max(8, workers + 2), "first_request_timeout_s": 600.0, "idle_timeout_s": 3600.0}
 
 
-def _serve(policy_cfg: dict[str, Any], options: dict[str, Any], conn: Connection) -> None:
+def _serve(policy_cfg: dict[str, Any], options: dict[str, Any], threads: int | None, conn: Connection) -> None:
     """Server process: build the server, report its port (or the error), serve until SIGTERM."""
     from molmo_lerobot.cli.serve import build_server
 
+    cap_threads(threads)  # as many as each in-process worker would use: the same rounding
     try:
         server = build_server(policy_cfg, host="127.0.0.1", port=0, **options)
         server.run(ready=lambda srv: conn.send(("ready", srv.port)))
@@ -56,16 +59,17 @@ def fetch_stats(port: int) -> dict[str, Any] | None:
 
 @contextlib.contextmanager
 def served_policy(policy_cfg: dict[str, Any], workers: int, output_dir: str | Path | None = None,
-                  start_timeout_s: float = 900.0) -> Iterator[dict[str, Any]]:
+                  start_timeout_s: float = 900.0, threads: int | None = 1) -> Iterator[dict[str, Any]]:
     """Yield the policy config workers should use: ``policy_cfg`` itself, or (``serve: true``)
-    a ``remote`` config for a server process started here and stopped (and reaped) on exit."""
+    a ``remote`` config for a server process started here and stopped (and reaped) on exit.
+    The server runs torch/BLAS on ``threads`` CPU threads (the run's ``worker_threads``)."""
     options = serve_options(policy_cfg, workers)
     if options is None:
         yield policy_cfg
         return
     ctx = mp.get_context("spawn")
     parent, child = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_serve, args=(policy_cfg, options, child), name="molmo-serve", daemon=True)
+    proc = ctx.Process(target=_serve, args=(policy_cfg, options, threads, child), name="molmo-serve", daemon=True)
     proc.start()
     child.close()
     port = None

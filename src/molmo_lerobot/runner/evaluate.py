@@ -264,7 +264,8 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                     record(failed)
             if todo:
                 try:  # policy.serve=true: one local policy server for the run, the workers its clients
-                    with served_policy(cfg["policy"], int(cfg["workers"]), out) as worker_policy:
+                    with served_policy(cfg["policy"], int(cfg["workers"]), out,
+                                       threads=cfg.get("worker_threads", 1)) as worker_policy:
                         job = WorkerJob(policy=worker_policy, timing=cfg["timing"], output_dir=str(out),
                                         benchmark_name=bench.name, benchmark_sha256=bench.sha256,
                                         recorders=recorders + progress.factories(), prefer=plugins.prefer,

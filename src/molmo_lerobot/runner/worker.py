@@ -8,13 +8,13 @@ process resolves each episode's task type and horizon once; they travel in the w
 from __future__ import annotations
 
 import os
-import sys
 import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from molmo_lerobot.cpu_threads import cap_threads
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.runner.recorders import EpisodeInfo, RecorderFactory
 from molmo_lerobot.runner.results import EpisodeResult
@@ -56,22 +56,6 @@ class WorkerJob:
     camera_system: str | None = None
     end_on_success: bool = False
     threads: int | None = 1  # CPU threads for torch/BLAS in this worker (None: the libraries' default)
-
-
-def cap_threads(n: int | None) -> None:
-    """Give this worker process ``n`` CPU threads for torch and BLAS (None: leave their default).
-
-    Every library otherwise starts one thread per core in every worker, so W workers run
-    W × cores threads: with a learned policy on CPU that oversubscription costs more than
-    the workers gain. A fixed count also keeps CPU kernels' rounding the same for any
-    worker count.
-    """
-    if n is None:
-        return
-    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
-        os.environ[var] = str(n)
-    if "torch" in sys.modules:  # already imported (a policy plugin's import): set it directly
-        sys.modules["torch"].set_num_threads(n)
 
 
 class WorkerStop(BaseException):
