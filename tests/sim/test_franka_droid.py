@@ -189,8 +189,8 @@ def test_molmospaces_grasp_file_transfers(tmp_path):
     (``<uid>/droid/grasps.npz`` + ``grasps_index.json``, ``transforms`` float16 as their pipeline
     saves them): one top-down grasp with the TCP at the block's origin, +y fingers along the
     object's -y (turned 0.5 rad about z), +z approach pointing down. The expert uses it on
-    franka_droid and picks the block: the pinch point at the block's centre keeps the fingertips
-    off the table."""
+    franka_droid and picks the block without the fingers touching the table: the pinch point at
+    the block's centre keeps the fingertips off it (the old, shallower TCP pressed them into it)."""
     raw = droid_episode(next(e for e in map(pick_episode, range(60))
                              if e["task"]["pickup_obj_name"].startswith("builtin_red_block")))
     uid = raw["task"]["pickup_obj_name"]
@@ -219,10 +219,21 @@ def test_molmospaces_grasp_file_transfers(tmp_path):
         task = get_plugins().task_type(spec.task_name).create(spec, env)
         ctx = EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=dict(env.move_groups),
                              policy_dt_s=0.066, env=env)
+        env.step({g: env.robot.targets(env.data, g) for g in env.move_groups})  # the block settles
+        support = env.contact_bodies(env.subtree_bodies(uid)) - env.robot.body_ids  # what it rests on
+        assert support
+        touched, step = [], env.step
+
+        def step_and_check(action):
+            step(action)
+            touched.append(bool(env.contact_bodies(env.robot.body_ids) & support))
+
+        env.step = step_and_check
         expert = ScriptedPick({})
         out = rollout(env, task, expert, ctx, 120, [], None, "scripted")
         assert expert.grasp_local == pytest.approx(T)
         assert out.success
+        assert not any(touched)  # the fingers never reach the table: the pads centre on the block
     finally:
         env.close()
         catalog.grasp_libraries[:] = saved
