@@ -21,43 +21,25 @@ from molmo_lerobot.robots.franka import FINGER_TRAVEL  # noqa: E402
 from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
 from molmo_lerobot.sim.env import Timing  # noqa: E402
 from molmo_lerobot.sim import geometry  # noqa: E402
+from task_scenes import make_task_env, put_in_receptacle, settle  # noqa: E402
 
 
 def _episode(task: str, seed: int = 3) -> dict:
     return generate_benchmark(task, 1, 1, seed, "test")[0][0]
 
 
-def _make(raw: dict):
-    plugins = get_plugins()
-    spec = EpisodeSpec.model_validate(raw)
-    env = build_env(spec, Timing(), plugins)
-    env.reset(0)
-    task = plugins.task_type(spec.task_name).create(spec, env)
-    task.setup()
-    return env, task
-
-
 @pytest.fixture
 def pnp():
-    env, task = _make(_episode("pick_and_place"))
+    env, task = make_task_env(_episode("pick_and_place"))
     yield env, task
     env.close()
 
 
 @pytest.fixture
 def next_to():
-    env, task = _make(_episode("pick_and_place_next_to"))
+    env, task = make_task_env(_episode("pick_and_place_next_to"))
     yield env, task
     env.close()
-
-
-def _hold(env) -> dict:
-    return {"arm": env.robot.targets(env.data, "arm"), "gripper": np.zeros(1)}
-
-
-def _settle(env, steps: int = 8) -> None:
-    for _ in range(steps):
-        env.step(_hold(env))
 
 
 def _clear_table(env, keep: set[str]) -> None:
@@ -69,22 +51,9 @@ def _clear_table(env, keep: set[str]) -> None:
     mujoco.mj_forward(env.model, env.data)
 
 
-def _put_in_receptacle(env, task) -> None:
-    """Drop the object upright into the middle of the receptacle and let it settle."""
-    rec = env.body_pose(task.receptacle_name)
-    base_top = rec[2] - BUILTIN_RECEPTACLES[task.receptacle_name].half_extents[2] + 0.008
-    obj = BUILTIN_OBJECTS[task.object_name]
-    lying = obj.shape == "capsule"
-    quat = [math.cos(math.pi / 4), 0, math.sin(math.pi / 4), 0] if lying else [1, 0, 0, 0]
-    height = obj.half_extents[0] if lying else obj.half_extents[2]
-    env._place(task.object_name, np.array([rec[0], rec[1], base_top + height + 0.002, *quat]))
-    mujoco.mj_forward(env.model, env.data)
-    _settle(env)
-
-
 def test_start_state_is_not_success(pnp, next_to):
     for env, task in (pnp, next_to):
-        _settle(env, 2)
+        settle(env, 2)
         assert not task.success() and task.reward() == 0.0
         assert task.support_fraction() == 0.0
         assert task.support_fraction(env.subtree_bodies("table")) == pytest.approx(1.0, abs=0.02)
@@ -93,7 +62,7 @@ def test_start_state_is_not_success(pnp, next_to):
 
 def test_resting_in_the_receptacle_succeeds(pnp):
     env, task = pnp
-    _put_in_receptacle(env, task)
+    put_in_receptacle(env, task)
     assert task.support_fraction() == pytest.approx(1.0, abs=0.02)
     assert not task.robot_touching() and task.success() and task.reward() == 1.0
 
@@ -104,10 +73,10 @@ def test_support_fraction_threshold(pnp, lift, ok):
     the force rule fails past half, and MolmoSpaces' fallback (contact below the object's centre
     with a near-vertical normal) still calls it supported."""
     env, task = pnp
-    _put_in_receptacle(env, task)
+    put_in_receptacle(env, task)
     body = env.body_id(task.object_name)
     env.data.xfrc_applied[body, 2] = lift * env.model.body_subtreemass[body] * 9.81
-    _settle(env, 4)
+    settle(env, 4)
     assert task.support_fraction() == pytest.approx(1.0 - lift, abs=0.02)
     assert task.supported_by_force() is ok
     assert task.supported_by_fallback() and task.success()
@@ -143,7 +112,7 @@ def _turned(pose: np.ndarray, axis: np.ndarray, deg: float) -> np.ndarray:
 
 def test_receptacle_displacement_limits(pnp):
     env, task = pnp
-    _put_in_receptacle(env, task)
+    put_in_receptacle(env, task)
     now = task._pose(env.body_id(task.receptacle_name))
     assert task.max_pos == 0.15 and task.max_rot == pytest.approx(math.radians(60), abs=1e-4)  # pick_and_place_v1's
     for shift, ok in (([0.14, 0, 0], True), ([0, 0.16, 0], False)):
@@ -157,7 +126,7 @@ def test_receptacle_displacement_limits(pnp):
 
 def test_yaw_is_ignored(pnp):
     env, task = pnp
-    _put_in_receptacle(env, task)
+    put_in_receptacle(env, task)
     task.setup()
     now = task._pose(env.body_id(task.receptacle_name))
     task.start_pose = _turned(now, np.array([0.0, 0.0, 1.0]), 170.0)  # turned 170° about the vertical
@@ -184,7 +153,7 @@ def _beside(env, task, gap: float) -> float:
         env._place(task.object_name, np.array([*(rec[:2] + dist * direction), obj[2], *obj[3:]]))
         mujoco.mj_forward(env.model, env.data)
         dist += gap - task.gap()
-    _settle(env, 3)
+    settle(env, 3)
     return task.gap()
 
 
@@ -212,7 +181,7 @@ def test_next_to_gap_bounds_and_tolerance(next_to):
 
 def test_next_to_inside_the_receptacle_fails(next_to):
     env, task = next_to
-    _put_in_receptacle(env, task)
+    put_in_receptacle(env, task)
     assert task.gap() == 0.0 and not task.success()  # supported by the receptacle, not the table
 
 
@@ -241,7 +210,7 @@ def test_color_task_paints_and_needs_the_named_receptacle():
     raw = _episode("pick_and_place_color")
     colors = raw["task"]["object_colors"]
     assert len(colors) == 2 and len({tuple(c) for c in colors.values()}) == 2
-    env, task = _make(raw)
+    env, task = make_task_env(raw)
     try:
         m = env.model
         for name, rgba in colors.items():
@@ -254,7 +223,7 @@ def test_color_task_paints_and_needs_the_named_receptacle():
         fresh.close()
         other = raw["task"]["other_receptacle_names"][0]
         task.receptacle_name, keep = other, task.receptacle_name
-        _put_in_receptacle(env, task)  # into the other colour's receptacle
+        put_in_receptacle(env, task)  # into the other colour's receptacle
         task.receptacle_name = keep
         assert not task.success()
     finally:

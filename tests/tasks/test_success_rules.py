@@ -12,7 +12,6 @@ from scipy.spatial.transform import Rotation
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES  # noqa: E402
 from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
 from molmo_lerobot.benchmark.generate_articulated import generate_benchmark as generate_articulated  # noqa: E402
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
@@ -20,38 +19,12 @@ from molmo_lerobot.plugins import get_plugins  # noqa: E402
 from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
 from molmo_lerobot.sim.env import Timing  # noqa: E402
 from molmo_lerobot.tasks.pick_and_place import tilt  # noqa: E402
-
-
-def _make(raw: dict):
-    plugins = get_plugins()
-    spec = EpisodeSpec.model_validate(raw)
-    env = build_env(spec, Timing(), plugins)
-    env.reset(0)
-    task = plugins.task_type(spec.task_name).create(spec, env)
-    task.setup()
-    return env, task
-
-
-def _hold(env) -> dict:
-    return {"arm": env.robot.targets(env.data, "arm"), "gripper": np.zeros(1)}
-
-
-def _in_receptacle(env, task) -> None:
-    rec = env.body_pose(task.receptacle_name)
-    floor = rec[2] - BUILTIN_RECEPTACLES[task.receptacle_name].half_extents[2] + 0.008
-    obj = BUILTIN_OBJECTS[task.object_name]
-    lying = obj.shape == "capsule"
-    quat = [math.cos(math.pi / 4), 0, math.sin(math.pi / 4), 0] if lying else [1, 0, 0, 0]
-    height = obj.half_extents[0] if lying else obj.half_extents[2]
-    env._place(task.object_name, np.array([rec[0], rec[1], floor + height + 0.002, *quat]))
-    mujoco.mj_forward(env.model, env.data)
-    for _ in range(8):
-        env.step(_hold(env))
+from task_scenes import hold, make_task_env, put_in_receptacle  # noqa: E402
 
 
 @pytest.fixture
 def pnp():
-    env, task = _make(generate_benchmark("pick_and_place", 1, 1, 3, "t")[0][0])
+    env, task = make_task_env(generate_benchmark("pick_and_place", 1, 1, 3, "t")[0][0])
     yield env, task
     env.close()
 
@@ -82,12 +55,12 @@ def test_tilt_boundary(deg):
 def test_support_force_within_30_degrees_of_vertical(pnp, angle, ok):
     """A sideways push of tan(angle) x weight, held by friction, tilts the receptacle's net force."""
     env, task = pnp
-    _in_receptacle(env, task)
+    put_in_receptacle(env, task)
     body = env.body_id(task.object_name)
     w = env.model.body_subtreemass[body] * 9.81
     env.data.xfrc_applied[body, 0] = w * math.tan(math.radians(angle))
     for _ in range(3):
-        env.step(_hold(env))
+        env.step(hold(env))
     force = task.support_force()
     measured = math.degrees(math.acos(force[2] / np.linalg.norm(force)))
     assert measured == pytest.approx(angle, abs=0.7)
@@ -116,7 +89,7 @@ def test_contactless_fallback_boundary(pnp):
 
 def test_carry_forward_of_a_supported_pose(pnp, monkeypatch):
     env, task = pnp
-    _in_receptacle(env, task)
+    put_in_receptacle(env, task)
     assert task.supported()  # remembers the relative pose
     monkeypatch.setattr(task, "supported_by_force", lambda: False)
     monkeypatch.setattr(task, "supported_by_fallback", lambda: False)
@@ -128,7 +101,7 @@ def test_carry_forward_of_a_supported_pose(pnp, monkeypatch):
 
 
 def test_next_to_counts_any_receptacle_rotation():
-    env, task = _make(generate_benchmark("pick_and_place_next_to", 1, 1, 3, "t")[0][0])
+    env, task = make_task_env(generate_benchmark("pick_and_place_next_to", 1, 1, 3, "t")[0][0])
     try:
         now = task._pose(env.body_id(task.receptacle_name))
         for deg, ok in ((59.0, True), (61.0, False)):  # next_to_v1's limit: 60°, about the vertical too
@@ -153,7 +126,7 @@ def test_pick_lift_is_measured_from_the_episode_start_pose():
     start = list(raw["task"]["pickup_obj_start_pose"])
     start[2] -= 0.02  # the file says it started 2 cm lower than where the scene puts it
     raw["task"]["pickup_obj_start_pose"] = start
-    env, task = _make(raw)
+    env, task = make_task_env(raw)
     try:
         assert task.lift() == pytest.approx(0.02, abs=0.002)
     finally:
@@ -170,7 +143,7 @@ def articulated():
 
 def test_zero_range_joint_is_skipped_by_open_and_never_closed(articulated):
     raw = next(e for e in articulated["open"] if e["task"]["pickup_obj_name"] == "kitchen_hinge_cabinet")
-    env, task = _make(raw)
+    env, task = make_task_env(raw)
     try:
         m, d = env.model, env.data
         zero, other = task.joints[0], task.joints[1]
@@ -194,7 +167,7 @@ def test_any_inst_of_category_counts_every_articulated_object_of_the_category(ar
     twin = None
     for raw in articulated["open"]:  # a house with a second articulated object (a drawer chest beside)
         name = raw["task"]["pickup_obj_name"]
-        env, _ = _make(raw)
+        env, _ = make_task_env(raw)
         try:
             bodies = {env.model.body(b).name for b in range(env.model.nbody)}
             twin = next((n for n in env.scene_metadata["objects"] if n != name and n in bodies
