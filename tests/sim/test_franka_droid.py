@@ -184,6 +184,12 @@ def test_franka_keeps_its_panda_hand():
     assert "franka_droid" not in plugins.robot("franka").aliases
 
 
+@pytest.mark.parametrize("robot", ["franka", "franka_droid"])
+def test_a_base_pose_without_7_values_is_one_clear_error(robot):
+    with pytest.raises(ValueError, match=r"robot_base_pose needs 7 values .* got 3"):
+        get_plugins().robot(robot).add_to(mujoco.MjSpec(), [0.0, 0.0, 0.0])
+
+
 def test_molmospaces_grasp_file_transfers(tmp_path):
     """A user grasp library exactly as MolmoSpaces' custom-assets tutorial writes one
     (``<uid>/droid/grasps.npz`` + ``grasps_index.json``, ``transforms`` float16 as their pipeline

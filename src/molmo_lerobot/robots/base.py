@@ -160,6 +160,14 @@ class RobotType(ABC):
     def spec(self) -> mujoco.MjSpec:
         """A standalone spec of the robot with its base at the origin (also used for IK)."""
 
+    @staticmethod
+    def base_pose(values: Sequence[float]) -> list[float]:
+        """An episode's ``robot_base_pose`` as 7 floats; ``ValueError`` if it has another length."""
+        pose = [float(v) for v in values]
+        if len(pose) != 7:
+            raise ValueError(f"robot_base_pose needs 7 values (x, y, z, qw, qx, qy, qz), got {len(pose)}")
+        return pose
+
     @abstractmethod
     def add_to(self, world: mujoco.MjSpec, base_pose: Sequence[float]) -> None:
         """Attach the robot to ``world`` at ``base_pose`` (x, y, z, qw, qx, qy, qz)."""

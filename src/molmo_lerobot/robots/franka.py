@@ -156,9 +156,7 @@ class Franka(RobotType):
         return load_franka_spec()
 
     def add_to(self, world: mujoco.MjSpec, base_pose: Sequence[float]) -> None:
-        pose = [float(v) for v in base_pose]
-        if len(pose) != 7:
-            raise ValueError(f"robot_base_pose needs 7 values (x, y, z, qw, qx, qy, qz), got {len(pose)}")
+        pose = self.base_pose(base_pose)
         frame = world.worldbody.add_frame(pos=pose[:3], quat=pose[3:])
         frame.attach_body(load_franka_spec().body("panda0_link0"), PREFIX, "")
 

@@ -244,9 +244,7 @@ class FrankaDroid(RobotType):
         return load_droid_spec()
 
     def add_to(self, world: mujoco.MjSpec, base_pose: Sequence[float]) -> None:
-        pose = [float(v) for v in base_pose]
-        if len(pose) != 7:
-            raise ValueError(f"robot_base_pose needs 7 values (x, y, z, qw, qx, qy, qz), got {len(pose)}")
+        pose = self.base_pose(base_pose)
         robot = load_droid_spec()
         if robot.body("base") is not None:  # MolmoSpaces' model brings its mount body
             world.worldbody.add_frame(pos=pose[:3], quat=pose[3:]).attach_body(robot.body("base"), NAMESPACE, "")
