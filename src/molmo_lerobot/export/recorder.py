@@ -147,13 +147,13 @@ class LeRobotRecorder(Recorder):
         self._discarded: list[dict[str, Any]] = []
         self._info: EpisodeInfo | None = None
         self._frames = 0
-        self._last_index = -1
 
     # Recorder interface -------------------------------------------------------------
     def start_episode(self, info: EpisodeInfo) -> None:
-        if self._saved and info.episode_index != self._last_index + 1:
+        previous = self._info
+        if self._saved and previous is not None and info.episode_index != previous.episode_index + 1:
             self._close_shard()  # out of benchmark order: the next shard starts here
-        self._info, self._frames, self._last_index = info, 0, info.episode_index
+        self._info, self._frames = info, 0
 
     def record_step(self, obs: dict[str, Any], action: dict[str, Any], reward: float | None,
                     success: bool, done: bool) -> None:
