@@ -14,8 +14,6 @@ edited episode is what the seeds, the rollout and the recorded dataset all see:
 
 from __future__ import annotations
 
-import hashlib
-import json
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -24,7 +22,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.schema import EpisodeSpec, episode_digest
 
 #: per randomization level: position (m), direction (deg), fov (deg), wrist offset (m) jitter
 CAMERA_JITTER = {"pos": 0.02, "dir_deg": 2.0, "fov_deg": 2.0, "offset": 0.005}
@@ -39,7 +37,7 @@ class OverrideError(ValueError):
 def molmo_episode_overrides(episode: EpisodeSpec, config: Any) -> EpisodeSpec | None:
     cfg = config if isinstance(config, dict) else {}
     data = episode.model_dump(mode="json")
-    identity = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).digest()
+    identity = episode_digest(episode)
     changed = False
     custom = cfg.get("custom_object") or {}
     if custom.get("path"):

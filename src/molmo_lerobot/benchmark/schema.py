@@ -12,6 +12,8 @@ installed task plugins, not parsing, reports it (with a "did you mean").
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 from typing import Annotated, Any, Literal, Union
 
@@ -413,3 +415,9 @@ class BenchmarkMetadata(_Model):
     camera_system_class: str | None = None
     source_data_date: str | None = None
     benchmark_created_date: str | None = None
+
+
+def episode_digest(episode: EpisodeSpec | dict[str, Any]) -> bytes:
+    """SHA-256 of an episode's content (its JSON, keys sorted): what seeds its randomizations."""
+    data = episode.model_dump(mode="json") if isinstance(episode, BaseModel) else episode
+    return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).digest()

@@ -8,14 +8,14 @@ camera at the episode's ``img_resolution``. Which system an episode uses is
 
 from __future__ import annotations
 
-import hashlib
-import json
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import mujoco
 import numpy as np
+
+from molmo_lerobot.benchmark.schema import episode_digest
 
 STANDARD = "standard"
 
@@ -66,8 +66,7 @@ def choose_camera_system(episode: Any, configured: str | None, robot_default: st
 def episode_rng(episode: Any, stream: int = 0) -> np.random.Generator:
     """A generator seeded by the episode's content (its JSON): the same episode, the same draws;
     ``stream`` picks an independent sequence for another use."""
-    data = episode.model_dump(mode="json") if hasattr(episode, "model_dump") else episode
-    digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).digest()
+    digest = episode_digest(episode)
     return np.random.default_rng([*digest[:16], stream] if stream else list(digest[:16]))
 
 

@@ -22,8 +22,6 @@ an episode always gets the same cameras, on any worker.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -34,6 +32,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from molmo_lerobot import hookimpl
+from molmo_lerobot.benchmark.schema import episode_digest
 from molmo_lerobot.cameras.base import CameraSystem, episode_rng, look_rotation, mat_to_quat
 
 WRIST_MJCF_NAME = "gripper/wrist_camera"
@@ -123,8 +122,7 @@ class FrankaRandomizedDroidCameraSystem(CameraSystem):
     places_in_scene = True
 
     def episode_key(self, episode: Any) -> str:
-        data = episode.model_dump(mode="json")
-        return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
+        return episode_digest(episode).hex()
 
     def add_cameras(self, world: mujoco.MjSpec, cameras: Sequence[Any],
                     find_body: Callable[[str], mujoco.MjsBody | None], episode: Any = None) -> list[str]:
