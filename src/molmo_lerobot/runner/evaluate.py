@@ -28,6 +28,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+import mujoco
 from omegaconf import DictConfig, OmegaConf
 
 from molmo_lerobot.export.report import write_report
@@ -224,7 +225,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                       "path": str(bench.path)},
         "policy": cfg["policy"], "policy_checkpoint": policy_checkpoints(cfg["policy"]), "seed": cfg["seed"],
         "limit": limit, "horizon": cfg.get("horizon"),
-        "timing": cfg["timing"],
+        "timing": cfg["timing"], "mujoco": mujoco.__version__,
         "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
                          "end_on_success": bool(cfg.get("end_on_success", False)),
                          "molmospaces": molmospaces_settings(cfg).to_config(),
@@ -365,7 +366,7 @@ def _reopen(out: Path, run_info: dict[str, Any]) -> list[EpisodeResult]:
     if not isinstance(previous, dict):
         raise RunError(f"cannot resume: {run_file} is not a run description (not a JSON object)")
     current = json.loads(json.dumps(run_info))  # compare as stored (JSON turns int keys into strings)
-    for key in ("benchmark", "policy", "policy_checkpoint", "seed", "horizon", "timing", "eval_options"):
+    for key in ("benchmark", "policy", "policy_checkpoint", "seed", "horizon", "timing", "mujoco", "eval_options"):
         if previous.get(key) != current.get(key):
             raise RunError(f"cannot resume {out}: its {key} differs from this run's "
                            f"({previous.get(key)!r} vs {current.get(key)!r})")

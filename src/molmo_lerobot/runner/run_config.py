@@ -90,11 +90,15 @@ def _timing_problems(timing: Any) -> list[str]:
         return [f"timing: expected a mapping with {', '.join(TIMING_KEYS)}, got {timing!r}"]
     out = [f"timing.{key}: expected a positive number of milliseconds, got {timing.get(key)!r}"
            for key in TIMING_KEYS if not (_is_number(timing.get(key)) and timing[key] > 0)]
+    known = (*TIMING_KEYS, "control", "sleep")
+    unknown = sorted(set(timing) - set(known))
+    if unknown:
+        out.append(f"timing: unknown keys {unknown} (known: {', '.join(known)})")
     if not out:
         from molmo_lerobot.sim.env import Timing
 
         try:
-            Timing(**{k: timing[k] for k in TIMING_KEYS})
+            Timing(**timing)
         except ValueError as exc:
             out.append(str(exc))
     return out
