@@ -29,6 +29,7 @@ import numpy as np
 from molmo_lerobot import hookimpl
 from molmo_lerobot.paths import package_asset_dir
 from molmo_lerobot.robots.base import ArmGripperHandle, RobotType, add_mount
+from molmo_lerobot.sim.spec_compat import set_joint_damping
 
 PREFIX = "robot/"
 #: finger joint travel (each finger, metres)
@@ -93,7 +94,7 @@ def load_franka_spec() -> mujoco.MjSpec:
         kp, kv = ARM_KP[k - 1], ARM_KV[k - 1]
         act.gainprm = [kp] + [0.0] * 9
         act.biasprm = [0.0, -kp, -kv] + [0.0] * 7
-        joint.damping = [1.0, 0.0, 0.0]
+        set_joint_damping(joint, 1.0)
         joint.armature = 0.1
     for body in spec.bodies:
         if body.name != "world":

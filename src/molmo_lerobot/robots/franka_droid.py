@@ -50,6 +50,7 @@ from molmo_lerobot import hookimpl
 from molmo_lerobot.paths import molmospaces_assets_dir, package_asset_dir
 from molmo_lerobot.robots.base import ArmGripperHandle, RobotType, add_mount
 from molmo_lerobot.robots.franka import load_franka_spec
+from molmo_lerobot.sim.spec_compat import set_joint_damping
 
 NAMESPACE = "robot_0/"
 #: MolmoSpaces' ``FrankaRobotConfig.base_size``: the pedestal under the arm (x, y, z metres)
@@ -131,7 +132,7 @@ def _robotiq_spec() -> mujoco.MjSpec:
                       data=[0.0, 1.0] + [0.0] * 10, solref=[0.005, 1.0])
     for joint in spec.joints:
         joint.armature = 0.005
-        joint.damping = [0.1, 0.0, 0.0]
+        set_joint_damping(joint, 0.1)
     split = spec.add_tendon(name="split")
     split.wrap_joint("left_driver_joint", 0.5)
     split.wrap_joint("right_driver_joint", 0.5)
@@ -162,7 +163,7 @@ def _registry_xml() -> str:
         joint = arm.joint(f"joint{k}")
         joint.name = f"fr3_joint{k}"
         joint.range, joint.armature, joint.frictionloss = list(limits), armature, friction
-        joint.damping = [FR3_DAMPING, 0.0, 0.0]
+        set_joint_damping(joint, FR3_DAMPING)
         act = arm.actuator(f"actuator{k}")
         act.name = act.target = f"fr3_joint{k}"
         act.ctrlrange = list(limits)

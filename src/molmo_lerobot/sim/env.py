@@ -15,8 +15,10 @@ followed by ``ctrl_dt / sim_dt`` physics steps. ``Timing.control`` says how the 
 position targets reach the actuators: ``hold`` (the default, MolmoSpaces' controllers) writes
 the new targets at the first tick and holds them for the step; ``ramp`` moves them linearly
 from the previous command to the new one over the ticks. ``Timing.sleep`` enables MuJoCo's
-body sleeping from the reset state on (as MolmoSpaces' rollouts do, where the MuJoCo in use
-has it).
+body sleeping from the reset state on, as MolmoSpaces' rollouts do (where the MuJoCo in use
+has it). It is off by default: MuJoCo leaves a sleeping body's contacts out of
+``data.contact``, which the contact-based success rules read (theirs too), so an object that
+has settled on its receptacle reads as unsupported (``docs/parity.md``).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.sim.geometry import subtree
+from molmo_lerobot.sim.spec_compat import set_joint_damping
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
@@ -73,7 +76,7 @@ class Timing:
     ctrl_dt_ms: float = 2.0
     sim_dt_ms: float = 2.0
     control: str = "hold"
-    sleep: bool = True
+    sleep: bool = False
 
     def __post_init__(self) -> None:
         for name in ("policy_dt_ms", "ctrl_dt_ms", "sim_dt_ms"):
@@ -128,7 +131,7 @@ def _add_primitive(world: mujoco.MjSpec, name: str, prim: Any) -> None:
     if prim.add_freejoint:
         joint = body.add_freejoint(name=prim.freejoint_name or f"{body.name}/free")
         if prim.freejoint_damping is not None:
-            joint.damping = float(prim.freejoint_damping)
+            set_joint_damping(joint, prim.freejoint_damping)
     types = {"box": mujoco.mjtGeom.mjGEOM_BOX, "sphere": mujoco.mjtGeom.mjGEOM_SPHERE,
              "capsule": mujoco.mjtGeom.mjGEOM_CAPSULE, "cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,
              "ellipsoid": mujoco.mjtGeom.mjGEOM_ELLIPSOID}
