@@ -36,7 +36,7 @@ TRIAL_FIELDS = ("timing", "mujoco", "horizon", "eval_options")
 #: a difference in any other key is flagged.
 NEUTRAL_CONFIG = frozenset({"policy", "benchmark", "seed", "limit", "workers", "executor", "output_dir", "record",
                             "push", "resume", "progress", "hub", "wandb", "video", *TRIAL_FIELDS, "horizons",
-                            "custom_object", "camera"})
+                            "custom_object", "camera", "robot"})
 Z95 = 1.959963984540054
 
 

@@ -227,6 +227,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         "limit": limit, "horizon": cfg.get("horizon"),
         "timing": cfg["timing"], "mujoco": mujoco.__version__,
         "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
+                         "robot": cfg.get("robot"),
                          "end_on_success": bool(cfg.get("end_on_success", False)),
                          "molmospaces": molmospaces_settings(cfg).to_config(),
                          **({"plugins_prefer": plugins.prefer} if plugins.prefer else {})},  # pinned providers

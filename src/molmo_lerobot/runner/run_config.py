@@ -64,6 +64,14 @@ def config_problems(cfg: Mapping[str, Any]) -> list[str]:
             out.append(f"horizons.{task}: expected a positive number of seconds, got {value!r} "
                        f"(at most {MAX_TASK_HORIZON_SEC:g})")
     out.extend(_timing_problems(cfg.get("timing")))
+    base_size = (cfg.get("robot") or {}).get("base_size", "default")
+    if base_size != "default":
+        from molmo_lerobot.robots.base import parse_base_size
+
+        try:
+            parse_base_size(base_size)
+        except ValueError as exc:
+            out.append(f"robot.{exc} (or default)")
     timeout = cfg.get("episode_timeout_s", 900)
     if not (_is_number(timeout) and timeout > 0):
         out.append(f"episode_timeout_s: expected a positive number of seconds, got {timeout!r}")
