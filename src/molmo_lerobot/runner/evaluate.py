@@ -219,6 +219,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     if too_long:
         more = f" (and {len(too_long) - 1} more episodes)" if len(too_long) > 1 else ""
         raise RunError(too_long[0][1] + more)
+    _warn_default_horizons(bench.path, [described[i] for i in indices], cfg["timing"]["policy_dt_ms"])
 
     run_info = {
         "benchmark": {"name": bench.name, "sha256": bench.sha256, "n_episodes": len(bench.episodes),
@@ -315,6 +316,24 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         raise ExportError(f"export failed after the run was scored ({'; '.join(failed)}); the score stands: "
                           f"{summary['n_success']}/{summary['n_episodes']} successes in {out / RESULTS_FILE}")
     return EvalResults(summary=summary, episodes=ordered, output_dir=out)
+
+
+def _warn_default_horizons(path: Path, described: list[dict[str, Any]], policy_dt_ms: float) -> None:
+    """One stderr line when episodes run the task types' default horizons (MolmoSpaces' table:
+    pick 20 s, pick-and-place 40 s, open/close 30 s): MolmoSpaces refuses a file without
+    ``task_horizon_sec`` unless given a horizon; here it runs, says so, and records
+    ``horizon_source: default`` per episode (molmo-compare checks per-episode horizons)."""
+    used: dict[str, int] = {}
+    count = 0
+    for d in described:
+        if d["horizon_source"] == "default":
+            used[d["task_type"]] = d["horizon"]
+            count += 1
+    if count:
+        table = ", ".join(f"{task} {steps * policy_dt_ms / 1000:.3g} s = {steps} steps" for task, steps in sorted(used.items()))
+        print(f"molmo-eval: warning: {path}: {count} episode{'s' * (count != 1)} carry no task.task_horizon_sec; "
+              f"running MolmoSpaces' default horizons ({table}); MolmoSpaces refuses such a file without a "
+              "horizon: pass horizon=<steps> or horizons.<task>=<seconds> to choose", file=sys.stderr)
 
 
 def _describe(spec: Any, plugins: Any, cfg: dict[str, Any], horizons: dict[str, float]) -> dict[str, Any]:
