@@ -50,7 +50,7 @@ from molmo_lerobot import hookimpl
 from molmo_lerobot.paths import molmospaces_assets_dir, package_asset_dir
 from molmo_lerobot.robots.base import ArmGripperHandle, RobotType, add_mount
 from molmo_lerobot.robots.franka import load_franka_spec
-from molmo_lerobot.sim.spec_compat import set_joint_damping
+from molmo_lerobot.sim.spec_compat import equality_data, set_joint_damping
 
 NAMESPACE = "robot_0/"
 #: MolmoSpaces' ``FrankaRobotConfig.base_size``: the pedestal under the arm (x, y, z metres)
@@ -127,9 +127,9 @@ def _robotiq_spec() -> mujoco.MjSpec:
         spec.joint(old).name = new
     for follower, (driver, coef) in _FOLLOWERS.items():
         spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1=follower, name2=_DRIVERS[driver],
-                          data=[0.0, coef] + [0.0] * 9 + [0.0], solref=[0.005, 1.0])
+                          data=equality_data(0.0, coef), solref=[0.005, 1.0])
     spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1="right_driver_joint", name2="left_driver_joint",
-                      data=[0.0, 1.0] + [0.0] * 10, solref=[0.005, 1.0])
+                      data=equality_data(0.0, 1.0), solref=[0.005, 1.0])
     for joint in spec.joints:
         joint.armature = 0.005
         set_joint_damping(joint, 0.1)

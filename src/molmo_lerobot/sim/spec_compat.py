@@ -13,3 +13,10 @@ def set_joint_damping(joint: mujoco.MjsJoint, damping: float) -> None:
         joint.damping = float(damping)
     else:
         joint.damping = [float(damping)] + [0.0] * (len(joint.damping) - 1)
+
+
+def equality_data(*values: float) -> list[float]:
+    """An equality's ``data`` starting with ``values``, zero-padded to this MuJoCo's length (11 in
+    3.x, 12 in 4.x)."""
+    size = len(mujoco.MjSpec().add_equality().data)
+    return [float(v) for v in values] + [0.0] * (size - len(values))
