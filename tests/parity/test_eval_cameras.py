@@ -153,24 +153,25 @@ def test_eval_system_places_the_cameras_theirs_does(theirs, scenes, monkeypatch)
                          "cameras": cams, "what": f"episode {i} level {level}"})
             cases.append({**scene, "episode": raw, "level": level, "oracle": oracle})
     got = theirs.run("their_cameras:eval_cameras", {"cases": cases})["results"]
-    bad, failed = [], 0
+    bad, failed, agreed = [], 0, 0
     for o, t in zip(ours, got, strict=True):
-        what = o["what"]
+        what, problems = o["what"], []
         if o["seed"] != t["seed"]:
-            bad.append(f"{what}: seed ours {o['seed']} theirs {t['seed']}")
+            problems.append(f"{what}: seed ours {o['seed']} theirs {t['seed']}")
         if not np.allclose(o["centre"], t["centre"], atol=1e-12):
-            bad.append(f"{what}: workspace centre ours {o['centre']} theirs {t['centre']}")
+            problems.append(f"{what}: workspace centre ours {o['centre']} theirs {t['centre']}")
         if o["checks"] != t["checks"] or (o["error"] is None) != (t["error"] is None):
-            bad.append(f"{what}: {o['checks']} visibility checks ({o['error']}) vs theirs {t['checks']} ({t['error']})")
-            continue
-        if o["error"]:
+            problems.append(f"{what}: {o['checks']} visibility checks ({o['error']}) vs theirs "
+                            f"{t['checks']} ({t['error']})")
+        elif o["error"]:
             failed += 1
-            continue
-        bad += _same_pose(o["cameras"]["wrist_camera"], t["cameras"]["wrist_camera"], f"{what} wrist")
-        bad += _same_pose(o["cameras"]["exo_camera_1"], t["cameras"]["exo_camera_1"], f"{what} exo")
-    print(f"\neval cameras: {len(ours)} cases ({len(scenes)} episodes x {len(LEVELS)} levels), "
-          f"{len(ours) - len(bad)} agreed, {failed} of them failing placement on both sides, "
-          f"{sum(o['checks'] for o in ours)} visibility checks")
+        else:
+            for name in ("wrist_camera", "exo_camera_1"):
+                problems += _same_pose(o["cameras"][name], t["cameras"][name], f"{what} {name}")
+        agreed += not problems
+        bad += problems
+    print(f"\neval cameras: {len(ours)} cases ({len(scenes)} episodes x {len(LEVELS)} levels), {agreed} agreed "
+          f"({failed} of them: placement fails on both sides), {sum(o['checks'] for o in ours)} visibility checks")
     assert not bad, "\n".join(bad)
     assert 0 < failed < len(ours) // 2  # the stand-ins make some placements hopeless, most not
 
@@ -213,16 +214,19 @@ def test_fixed_and_randomized_droid_systems_place_the_cameras_theirs_do(theirs, 
                       "centre": centre.tolist(), "oracle": oracle})
         env.close()
     got = theirs.run("their_cameras:droid_cameras", {"cases": cases})["results"]
-    bad = []
+    bad, agreed = [], 0
     for o, t in zip(ours, got, strict=True):
+        problems = []
         if o["checks"] != t["checks"] or (o["error"] is None) != (t["error"] is None):
-            bad.append(f"{o['what']}: {o['checks']} checks ({o['error']}) vs theirs {t['checks']} ({t['error']})")
-            continue
-        for name, pose in o["cameras"].items():
-            if name in t["cameras"]:
-                bad += _same_pose(pose, t["cameras"][name], f"{o['what']} {name}")
-            elif not o["error"]:
-                bad.append(f"{o['what']}: {name} placed by us, not by them")
-    print(f"\nDROID systems: {len(ours)} cases ({len(scenes)} fixed, {len(scenes)} randomized), "
-          f"{len(ours) - len(bad)} agreed, {sum(o['checks'] for o in ours)} visibility checks")
+            problems.append(f"{o['what']}: {o['checks']} checks ({o['error']}) vs theirs {t['checks']} ({t['error']})")
+        else:
+            for name, pose in o["cameras"].items():
+                if name in t["cameras"]:
+                    problems += _same_pose(pose, t["cameras"][name], f"{o['what']} {name}")
+                elif not o["error"]:
+                    problems.append(f"{o['what']}: {name} placed by us, not by them")
+        agreed += not problems
+        bad += problems
+    print(f"\nDROID systems: {len(ours)} cases ({len(scenes)} fixed, {len(scenes)} randomized), {agreed} agreed, "
+          f"{sum(o['checks'] for o in ours)} visibility checks")
     assert not bad, "\n".join(bad)
