@@ -178,3 +178,31 @@ def test_good_camera_options_compose():
 
     assert config_problems(OmegaConf.to_container(cfg, resolve=True)) == []
     assert camera_option_problems({"system": "eval", "rand_level": 12.5}) == []
+
+
+def test_a_run_with_eval_cameras(tmp_path):
+    """molmo-eval camera.eval=true camera.rand_level=50 (MolmoSpaces' --use_eval_cameras
+    --camera_rand_level 50): the workers build the eval cameras; the run records the options."""
+    from molmo_lerobot.config import compose
+    from molmo_lerobot.runner.evaluate import run_evaluation
+
+    bench = tmp_path / "droid_pick"
+    bench.mkdir()
+    (bench / "benchmark.json").write_text(json.dumps([_pick(0)]))
+    cfg = compose(["policy=scripted", f"benchmark.path={bench}", "workers=1", "horizon=3", "progress=false",
+                   f"output_dir={tmp_path / 'run'}", "camera.eval=true", "camera.rand_level=50"])
+    res = run_evaluation(cfg)
+    assert res.summary["n_errors"] == 0
+    assert [e.extra["camera_system"] for e in res.episodes] == ["FrankaEvalCameraSystem"]
+    run = json.loads((tmp_path / "run" / "results.json").read_text())
+    assert run["eval_options"]["camera"]["eval"] is True and run["eval_options"]["camera"]["rand_level"] == 50
+
+
+def test_eval_cameras_render_at_their_resolution():
+    """Their eval system renders 640 x 368 whatever the episode says (the camera.eval override)."""
+    plugins = get_plugins()
+    spec = EpisodeSpec.model_validate(_pick(0))
+    assert list(spec.img_resolution) == [224, 224]
+    for camera in ({"eval": True, "rand_level": 30}, {"system": "FrankaEvalCameraSystem"}):
+        assert list(plugins.apply_episode_overrides(spec, {"camera": camera}).img_resolution) == [640, 368]
+    assert plugins.apply_episode_overrides(spec, {"camera": {"system": "droid"}}) == spec

@@ -1,6 +1,7 @@
 """MolmoSpaces' eval camera system, ``FrankaEvalCameraSystem`` (their ``--use_eval_cameras
 --camera_rand_level L``), for ``franka_droid``: it replaces the episode's recorded cameras.
 
+Images are 640 × 368, as theirs (the ``camera.eval`` episode override sets ``img_resolution``).
 ``wrist_camera``: the robot's ``gripper/wrist_camera`` mount, fov 52°, with mount noise.
 ``exo_camera_1``: a world camera whose level-0 pose is DROID's shoulder camera (``fr3_link0`` +
 ``[0.1, 0.57, 0.66]``, fov 71°) in the reset scene. Around the workspace centre (the centroid of
@@ -49,6 +50,8 @@ from molmo_lerobot.cameras.droid import (
     task_objects,
 )
 
+#: (width, height) their eval cameras render at, whatever the episode's ``img_resolution``
+EVAL_IMG_RESOLUTION = (640, 368)
 WRIST_FOV = 52.0
 EXO_FOV = 71.0
 EXO_ATTEMPTS = 50
