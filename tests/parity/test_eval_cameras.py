@@ -103,7 +103,8 @@ def _same_pose(ours: dict, theirs: dict, what: str) -> list[str]:
     bad = []
     for key, tol in (("pos", POS_TOL), ("forward", DIR_TOL), ("up", DIR_TOL)):
         if not np.allclose(ours[key], theirs[key], atol=tol, rtol=0):
-            bad.append(f"{what} {key}: ours {np.round(ours[key], 6).tolist()} theirs {np.round(theirs[key], 6).tolist()}")
+            bad.append(f"{what} {key}: ours {np.round(ours[key], 6).tolist()} "
+                       f"theirs {np.round(theirs[key], 6).tolist()}")
     if abs(ours["fov"] - theirs["fov"]) > FOV_TOL:
         bad.append(f"{what} fov: ours {ours['fov']} theirs {theirs['fov']}")
     return bad

@@ -102,7 +102,8 @@ def eval_ranges(inputs: dict) -> dict:
 
     out = []
     for level in inputs["levels"]:
-        cams = {c.name: c.model_dump() for c in apply_camera_randomization_level(FrankaEvalCameraSystem(), level).cameras}
+        system = apply_camera_randomization_level(FrankaEvalCameraSystem(), level)
+        cams = {c.name: c.model_dump() for c in system.cameras}
         out.append({"wrist": {k: cams["wrist_camera"][k] for k in ("fov", "fov_noise_degrees", "pos_noise_range",
                                                                     "orientation_noise_degrees")},
                     "exo": {k: cams["exo_camera_1"][k] for k in (

@@ -120,7 +120,7 @@ def exo_ranges(level: float) -> ExoRanges:
 def episode_camera_seed(episode: Any) -> int:
     """MolmoSpaces' eval camera seed of an episode: the first 32 bits of the SHA-256 of its
     identity — scene dataset, split, house, source file and trajectory key, seed — joined by
-    ``|``. It does not depend on the level: a level sweep moves the same draws further."""
+    ``|``. It does not depend on the level: a level sweep keeps each episode's seed."""
     parts = [str(episode.scene_dataset), str(episode.data_split), str(episode.house_index)]
     if episode.source is not None:
         parts += [str(episode.source.h5_file), str(episode.source.traj_key)]
@@ -137,7 +137,7 @@ def workspace_centre(episode: Any, tcp: Sequence[float]) -> np.ndarray:
 
 
 def eval_exo_draws(ref_pos: np.ndarray, ref_rot: np.ndarray, centre: np.ndarray, ranges: ExoRanges,
-              rng: Any) -> Callable[[], tuple[np.ndarray, list[float], float]]:
+                   rng: Any) -> Callable[[], tuple[np.ndarray, list[float], float]]:
     """Draws of the exterior camera (world position, wxyz quaternion, fovy) around ``centre``
     from its calibrated pose (``ref_pos``, rotation matrix ``ref_rot``), in MolmoSpaces' order."""
     delta = ref_pos - centre
@@ -147,7 +147,8 @@ def eval_exo_draws(ref_pos: np.ndarray, ref_rot: np.ndarray, centre: np.ndarray,
     def draw() -> tuple[np.ndarray, list[float], float]:
         azimuth = azimuth0 + rng.uniform(*ranges.azimuth)
         distance = max(distance0 + rng.uniform(*ranges.distance), MIN_EXO_DISTANCE)
-        pos = centre + [distance * math.cos(azimuth), distance * math.sin(azimuth), height0 + rng.uniform(*ranges.height)]
+        height = height0 + rng.uniform(*ranges.height)
+        pos = centre + [distance * math.cos(azimuth), distance * math.sin(azimuth), height]
         lookat = centre + rng.uniform(*ranges.lookat_noise, size=3)
         looking = Rotation.from_matrix(look_rotation(lookat - pos, (0.0, 0.0, 1.0)))
         rot = Slerp([0.0, 1.0], Rotation.concatenate([calibrated, looking]))(ranges.lookat_weight)
@@ -158,6 +159,7 @@ def eval_exo_draws(ref_pos: np.ndarray, ref_rot: np.ndarray, centre: np.ndarray,
 
 
 def _model_body(model: mujoco.MjModel, name: str) -> int:
+    """Id of the compiled model's body ``name`` (robot bodies carry a prefix)."""
     found = [i for i in range(model.nbody) if model.body(i).name == name or model.body(i).name.endswith("/" + name)]
     if len(found) != 1:
         raise ValueError(f"camera system: no (unique) body {name!r} in the scene")
