@@ -206,3 +206,22 @@ def test_eval_cameras_render_at_their_resolution():
     for camera in ({"eval": True, "rand_level": 30}, {"system": "FrankaEvalCameraSystem"}):
         assert list(plugins.apply_episode_overrides(spec, {"camera": camera}).img_resolution) == [640, 368]
     assert plugins.apply_episode_overrides(spec, {"camera": {"system": "droid"}}) == spec
+
+
+@pytest.mark.slow
+def test_eval_cameras_are_the_same_for_any_worker_count(tmp_path):
+    """Each episode's eval cameras come from its own identity: one worker or two, the same
+    frames (the per-episode thumbnails, first and last exterior frame, compared byte for byte)."""
+    from molmo_lerobot.config import compose
+    from molmo_lerobot.runner.evaluate import run_evaluation
+
+    bench = tmp_path / "droid_pick"
+    bench.mkdir()
+    (bench / "benchmark.json").write_text(json.dumps([_pick(k) for k in range(3)]))
+    shots = {}
+    for workers in (1, 2):
+        out = tmp_path / f"run{workers}"
+        run_evaluation(compose(["policy=scripted", f"benchmark.path={bench}", f"workers={workers}", "horizon=2",
+                                "progress=false", f"output_dir={out}", "camera.eval=true", "camera.rand_level=100"]))
+        shots[workers] = {p.name: p.read_bytes() for p in sorted((out / "thumbnails").iterdir())}
+    assert len(shots[1]) == 3 and shots[1] == shots[2]
