@@ -99,8 +99,14 @@ def _build(raw: dict, camera: dict | None, monkeypatch, oracle: dict | None = No
     return env, seen.checks, None
 
 
+#: the largest difference seen per quantity (reported by the tests)
+DEVIATION = {"pos": 0.0, "forward": 0.0, "up": 0.0, "fov": 0.0}
+
+
 def _same_pose(ours: dict, theirs: dict, what: str) -> list[str]:
     bad = []
+    for key in DEVIATION:
+        DEVIATION[key] = max(DEVIATION[key], float(np.max(np.abs(np.subtract(ours[key], theirs[key])))))
     for key, tol in (("pos", POS_TOL), ("forward", DIR_TOL), ("up", DIR_TOL)):
         if not np.allclose(ours[key], theirs[key], atol=tol, rtol=0):
             bad.append(f"{what} {key}: ours {np.round(ours[key], 6).tolist()} "
@@ -139,6 +145,7 @@ def test_eval_ranges_at_every_level_equal_theirs(theirs):
 
 
 def test_eval_system_places_the_cameras_theirs_does(theirs, scenes, monkeypatch):
+    DEVIATION.update(dict.fromkeys(DEVIATION, 0.0))
     cases, ours = [], []
     for i, (raw, scene, _) in enumerate(scenes):
         spec = EpisodeSpec.model_validate(raw)
@@ -172,12 +179,13 @@ def test_eval_system_places_the_cameras_theirs_does(theirs, scenes, monkeypatch)
         agreed += not problems
         bad += problems
     print(f"\neval cameras: {len(ours)} cases ({len(scenes)} episodes x {len(LEVELS)} levels), {agreed} agreed "
-          f"({failed} of them: placement fails on both sides), {sum(o['checks'] for o in ours)} visibility checks")
+          f"({failed} of them: placement fails on both sides), {sum(o['checks'] for o in ours)} visibility checks; largest differences {DEVIATION}")
     assert not bad, "\n".join(bad)
     assert 0 < failed < len(ours) // 2  # the stand-ins make some placements hopeless, most not
 
 
 def test_fixed_and_randomized_droid_systems_place_the_cameras_theirs_do(theirs, scenes, monkeypatch):
+    DEVIATION.update(dict.fromkeys(DEVIATION, 0.0))
     cases, ours = [], []
     for i, (raw, scene, fixed) in enumerate(scenes):
         ours.append({"cameras": {n: _world(fixed, n) for n in ("wrist_camera", "exo_camera_1")}, "checks": 0,
@@ -229,5 +237,5 @@ def test_fixed_and_randomized_droid_systems_place_the_cameras_theirs_do(theirs, 
         agreed += not problems
         bad += problems
     print(f"\nDROID systems: {len(ours)} cases ({len(scenes)} fixed, {len(scenes)} randomized), {agreed} agreed, "
-          f"{sum(o['checks'] for o in ours)} visibility checks")
+          f"{sum(o['checks'] for o in ours)} visibility checks; largest differences {DEVIATION}")
     assert not bad, "\n".join(bad)
