@@ -184,10 +184,11 @@ def open_fd(path: str | os.PathLike, flags: int, mode: int = 0o666, *, root: str
 
 @contextlib.contextmanager
 def atomic_open(path: str | os.PathLike, mode: str = "w", *, root: str | os.PathLike | None = None,
-                parents: bool = False, **kwargs: Any) -> Iterator[IO[Any]]:
+                parents: bool = False, durable: bool = True, **kwargs: Any) -> Iterator[IO[Any]]:
     """``with atomic_open(path, "wb", root=out) as f: ...``: ``path`` gets what was written, once the block
     succeeds. Missing directories from ``root`` down are made (none may be a link); without ``root``,
-    ``parents=True`` makes the missing parents."""
+    ``parents=True`` makes the missing parents. ``durable=False`` skips the fsyncs (files nobody
+    needs after a crash, such as progress notes)."""
     if mode not in ("w", "wb"):
         raise ValueError(f"atomic_open: mode must be 'w' or 'wb', got {mode!r}")
     with _parent(path, root, parents=parents) as (dfd, leaf):
@@ -197,27 +198,29 @@ def atomic_open(path: str | os.PathLike, mode: str = "w", *, root: str | os.Path
             with open(fd, mode, **kwargs) as f:
                 yield f
                 f.flush()
-                os.fsync(f.fileno())
+                if durable:
+                    os.fsync(f.fileno())
             os.replace(tmp, leaf, src_dir_fd=dfd, dst_dir_fd=dfd)
         except BaseException:
             with contextlib.suppress(OSError):
                 os.unlink(tmp, dir_fd=dfd)
             raise
-        os.fsync(dfd)
+        if durable:
+            os.fsync(dfd)
 
 
 def atomic_write(path: str | os.PathLike, data: str | bytes, *, root: str | os.PathLike | None = None,
-                 parents: bool = False, encoding: str = "utf-8") -> Path:
+                 parents: bool = False, durable: bool = True, encoding: str = "utf-8") -> Path:
     """Replace ``path``'s content with ``data`` atomically and durably; return ``path``.
 
     With ``root``, missing directories from it down are made (refusing links); without it,
     ``parents=True`` creates the missing parent directories first.
     """
     if isinstance(data, bytes):
-        with atomic_open(path, "wb", root=root, parents=parents) as f:
+        with atomic_open(path, "wb", root=root, parents=parents, durable=durable) as f:
             f.write(data)
     else:
-        with atomic_open(path, "w", root=root, parents=parents, encoding=encoding) as f:
+        with atomic_open(path, "w", root=root, parents=parents, durable=durable, encoding=encoding) as f:
             f.write(data)
     return Path(path)
 
@@ -261,6 +264,12 @@ def rmtree(path: str | os.PathLike, *, root: str | os.PathLike, ignore_errors: b
     except OSError:
         if not ignore_errors:
             raise
+
+
+def refuse_link(path: str | os.PathLike) -> None:
+    """Raise :class:`UnsafePathError` when ``path`` itself is a symbolic link (before reading it as run data)."""
+    if os.path.islink(path):
+        raise UnsafePathError(errno.ELOOP, f"{path} is a symlink; refusing to use it as part of the run")
 
 
 # -- reading trees without following links (resources' verification) ----------------------------

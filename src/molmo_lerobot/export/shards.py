@@ -52,9 +52,8 @@ class Shard:
 
 
 def write_marker(root: Path, record: dict[str, Any]) -> None:
-    """Declare a finalized shard complete (atomic: a torn write never counts)."""
-    path = root / MARKER
-    atomic_write(path, json.dumps(record))
+    """Declare a finalized shard complete (atomic: a torn write never counts; no link below ``root``)."""
+    atomic_write(root / MARKER, json.dumps(record), root=root)
 
 
 def list_shards(output_dir: Path) -> list[Shard]:
