@@ -66,20 +66,11 @@ def lstat_at(dir_fd: int, name: str) -> os.stat_result | None:
         return None
 
 
-@contextlib.contextmanager
-def parent_of(root_fd: int, rel: str, *, create: bool, where: str) -> Iterator[tuple[int, str]]:
-    """``(fd of rel's parent dir, rel's last component)``; missing dirs are made when ``create``.
-
-    Raises :class:`UnsafePathError` ("``where``: ``a/b`` is a symlink; refusing to write ...")
-    when a component is a link or not a directory; :class:`FileNotFoundError` when one is
-    missing and not ``create``.
-    """
-    parts = PurePosixPath(rel).parts
-    if not parts or any(p in ("..", "/") for p in parts):
-        raise UnsafePathError(errno.EINVAL, f"{where}: {rel!r} is not a path below the root")
+def _walk(root_fd: int, parts: tuple[str, ...], create: bool, rel: str, where: str) -> int:
+    """A new fd on the directory reached from ``root_fd`` through ``parts``, never through a link."""
     fd = os.dup(root_fd)
     try:
-        for i, part in enumerate(parts[:-1]):
+        for i, part in enumerate(parts):
             try:
                 nfd = os.open(part, _DIR, dir_fd=fd)
             except FileNotFoundError:
@@ -94,7 +85,41 @@ def parent_of(root_fd: int, rel: str, *, create: bool, where: str) -> Iterator[t
                 nfd = _open_dir(fd, part, parts, i, rel, where)
             os.close(fd)
             fd = nfd
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
+
+
+def _parts(rel: str, where: str) -> tuple[str, ...]:
+    parts = PurePosixPath(rel).parts
+    if not parts or any(p in ("..", "/") for p in parts):
+        raise UnsafePathError(errno.EINVAL, f"{where}: {rel!r} is not a path below the root")
+    return parts
+
+
+@contextlib.contextmanager
+def parent_of(root_fd: int, rel: str, *, create: bool, where: str) -> Iterator[tuple[int, str]]:
+    """``(fd of rel's parent dir, rel's last component)``; missing dirs are made when ``create``.
+
+    Raises :class:`UnsafePathError` ("``where``: ``a/b`` is a symlink; refusing to write ...")
+    when a component is a link or not a directory; :class:`FileNotFoundError` when one is
+    missing and not ``create``.
+    """
+    parts = _parts(rel, where)
+    fd = _walk(root_fd, parts[:-1], create, rel, where)
+    try:
         yield fd, parts[-1]
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def dir_at(root_fd: int, rel: str, *, create: bool, where: str) -> Iterator[int]:
+    """An fd on the directory ``rel`` below the root (made with its parents when ``create``), as :func:`parent_of`."""
+    fd = _walk(root_fd, _parts(rel, where), create, rel, where)
+    try:
+        yield fd
     finally:
         os.close(fd)
 
@@ -111,12 +136,13 @@ def _open_dir(fd: int, part: str, parts: tuple, i: int, rel: str, where: str) ->
 def _refuse(fd: int, leaf: str, shown: str, rel: str, where: str):
     st = lstat_at(fd, leaf)
     kind = "a symlink" if st is not None and stat.S_ISLNK(st.st_mode) else "not a directory"
-    raise UnsafePathError(errno.ELOOP, f"{where}: {shown} is {kind}; refusing to write {rel!r} through it")
+    what = "" if shown == rel else f"{rel!r} "
+    raise UnsafePathError(errno.ELOOP, f"{where}: {shown} is {kind}; refusing to write {what}through it")
 
 
 def make_dirs_at(root_fd: int, rel: str, where: str) -> None:
     """Create the directory ``rel`` (and its parents) below the root, never through a link."""
-    with parent_of(root_fd, rel + "/x", create=True, where=where):
+    with dir_at(root_fd, rel, create=True, where=where):
         pass
 
 
@@ -156,17 +182,16 @@ def _parent(path: str | os.PathLike, root: str | os.PathLike | None, create: boo
 @contextlib.contextmanager
 def open_dir(path: str | os.PathLike, *, root: str | os.PathLike, create: bool = True) -> Iterator[int]:
     """A directory fd on ``path`` below ``root``, walked (and made when ``create``) without following links."""
-    with _parent(Path(path) / "x", root, create) as (fd, _):
+    base, rel = _split(path, root)
+    with open_root(base, create=create) as rfd, dir_at(rfd, rel, create=create, where=str(base)) as fd:
         yield fd
 
 
 def make_dirs(path: str | os.PathLike, *, root: str | os.PathLike) -> Path:
     """Create the directory ``path`` below ``root`` (the root too when missing), refusing any link below
     the root, ``path`` itself included; returns ``path``."""
-    base, rel = _split(path, root)
-    with open_root(base) as rfd:
-        make_dirs_at(rfd, rel, str(base))
-    return Path(path)
+    with open_dir(path, root=root):
+        return Path(path)
 
 
 def open_fd(path: str | os.PathLike, flags: int, mode: int = 0o666, *, root: str | os.PathLike | None = None) -> int:

@@ -18,6 +18,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from molmo_lerobot import fileio
 from molmo_lerobot.fileio import atomic_write
 
 SHARDS_DIR = "dataset_shards"
@@ -59,6 +60,7 @@ def write_marker(root: Path, record: dict[str, Any]) -> None:
 def list_shards(output_dir: Path) -> list[Shard]:
     """Every shard under ``output_dir``, oldest first; torn ones have ``complete=False``."""
     base = Path(output_dir) / SHARDS_DIR
+    fileio.refuse_link(base)  # shards from elsewhere must not be merged into this run's dataset
     shards: list[Shard] = []
     if not base.is_dir():
         return shards

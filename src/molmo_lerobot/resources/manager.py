@@ -450,7 +450,7 @@ class ResourceManager:
                         except Exception as exc:  # collected, retried once, then raised
                             errors[name] = exc
                 fatal = [e for e in errors.values()
-                         if isinstance(e, UnsafeArchiveError) or not getattr(e, "retryable", True)]
+                         if isinstance(e, (UnsafeArchiveError, UnsafePathError)) or not getattr(e, "retryable", True)]
                 if not errors or fatal or attempt == 1:
                     break
                 pending = list(errors)
