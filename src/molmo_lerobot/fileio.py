@@ -135,9 +135,10 @@ def _open_dir(fd: int, part: str, parts: tuple, i: int, rel: str, where: str) ->
 
 def _refuse(fd: int, leaf: str, shown: str, rel: str, where: str):
     st = lstat_at(fd, leaf)
-    kind = "a symlink" if st is not None and stat.S_ISLNK(st.st_mode) else "not a directory"
+    link = st is not None and stat.S_ISLNK(st.st_mode)
     what = "" if shown == rel else f"{rel!r} "
-    raise UnsafePathError(errno.ELOOP, f"{where}: {shown} is {kind}; refusing to write {what}through it")
+    raise UnsafePathError(errno.ELOOP if link else errno.ENOTDIR, f"{where}: {shown} is "
+                          f"{'a symlink' if link else 'not a directory'}; refusing to write {what}through it")
 
 
 def make_dirs_at(root_fd: int, rel: str, where: str) -> None:
@@ -205,6 +206,15 @@ def open_fd(path: str | os.PathLike, flags: int, mode: int = 0o666, *, root: str
                 raise
             base, rel = _split(path, root)
             _refuse(fd, leaf, rel, rel, str(base))
+
+
+def fsync_dir(path: str | os.PathLike) -> None:
+    """Make renames and new entries in directory ``path`` durable."""
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 @contextlib.contextmanager

@@ -116,7 +116,6 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
     final = output_dir / DATASET_DIR
     work = output_dir / f".dataset-merge-{factory.session}"
     fileio.rmtree(work, root=output_dir, ignore_errors=True)
-    fileio.make_dirs(work, root=output_dir)  # LeRobot writes the subsets and the merged dataset in here
     shards = list_shards(output_dir)
     torn = [s.root.name for s in shards if not s.complete]
     for name in torn:
@@ -130,6 +129,7 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
 
     order = sorted(chosen)  # dataset episodes follow benchmark order, whatever the number of workers
     dataset_index = {b: i for i, b in enumerate(order)}
+    fileio.make_dirs(work, root=output_dir)  # LeRobot writes the subsets and the merged dataset in here
     roots: list[Path] = []
     for k, (si, keep) in enumerate(_segments(order, chosen)):
         src = sources[si]

@@ -3,8 +3,8 @@ and never writes more than the archive's index says."""
 
 from __future__ import annotations
 
-import hashlib
 import errno
+import hashlib
 import io
 import os
 import posixpath
