@@ -228,6 +228,8 @@ ALLOWED = {
     ("cli/bench.py", "shutil.rmtree(tmp"): "molmo-bench: removes its own fresh mkdtemp dir",
     ("export/video.py", "shutil.rmtree(stream.path.parent"): "a fresh mkdtemp dir inside LeRobot's own temp "
                                                              "dir of a shard that fileio made",
+    ("export/video.py", "av.open(str(self.path), 'w')"): "a new file in a fresh mkdtemp dir inside LeRobot's own "
+                                                         "temp dir of a shard that fileio made",
     ("resources/archive.py", "open(out, 'wb')"): "``out`` is a descriptor opened O_NOFOLLOW at a walked dir fd",
     ("resources/remotes.py", "shutil.copytree(local_dir, staging)"): "copytree makes the new staging dir "
                                                                      "itself, in a parent fileio made",
@@ -241,14 +243,19 @@ def _raw_writes(tree: ast.AST):
         f, kws = n.func, {k.arg for k in n.keywords}
         if kws & {"dir_fd", "src_dir_fd", "dst_dir_fd"}:
             continue  # relative to a directory descriptor from fileio's walk
-        if isinstance(f, ast.Name) and f.id == "open":
-            mode = n.args[1] if len(n.args) > 1 else next((k.value for k in n.keywords if k.arg == "mode"), None)
-            first = ast.unparse(n.args[0]) if n.args else ""
+        base = f.value.id if isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name) else None
+        if (isinstance(f, ast.Name) and f.id == "open") or (isinstance(f, ast.Attribute) and f.attr == "open"
+                                                             and base != "os" and "fileobj" not in kws):
+            # open(path, "w"), Path.open("a"), av.open(path, "w"): not a descriptor fileio opened
+            args = list(n.args)
+            if isinstance(f, ast.Attribute) and args and isinstance(args[0], ast.Constant):
+                args = [f.value, *args]  # Path.open("w"): the mode comes first
+            mode = args[1] if len(args) > 1 else next((k.value for k in n.keywords if k.arg == "mode"), None)
+            first = ast.unparse(args[0]) if args else ""
             if (isinstance(mode, ast.Constant) and isinstance(mode.value, str) and set(mode.value) & set("wax+")
-                    and not first.startswith("fileio.")):
+                    and not first.startswith(("fileio.", "io.BytesIO("))):
                 yield n
         elif isinstance(f, ast.Attribute):
-            base = f.value.id if isinstance(f.value, ast.Name) else None
             if base == "os":
                 text = ast.unparse(n)
                 if f.attr in _OS or (f.attr == "open" and any(x in text for x in ("O_CREAT", "O_WRONLY", "O_RDWR"))):
@@ -282,7 +289,9 @@ def test_no_write_bypasses_the_one_write_path():
 
 def test_the_scan_catches_a_raw_write():
     code = "p.write_text('x')\nopen(f, 'a')\nos.replace(a, b)\nshutil.copyfile(a, b)\nos.open(p, os.O_CREAT)\n"
-    assert len(list(_raw_writes(ast.parse(code)))) == 5
+    code += "path.open('w')\nav.open(str(p), 'w')\n"
+    assert len(list(_raw_writes(ast.parse(code)))) == 7
     assert list(_raw_writes(ast.parse("s.replace('a', 'b')\nos.replace(a, b, src_dir_fd=1, dst_dir_fd=2)\n"
-                                      "open(p)\nopen(fileio.open_fd(p, 1), 'wb')\n"))) == []
+                                      "open(p)\nopen(fileio.open_fd(p, 1), 'wb')\ngzip.open(p, 'rt')\n"
+                                      "tarfile.open(fileobj=f, mode='w|')\nav.open(io.BytesIO(), 'w')\n"))) == []
 
