@@ -17,7 +17,8 @@ import pytest
 from molmo_lerobot import fileio
 from molmo_lerobot.fileio import UnsafePathError, atomic_write
 
-sys.path.insert(0, str(Path(__file__).parent / "export"))
+if str(Path(__file__).parent / "export") not in sys.path:
+    sys.path.insert(0, str(Path(__file__).parent / "export"))
 import export_synthetic as S  # noqa: E402 - the synthetic rollouts of tests/export
 
 SRC = Path(__file__).parents[1] / "src" / "molmo_lerobot"
@@ -49,9 +50,8 @@ def test_a_link_below_the_root_is_refused_for_every_kind_of_write(tmp_path, outs
                   lambda: fileio.rmtree(root / "linked" / "keep.txt", root=root)):
         with pytest.raises(UnsafePathError) as err:
             write()
-        assert str(err.value) == (f"{root}: linked is a symlink; refusing to write "
-                                  f"{str(err.value).split('refusing to write ')[1]}")
-        assert "\n" not in str(err.value)
+        assert str(err.value).startswith(f"{root}: linked is a symlink; refusing to write 'linked/")
+        assert str(err.value).endswith("' through it") and "\n" not in str(err.value)
     fileio.remove(root / "linked" / "keep.txt", root=root)  # a removal through a link is a no-op
     assert _tree(outside) == ["keep.txt"]
 
