@@ -23,11 +23,11 @@ from __future__ import annotations
 
 import json
 import logging
-import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from molmo_lerobot import fileio
 from molmo_lerobot.export.card import make_card
 from molmo_lerobot.export.frames import EVAL_EPISODE_INDEX
 from molmo_lerobot.export.shards import SHARDS_DIR, list_shards
@@ -66,6 +66,7 @@ def read_eval_records(dataset_root: Path) -> list[dict[str, Any]]:
 
 
 def _previous_source(dataset: Path) -> _Source | None:
+    fileio.refuse_link(dataset)  # a planted link would bring (and then drop) a dataset from elsewhere
     if not (dataset / "meta/info.json").exists() or not (dataset / EVAL_EPISODES).exists():
         return None
     stored = sorted((r for r in read_eval_records(dataset) if r.get("episode_index") is not None),
@@ -114,7 +115,7 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
     output_dir = Path(output_dir)
     final = output_dir / DATASET_DIR
     work = output_dir / f".dataset-merge-{factory.session}"
-    shutil.rmtree(work, ignore_errors=True)
+    fileio.rmtree(work, root=output_dir, ignore_errors=True)
     shards = list_shards(output_dir)
     torn = [s.root.name for s in shards if not s.complete]
     for name in torn:
@@ -128,6 +129,7 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
 
     order = sorted(chosen)  # dataset episodes follow benchmark order, whatever the number of workers
     dataset_index = {b: i for i, b in enumerate(order)}
+    fileio.make_dirs(work, root=output_dir)  # LeRobot writes the subsets and the merged dataset in here
     roots: list[Path] = []
     for k, (si, keep) in enumerate(_segments(order, chosen)):
         src = sources[si]
@@ -136,7 +138,7 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
 
     if not roots:
         log.warning("record=true but no episode finished without error: no dataset written")
-        shutil.rmtree(work, ignore_errors=True)
+        fileio.rmtree(work, root=output_dir, ignore_errors=True)
         return None
 
     tmp = work / DATASET_DIR
@@ -146,21 +148,22 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
         raise ExportError(f"merging {len(roots)} dataset shards under {output_dir / SHARDS_DIR} failed: "
                           f"{type(exc).__name__}: {exc}") from exc
     records = _eval_records(results, dataset_index, discarded, summary, factory)
-    _write_jsonl(tmp / EVAL_EPISODES, records)
+    fileio.atomic_write(tmp / EVAL_EPISODES, "".join(json.dumps(r) + "\n" for r in records), root=tmp)
     info = {
         "benchmark": summary.get("benchmark"), "policy": factory.policy, "repo_id": factory.repo_id,
         "policy_dt_ms": factory.policy_dt_ms, "fps_exact": 1000.0 / factory.policy_dt_ms, "fps": factory.fps,
         "n_attempted": len(results), "n_recorded": len(dataset_index), "torn_shards": torn,
         "session": factory.session,
     }
-    (tmp / EVAL_INFO).write_text(json.dumps(info, indent=2) + "\n")
-    (tmp / "results.json").write_text(json.dumps(summary, indent=2) + "\n")
+    fileio.atomic_write(tmp / EVAL_INFO, json.dumps(info, indent=2) + "\n", root=tmp)
+    fileio.atomic_write(tmp / "results.json", json.dumps(summary, indent=2) + "\n", root=tmp)
     meta = LeRobotDatasetMetadata(factory.repo_id, root=tmp)
     check_dataset(tmp, results)
-    make_card(meta.info, summary, factory.repo_id, len(dataset_index)).save(str(tmp / "README.md"))
+    fileio.atomic_write(tmp / "README.md", str(make_card(meta.info, summary, factory.repo_id, len(dataset_index))),
+                        root=tmp)
     _swap_into_place(tmp, final, work)
-    shutil.rmtree(output_dir / SHARDS_DIR, ignore_errors=True)
-    shutil.rmtree(work, ignore_errors=True)
+    fileio.rmtree(output_dir / SHARDS_DIR, root=output_dir, ignore_errors=True)
+    fileio.rmtree(work, root=output_dir, ignore_errors=True)
     return final
 
 
@@ -223,14 +226,9 @@ def check_dataset(root: Path, results: list[EpisodeResult]) -> None:
                 f"success={res.success}")
 
 
-def _write_jsonl(path: Path, records: list[dict[str, Any]]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("".join(json.dumps(r) + "\n" for r in records))
-
-
 def _swap_into_place(tmp: Path, final: Path, work: Path) -> None:
     old = work / "previous"
     if final.exists():
-        final.rename(old)
-    tmp.rename(final)
-    shutil.rmtree(old, ignore_errors=True)
+        fileio.replace(final, old, root=work.parent)
+    fileio.replace(tmp, final, root=work.parent)
+    fileio.rmtree(old, root=work.parent, ignore_errors=True)

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from molmo_lerobot import fileio
 from molmo_lerobot.config import ConfigError
 from molmo_lerobot.export.frames import FrameLayout
 from molmo_lerobot.export.shards import SHARDS_DIR, new_session, shard_name, write_marker
@@ -201,7 +202,7 @@ class LeRobotRecorder(Recorder):
 
     # Shards ----------------------------------------------------------------------------
     def _open_shard(self, layout: FrameLayout, horizon: int) -> None:
-        self.shards_dir.mkdir(parents=True, exist_ok=True)
+        fileio.make_dirs(self.shards_dir, root=self.shards_dir.parent)  # LeRobot makes the new shard in it
         root = self.shards_dir / shard_name(self.factory.session, self.worker_id, self._seq)
         while root.exists():  # never reuse a directory, whatever left it there
             self._seq += 1
