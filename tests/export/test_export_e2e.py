@@ -56,6 +56,30 @@ def test_multi_worker_recording_loads_and_agrees_with_episodes_jsonl(recorded):
     assert page.count("<video") == 8
 
 
+def test_a_dataset_about_to_be_pushed_names_no_path_of_this_machine(recorded, hub_standin, tmp_path_factory, tmp_path):
+    """Every file pushed (and every file of the local dataset) is free of the run's, the temp
+    dir's, the home dir's and the repository's absolute paths, which the run config holds."""
+    import molmo_lerobot
+    from huggingface_hub import snapshot_download
+
+    from molmo_lerobot.export.hub import push_dataset
+
+    out, res = recorded
+    assert str(out) in json.dumps(res.summary)  # the run's own summary names them; the dataset must not
+    assert push_dataset(out / "dataset", REPO_ID.replace("local/", "molmo-test/")) is None
+    pushed = Path(snapshot_download(REPO_ID.replace("local/", "molmo-test/"), repo_type="dataset",
+                                    local_dir=tmp_path / "pushed"))
+    places = {Path(molmo_lerobot.__file__).parents[2], Path.home(), tmp_path_factory.getbasetemp(), out, Path.cwd()}
+    needles = {str(p).encode() for place in places for p in (place, place.resolve())}
+    files = [p for root in (out / "dataset", pushed) for p in root.rglob("*") if p.is_file() and ".cache" not in p.parts]
+    assert len(files) > 10 and any(p.name == "results.json" for p in files)
+    leaks = [(str(p), n.decode()) for p in files for n in needles if n in p.read_bytes()]
+    assert not leaks, leaks
+    shared = json.loads((pushed / "results.json").read_text())
+    assert shared["output_dir"] == "." and shared["benchmark"]["path"] == "<local>/pick_v1"
+    assert shared["benchmark"]["sha256"] == res.summary["benchmark"]["sha256"]
+
+
 @pytest.mark.slow
 def test_act_trains_on_the_export_and_its_checkpoint_evaluates(recorded, tmp_path):
     out, _ = recorded

@@ -271,3 +271,17 @@ def test_a_new_episode_between_previous_ones_keeps_benchmark_order(two_worker_ru
         assert int(first["eval.episode_index"]) == rec["benchmark_episode_index"]
         level = (rec["benchmark_episode_index"] * 37) % 250 / 255.0
         assert float(first["observation.images.exo"].mean()) == pytest.approx(level, abs=0.03)
+
+
+def test_portable_paths_name_no_place_of_this_machine(tmp_path):
+    from molmo_lerobot.export.portable import portable
+
+    run = tmp_path / "run"
+    record = {"output_dir": str(run), "video": str(run / "dataset" / "videos"), "n": 3, "url": "http://host/a/b",
+              "repo": "me/pick", "rel": "runs/x",
+              "error": f"FileNotFoundError: {tmp_path}/objects/mug.xml is missing. See /root/.cache/x.",
+              "paths": [str(tmp_path / "bench" / "pick_v1"), "/"]}
+    assert portable(record, run) == {
+        "output_dir": ".", "video": "dataset/videos", "n": 3, "url": "http://host/a/b", "repo": "me/pick",
+        "rel": "runs/x", "error": "FileNotFoundError: <local>/mug.xml is missing. See <local>/x.",
+        "paths": ["<local>/pick_v1", "<local>"]}

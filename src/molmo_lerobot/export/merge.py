@@ -19,6 +19,8 @@ merge only copies and concatenates, never re-encodes), and every frame carries `
   success hold);
 * ``meta/eval/info.json``: benchmark, policy, timing, exact fps, torn shards;
 * ``results.json`` (the run summary) and ``README.md`` (card with the score table).
+
+These files name no absolute path of this machine (:func:`molmo_lerobot.export.portable.portable`).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.export.card import make_card
 from molmo_lerobot.export.frames import EVAL_EPISODE_INDEX
+from molmo_lerobot.export.portable import portable
 from molmo_lerobot.export.shards import SHARDS_DIR, list_shards
 from molmo_lerobot.runner.results import EpisodeResult
 
@@ -150,18 +153,19 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
                           f"{type(exc).__name__}: {exc}") from exc
     frames = {b: sources[si].episodes[li].get("frames", by_index[b].steps) for b, (si, li) in chosen.items()}
     records = _eval_records(results, dataset_index, frames, discarded, summary, factory)
-    _write_jsonl(tmp / EVAL_EPISODES, records)
+    _write_jsonl(tmp / EVAL_EPISODES, portable(records, output_dir))
     info = {
         "benchmark": summary.get("benchmark"), "policy": factory.policy, "repo_id": factory.repo_id,
         "policy_dt_ms": factory.policy_dt_ms, "fps_exact": 1000.0 / factory.policy_dt_ms, "fps": factory.fps,
         "n_attempted": len(results), "n_recorded": len(dataset_index), "torn_shards": torn,
         "session": factory.session,
     }
-    (tmp / EVAL_INFO).write_text(json.dumps(info, indent=2) + "\n")
-    (tmp / "results.json").write_text(json.dumps(summary, indent=2) + "\n")
+    shared = portable(summary, output_dir)
+    (tmp / EVAL_INFO).write_text(json.dumps(portable(info, output_dir), indent=2) + "\n")
+    (tmp / "results.json").write_text(json.dumps(shared, indent=2) + "\n")
     meta = LeRobotDatasetMetadata(factory.repo_id, root=tmp)
     check_dataset(tmp, results)
-    make_card(meta.info, summary, factory.repo_id, len(dataset_index)).save(str(tmp / "README.md"))
+    make_card(meta.info, shared, factory.repo_id, len(dataset_index)).save(str(tmp / "README.md"))
     _swap_into_place(tmp, final, work)
     shutil.rmtree(output_dir / SHARDS_DIR, ignore_errors=True)
     shutil.rmtree(work, ignore_errors=True)
