@@ -128,6 +128,19 @@ def test_results_card_and_cleanup(two_worker_run):
     assert (root / EVAL_EPISODES).is_file()
 
 
+def test_the_card_says_in_prose_what_the_data_is_and_its_limitations(two_worker_run):
+    import re
+
+    card = (two_worker_run[0] / "dataset" / "README.md").read_text()
+    for said in ("synthetic", "simulated", "MuJoCo", "Robot: `synth_arm`", "5 joint positions",
+                 "2 simulated RGB camera(s), `exo` (32x24), `wrist` (32x24), at 15 fps", "`pick` (6 episodes)",
+                 "e.g. \"pick up the mug\"", "**Scores.**", "**Limitations.**", "real robot"):
+        assert said in card, said
+    # lerobot-quality-gates' card checks: these terms, and mock/synthetic/tutorial status
+    assert all(re.search(term, card, re.I) for term in ("robot", "sensor", "task", "limitation", "synthetic"))
+    assert "scripted expert that end" not in card  # no episode was cut at its success hold
+
+
 def test_resume_adds_new_shards_to_the_previous_dataset(two_worker_run, tmp_path):
     out0, _, results, _, _ = two_worker_run
     out = tmp_path / "run"

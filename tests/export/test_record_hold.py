@@ -51,6 +51,7 @@ def test_an_experts_recording_ends_its_hold_after_the_first_success(tmp_path):
     assert {e: n for e, (n, _, _) in stored.items()} == {0: 6, 1: 6, 2: 8, 3: 9, 4: 9, 5: 5}
     for n, done, steps in stored.values():
         assert steps == list(range(n)) and done == [False] * (n - 1) + [True]  # the first n steps, then done
+    assert "3 stored episode(s) are demonstrations of a scripted expert" in (root / "README.md").read_text()
     records = {r["benchmark_episode_index"]: r for r in read_eval_records(root)}
     assert [(records[i]["steps"], records[i]["frames"], records[i]["success"]) for i in range(6)] == [
         (12, 6, True), (10, 6, False), (8, 8, True), (9, 9, False), (9, 9, True), (12, 5, True)]

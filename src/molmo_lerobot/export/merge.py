@@ -153,7 +153,8 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
                           f"{type(exc).__name__}: {exc}") from exc
     frames = {b: sources[si].episodes[li].get("frames", by_index[b].steps) for b, (si, li) in chosen.items()}
     records = _eval_records(results, dataset_index, frames, discarded, summary, factory)
-    _write_jsonl(tmp / EVAL_EPISODES, portable(records, output_dir))
+    records = portable(records, output_dir)
+    _write_jsonl(tmp / EVAL_EPISODES, records)
     info = {
         "benchmark": summary.get("benchmark"), "policy": factory.policy, "repo_id": factory.repo_id,
         "policy_dt_ms": factory.policy_dt_ms, "fps_exact": 1000.0 / factory.policy_dt_ms, "fps": factory.fps,
@@ -165,7 +166,7 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
     (tmp / "results.json").write_text(json.dumps(shared, indent=2) + "\n")
     meta = LeRobotDatasetMetadata(factory.repo_id, root=tmp)
     check_dataset(tmp, results)
-    make_card(meta.info, shared, factory.repo_id, len(dataset_index)).save(str(tmp / "README.md"))
+    make_card(meta.info, shared, factory.repo_id, records).save(str(tmp / "README.md"))
     _swap_into_place(tmp, final, work)
     shutil.rmtree(output_dir / SHARDS_DIR, ignore_errors=True)
     shutil.rmtree(work, ignore_errors=True)
