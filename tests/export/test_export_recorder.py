@@ -293,8 +293,8 @@ def test_portable_paths_name_no_place_of_this_machine(tmp_path):
     record = {"output_dir": str(run), "video": str(run / "dataset" / "videos"), "n": 3, "url": "http://host/a/b",
               "repo": "me/pick", "rel": "runs/x",
               "error": f"FileNotFoundError: {tmp_path}/objects/mug.xml is missing. See /root/.cache/x.",
-              "paths": [str(tmp_path / "bench" / "pick_v1"), "/"]}
+              "paths": [str(tmp_path / "bench" / "pick_v1"), "/"], str(tmp_path / "key"): 1}
     assert portable(record, run) == {
         "output_dir": ".", "video": "dataset/videos", "n": 3, "url": "http://host/a/b", "repo": "me/pick",
         "rel": "runs/x", "error": "FileNotFoundError: <local>/mug.xml is missing. See <local>/x.",
-        "paths": ["<local>/pick_v1", "<local>"]}
+        "paths": ["<local>/pick_v1", "<local>"], "<local>/key": 1}

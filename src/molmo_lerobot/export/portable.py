@@ -22,7 +22,8 @@ LOCAL = "<local>"
 
 
 def portable(value: Any, run_dir: Path) -> Any:
-    """``value`` (JSON-like: dicts, lists, strings, numbers) with every absolute path made portable."""
+    """``value`` (JSON-like: dicts, lists, strings, numbers) with every absolute path made portable
+    (in keys too)."""
     roots = {str(Path(run_dir)), str(Path(run_dir).resolve())}
 
     def replace(match: re.Match[str]) -> str:
@@ -38,7 +39,7 @@ def portable(value: Any, run_dir: Path) -> Any:
         if isinstance(v, str):
             return _ABSOLUTE.sub(replace, v)
         if isinstance(v, dict):
-            return {k: walk(x) for k, x in v.items()}
+            return {walk(k): walk(x) for k, x in v.items()}
         if isinstance(v, (list, tuple)):
             return [walk(x) for x in v]
         return v
