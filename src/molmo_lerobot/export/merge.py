@@ -14,9 +14,13 @@ merge only copies and concatenates, never re-encodes), and every frame carries `
 
 * ``meta/eval/episodes.jsonl``: one record per attempted episode: ``episode_index`` (the
   dataset episode, or null when not stored, with ``not_recorded``), ``benchmark_episode_index``,
-  house, task, prompt, success, success_once, steps, seed, error, policy, benchmark + sha256;
+  house, task, prompt, success, success_once, steps, seed, error, policy, benchmark + sha256, and
+  ``frames`` (the stored frames: fewer than ``steps`` when an expert's recording ended at its
+  success hold);
 * ``meta/eval/info.json``: benchmark, policy, timing, exact fps, torn shards;
 * ``results.json`` (the run summary) and ``README.md`` (card with the score table).
+
+These files name no absolute path of this machine (:func:`molmo_lerobot.export.portable.portable`).
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 from molmo_lerobot import fileio
 from molmo_lerobot.export.card import make_card
 from molmo_lerobot.export.frames import EVAL_EPISODE_INDEX
+from molmo_lerobot.export.portable import portable
 from molmo_lerobot.export.shards import SHARDS_DIR, list_shards
 from molmo_lerobot.runner.results import EpisodeResult
 
@@ -71,7 +76,8 @@ def _previous_source(dataset: Path) -> _Source | None:
         return None
     stored = sorted((r for r in read_eval_records(dataset) if r.get("episode_index") is not None),
                     key=lambda r: r["episode_index"])
-    eps = [{"episode_index": r["benchmark_episode_index"], "success": r["success"]} for r in stored]
+    eps = [{"episode_index": r["benchmark_episode_index"], "success": r["success"],
+            "frames": r.get("frames", r["steps"])} for r in stored]
     return _Source(dataset, eps)
 
 
@@ -147,7 +153,8 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
     except Exception as exc:
         raise ExportError(f"merging {len(roots)} dataset shards under {output_dir / SHARDS_DIR} failed: "
                           f"{type(exc).__name__}: {exc}") from exc
-    records = _eval_records(results, dataset_index, discarded, summary, factory)
+    frames = {b: sources[si].episodes[li].get("frames", by_index[b].steps) for b, (si, li) in chosen.items()}
+    records = portable(_eval_records(results, dataset_index, frames, discarded, summary, factory), output_dir)
     fileio.atomic_write(tmp / EVAL_EPISODES, "".join(json.dumps(r) + "\n" for r in records), root=tmp)
     info = {
         "benchmark": summary.get("benchmark"), "policy": factory.policy, "repo_id": factory.repo_id,
@@ -155,12 +162,12 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
         "n_attempted": len(results), "n_recorded": len(dataset_index), "torn_shards": torn,
         "session": factory.session,
     }
-    fileio.atomic_write(tmp / EVAL_INFO, json.dumps(info, indent=2) + "\n", root=tmp)
-    fileio.atomic_write(tmp / "results.json", json.dumps(summary, indent=2) + "\n", root=tmp)
+    shared = portable(summary, output_dir)
+    fileio.atomic_write(tmp / EVAL_INFO, json.dumps(portable(info, output_dir), indent=2) + "\n", root=tmp)
+    fileio.atomic_write(tmp / "results.json", json.dumps(shared, indent=2) + "\n", root=tmp)
     meta = LeRobotDatasetMetadata(factory.repo_id, root=tmp)
     check_dataset(tmp, results)
-    fileio.atomic_write(tmp / "README.md", str(make_card(meta.info, summary, factory.repo_id, len(dataset_index))),
-                        root=tmp)
+    fileio.atomic_write(tmp / "README.md", str(make_card(meta.info, shared, factory.repo_id, records)), root=tmp)
     _swap_into_place(tmp, final, work)
     fileio.rmtree(output_dir / SHARDS_DIR, root=output_dir, ignore_errors=True)
     fileio.rmtree(work, root=output_dir, ignore_errors=True)
@@ -178,8 +185,9 @@ def _subset(src: _Source, keep: list[int], out: Path, repo_id: str) -> Path:
     return out
 
 
-def _eval_records(results: list[EpisodeResult], dataset_index: dict[int, int], discarded: dict[int, str],
-                  summary: dict[str, Any], factory: LeRobotRecorderFactory) -> list[dict[str, Any]]:
+def _eval_records(results: list[EpisodeResult], dataset_index: dict[int, int], frames: dict[int, int],
+                  discarded: dict[int, str], summary: dict[str, Any],
+                  factory: LeRobotRecorderFactory) -> list[dict[str, Any]]:
     bench = summary.get("benchmark") or {}
     records = []
     for r in sorted(results, key=lambda r: r.episode_index):
@@ -195,7 +203,7 @@ def _eval_records(results: list[EpisodeResult], dataset_index: dict[int, int], d
             "task_cls": r.task_cls, "task_type": r.task_type, "prompt": r.prompt, "success": r.success,
             "success_once": r.success_once, "steps": r.steps, "seed": r.seed, "error": r.error,
             "policy": factory.policy, "benchmark": bench.get("name", factory.benchmark),
-            "benchmark_sha256": bench.get("sha256"), "not_recorded": why,
+            "benchmark_sha256": bench.get("sha256"), "not_recorded": why, "frames": frames.get(r.episode_index),
         })
     return records
 
@@ -219,11 +227,14 @@ def check_dataset(root: Path, results: list[EpisodeResult]) -> None:
         if set(g[EVAL_EPISODE_INDEX]) != {res.episode_index}:
             raise ExportError(f"{root}: dataset episode {ep} holds {EVAL_EPISODE_INDEX} "
                               f"{sorted(set(g[EVAL_EPISODE_INDEX]))[:5]}, expected {res.episode_index}")
-        if len(g) != res.steps or bool(last["next.success"]) != res.success or not bool(last["next.done"]):
+        length = rec.get("frames", res.steps)
+        held = length < res.steps  # an expert's recording ends at its success hold, its rollout goes on
+        if (len(g) != length or length > res.steps or not bool(last["next.done"])
+                or (bool(last["next.success"]) != res.success if not held else not g["next.success"].any())):
             raise ExportError(
                 f"{root}: dataset episode {ep} (benchmark episode {res.episode_index}) has {len(g)} frames, "
-                f"final next.success={bool(last['next.success'])}; the result says {res.steps} steps, "
-                f"success={res.success}")
+                f"final next.success={bool(last['next.success'])}; the records say {length} frames of "
+                f"{res.steps} steps, success={res.success}")
 
 
 def _swap_into_place(tmp: Path, final: Path, work: Path) -> None:
