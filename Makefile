@@ -10,7 +10,7 @@ PYTHON312 ?= $(shell scripts/find-python312.sh)
 # Plugin distributions to install; the example plugin is installed by its own test instead.
 PLUGINS := $(filter-out plugins/molmo-example-%,$(wildcard plugins/*/pyproject.toml))
 
-.PHONY: eval test test-all perf clean
+.PHONY: eval test test-all perf parity clean
 
 $(VENV): pyproject.toml $(PLUGINS)
 	@test -n "$(PYTHON312)" || { echo "Python 3.12 not found (PATH or pyenv)"; exit 1; }
@@ -41,5 +41,14 @@ test-all: $(VENV)
 perf: $(VENV)
 	$(PY) -m pytest -q -s -m perf tests/perf
 
+# Differential tests against MolmoSpaces' own code, in its own venv (docs/parity.md).
+PARITY_VENV := .parity-venv
+$(PARITY_VENV): scripts/parity-venv.sh tests/parity/requirements.txt
+	PYTHON312=$(PYTHON312) scripts/parity-venv.sh $(PARITY_VENV)
+	touch $(PARITY_VENV)
+
+parity: $(VENV) $(PARITY_VENV)
+	MOLMO_PARITY_REQUIRED=1 $(PY) -m pytest -q -m parity tests/parity
+
 clean:
-	rm -rf $(VENV) outputs runs
+	rm -rf $(VENV) $(PARITY_VENV) outputs runs

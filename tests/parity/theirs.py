@@ -1,0 +1,103 @@
+"""Run code in MolmoSpaces' own virtual environment and get its result back.
+
+The parity venv (``.parity-venv`` at the repository root, built by ``scripts/parity-venv.sh``; another
+location through ``MOLMO_PARITY_VENV``) holds the real ``molmo-spaces`` package and its pinned MuJoCo.
+A *helper* is a function ``main(inputs: dict) -> dict`` in a module file next to this one
+(``tests/parity/<module>.py``); it runs there, in a fresh interpreter, with nothing of ours on its path.
+
+Inputs and outputs cross as one JSON document plus one ``.npz``: a top-level value that is a numpy
+array travels in the npz, everything else in the JSON (so keep it JSON-able).
+
+This file is also the entry point on the other side (``python theirs.py MODULE:FUNC IO_DIR``), so it
+imports only the standard library and numpy at the top.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+VENV = Path(os.environ.get("MOLMO_PARITY_VENV", HERE.parents[1] / ".parity-venv"))
+REQUIRED_ENV = "MOLMO_PARITY_REQUIRED"  # set by `make parity`: a missing venv fails instead of skipping
+
+
+class TheirError(RuntimeError):
+    """The helper failed on MolmoSpaces' side; the message carries its traceback."""
+
+
+def python() -> Path | None:
+    """The parity venv's interpreter, or None when the venv is not built."""
+    exe = VENV / "bin" / "python"
+    return exe if exe.exists() else None
+
+
+def _plain(value):
+    """numpy scalars (a bool from a comparison, a float64) as their Python value."""
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"not JSON-able: {type(value).__name__}")
+
+
+def _write(io_dir: Path, stem: str, payload: dict) -> None:
+    arrays = {k: v for k, v in payload.items() if isinstance(v, np.ndarray)}
+    rest = {k: v for k, v in payload.items() if k not in arrays}
+    (io_dir / f"{stem}.json").write_text(json.dumps(rest, default=_plain))
+    np.savez(io_dir / f"{stem}.npz", **arrays)
+
+
+def _read(io_dir: Path, stem: str) -> dict:
+    payload = json.loads((io_dir / f"{stem}.json").read_text())
+    with np.load(io_dir / f"{stem}.npz") as npz:
+        payload.update({k: npz[k] for k in npz.files})
+    return payload
+
+
+def run(helper: str, inputs: dict | None = None, timeout: float = 600) -> dict:
+    """Call ``helper`` (``"module:function"``, module in tests/parity/) in the parity venv.
+
+    Raises FileNotFoundError when the venv is missing (the ``theirs`` fixture skips or fails first)
+    and TheirError with the other side's stderr when the helper raises.
+    """
+    exe = python()
+    if exe is None:
+        raise FileNotFoundError(f"no parity venv at {VENV} (build it with `make parity`)")
+    with tempfile.TemporaryDirectory(prefix="molmo-parity-") as tmp:
+        io_dir = Path(tmp)
+        _write(io_dir, "in", inputs or {})
+        env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
+        env.setdefault("MUJOCO_GL", "egl")
+        proc = subprocess.run([str(exe), str(Path(__file__).resolve()), helper, str(io_dir)],
+                              cwd=io_dir, env=env, capture_output=True, text=True, timeout=timeout)
+        if proc.returncode != 0:
+            raise TheirError(f"{helper} failed in the parity venv (exit {proc.returncode}):\n{proc.stderr[-6000:]}")
+        return _read(io_dir, "out")
+
+
+def versions(_inputs: dict) -> dict:
+    """A helper: what the parity venv runs (for the report and the harness's own test)."""
+    from importlib.metadata import version
+
+    import mujoco
+
+    return {"molmo-spaces": version("molmo-spaces"), "mujoco": mujoco.__version__, "python": sys.version.split()[0]}
+
+
+def _serve(helper: str, io_dir: Path) -> None:
+    """The other side: import the helper module from this directory and run it on the inputs."""
+    import importlib
+
+    module, func = helper.split(":")
+    sys.path.insert(0, str(HERE))
+    result = getattr(importlib.import_module(module), func)(_read(io_dir, "in"))
+    _write(io_dir, "out", result)
+
+
+if __name__ == "__main__":
+    _serve(sys.argv[1], Path(sys.argv[2]))
