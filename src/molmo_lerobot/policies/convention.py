@@ -16,8 +16,9 @@ one value 0 open … 1 closed, ``tcp_pose`` in the world frame, gripper actions 
 * actions: ``{"arm": 7 absolute joint targets, "gripper": actuator command 0 open … 255 closed}``,
   one step or a chunk (a leading time axis, or their list of per-step dicts).
 
-The mapping is a pure function of our observation, so it works the same in a worker, behind
-``molmo-serve`` and in the Gymnasium env. Policies apply it at their boundary:
+The mapping is a pure function of our observation (which carries ``joint_qpos``, ``joint_qvel``
+and ``robot_base_pose`` for it), so it works the same in a worker and behind ``molmo-serve``.
+Policies apply it at their boundary:
 ``policy=remote`` on the wire, ``policy=lerobot`` for ``observation.state`` and the action
 vector, ``policy=pi0`` (molmo-pi0) for the DROID request.
 """
