@@ -128,3 +128,20 @@ def test_remote_policy_speaks_their_convention_on_the_wire():
     got = EchoTheirs.seen[-1]
     assert (got["wrist_camera"] == 7).all() and got["qpos"]["gripper"] == pytest.approx([0.4, 0.4]) and got["task"] == "pick"
     assert "images" not in got and action["gripper"][0] == 1.0 and (action["arm"] == np.arange(7.0)).all()
+
+
+def test_any_other_policy_plugin_is_wrapped(tmp_path):
+    """policy=replay policy.convention=molmospaces replays MolmoSpaces-unit actions (gripper 0 … 255)."""
+    from molmo_lerobot.policies.convention import ConventionAdapter
+    from molmo_lerobot.runner.policy import make_policy
+
+    np.save(tmp_path / "a.npy", np.array([[0.1] * 7 + [255.0], [0.2] * 7 + [51.0]]))
+    policy = make_policy({"name": "replay", "actions": str(tmp_path / "a.npy"), "convention": "molmospaces"})
+    assert isinstance(policy, ConventionAdapter) and policy.needs_images is False
+    policy.reset(EpisodeContext(spec=None, episode_index=0, seed=0, prompt="", move_groups={"arm": 7, "gripper": 1},  # type: ignore[arg-type]
+                                policy_dt_s=0.066))
+    obs = {"qpos": {"arm": np.zeros(7)}, "joint_qpos": {"arm": np.zeros(7)}, "joint_qvel": {"arm": np.zeros(7)},
+           "tcp_pose": np.array([0, 0, 0, 1.0, 0, 0, 0]), "robot_base_pose": np.array([0, 0, 0, 1.0, 0, 0, 0])}
+    assert [policy.act(obs)["gripper"][0] for _ in range(2)] == [1.0, 0.2]
+    native = make_policy({"name": "replay", "actions": str(tmp_path / "a.npy"), "convention": "native"})
+    assert not isinstance(native, ConventionAdapter)

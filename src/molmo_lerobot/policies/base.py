@@ -127,3 +127,8 @@ class PolicyType:
     factory: Callable[[dict[str, Any]], Policy]
     description: str = ""
     aliases: tuple[str, ...] = ()
+    #: The factory reads ``policy.convention`` itself (its boundary is a wire, a state vector or a
+    #: request, not the observation dict). Otherwise ``policy.convention`` is taken out of the config
+    #: and a non-native one wraps the policy: it acts on that convention's view of each observation
+    #: and returns that convention's actions (:class:`~molmo_lerobot.policies.convention.ConventionAdapter`).
+    conventions: bool = False

@@ -20,7 +20,8 @@ The mapping is a pure function of our observation (which carries ``joint_qpos``,
 and ``robot_base_pose`` for it), so it works the same in a worker and behind ``molmo-serve``.
 Policies apply it at their boundary:
 ``policy=remote`` on the wire, ``policy=lerobot`` for ``observation.state`` and the action
-vector, ``policy=pi0`` (molmo-pi0) for the DROID request.
+vector, ``policy=pi0`` (molmo-pi0) for the DROID request; any other policy plugin is wrapped in a
+:class:`ConventionAdapter` (``molmo_lerobot.runner.policy.make_policy``).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from typing import Any, Literal
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from molmo_lerobot.policies.base import Action, Observation
+from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
 
 ConventionName = Literal["native", "molmospaces"]
 #: MolmoSpaces' gripper actuator command for fully closed (0 is open)
@@ -88,6 +89,28 @@ class MolmoSpacesConvention(Convention):
         if "gripper" in out:
             out["gripper"] = np.asarray(out["gripper"], dtype=np.float64) / GRIPPER_CLOSED_CMD
         return out
+
+
+class ConventionAdapter(Policy):
+    """Any policy plugin written against another convention: it acts on that convention's view of
+    each observation, and its actions are mapped back to ours."""
+
+    def __init__(self, inner: Policy, convention: Convention) -> None:
+        self.inner, self.convention = inner, convention
+        self.needs_images, self.needs_simulator = inner.needs_images, inner.needs_simulator
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        self.inner.reset(ctx)
+
+    def act(self, obs: Observation) -> Action:
+        return self.convention.action(self.inner.act(self.convention.observation(obs)))
+
+    def close(self) -> None:
+        self.inner.close()
+
+    def fork(self) -> Policy | None:
+        twin = self.inner.fork()
+        return None if twin is None else ConventionAdapter(twin, self.convention)
 
 
 CONVENTIONS: dict[str, Convention] = {"native": Convention(), "molmospaces": MolmoSpacesConvention()}

@@ -79,4 +79,5 @@ class RemotePolicy(Policy):
 
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
-    return [PolicyType("remote", RemotePolicy, "any policy served by molmo-serve (policy.host=… policy.port=…)")]
+    return [PolicyType("remote", RemotePolicy, "any policy served by molmo-serve (policy.host=… policy.port=…)",
+                       conventions=True)]
