@@ -50,7 +50,7 @@ def ms_pick_episode(k: int = 0) -> dict:
 
 def _env(raw: dict, camera_system: str | None = None):
     spec = EpisodeSpec.model_validate(raw)
-    env = build_env(spec, Timing(), get_plugins(), camera_system)
+    env = build_env(spec, Timing(), get_plugins(), {"system": camera_system})
     env.reset(0)
     return env
 

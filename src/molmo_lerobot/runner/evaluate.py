@@ -270,7 +270,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                                         benchmark_name=bench.name, benchmark_sha256=bench.sha256,
                                         recorders=recorders + progress.factories(), prefer=plugins.prefer,
                                         molmospaces=run_info["eval_options"]["molmospaces"],
-                                        camera_system=(cfg.get("camera") or {}).get("system"),
+                                        camera=cfg.get("camera") or {},
                                         end_on_success=bool(cfg.get("end_on_success", False)),
                                         threads=cfg.get("worker_threads", 1))
                         executor.run(job, todo, record)

@@ -64,6 +64,9 @@ def config_problems(cfg: Mapping[str, Any]) -> list[str]:
             out.append(f"horizons.{task}: expected a positive number of seconds, got {value!r} "
                        f"(at most {MAX_TASK_HORIZON_SEC:g})")
     out.extend(_timing_problems(cfg.get("timing")))
+    from molmo_lerobot.cameras.options import camera_option_problems
+
+    out.extend(camera_option_problems(cfg.get("camera")))
     timeout = cfg.get("episode_timeout_s", 900)
     if not (_is_number(timeout) and timeout > 0):
         out.append(f"episode_timeout_s: expected a positive number of seconds, got {timeout!r}")
