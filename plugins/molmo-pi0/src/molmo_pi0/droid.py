@@ -9,7 +9,10 @@ Two presets fit two families of checkpoints (conf/policy/pi0_*.yaml):
   Robotiq driver angle / 0.824033 as the gripper, prompt lower-cased; the first 8 actions of
   each chunk run as joint targets, the gripper thresholded at 0.5.
 * ``droid`` (``policy=pi0_droid``): openpi's DROID joint-velocity checkpoints (``pi0_droid``,
-  ``pi0_fast_droid``, ``pi05_droid``): velocities integrated over the policy step, the whole chunk.
+  ``pi0_fast_droid``, ``pi05_droid``): our native observation; the first 8 actions of each chunk
+  (openpi's DROID client's open-loop horizon) are velocities integrated over the policy step.
+
+The Python defaults below are the ``molmospaces`` preset; the presets themselves are the yaml files.
 """
 
 from __future__ import annotations
