@@ -10,8 +10,11 @@ edited episode is what the seeds, the rollout and the recorded dataset all see:
 * ``robot.base_size``: the robot's pedestal for every episode (``[x, y, z]`` metres, ``null``
   for none; ``default`` leaves each episode's ``robot.base_size`` or the robot's own);
 * ``camera.randomization``: level 0-3 of seeded camera jitter (position, direction, field of
-  view); the seed comes from the episode's own content, so every run, worker and executor
-  sees the same cameras for the same episode.
+  view) of the episode's recorded cameras; the seed comes from the episode's own content, so
+  every run, worker and executor sees the same cameras for the same episode. Our own option,
+  not MolmoSpaces' camera robustness sweep (that is ``camera.eval=true camera.rand_level=L``);
+* ``camera.eval=true`` (or ``camera.system=FrankaEvalCameraSystem``): MolmoSpaces' eval cameras
+  render at their own resolution, which becomes the episode's ``img_resolution``.
 """
 
 from __future__ import annotations
@@ -25,6 +28,8 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.schema import EpisodeSpec, episode_digest
+from molmo_lerobot.cameras.franka_eval import EVAL_IMG_RESOLUTION
+from molmo_lerobot.cameras.options import EVAL_NAMES, run_camera_system
 
 #: per randomization level: position (m), direction (deg), fov (deg), wrist offset (m) jitter
 CAMERA_JITTER = {"pos": 0.02, "dir_deg": 2.0, "fov_deg": 2.0, "offset": 0.005}
@@ -57,6 +62,9 @@ def molmo_episode_overrides(episode: EpisodeSpec, config: Any) -> EpisodeSpec | 
             raise OverrideError(f"camera.overrides: no camera {name!r} in the episode "
                                 f"(cameras: {', '.join(c['name'] for c in data['cameras'])})")
         cams[0].update(fields)
+        changed = True
+    if run_camera_system(camera) in EVAL_NAMES and tuple(data["img_resolution"]) != EVAL_IMG_RESOLUTION:
+        data["img_resolution"] = list(EVAL_IMG_RESOLUTION)
         changed = True
     level = int(camera.get("randomization") or 0)
     if level:

@@ -128,6 +128,19 @@ def test_results_card_and_cleanup(two_worker_run):
     assert (root / EVAL_EPISODES).is_file()
 
 
+def test_the_card_says_in_prose_what_the_data_is_and_its_limitations(two_worker_run):
+    import re
+
+    card = (two_worker_run[0] / "dataset" / "README.md").read_text()
+    for said in ("synthetic", "simulated", "MuJoCo", "Robot: `synth_arm`", "5 joint positions",
+                 "2 simulated RGB camera(s), `exo` (32x24), `wrist` (32x24), at 15 fps", "`pick` (6 episodes)",
+                 "e.g. \"pick up the mug\"", "**Scores.**", "**Limitations.**", "real robot"):
+        assert said in card, said
+    # lerobot-quality-gates' card checks: these terms, and mock/synthetic/tutorial status
+    assert all(re.search(term, card, re.I) for term in ("robot", "sensor", "task", "limitation", "synthetic"))
+    assert "scripted expert that end" not in card  # no episode was cut at its success hold
+
+
 def test_resume_adds_new_shards_to_the_previous_dataset(two_worker_run, tmp_path):
     out0, _, results, _, _ = two_worker_run
     out = tmp_path / "run"
@@ -271,3 +284,17 @@ def test_a_new_episode_between_previous_ones_keeps_benchmark_order(two_worker_ru
         assert int(first["eval.episode_index"]) == rec["benchmark_episode_index"]
         level = (rec["benchmark_episode_index"] * 37) % 250 / 255.0
         assert float(first["observation.images.exo"].mean()) == pytest.approx(level, abs=0.03)
+
+
+def test_portable_paths_name_no_place_of_this_machine(tmp_path):
+    from molmo_lerobot.export.portable import portable
+
+    run = tmp_path / "run"
+    record = {"output_dir": str(run), "video": str(run / "dataset" / "videos"), "n": 3, "url": "http://host/a/b",
+              "repo": "me/pick", "rel": "runs/x",
+              "error": f"FileNotFoundError: {tmp_path}/objects/mug.xml is missing. See /root/.cache/x.",
+              "paths": [str(tmp_path / "bench" / "pick_v1"), "/"], str(tmp_path / "key"): 1}
+    assert portable(record, run) == {
+        "output_dir": ".", "video": "dataset/videos", "n": 3, "url": "http://host/a/b", "repo": "me/pick",
+        "rel": "runs/x", "error": "FileNotFoundError: <local>/mug.xml is missing. See <local>/x.",
+        "paths": ["<local>/pick_v1", "<local>"], "<local>/key": 1}

@@ -30,7 +30,7 @@ def _pick(k: int = 0) -> dict:
 
 
 def _env(raw: dict, system: str | None = None):
-    env = build_env(EpisodeSpec.model_validate(raw), Timing(), get_plugins(), system)
+    env = build_env(EpisodeSpec.model_validate(raw), Timing(), get_plugins(), {"system": system})
     env.reset(0)
     return env
 

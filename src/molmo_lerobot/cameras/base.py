@@ -9,7 +9,7 @@ camera at the episode's ``img_resolution``. Which system an episode uses is
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import mujoco
@@ -44,6 +44,13 @@ class CameraSystem(ABC):
 
     #: whether :meth:`place` needs to run on the compiled scene
     places_in_scene: bool = False
+    #: whether the system, when the run names it, also replaces episodes' own ``cameras``
+    #: (MolmoSpaces' eval cameras do; other systems only serve episodes without cameras)
+    replaces_recorded: bool = False
+
+    def configured(self, options: Mapping[str, Any]) -> CameraSystem:
+        """This system set up by the run's ``camera`` options (e.g. ``rand_level``); most take none."""
+        return self
 
     def place(self, env: Any) -> dict[str, tuple[Sequence[float], Sequence[float], float]]:
         """Poses that depend on the compiled scene in its initial state (``env``: a reset
@@ -53,11 +60,13 @@ class CameraSystem(ABC):
         return {}
 
 
-def choose_camera_system(episode: Any, configured: str | None, robot_default: str | None = None) -> str:
-    """The camera system an episode runs with: ``standard`` for the episode's own ``cameras``,
-    else the run's ``camera.system``, else ``source.camera_system_class``, else the robot's
-    default (``franka_droid``: ``FrankaDroidCameraSystem``), else ``standard`` (no cameras)."""
-    if episode.cameras:
+def choose_camera_system(episode: Any, configured: str | None, robot_default: str | None = None,
+                         replaces_recorded: bool = False) -> str:
+    """The camera system an episode runs with: ``standard`` for the episode's own ``cameras``
+    (unless the run's system ``replaces_recorded``), else the run's ``camera.system``, else
+    ``source.camera_system_class``, else the robot's default (``franka_droid``:
+    ``FrankaDroidCameraSystem``), else ``standard`` (no cameras)."""
+    if episode.cameras and not (configured and replaces_recorded):
         return STANDARD
     source = getattr(episode, "source", None)
     return configured or getattr(source, "camera_system_class", None) or robot_default or STANDARD

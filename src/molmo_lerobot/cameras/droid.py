@@ -1,5 +1,6 @@
 """DROID camera systems for ``franka_droid`` (a camera plugin), as MolmoSpaces configures them
-(``molmo_spaces/configs/camera_configs.py``).
+(``molmo_spaces/configs/camera_configs.py``); MolmoSpaces' eval cameras, built on the same parts,
+are in :mod:`molmo_lerobot.cameras.franka_eval`.
 
 ``FrankaDroidCameraSystem`` (alias ``droid``): fixed cameras, no noise —
 
@@ -40,9 +41,20 @@ ARM_ROOT = "fr3_link0"
 #: DROID's shoulder camera: offset and wxyz quaternion in fr3_link0's frame, fov
 EXO_CAMERA_1 = ((0.1, 0.57, 0.66), (-0.3633, -0.1241, 0.4263, 0.8191), 71.0)
 FIXED_WRIST_FOV = 56.74
-RANDOM_WRIST_FOV, RANDOM_WRIST_FOV_NOISE = 52.0, (-4.0, 4.0)
-RANDOM_WRIST_POS_NOISE = ((-0.015, -0.005, -0.01), (0.015, 0.005, 0.01))
-RANDOM_WRIST_ROT_NOISE_DEG = (8.0, 4.0, 4.0)
+RANDOM_WRIST_FOV = 52.0
+
+
+@dataclass(frozen=True)
+class MountNoise:
+    """Noise of a camera on its mount: fov (deg, added), position (m, per axis of the camera's
+    frame) and orientation (deg, ± per x/y/z Euler angle, applied in the camera's frame)."""
+
+    fov: tuple[float, float]
+    pos: tuple[tuple[float, float, float], tuple[float, float, float]]
+    rot_deg: tuple[float, float, float]
+
+
+RANDOM_WRIST_NOISE = MountNoise((-4.0, 4.0), ((-0.015, -0.005, -0.01), (0.015, 0.005, 0.01)), (8.0, 4.0, 4.0))
 
 
 @dataclass(frozen=True)
@@ -67,7 +79,7 @@ RANDOM_EXO_CAMERAS = (
 MIN_VISIBLE_FRACTION = 1e-4
 
 
-def _wrist_mount(world: mujoco.MjSpec) -> mujoco.MjsCamera:
+def wrist_mount(world: mujoco.MjSpec) -> mujoco.MjsCamera:
     found = [c for c in world.cameras if c.name == WRIST_MJCF_NAME or c.name.endswith("/" + WRIST_MJCF_NAME)]
     if len(found) != 1:
         raise ValueError(f"camera system: the robot has no (unique) {WRIST_MJCF_NAME!r} camera; "
@@ -75,15 +87,49 @@ def _wrist_mount(world: mujoco.MjSpec) -> mujoco.MjsCamera:
     return found[0]
 
 
-def _arm_root(find_body: Callable[[str], mujoco.MjsBody | None]) -> mujoco.MjsBody:
+def arm_root(find_body: Callable[[str], mujoco.MjsBody | None]) -> mujoco.MjsBody:
     body = find_body(ARM_ROOT)
     if body is None:
         raise ValueError(f"camera system: no body {ARM_ROOT!r} (DROID camera systems need franka_droid)")
     return body
 
 
-def _add_wrist(world: mujoco.MjSpec, pos: Sequence[float], quat: Sequence[float], fov: float) -> None:
-    mount = _wrist_mount(world)
+def noisy_mount(pos: Sequence[float], quat: Sequence[float], fov: float, noise: MountNoise,
+                rng: Any) -> tuple[np.ndarray, np.ndarray, float]:
+    """A mounted camera's pose (position, wxyz quaternion in its parent's frame) and fov with
+    ``noise`` drawn from ``rng`` in MolmoSpaces' order: fov, position, orientation."""
+    fov = fov + rng.uniform(*noise.fov)
+    rot = Rotation.from_quat(np.asarray(quat, dtype=np.float64), scalar_first=True)
+    pos = np.asarray(pos, dtype=np.float64) + rot.apply(rng.uniform(*noise.pos, size=3))
+    limit = np.asarray(noise.rot_deg, dtype=np.float64)
+    rot = rot * Rotation.from_euler("xyz", rng.uniform(-limit, limit, size=3), degrees=True)
+    return pos, rot.as_quat(scalar_first=True), float(fov)
+
+
+def gripper_body(env: Any) -> str:
+    """The body holding the robot's TCP site (``franka_droid``: ``gripper/base``): the gripper the
+    exocentric cameras must see."""
+    return env.model.body(int(env.model.site_bodyid[env.robot.tcp_site])).name
+
+
+def place_until_seen(env: Any, camera: str, must_see: Sequence[str], attempts: int,
+                     draw: Callable[[], tuple[Sequence[float], Sequence[float], float]],
+                     system: str) -> tuple[list[float], list[float], float]:
+    """Set ``camera`` (a world camera of the probe scene ``env``) to ``draw()``'s pose until every
+    body of ``must_see`` covers :data:`MIN_VISIBLE_FRACTION` of its image, at most ``attempts``
+    times; the pose that passed, or a ``ValueError`` naming ``system`` when none did."""
+    cid = env.model.camera(camera).id
+    for _ in range(attempts):
+        pos, quat, fovy = draw()
+        env.model.cam_pos[cid], env.model.cam_quat[cid], env.model.cam_fovy[cid] = pos, quat, fovy
+        if min(env.visible_fractions(camera, must_see).values()) >= MIN_VISIBLE_FRACTION:
+            return [float(v) for v in pos], [float(v) for v in quat], float(fovy)
+    raise ValueError(f"{system}: no placement of {camera} in {attempts} draws sees all of {list(must_see)} "
+                     f"(each must cover {MIN_VISIBLE_FRACTION:g} of the image)")
+
+
+def add_wrist(world: mujoco.MjSpec, pos: Sequence[float], quat: Sequence[float], fov: float) -> None:
+    mount = wrist_mount(world)
     mount.parent.add_camera(name="wrist_camera", pos=list(pos), quat=list(quat), fovy=float(fov))
 
 
@@ -95,10 +141,10 @@ class FrankaDroidCameraSystem(CameraSystem):
 
     def add_cameras(self, world: mujoco.MjSpec, cameras: Sequence[Any],
                     find_body: Callable[[str], mujoco.MjsBody | None], episode: Any = None) -> list[str]:
-        mount = _wrist_mount(world)
-        _add_wrist(world, mount.pos, mount.quat, FIXED_WRIST_FOV)
+        mount = wrist_mount(world)
+        add_wrist(world, mount.pos, mount.quat, FIXED_WRIST_FOV)
         offset, quat, fov = EXO_CAMERA_1
-        _arm_root(find_body).add_camera(name="exo_camera_1", pos=list(offset), quat=list(quat), fovy=fov)
+        arm_root(find_body).add_camera(name="exo_camera_1", pos=list(offset), quat=list(quat), fovy=fov)
         return ["wrist_camera", "exo_camera_1"]
 
 
@@ -128,47 +174,39 @@ class FrankaRandomizedDroidCameraSystem(CameraSystem):
                     find_body: Callable[[str], mujoco.MjsBody | None], episode: Any = None) -> list[str]:
         if episode is None:
             raise ValueError(f"{self.name} needs the episode (its randomization is seeded by it)")
-        rng = episode_rng(episode)
-        mount = _wrist_mount(world)
-        fov = RANDOM_WRIST_FOV + rng.uniform(*RANDOM_WRIST_FOV_NOISE)
-        rot = Rotation.from_quat(np.asarray(mount.quat, dtype=np.float64), scalar_first=True)
-        pos = np.asarray(mount.pos, dtype=np.float64) + rot.apply(rng.uniform(*RANDOM_WRIST_POS_NOISE, size=3))
-        limit = np.asarray(RANDOM_WRIST_ROT_NOISE_DEG)
-        rot = rot * Rotation.from_euler("xyz", rng.uniform(-limit, limit, size=3), degrees=True)
-        _add_wrist(world, pos, rot.as_quat(scalar_first=True), fov)
+        mount = wrist_mount(world)
+        pos, quat, fov = noisy_mount(mount.pos, mount.quat, RANDOM_WRIST_FOV, RANDOM_WRIST_NOISE, episode_rng(episode))
+        add_wrist(world, pos, quat, fov)
         for cam in RANDOM_EXO_CAMERAS:  # placed by place() once the scene is compiled
             world.worldbody.add_camera(name=cam.name, pos=[0.0, 0.0, 0.0])
         return ["wrist_camera"] + [cam.name for cam in RANDOM_EXO_CAMERAS]
 
     def place(self, env: Any) -> dict[str, tuple[Sequence[float], Sequence[float], float]]:
-        spec, m, d = env.spec, env.model, env.data
-        objects = task_objects(spec)
-        points = [d.xpos[env.body_id(name, "task_relevant_objects")] for name in objects]
-        tcp = env.robot.tcp_site
-        centre = np.mean([*points, d.site_xpos[tcp]], axis=0)
-        must_see = [*objects, m.body(int(m.site_bodyid[tcp])).name]  # and the gripper
-        rng = episode_rng(spec, stream=1)
-        poses: dict[str, tuple[Sequence[float], Sequence[float], float]] = {}
-        for cam in RANDOM_EXO_CAMERAS:
-            cid = m.camera(cam.name).id
-            m.cam_fovy[cid] = fovy = float(rng.uniform(*cam.fov))
-            for _ in range(cam.attempts):
-                distance, azimuth, height = (rng.uniform(*cam.distance), rng.uniform(*cam.azimuth),
-                                             rng.uniform(*cam.height))
-                pos = centre + [distance * math.cos(azimuth), distance * math.sin(azimuth), height]
-                lookat = centre + rng.uniform(*cam.lookat_noise, size=3)
-                quat = mat_to_quat(look_rotation(lookat - pos, (0.0, 0.0, 1.0)))
-                m.cam_pos[cid], m.cam_quat[cid] = pos, quat
-                seen = env.visible_fractions(cam.name, must_see)
-                if min(seen.values()) >= MIN_VISIBLE_FRACTION:
-                    poses[cam.name] = (pos.tolist(), quat, fovy)
-                    break
-            else:
-                raise ValueError(f"{self.name}: no placement of {cam.name} in {cam.attempts} draws sees all of "
-                                 f"{must_see} (each must cover {MIN_VISIBLE_FRACTION:g} of the image)")
-        return poses
+        objects = task_objects(env.spec)
+        centre = np.mean([*(env.data.xpos[env.body_id(name, "task_relevant_objects")] for name in objects),
+                          env.data.site_xpos[env.robot.tcp_site]], axis=0)
+        rng = episode_rng(env.spec, stream=1)
+        return {cam.name: place_until_seen(env, cam.name, [*objects, gripper_body(env)], cam.attempts,
+                                           random_exo_draws(cam, centre, rng), self.name)
+                for cam in RANDOM_EXO_CAMERAS}
+
+
+def random_exo_draws(cam: ExoDraw, centre: np.ndarray, rng: Any) -> Callable[[], tuple[np.ndarray, list[float], float]]:
+    """Draws of ``cam`` around ``centre`` in MolmoSpaces' order (fov once; then per draw distance,
+    azimuth, height and the look-at jitter), each looking at the jittered centre."""
+    fovy = float(rng.uniform(*cam.fov))
+
+    def draw() -> tuple[np.ndarray, list[float], float]:
+        distance, azimuth, height = rng.uniform(*cam.distance), rng.uniform(*cam.azimuth), rng.uniform(*cam.height)
+        pos = centre + [distance * math.cos(azimuth), distance * math.sin(azimuth), height]
+        lookat = centre + rng.uniform(*cam.lookat_noise, size=3)
+        return pos, mat_to_quat(look_rotation(lookat - pos, (0.0, 0.0, 1.0))), fovy
+
+    return draw
 
 
 @hookimpl
 def molmo_camera_systems() -> list[CameraSystem]:
-    return [FrankaDroidCameraSystem(), FrankaRandomizedDroidCameraSystem()]
+    from molmo_lerobot.cameras.franka_eval import FrankaEvalCameraSystem  # built on this module's parts
+
+    return [FrankaDroidCameraSystem(), FrankaRandomizedDroidCameraSystem(), FrankaEvalCameraSystem()]

@@ -101,8 +101,7 @@ class EpisodeRunner:
         seed = episode_seed(self.run_seed, spec.model_dump(mode="json", exclude_unset=False))
         task_type = self.plugins.task_type(spec.task_name)
         horizon = self.horizon_of(spec)
-        env, task = start_episode(spec, seed, task_type, self.plugins, self.timing,
-                                  (self.eval_options.get("camera") or {}).get("system"))
+        env, task = start_episode(spec, seed, task_type, self.plugins, self.timing, self.eval_options.get("camera"))
         try:
             check_divergence(env.data, "at the initial state")
             task.setup()
@@ -114,12 +113,12 @@ class EpisodeRunner:
 
 
 def start_episode(spec: EpisodeSpec, seed: int, task_type: TaskType, plugins: Plugins, timing: Timing,
-                  camera_system: str | None) -> tuple[Env, Task]:
+                  camera: dict[str, Any] | None) -> tuple[Env, Task]:
     """The episode's environment reset with ``seed`` and its task (not yet set up). The worker's
     rollout and :meth:`EpisodeRunner.open` both start episodes here."""
     from molmo_lerobot.runner.episode_env import build_env
 
-    env = build_env(spec, timing, plugins, camera_system)
+    env = build_env(spec, timing, plugins, camera)
     try:
         env.reset(seed)
         return env, task_type.create(spec, env)

@@ -5,9 +5,10 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
 
-from molmo_lerobot.cameras.base import choose_camera_system
+from molmo_lerobot.cameras.options import episode_camera_system
 from molmo_lerobot.sim.env import Env, Timing, make_env
 
 if TYPE_CHECKING:
@@ -15,9 +16,9 @@ if TYPE_CHECKING:
     from molmo_lerobot.plugins import Plugins
 
 
-def build_env(spec: EpisodeSpec, timing: Timing, plugins: Plugins, camera_system: str | None = None) -> Env:
-    """The episode's environment; ``camera_system`` is the run's ``camera.system`` (see
-    :func:`~molmo_lerobot.cameras.base.choose_camera_system` for the order of choice)."""
+def build_env(spec: EpisodeSpec, timing: Timing, plugins: Plugins, camera: Mapping[str, Any] | None = None) -> Env:
+    """The episode's environment; ``camera`` is the run's ``camera`` options (see
+    :func:`~molmo_lerobot.cameras.options.episode_camera_system` for the choice of cameras)."""
     robot = plugins.robot(spec.robot.robot_name)
-    cameras = plugins.camera_system(choose_camera_system(spec, camera_system, robot.default_camera_system))
+    cameras = episode_camera_system(spec, camera, plugins.camera_system, robot.default_camera_system)
     return make_env(spec, timing, plugins.scene_dataset(spec.scene_dataset), robot, cameras)

@@ -33,6 +33,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from molmo_lerobot.export.report import write_report
 from molmo_lerobot.export.wandb_log import log_run
+from molmo_lerobot import fileio
 from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import resolve as molmospaces_settings
@@ -107,7 +108,7 @@ class _EpisodeLog:
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self.fd = os.open(path, os.O_WRONLY | os.O_APPEND)
+        self.fd = fileio.open_fd(path, os.O_WRONLY | os.O_APPEND, root=path.parent)
 
     def append(self, result: EpisodeResult) -> None:
         data = (json.dumps(result.to_dict()) + "\n").encode()
@@ -273,7 +274,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                                         benchmark_name=bench.name, benchmark_sha256=bench.sha256,
                                         recorders=recorders + progress.factories(), prefer=plugins.prefer,
                                         molmospaces=run_info["eval_options"]["molmospaces"],
-                                        camera_system=(cfg.get("camera") or {}).get("system"),
+                                        camera=cfg.get("camera") or {},
                                         end_on_success=bool(cfg.get("end_on_success", False)),
                                         threads=cfg.get("worker_threads", 1))
                         executor.run(job, todo, record)
@@ -296,8 +297,8 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     )
     scored = json.dumps(summary, indent=2) + "\n"
     try:
-        atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered))
-        atomic_write(out / RESULTS_FILE, scored)  # the score, before any export
+        atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered), root=out)
+        atomic_write(out / RESULTS_FILE, scored, root=out)  # the score, before any export
     except OSError as exc:
         raise _write_error(out, "the run's outputs", exc) from None
     failed = []
@@ -311,7 +312,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     if failed:
         summary["export_errors"] = failed
     if json.dumps(summary, indent=2) + "\n" != scored:  # what the export did (push status, failures); same score
-        atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
+        atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n", root=out)
     if failed:
         raise ExportError(f"export failed after the run was scored ({'; '.join(failed)}); the score stands: "
                           f"{summary['n_success']}/{summary['n_episodes']} successes in {out / RESULTS_FILE}")
@@ -366,9 +367,8 @@ def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool) -> list[E
                 raise RunError(f"output_dir {out} already holds a run; pass resume=true to continue it "
                                "or choose another output_dir")
             return _reopen(out, run_info)
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write(run_file, json.dumps(run_info, indent=2) + "\n")
-        (out / EPISODES_FILE).touch()
+        atomic_write(run_file, json.dumps(run_info, indent=2) + "\n", root=out)  # makes ``out`` too
+        os.close(fileio.open_fd(out / EPISODES_FILE, os.O_WRONLY | os.O_CREAT, root=out))
     except OSError as exc:
         raise RunError(f"cannot write output_dir {out}: {exc.strerror or exc}") from None
     return []
@@ -398,10 +398,10 @@ def _reopen(out: Path, run_info: dict[str, Any]) -> list[EpisodeResult]:
                        f"({recorded} episode{'s' * (recorded != 1)} recorded) and a resume never drops recorded "
                        + ("episodes; use limit=null" if old is None else
                           f"episodes; use limit={old} or larger (or limit=null)"))
-    (out / RESULTS_FILE).unlink(missing_ok=True)
-    atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))
+    fileio.remove(out / RESULTS_FILE, root=out)
+    atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done), root=out)
     if new != old:  # a larger limit extends the run
-        atomic_write(run_file, json.dumps({**previous, "limit": new}, indent=2) + "\n")
+        atomic_write(run_file, json.dumps({**previous, "limit": new}, indent=2) + "\n", root=out)
     return done
 
 

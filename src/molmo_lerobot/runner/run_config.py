@@ -72,6 +72,9 @@ def config_problems(cfg: Mapping[str, Any]) -> list[str]:
             parse_base_size(base_size)
         except ValueError as exc:
             out.append(f"robot.{exc} (or default)")
+    from molmo_lerobot.cameras.options import camera_option_problems
+
+    out.extend(camera_option_problems(cfg.get("camera")))
     timeout = cfg.get("episode_timeout_s", 900)
     if not (_is_number(timeout) and timeout > 0):
         out.append(f"episode_timeout_s: expected a positive number of seconds, got {timeout!r}")

@@ -53,7 +53,7 @@ class WorkerJob:
     recorders: list[RecorderFactory] = field(default_factory=list)
     molmospaces: dict[str, Any] = field(default_factory=dict)  # MolmoSpaces data settings, user libraries
     prefer: dict[str, dict[str, str]] = field(default_factory=dict)  # the run's plugins.prefer pins
-    camera_system: str | None = None
+    camera: dict[str, Any] = field(default_factory=dict)  # the run's camera options (camera.system, camera.eval, ...)
     end_on_success: bool = False
     threads: int | None = 1  # CPU threads for torch/BLAS in this worker (None: the libraries' default)
 
@@ -108,7 +108,7 @@ class EpisodeWorker:
             task_type = self.plugins.task_type(item.task_type)
             horizon = item.horizon
             prompt = spec.language.task_description if spec.language else ""
-            env, task = start_episode(spec, item.seed, task_type, self.plugins, self.timing, self.job.camera_system)
+            env, task = start_episode(spec, item.seed, task_type, self.plugins, self.timing, self.job.camera)
             try:
                 ctx = EpisodeContext(
                     spec=spec, episode_index=item.episode_index, seed=item.seed, prompt=prompt,
@@ -120,6 +120,7 @@ class EpisodeWorker:
                     task_type=task_type.name, fps=1000.0 / self.timing.policy_dt_ms, horizon=horizon,
                     camera_names=list(env.camera_names), img_resolution=tuple(spec.img_resolution),
                     joint_names=dict(env.joint_names), move_groups=dict(env.move_groups),
+                    expert=self.policy.needs_simulator,
                     extra={"task_cls": task_cls, "policy": self.policy_name, "robot": spec.robot.robot_name,
                            "object": getattr(spec.task, "pickup_obj_name", None),
                            "benchmark": self.job.benchmark_name, "benchmark_sha256": self.job.benchmark_sha256},
