@@ -7,6 +7,7 @@ import json
 import os
 import sys
 from pathlib import Path
+from xml.etree import ElementTree
 
 import mujoco
 import numpy as np
@@ -251,15 +252,18 @@ def test_their_model_is_loaded_when_installed(tmp_path, monkeypatch):
     gravity-compensated (their FrankaRobotConfig.gravcomp); the file's own top body is not carried."""
     robot_dir = tmp_path / "robots" / "franka_droid"
     robot_dir.mkdir(parents=True)
-    world = mujoco.MjSpec()
-    base = world.worldbody.add_body(name="base")
-    base.add_geom(name="their_base_marker", size=[0.01, 0.01, 0.01], type=mujoco.mjtGeom.mjGEOM_BOX)
     arm = mujoco.MjSpec.from_string(franka_droid._registry_xml())
     for body in arm.bodies:
         body.gravcomp = 0.0
     arm.body("fr3_link0").add_geom(name="their_marker", size=[0.01, 0.01, 0.01], type=mujoco.mjtGeom.mjGEOM_BOX)
-    base.add_frame().attach_body(arm.body("fr3_link0"), "", "")
-    (robot_dir / "model.xml").write_text(world.to_xml())
+    root = ElementTree.fromstring(arm.to_xml())  # their file: a top body "base" holding fr3_link0
+    worldbody = root.find("worldbody")
+    base = ElementTree.SubElement(worldbody, "body", name="base")
+    ElementTree.SubElement(base, "geom", name="their_base_marker", type="box", size="0.01 0.01 0.01")
+    link0 = worldbody.find("body[@name='fr3_link0']")
+    worldbody.remove(link0)
+    base.append(link0)
+    (robot_dir / "model.xml").write_text(ElementTree.tostring(root, encoding="unicode"))
     monkeypatch.setenv("MLSPACES_ASSETS_DIR", str(tmp_path))
     assert franka_droid.molmospaces_model() == robot_dir / "model.xml"
     w = mujoco.MjSpec()
