@@ -30,7 +30,7 @@ def test_summary_counts_errors_as_failures_and_splits_tasks():
     assert s["success_once_rate"] == pytest.approx(2 / 3)
     assert s["per_task"]["pick"]["n_episodes"] == 2
     assert s["per_task"]["open"]["n_errors"] == 1
-    assert s["errors"] == [{"episode_index": 2, "error": "RuntimeError: boom"}]
+    assert s["errors"] == [{"episode_index": 2, "error": "RuntimeError: boom", "error_kind": "episode"}]
     assert s["seed"] == 0
 
 
