@@ -271,3 +271,39 @@ def test_a_new_episode_between_previous_ones_keeps_benchmark_order(two_worker_ru
         assert int(first["eval.episode_index"]) == rec["benchmark_episode_index"]
         level = (rec["benchmark_episode_index"] * 37) % 250 / 255.0
         assert float(first["observation.images.exo"].mean()) == pytest.approx(level, abs=0.03)
+
+
+def test_a_merge_killed_between_the_swap_renames_is_completed_by_the_next(two_worker_run, tmp_path, monkeypatch):
+    """A resume's merge is killed after ``dataset`` moved away and before the new one moved in:
+    the next merge finds the intact copy and puts it in place (nothing recorded is lost), leaves
+    no ``.dataset-merge-*`` behind, and a resume knows which episodes the dataset still lacks."""
+    from pathlib import Path
+
+    out0, _, results, _, _ = two_worker_run
+    out = tmp_path / "run"
+    shutil.copytree(out0, out)
+    factory = LeRobotRecorderFactory.from_config(CFG)
+    w = factory.make("w0g0", out)
+    redo = S.run_episode(w, 2, 5, success_from=1)  # the resume stores episode 2 (errored before)
+    w.close()
+    everything = [redo if r.episode_index == 2 else r for r in results]
+    rename = Path.rename
+
+    def killed_mid_swap(self, target):
+        if self.name == "dataset" and self.parent.name.startswith(".dataset-merge-"):
+            raise KeyboardInterrupt  # stands for the SIGKILL: the previous dataset is already moved away
+        return rename(self, target)
+
+    monkeypatch.setattr(Path, "rename", killed_mid_swap)
+    with pytest.raises(KeyboardInterrupt):
+        factory.finalize(out, everything, S.summary_for(everything))
+    monkeypatch.undo()
+    assert not (out / "dataset").exists() and list(out.glob(".dataset-merge-*"))
+
+    again = LeRobotRecorderFactory.from_config(CFG)  # the next resume: a new session
+    again.finalize(out, everything, S.summary_for(everything))
+    records = [r for r in read_eval_records(out / "dataset") if r["episode_index"] is not None]
+    assert [r["benchmark_episode_index"] for r in records] == [0, 1, 2, 3, 4]
+    assert _load(out / "dataset", again.repo_id).num_episodes == 5
+    assert not list(out.glob(".dataset-merge-*")) and not (out / SHARDS_DIR).exists()
+    assert again.missing(out, everything) == {5}, "episode 5 finished but its recording was lost"
