@@ -23,7 +23,8 @@ first N workers that start after a ``sigkill*`` fault fired SIGKILL themselves w
 The distribution also provides a recorder: with ``+trace_dir=D`` every finished episode writes
 ``D/trace-<episode_index>``, a SHA-256 of every action and joint position of the episode;
 ``+trace_fail_finalize=true`` makes its run-level ``finalize`` (the export step) raise; while
-``D/disk-full`` exists, writing a trace raises ``OSError(ENOSPC)`` (a full disk).
+``D/disk-full`` exists, writing a trace raises ``OSError(ENOSPC)`` (a full disk); on resume it
+reports the episodes without a trace file as ``missing`` (they run again).
 """
 
 from __future__ import annotations
@@ -138,6 +139,10 @@ MODULE = textwrap.dedent('''
         def finalize(self, output_dir, results, summary):
             if self.fail_finalize:
                 raise OSError("trace export: disk full (trace_fail_finalize=true)")
+
+        def missing(self, output_dir, results):
+            return {r.episode_index for r in results
+                    if r.error is None and not (self.out / f"trace-{r.episode_index}").exists()}
 
 
     class TraceRecorder(Recorder):

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from molmo_lerobot.runner.evaluate import run_evaluation
 
 
@@ -67,3 +69,42 @@ def test_output_and_infrastructure_failures_never_rewrite_outcomes_and_resume_re
     assert not list(out.rglob("*.tmp"))
     runs = {i: len((markers / f"pids-{i}").read_text().split()) for i in range(4)}
     assert runs == {0: 3, 1: 2, 2: 3, 3: 1}, "resume reran exactly the infrastructure and output failures"
+
+    (trace_dir / "trace-1").unlink()  # a recorder's output lost after the run (RecorderFactory.missing)
+    run_evaluation(eval_config(small_bench, out, *common, "limit=4", f"+trace_dir={trace_dir}", "resume=true"))
+    assert traces(trace_dir) == traces(tmp_path / "ref-traces") and outcomes(out) == outcomes(tmp_path / "ref")
+    assert len((markers / "pids-1").read_text().split()) == 3 and len((markers / "pids-0").read_text().split()) == 3
+
+
+@pytest.mark.slow
+def test_a_recorded_run_killed_before_its_shards_were_finished_records_them_on_resume(
+        faulty_policy, small_bench, tmp_path, eval_config):
+    """``kill -9`` of molmo-eval and its workers after every result was written but before one
+    worker finished its dataset shard (no marker: torn) and before the merge: the resume runs
+    that shard's episodes again, so the dataset holds every episode the results hold."""
+    from molmo_lerobot.export.merge import read_eval_records
+    from molmo_lerobot.export.shards import MARKER, list_shards
+
+    markers = faulty_policy.marker_dir
+    cfg = ["policy=faulty", "workers=2", "horizon=3", "limit=4", "record=true", f"policy.marker_dir={markers}"]
+    out = tmp_path / "run"
+
+    def killed(*args, **kwargs):
+        raise KeyboardInterrupt  # stands for the SIGKILL of molmo-eval before its merge
+
+    with pytest.MonkeyPatch.context() as mp, pytest.raises(KeyboardInterrupt):
+        mp.setattr("molmo_lerobot.export.merge.merge_shards", killed)
+        run_evaluation(eval_config(small_bench, out, *cfg))
+    shards = list_shards(out)
+    assert len(shards) == 2 and len(_records(out)) == 4
+    torn = shards[-1]
+    (torn.root / MARKER).unlink()  # its worker was killed before it finished the shard
+    lost = sorted(e["episode_index"] for e in torn.episodes)
+    assert lost
+
+    res = run_evaluation(eval_config(small_bench, out, *cfg, "resume=true"))
+    assert res.summary["n_errors"] == 0
+    records = read_eval_records(out / "dataset")
+    assert sorted(r["benchmark_episode_index"] for r in records if r["episode_index"] is not None) == [0, 1, 2, 3]
+    runs = {i: len((markers / f"pids-{i}").read_text().split()) for i in range(4)}
+    assert runs == {i: 2 if i in lost else 1 for i in range(4)}, "resume ran exactly the lost episodes again"
