@@ -138,6 +138,6 @@ def summary_lines(s: dict[str, Any], max_errors: int = 10) -> list[str]:
     outputs = s.get("output_errors") or []
     if outputs:
         first = outputs[0]
-        lines.append(f"  {len(outputs)} episodes kept their outcome but some output was not written "
-                     f"(first: episode {first['episode_index']}: {first['errors'][0]}); see results.json output_errors")
+        lines.append(f"  outputs not written for {len(outputs)} episode{'s' * (len(outputs) != 1)}, outcomes kept "
+                     f"(episode {first['episode_index']}: {first['errors'][0]}; all in results.json output_errors)")
     return lines
