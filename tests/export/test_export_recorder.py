@@ -216,9 +216,12 @@ def test_a_failed_save_leaves_the_shard_torn_and_never_merged(tmp_path, monkeypa
     w.close()
     assert [s.complete for s in list_shards(tmp_path)] == [True, False]
     second = S.run_episode(S.NullRecorder(), 1, 5, success_from=1)
+    second.output_errors = ["LeRobotRecorder: OSError: [Errno 28] No space left on device"]  # as the worker saw it
     factory.finalize(tmp_path, [first, second], S.summary_for([first, second]))
     records = read_eval_records(tmp_path / "dataset")  # the torn shard's episode is never merged
     assert [r["episode_index"] for r in records] == [0, None]
+    assert records[1]["not_recorded"] == "output failed: LeRobotRecorder: OSError: [Errno 28] No space left on device"
+    assert factory.missing(tmp_path, [first, second]) == {1}, "a resume records it"
 
 
 def test_shards_rotate_and_merge_in_order(tmp_path):
