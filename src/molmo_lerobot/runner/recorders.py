@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -132,9 +133,9 @@ class RecorderGroup:
             if i not in self._failed:
                 self._call(i, getattr(rec, method), *args, failed=self._failed)
 
-    def _call(self, i: int, fn: object, *args: object, failed: dict[int, str]) -> None:
+    def _call(self, i: int, fn: Callable[..., None], *args: object, failed: dict[int, str]) -> None:
         try:
-            fn(*args)  # type: ignore[operator]
+            fn(*args)
         except Exception as exc:
             failed.setdefault(i, f"{type(self.recorders[i]).__name__}: {describe(exc)}")
             log.warning("output of %s failed (the episode's outcome stands): %s", type(self.recorders[i]).__name__,
