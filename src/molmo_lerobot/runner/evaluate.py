@@ -384,10 +384,10 @@ def _reopen(out: Path, run_info: dict[str, Any], recorders: list[Any]) -> list[E
                           f"episodes; use limit={old} or larger (or limit=null)"))
     rerun = _incomplete(out, done, recorders)
     if rerun:
-        print(f"molmo-eval: resume runs {len(rerun)} recorded episodes again ({rerun[:10]}"
+        print(f"molmo-eval: resume runs {len(rerun)} recorded episodes again ({sorted(rerun)[:10]}"
               f"{' …' if len(rerun) > 10 else ''}): infrastructure errors, outputs not written or not in the "
               "dataset", file=sys.stderr)
-        done = [r for r in done if r.episode_index not in set(rerun)]
+        done = [r for r in done if r.episode_index not in rerun]
     (out / RESULTS_FILE).unlink(missing_ok=True)
     atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))
     if new != old:  # a larger limit extends the run
@@ -395,7 +395,7 @@ def _reopen(out: Path, run_info: dict[str, Any], recorders: list[Any]) -> list[E
     return done
 
 
-def _incomplete(out: Path, done: list[EpisodeResult], recorders: list[Any]) -> list[int]:
+def _incomplete(out: Path, done: list[EpisodeResult], recorders: list[Any]) -> set[int]:
     """Recorded episodes a resume runs again: infrastructure failures, episodes with an output not
     written, and those a recorder's output lacks (``RecorderFactory.missing``)."""
     rerun = {r.episode_index for r in done if r.rerun_on_resume or r.output_errors}
@@ -406,7 +406,7 @@ def _incomplete(out: Path, done: list[EpisodeResult], recorders: list[Any]) -> l
         except Exception as exc:
             raise RunError(f"cannot resume {out}: {type(factory).__name__} cannot tell which episodes its output "
                            f"lacks: {type(exc).__name__}: {exc}".splitlines()[0]) from None
-    return sorted(rerun)
+    return rerun
 
 
 #: ``episodes.jsonl`` fields a record must have, with their JSON types.

@@ -33,12 +33,12 @@ class WorkItem:
     task_type: str
     horizon: int
 
-    def failed(self, error: str, error_kind: str = EPISODE, **kw: Any) -> EpisodeResult:
+    def failed(self, error: str, kind: str = EPISODE, **kw: Any) -> EpisodeResult:
         """This episode as an error record (keeping its task type, prompt and horizon)."""
         task, language = self.spec.get("task"), self.spec.get("language")
         return EpisodeResult.failed(
             self.episode_index, self.spec.get("house_index"), task.get("task_cls") if isinstance(task, dict) else None,
-            self.seed, error, error_kind, task_type=self.task_type, horizon=self.horizon,
+            self.seed, error, kind, task_type=self.task_type, horizon=self.horizon,
             prompt=language.get("task_description") if isinstance(language, dict) else "", **kw)
 
 
