@@ -13,11 +13,11 @@ MOVE_GROUPS = {"arm": 3, "gripper": 1}
 JOINTS = {"arm": ["j1", "j2", "j3"], "gripper": ["finger_left", "finger_right"]}
 
 
-def info(index: int, steps: int, prompt: str = "pick up the mug") -> EpisodeInfo:
+def info(index: int, steps: int, prompt: str = "pick up the mug", expert: bool = False) -> EpisodeInfo:
     return EpisodeInfo(episode_index=index, house_index=index % 3, seed=1000 + index, prompt=prompt,
                        task_type="pick", fps=1000 / 66, horizon=steps, camera_names=list(CAMS),
                        img_resolution=(W, H), joint_names=dict(JOINTS), move_groups=dict(MOVE_GROUPS),
-                       extra={"robot": "synth_arm"})
+                       expert=expert, extra={"robot": "synth_arm"})
 
 
 def obs(index: int, step: int) -> dict:
@@ -32,13 +32,14 @@ def obs(index: int, step: int) -> dict:
 
 
 def run_episode(rec, index: int, steps: int, success_from: int | None, error: str | None = None,
-                reward: bool = False) -> EpisodeResult:
-    """Feed one episode to ``rec``; succeeds from step ``success_from`` on (None: never)."""
-    rec.start_episode(info(index, steps))
+                reward: bool = False, expert: bool = False, success_until: int | None = None) -> EpisodeResult:
+    """Feed one episode to ``rec``; succeeds from step ``success_from`` on (None: never) up to
+    ``success_until`` (None: the end); ``expert``: played by a scripted expert."""
+    rec.start_episode(info(index, steps, expert=expert))
     ok = once = False
     n = steps if error is None else steps // 2
     for t in range(n):
-        ok = success_from is not None and t >= success_from
+        ok = success_from is not None and t >= success_from and (success_until is None or t < success_until)
         once |= ok
         action = {"arm": np.array([t, -t, index], float), "gripper": np.array([float(ok)])}
         rec.record_step(obs(index, t), action, float(ok) if reward else None, ok, t == steps - 1)

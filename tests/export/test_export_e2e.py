@@ -56,19 +56,60 @@ def test_multi_worker_recording_loads_and_agrees_with_episodes_jsonl(recorded):
     assert page.count("<video") == 8
 
 
+def test_a_dataset_about_to_be_pushed_names_no_path_of_this_machine(recorded, hub_standin, tmp_path_factory, tmp_path):
+    """Every file pushed (and every file of the local dataset) is free of the run's, the temp
+    dir's, the home dir's and the repository's absolute paths, which the run config holds."""
+    import molmo_lerobot
+    from huggingface_hub import snapshot_download
+
+    from molmo_lerobot.export.hub import push_dataset
+
+    out, res = recorded
+    assert str(out) in json.dumps(res.summary)  # the run's own summary names them; the dataset must not
+    assert push_dataset(out / "dataset", REPO_ID.replace("local/", "molmo-test/")) is None
+    pushed = Path(snapshot_download(REPO_ID.replace("local/", "molmo-test/"), repo_type="dataset",
+                                    local_dir=tmp_path / "pushed"))
+    places = {Path(molmo_lerobot.__file__).parents[2], Path.home(), tmp_path_factory.getbasetemp(), out, Path.cwd()}
+    needles = {str(p).encode() for place in places for p in (place, place.resolve())}
+    files = [p for root in (out / "dataset", pushed) for p in root.rglob("*") if p.is_file() and ".cache" not in p.parts]
+    assert len(files) > 10 and any(p.name == "results.json" for p in files)
+    leaks = [(str(p), n.decode()) for p in files for n in needles if n in p.read_bytes()]
+    assert not leaks, leaks
+    shared = json.loads((pushed / "results.json").read_text())
+    assert shared["output_dir"] == "." and shared["benchmark"]["path"] == "<local>/pick_v1"
+    assert shared["benchmark"]["sha256"] == res.summary["benchmark"]["sha256"]
+
+
+def readme_command(program: str) -> list[str]:
+    """The ``program`` command of README.md's bash blocks, as its arguments (continuations joined)."""
+    import re
+    import shlex
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    for block in re.findall(r"```bash\n(.*?)```", readme, re.S):
+        for line in block.replace("\\\n", " ").splitlines():
+            if line.startswith(program + " "):
+                return shlex.split(line, comments=True)
+    raise AssertionError(f"README.md has no `{program}` command in a bash block")
+
+
 @pytest.mark.slow
-def test_act_trains_on_the_export_and_its_checkpoint_evaluates(recorded, tmp_path):
+def test_the_readme_lerobot_train_command_trains_on_the_export_and_its_checkpoint_evaluates(recorded, tmp_path):
+    """README.md's copy-paste ``lerobot-train`` command, offline, on our recording: only its
+    paths and step counts are replaced."""
     out, _ = recorded
     train = tmp_path / "train"
+    cmd = readme_command("lerobot-train")
+    assert f"--dataset.repo_id={REPO_ID}" in cmd
+    overrides = {"--dataset.root": out / "dataset", "--output_dir": train, "--steps": 2, "--save_freq": 2}
+    keys = [arg.split("=", 1)[0] for arg in cmd]
+    assert set(overrides) <= set(keys), f"README's command lacks {set(overrides) - set(keys)}"
+    cmd = [str(Path(sys.executable).parent / cmd[0])] + [
+        f"{key}={overrides[key]}" if key in overrides else arg for key, arg in zip(keys[1:], cmd[1:])]
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": "egl"}
-    cmd = [str(Path(sys.executable).parent / "lerobot-train"), f"--dataset.repo_id={REPO_ID}",
-           f"--dataset.root={out / 'dataset'}", "--dataset.video_backend=pyav", "--policy.type=act",
-           "--policy.device=cpu", "--policy.push_to_hub=false", "--policy.pretrained_backbone_weights=null",
-           "--steps=2", "--batch_size=2", "--num_workers=0", "--save_freq=2", "--log_freq=1",
-           "--wandb.enable=false", f"--output_dir={train}"]
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    ckpt = train / "checkpoints" / "000002" / "pretrained_model"
+    ckpt = train / "checkpoints" / "last" / "pretrained_model"
     assert (ckpt / "model.safetensors").is_file() and (ckpt / "config.json").is_file()
 
     res = run_evaluation(compose(["policy=lerobot", f"policy.path={ckpt}", "policy.device=cpu", "benchmark=pick_v1",

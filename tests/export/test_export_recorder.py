@@ -128,6 +128,19 @@ def test_results_card_and_cleanup(two_worker_run):
     assert (root / EVAL_EPISODES).is_file()
 
 
+def test_the_card_says_in_prose_what_the_data_is_and_its_limitations(two_worker_run):
+    import re
+
+    card = (two_worker_run[0] / "dataset" / "README.md").read_text()
+    for said in ("synthetic", "simulated", "MuJoCo", "Robot: `synth_arm`", "5 joint positions",
+                 "2 simulated RGB camera(s), `exo` (32x24), `wrist` (32x24), at 15 fps", "`pick` (6 episodes)",
+                 "e.g. \"pick up the mug\"", "**Scores.**", "**Limitations.**", "real robot"):
+        assert said in card, said
+    # lerobot-quality-gates' card checks: these terms, and mock/synthetic/tutorial status
+    assert all(re.search(term, card, re.I) for term in ("robot", "sensor", "task", "limitation", "synthetic"))
+    assert "scripted expert that end" not in card  # no episode was cut at its success hold
+
+
 def test_resume_adds_new_shards_to_the_previous_dataset(two_worker_run, tmp_path):
     out0, _, results, _, _ = two_worker_run
     out = tmp_path / "run"
@@ -276,11 +289,25 @@ def test_a_new_episode_between_previous_ones_keeps_benchmark_order(two_worker_ru
         assert float(first["observation.images.exo"].mean()) == pytest.approx(level, abs=0.03)
 
 
+def test_portable_paths_name_no_place_of_this_machine(tmp_path):
+    from molmo_lerobot.export.portable import portable
+
+    run = tmp_path / "run"
+    record = {"output_dir": str(run), "video": str(run / "dataset" / "videos"), "n": 3, "url": "http://host/a/b",
+              "repo": "me/pick", "rel": "runs/x",
+              "error": f"FileNotFoundError: {tmp_path}/objects/mug.xml is missing. See /root/.cache/x.",
+              "paths": [str(tmp_path / "bench" / "pick_v1"), "/"], str(tmp_path / "key"): 1}
+    assert portable(record, run) == {
+        "output_dir": ".", "video": "dataset/videos", "n": 3, "url": "http://host/a/b", "repo": "me/pick",
+        "rel": "runs/x", "error": "FileNotFoundError: <local>/mug.xml is missing. See <local>/x.",
+        "paths": ["<local>/pick_v1", "<local>"], "<local>/key": 1}
+
+
 def test_a_merge_killed_between_the_swap_renames_is_completed_by_the_next(two_worker_run, tmp_path, monkeypatch):
     """A resume's merge is killed after ``dataset`` moved away and before the new one moved in:
     the next merge finds the intact copy and puts it in place (nothing recorded is lost), leaves
     no ``.dataset-merge-*`` behind, and a resume knows which episodes the dataset still lacks."""
-    from pathlib import Path
+    from molmo_lerobot import fileio
 
     out0, _, results, _, _ = two_worker_run
     out = tmp_path / "run"
@@ -290,14 +317,14 @@ def test_a_merge_killed_between_the_swap_renames_is_completed_by_the_next(two_wo
     redo = S.run_episode(w, 2, 5, success_from=1)  # the resume stores episode 2 (errored before)
     w.close()
     everything = [redo if r.episode_index == 2 else r for r in results]
-    rename = Path.rename
+    replace = fileio.replace
 
-    def killed_mid_swap(self, target):
-        if self.name == "dataset" and self.parent.name.startswith(".dataset-merge-"):
+    def killed_mid_swap(src, dst, **kwargs):
+        if src.name == "dataset" and src.parent.name.startswith(".dataset-merge-"):
             raise KeyboardInterrupt  # stands for the SIGKILL: the previous dataset is already moved away
-        return rename(self, target)
+        return replace(src, dst, **kwargs)
 
-    monkeypatch.setattr(Path, "rename", killed_mid_swap)
+    monkeypatch.setattr(fileio, "replace", killed_mid_swap)
     with pytest.raises(KeyboardInterrupt):
         factory.finalize(out, everything, S.summary_for(everything))
     monkeypatch.undo()

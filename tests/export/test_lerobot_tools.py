@@ -65,3 +65,34 @@ def test_lerobot_dataset_viz_saves_a_recording_of_our_episode(recorded, tmp_path
     assert proc.returncode == 0, proc.stderr[-3000:]
     rrd = list(tmp_path.glob("*.rrd"))
     assert len(rrd) == 1 and rrd[0].stat().st_size > 10_000, proc.stderr[-2000:]
+
+
+def test_our_default_recording_merges_with_a_dataset_made_on_lerobots_defaults(recorded, tmp_path):
+    """LeRobot's merge refuses datasets whose ``video.codec`` differ: ours must be LeRobot's default."""
+    from lerobot.datasets.dataset_tools import merge_datasets
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+    from lerobot.utils.constants import DEFAULT_FEATURES
+
+    root, repo_id = recorded
+    ours = LeRobotDataset(repo_id, root=root, video_backend="pyav")
+    features = {k: v for k, v in ours.meta.features.items() if k not in DEFAULT_FEATURES}
+    for feature in features.values():
+        feature.pop("info", None)  # what a user declares: dtype, shape, names
+    theirs = LeRobotDataset.create("someone/synth-teleop", fps=ours.fps, features=features,
+                                   root=tmp_path / "theirs", robot_type=ours.meta.robot_type)
+    for t in range(4):
+        frame = S.obs(7, t)
+        theirs.add_frame({**{f"observation.images.{c}": img for c, img in frame["images"].items()},
+                          "observation.state": np.array([7, t, 0.5, 0.01, 0.01], np.float32),
+                          "action": np.zeros(4, np.float32), "next.success": np.array([False]),
+                          "next.done": np.array([t == 3]), "eval.episode_index": np.array([-1]),
+                          "eval.seed": np.array([-1]), "task": "pick up the mug"})
+    theirs.save_episode()
+    theirs.finalize()
+    merged = merge_datasets([ours, LeRobotDataset("someone/synth-teleop", root=tmp_path / "theirs",
+                                                  video_backend="pyav")],
+                            output_repo_id="someone/merged", output_dir=tmp_path / "merged")
+    assert merged.num_episodes == ours.num_episodes + 1 and len(merged) == len(ours) + 4
+    assert merged.meta.features["observation.images.exo"]["info"]["video.codec"] == "av1"
+    last = merged[len(merged) - 1]
+    assert float(last["observation.state"][1]) == 3.0

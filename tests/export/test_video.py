@@ -87,7 +87,7 @@ def test_cancel_removes_the_partial_video(tmp_path):
 
 
 def test_bad_frames_and_encoder_failures_are_reported(tmp_path):
-    enc = CameraStreamEncoder(15, VideoSettings().encoder_config(), queue_maxsize=4, encoder_threads=1)
+    enc = CameraStreamEncoder(15, VideoSettings(vcodec="h264").encoder_config(), queue_maxsize=4, encoder_threads=1)
     enc.start_episode(KEYS[:1], tmp_path)
     with pytest.raises(ValueError, match="uint8"):
         enc.feed_frame(KEYS[0], np.zeros((48, 64, 3), np.float32))

@@ -1,14 +1,16 @@
 """Export overhead, measured in one run (``pytest -m perf -s tests/perf/test_export_overhead.py``).
 
-Four ``run_evaluation`` runs of the same pick_v1 episodes (scripted expert, workers=2):
+Five ``run_evaluation`` runs of the same pick_v1 episodes (scripted expert, workers=2):
 
 * ``eval``: no recorder. The scripted expert needs no images, so nothing is rendered;
 * ``render``: a recorder that only asks for images, so every step renders every camera
   (what any image-based policy or video recording pays anyway) and keeps nothing;
-* ``export``: ``record=true`` with the default ``video`` settings (h264): every step
-  rendered, streamed into per-worker LeRobot shards, merged into ``output_dir/dataset``;
-* ``export_av1``: the same with ``video.vcodec=libsvtav1`` (LeRobot's default codec);
-  left out with ``MOLMO_PERF_AV1=0``.
+* ``export``: ``record=true record_hold_steps=null`` with the default ``video`` settings
+  (LeRobot's AV1): every step rendered, streamed into per-worker LeRobot shards, merged into
+  ``output_dir/dataset``;
+* ``export_h264``: the same with ``video.vcodec=h264``; left out with ``MOLMO_PERF_H264=0``;
+* ``export_held``: plain ``record=true``: the expert's recording ends 10 steps after its first
+  success, so the rest of the rollout is neither rendered nor encoded.
 
 Reported: export/eval and export/render wall-time ratios (target <= 1.15 against the
 rendering eval) and the size of the videos. Figures are printed and appended to
@@ -33,7 +35,7 @@ pytestmark = [pytest.mark.perf, pytest.mark.timeout(7200)]  # MOLMO_PERF_EPISODE
 N_EPISODES = int(os.environ.get("MOLMO_PERF_EPISODES", "6"))
 HORIZON = os.environ.get("MOLMO_PERF_HORIZON")  # default: the task's own horizon
 WORKERS = int(os.environ.get("MOLMO_PERF_WORKERS", "2"))
-AV1 = os.environ.get("MOLMO_PERF_AV1", "1") != "0"
+H264 = os.environ.get("MOLMO_PERF_H264", "1") != "0"
 
 
 class RenderOnlyRecorder(Recorder):
@@ -76,12 +78,14 @@ def test_export_overhead(tmp_path, monkeypatch):
     with monkeypatch.context() as m:  # a recorder that only asks for images, through the plugin hook
         m.setattr(get_plugins(), "recorder_factories", lambda cfg: [RenderOnlyFactory()])
         t_render, _ = _run(tmp_path / "render")
-    t_export, _ = _run(tmp_path / "export", "record=true")
-    t_av1 = _run(tmp_path / "export_av1", "record=true", "video.vcodec=libsvtav1")[0] if AV1 else None
+    t_export, _ = _run(tmp_path / "export", "record=true", "record_hold_steps=null")
+    t_h264 = (_run(tmp_path / "export_h264", "record=true", "record_hold_steps=null", "video.vcodec=h264")[0]
+              if H264 else None)
+    t_held, _ = _run(tmp_path / "export_held", "record=true")
 
     steps = sum(json.loads(line)["steps"] for line in (tmp_path / "eval" / "episodes.jsonl").read_text().splitlines())
     mb = {}
-    for name in ("export", "export_av1")[: 2 if AV1 else 1]:
+    for name in ("export", "export_h264")[: 2 if H264 else 1]:
         root = tmp_path / name / "dataset"
         ds = LeRobotDataset("local/pick_v1-scripted", root=root, video_backend="pyav")
         assert ds.num_episodes == N_EPISODES - summary["n_errors"] and ds.num_frames == steps
@@ -92,11 +96,13 @@ def test_export_overhead(tmp_path, monkeypatch):
         "cameras": len(ds.meta.video_keys), "eval_s": round(t_eval, 2), "render_s": round(t_render, 2),
         "export_s": round(t_export, 2), "export_over_eval": round(t_export / t_eval, 3),
         "export_over_render": round(t_export / t_render, 3), "target_export_over_render": 1.15,
-        "video_mb": mb["export"],
+        "video_mb": mb["export"], "export_held_s": round(t_held, 2),
+        "held_frames": LeRobotDataset("local/pick_v1-scripted", root=tmp_path / "export_held" / "dataset",
+                                      video_backend="pyav").num_frames,
     }
-    if t_av1 is not None:
-        figures |= {"export_av1_s": round(t_av1, 2), "export_av1_over_render": round(t_av1 / t_render, 3),
-                    "video_av1_mb": mb["export_av1"]}
+    if t_h264 is not None:
+        figures |= {"export_h264_s": round(t_h264, 2), "export_h264_over_render": round(t_h264 / t_render, 3),
+                    "video_h264_mb": mb["export_h264"]}
     line = json.dumps(figures)
     print("\n" + line)
     Path("runs").mkdir(exist_ok=True)

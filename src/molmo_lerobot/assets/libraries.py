@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import uuid
 from abc import ABC, abstractmethod
 from collections.abc import Iterator, Mapping
@@ -27,6 +26,7 @@ from typing import Any
 import lmdb
 import zstandard
 
+from molmo_lerobot import fileio
 from molmo_lerobot.assets.grasps import BuiltinGraspLibrary, GraspLibrary
 
 METADATA_FIELDS = ("assetId", "category", "description", "description_long", "description_short", "synset",
@@ -176,9 +176,9 @@ class MetadataStore:
         finally:
             env.close()
         try:
-            os.replace(tmp, path)
+            fileio.replace(tmp, path, root=path.parent)
         except OSError:  # another process finished the same build first
-            shutil.rmtree(tmp, ignore_errors=True)
+            fileio.rmtree(tmp, root=path.parent, ignore_errors=True)
         return cls(path)
 
     @property
@@ -230,6 +230,7 @@ class ResourceAssetLibrary(AssetLibrary):
         if self._store is None:
             store = MetadataStore(self.manager.meta_dir(self.objects) / "metadata.lmdb")
             if not store.exists():
+                fileio.make_dirs(store.path.parent, root=self.manager.cache_dir)  # LMDB writes in there
                 store = MetadataStore.build(store.path, self.manager.ensure_path(self.objects, self.METADATA))
             self._store = store
         return self._store

@@ -1,10 +1,11 @@
-"""The dataset card (``README.md``): LeRobot's card with the evaluation's score table."""
+"""The dataset card (``README.md``): LeRobot's card saying in prose what the data is (simulated:
+MuJoCo, robot, cameras, tasks), how it is scored (the score table) and its limitations."""
 
 from __future__ import annotations
 
 from typing import Any
 
-TAGS = ["molmo-lerobot", "evaluation", "rollouts", "mujoco"]
+TAGS = ["molmo-lerobot", "evaluation", "rollouts", "mujoco", "simulation", "synthetic"]
 
 
 def _pct(x: float | None) -> str:
@@ -34,36 +35,76 @@ def score_table(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def description(summary: dict[str, Any], n_recorded: int) -> str:
-    """The card's description: what was evaluated, the scores, and where the per-episode records are."""
+def _cameras(meta_info: dict[str, Any]) -> list[str]:
+    """``exterior`` (224x224) for each video feature of LeRobot's ``meta/info.json``."""
+    out = []
+    for key, feature in (meta_info.get("features") or {}).items():
+        if feature.get("dtype") == "video":
+            h, w = list(feature.get("shape") or [0, 0])[:2]
+            out.append(f"`{key.removeprefix('observation.images.')}` ({w}x{h})")
+    return out
+
+
+def description(meta_info: dict[str, Any], summary: dict[str, Any], records: list[dict[str, Any]]) -> str:
+    """The card's prose: what the data is (simulated), robot, sensors, tasks, scores, limitations."""
     bench = summary.get("benchmark") or {}
     policy = summary.get("policy") or {}
     policy_name = policy.get("name", "?") if isinstance(policy, dict) else str(policy)
     sha = str(bench.get("sha256", ""))
-    return "\n".join([
+    stored = [r for r in records if r.get("episode_index") is not None]
+    held = [r for r in stored if r.get("frames", r["steps"]) < r["steps"]]
+    prompts = sorted({str(r.get("prompt")) for r in stored if r.get("prompt")})
+    tasks = sorted((summary.get("per_task") or {}).items())
+    cameras = _cameras(meta_info)
+    fps = meta_info.get("fps")
+    state = ((meta_info.get("features") or {}).get("observation.state") or {}).get("shape") or ["?"]
+    lines = [
         f"Evaluation rollouts of policy `{policy_name}` on benchmark `{bench.get('name', '?')}` "
         f"(sha256 `{sha[:16]}`), recorded with molmo_lerobot.",
         "",
-        f"Primary metric: {summary.get('primary_metric', 'success_rate')}. Every attempted episode counts; "
-        "errored episodes count as failures and are not stored as dataset episodes.",
+        "**Simulated data.** Every frame is synthetic: the scenes, the robot and its cameras are simulated "
+        "in the MuJoCo physics engine, and the images are MuJoCo renders; nothing was recorded on a real "
+        f"robot. Robot: `{meta_info.get('robot_type') or 'unknown'}`, with its {state[0]} joint positions "
+        "as `observation.state` and the commanded joint targets as `action` (names in `meta/info.json`). "
+        f"Sensors: {len(cameras)} simulated RGB camera(s), {', '.join(cameras) or 'none'}, at {fps} fps; "
+        "no depth, force or tactile sensing. "
+        f"Task(s): {', '.join(f'`{t}` ({b.get('n_episodes', 0)} episodes)' for t, b in tasks) or 'none'}; "
+        f"each episode's language instruction is its LeRobot task ({len(prompts)} distinct, "
+        f"e.g. \"{prompts[0] if prompts else ''}\").",
+        "",
+        f"**Scores.** The benchmark's success rule judges each episode on the simulator state; the primary "
+        f"metric is {summary.get('primary_metric', 'success_rate')}. Every attempted episode counts; errored "
+        "episodes count as failures and are not stored as dataset episodes.",
         "",
         score_table(summary),
         "",
-        f"{n_recorded} of {summary.get('n_episodes', 0)} attempted episodes are stored. "
+        f"{len(stored)} of {summary.get('n_episodes', 0)} attempted episodes are stored. "
         "`meta/eval/episodes.jsonl` maps every attempted episode (dataset `episode_index`, or null when "
         "not stored) to its outcome, seed, house, policy and benchmark hash; `results.json` is the run summary.",
-    ])
+    ]
+    if held:
+        lines += ["", f"{len(held)} stored episode(s) are demonstrations of a scripted expert that end a few "
+                  "steps after their first success (`record_hold_steps`): the rollout, and its score, went on "
+                  "to the horizon unrecorded, so their `frames` in `meta/eval/episodes.jsonl` are fewer than "
+                  "their `steps`."]
+    lines += [
+        "",
+        "**Limitations.** Simulated contact, friction and rendering differ from the real world (no sensor "
+        "noise, motion blur or calibration error): a policy trained only on this data should not be expected "
+        "to work on a real robot. The scenes, objects and camera poses cover this benchmark's episodes only. "
+        "Success is a rule on simulator state, not a human judgement. A scripted expert plans with privileged "
+        "simulator state (object poses) that a learned policy does not observe. With few episodes the "
+        "confidence intervals above are wide.",
+    ]
+    return "\n".join(lines)
 
 
-def make_card(meta_info: Any, summary: dict[str, Any], repo_id: str, n_recorded: int) -> Any:
-    """A :class:`huggingface_hub.DatasetCard` from LeRobot's template, with the score table."""
+def make_card(meta_info: Any, summary: dict[str, Any], repo_id: str, records: list[dict[str, Any]]) -> Any:
+    """A :class:`huggingface_hub.DatasetCard` from LeRobot's template (``meta_info``: LeRobot's
+    ``DatasetInfo``), with this description."""
     from lerobot.datasets.utils import create_lerobot_dataset_card
 
-    return create_lerobot_dataset_card(**card_kwargs(summary, n_recorded), dataset_info=meta_info, repo_id=repo_id)
-
-
-def card_kwargs(summary: dict[str, Any], n_recorded: int) -> dict[str, Any]:
-    """Keyword arguments for LeRobot's card (also what ``push_to_hub`` forwards to it)."""
     bench = (summary.get("benchmark") or {}).get("name")
     tags = TAGS + ([str(bench)] if bench else [])
-    return {"tags": tags, "license": "apache-2.0", "dataset_description": description(summary, n_recorded)}
+    return create_lerobot_dataset_card(tags=tags, license="apache-2.0", dataset_info=meta_info, repo_id=repo_id,
+                                       dataset_description=description(meta_info.to_dict(), summary, records))

@@ -12,7 +12,6 @@ and puts them in the episode result's ``extra`` (so they reach ``episodes.jsonl`
 
 from __future__ import annotations
 
-import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder, RecorderFactory
 from molmo_lerobot.runner.results import EpisodeResult
 
@@ -120,12 +120,8 @@ class GlanceRecorder(Recorder):
         gap = np.full((frames[0].shape[0], 2, 3), 255, np.uint8)
         strip = np.concatenate([frames[0], gap, frames[-1]], axis=1) if len(frames) > 1 else frames[0]
         rel = thumbnail_path(episode_index)
-        path = self.output_dir / rel
-        path.parent.mkdir(parents=True, exist_ok=True)
         ok, data = cv2.imencode(".jpg", cv2.cvtColor(strip, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 85])
         if not ok:
             raise RuntimeError(f"could not encode the thumbnail of episode {episode_index}")
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        tmp.write_bytes(data.tobytes())
-        os.replace(tmp, path)
+        atomic_write(self.output_dir / rel, data.tobytes(), root=self.output_dir)
         return rel

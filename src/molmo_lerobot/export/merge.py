@@ -16,22 +16,27 @@ merge only copies and concatenates, never re-encodes), and every frame carries `
 
 * ``meta/eval/episodes.jsonl``: one record per attempted episode: ``episode_index`` (the
   dataset episode, or null when not stored, with ``not_recorded``), ``benchmark_episode_index``,
-  house, task, prompt, success, success_once, steps, seed, error, policy, benchmark + sha256;
+  house, task, prompt, success, success_once, steps, seed, error, policy, benchmark + sha256, and
+  ``frames`` (the stored frames: fewer than ``steps`` when an expert's recording ended at its
+  success hold);
 * ``meta/eval/info.json``: benchmark, policy, timing, exact fps, torn shards;
 * ``results.json`` (the run summary) and ``README.md`` (card with the score table).
+
+These files name no absolute path of this machine (:func:`molmo_lerobot.export.portable.portable`).
 """
 
 from __future__ import annotations
 
 import json
 import logging
-import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from molmo_lerobot import fileio
 from molmo_lerobot.export.card import make_card
 from molmo_lerobot.export.frames import EVAL_EPISODE_INDEX
+from molmo_lerobot.export.portable import portable
 from molmo_lerobot.export.shards import SHARDS_DIR, Shard, list_shards
 from molmo_lerobot.runner.results import EpisodeResult
 
@@ -70,11 +75,13 @@ def read_eval_records(dataset_root: Path) -> list[dict[str, Any]]:
 
 
 def _previous_source(dataset: Path) -> _Source | None:
+    fileio.refuse_link(dataset)  # a planted link would bring (and then drop) a dataset from elsewhere
     if not (dataset / "meta/info.json").exists() or not (dataset / EVAL_EPISODES).exists():
         return None
     stored = sorted((r for r in read_eval_records(dataset) if r.get("episode_index") is not None),
                     key=lambda r: r["episode_index"])
-    eps = [{"episode_index": r["benchmark_episode_index"], "success": r["success"]} for r in stored]
+    eps = [{"episode_index": r["benchmark_episode_index"], "success": r["success"],
+            "frames": r.get("frames", r["steps"])} for r in stored]
     return _Source(dataset, eps)
 
 
@@ -119,8 +126,8 @@ def recover_dataset(output_dir: Path) -> None:
         if previous.is_dir() and not final.exists():
             kept = new if new.is_dir() else previous  # the new one was checked before the swap began
             log.warning("completing a dataset merge that was killed mid-swap: %s -> %s", kept, final)
-            kept.rename(final)
-        shutil.rmtree(work, ignore_errors=True)
+            fileio.replace(kept, final, root=output_dir)
+        fileio.rmtree(work, root=output_dir, ignore_errors=True)
 
 
 def _sources(output_dir: Path) -> tuple[list[_Source], list[Shard]]:
@@ -151,15 +158,15 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
     try:
         tmp = _build(work, sources, shards, torn, results, summary, factory)
     except BaseException:
-        shutil.rmtree(work, ignore_errors=True)
+        fileio.rmtree(work, root=output_dir, ignore_errors=True)
         raise
     if tmp is None:
-        shutil.rmtree(work, ignore_errors=True)
+        fileio.rmtree(work, root=output_dir, ignore_errors=True)
         return None
     final = output_dir / DATASET_DIR
     _swap_into_place(tmp, final, work)
-    shutil.rmtree(output_dir / SHARDS_DIR, ignore_errors=True)
-    shutil.rmtree(work, ignore_errors=True)
+    fileio.rmtree(output_dir / SHARDS_DIR, root=output_dir, ignore_errors=True)
+    fileio.rmtree(work, root=output_dir, ignore_errors=True)
     return final
 
 
@@ -169,12 +176,14 @@ def _build(work: Path, sources: list[_Source], shards: list[Shard], torn: list[s
     from lerobot.datasets.aggregate import aggregate_datasets
     from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 
+    output_dir = work.parent
     discarded = {int(d["episode_index"]): d["reason"] for s in shards for d in s.discarded}
     by_index = {r.episode_index: r for r in results}
     chosen = _choose(sources, by_index)
 
     order = sorted(chosen)  # dataset episodes follow benchmark order, whatever the number of workers
     dataset_index = {b: i for i, b in enumerate(order)}
+    fileio.make_dirs(work, root=output_dir)  # LeRobot writes the subsets and the merged dataset in here
     roots: list[Path] = []
     for k, (si, keep) in enumerate(_segments(order, chosen)):
         src = sources[si]
@@ -189,21 +198,23 @@ def _build(work: Path, sources: list[_Source], shards: list[Shard], torn: list[s
     try:
         aggregate_datasets([factory.repo_id] * len(roots), factory.repo_id, roots=roots, aggr_root=tmp)
     except Exception as exc:
-        raise ExportError(f"merging {len(roots)} dataset shards under {work.parent / SHARDS_DIR} failed: "
+        raise ExportError(f"merging {len(roots)} dataset shards under {output_dir / SHARDS_DIR} failed: "
                           f"{type(exc).__name__}: {exc}") from exc
-    records = _eval_records(results, dataset_index, discarded, summary, factory)
-    _write_jsonl(tmp / EVAL_EPISODES, records)
+    frames = {b: sources[si].episodes[li].get("frames", by_index[b].steps) for b, (si, li) in chosen.items()}
+    records = portable(_eval_records(results, dataset_index, frames, discarded, summary, factory), output_dir)
+    fileio.atomic_write(tmp / EVAL_EPISODES, "".join(json.dumps(r) + "\n" for r in records), root=tmp)
     info = {
         "benchmark": summary.get("benchmark"), "policy": factory.policy, "repo_id": factory.repo_id,
         "policy_dt_ms": factory.policy_dt_ms, "fps_exact": 1000.0 / factory.policy_dt_ms, "fps": factory.fps,
         "n_attempted": len(results), "n_recorded": len(dataset_index), "torn_shards": torn,
         "session": factory.session,
     }
-    (tmp / EVAL_INFO).write_text(json.dumps(info, indent=2) + "\n")
-    (tmp / "results.json").write_text(json.dumps(summary, indent=2) + "\n")
+    shared = portable(summary, output_dir)
+    fileio.atomic_write(tmp / EVAL_INFO, json.dumps(portable(info, output_dir), indent=2) + "\n", root=tmp)
+    fileio.atomic_write(tmp / "results.json", json.dumps(shared, indent=2) + "\n", root=tmp)
     meta = LeRobotDatasetMetadata(factory.repo_id, root=tmp)
     check_dataset(tmp, results)
-    make_card(meta.info, summary, factory.repo_id, len(dataset_index)).save(str(tmp / "README.md"))
+    fileio.atomic_write(tmp / "README.md", str(make_card(meta.info, shared, factory.repo_id, records)), root=tmp)
     return tmp
 
 
@@ -218,8 +229,9 @@ def _subset(src: _Source, keep: list[int], out: Path, repo_id: str) -> Path:
     return out
 
 
-def _eval_records(results: list[EpisodeResult], dataset_index: dict[int, int], discarded: dict[int, str],
-                  summary: dict[str, Any], factory: LeRobotRecorderFactory) -> list[dict[str, Any]]:
+def _eval_records(results: list[EpisodeResult], dataset_index: dict[int, int], frames: dict[int, int],
+                  discarded: dict[int, str], summary: dict[str, Any],
+                  factory: LeRobotRecorderFactory) -> list[dict[str, Any]]:
     bench = summary.get("benchmark") or {}
     records = []
     for r in sorted(results, key=lambda r: r.episode_index):
@@ -237,7 +249,7 @@ def _eval_records(results: list[EpisodeResult], dataset_index: dict[int, int], d
             "task_cls": r.task_cls, "task_type": r.task_type, "prompt": r.prompt, "success": r.success,
             "success_once": r.success_once, "steps": r.steps, "seed": r.seed, "error": r.error,
             "policy": factory.policy, "benchmark": bench.get("name", factory.benchmark),
-            "benchmark_sha256": bench.get("sha256"), "not_recorded": why,
+            "benchmark_sha256": bench.get("sha256"), "not_recorded": why, "frames": frames.get(r.episode_index),
         })
     return records
 
@@ -261,22 +273,20 @@ def check_dataset(root: Path, results: list[EpisodeResult]) -> None:
         if set(g[EVAL_EPISODE_INDEX]) != {res.episode_index}:
             raise ExportError(f"{root}: dataset episode {ep} holds {EVAL_EPISODE_INDEX} "
                               f"{sorted(set(g[EVAL_EPISODE_INDEX]))[:5]}, expected {res.episode_index}")
-        if len(g) != res.steps or bool(last["next.success"]) != res.success or not bool(last["next.done"]):
+        length = rec.get("frames", res.steps)
+        held = length < res.steps  # an expert's recording ends at its success hold, its rollout goes on
+        if (len(g) != length or length > res.steps or not bool(last["next.done"])
+                or (bool(last["next.success"]) != res.success if not held else not g["next.success"].any())):
             raise ExportError(
                 f"{root}: dataset episode {ep} (benchmark episode {res.episode_index}) has {len(g)} frames, "
-                f"final next.success={bool(last['next.success'])}; the result says {res.steps} steps, "
-                f"success={res.success}")
-
-
-def _write_jsonl(path: Path, records: list[dict[str, Any]]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("".join(json.dumps(r) + "\n" for r in records))
+                f"final next.success={bool(last['next.success'])}; the records say {length} frames of "
+                f"{res.steps} steps, success={res.success}")
 
 
 def _swap_into_place(tmp: Path, final: Path, work: Path) -> None:
     """Two renames; one killed between them is completed by :func:`recover_dataset`."""
     old = work / PREVIOUS
     if final.exists():
-        final.rename(old)
-    tmp.rename(final)
-    shutil.rmtree(old, ignore_errors=True)
+        fileio.replace(final, old, root=work.parent)
+    fileio.replace(tmp, final, root=work.parent)
+    fileio.rmtree(old, root=work.parent, ignore_errors=True)

@@ -5,6 +5,8 @@ pickled to the workers. Each worker's :class:`LeRobotRecorder` streams frames in
 LeRobot v3 dataset shard (``streaming_encoding=True``: video is encoded while the episode
 runs, by :mod:`molmo_lerobot.export.video` with the run's ``video`` settings), saves an
 episode only if it finished without error, and finalizes its shard when the worker closes.
+An expert's episode (:attr:`EpisodeInfo.expert`) is recorded up to ``record_hold_steps`` after
+its first success (the rollout itself, and so the score, runs on to the horizon).
 ``finalize`` then merges the shards into ``output_dir/dataset`` with
 ``lerobot.datasets.aggregate.aggregate_datasets``, writes the eval records, the dataset card
 and ``results.json`` into it, and pushes to the Hub when ``push=true``.
@@ -18,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from molmo_lerobot import fileio
 from molmo_lerobot.config import ConfigError
 from molmo_lerobot.export.frames import FrameLayout
 from molmo_lerobot.export.shards import SHARDS_DIR, new_session, shard_name, write_marker
@@ -72,6 +75,8 @@ class LeRobotRecorderFactory(RecorderFactory):
     #: the merge (about a second per shard) sees a few shards, not one per episode
     shard_episodes: int = 8
     video: VideoSettings = field(default_factory=VideoSettings)
+    #: an expert's recording ends this many steps after its first success (None: the whole rollout)
+    hold_steps: int | None = 10
 
     @classmethod
     def from_config(cls, cfg: dict[str, Any]) -> LeRobotRecorderFactory:
@@ -87,9 +92,12 @@ class LeRobotRecorderFactory(RecorderFactory):
             validate_repo_id(str(repo_id))
         else:
             repo_id = f"local/{_slug(bench)}-{_slug(policy)}"
+        hold = cfg.get("record_hold_steps", cls.hold_steps)
+        if hold is not None and (isinstance(hold, bool) or not isinstance(hold, int) or hold < 0):
+            raise RecordConfigError(f"record_hold_steps: expected a non-negative integer or null, got {hold!r}")
         return cls(repo_id=str(repo_id), policy_dt_ms=float(cfg["timing"]["policy_dt_ms"]), benchmark=bench,
                    policy=policy, push=push, private=bool(hub.get("private", False)),
-                   video=VideoSettings.from_config(cfg.get("video")))
+                   video=VideoSettings.from_config(cfg.get("video")), hold_steps=hold)
 
     @property
     def fps(self) -> int:
@@ -112,7 +120,6 @@ class LeRobotRecorderFactory(RecorderFactory):
             error = (push_dataset(root, self.repo_id, private=self.private) if root is not None
                      else "no episode finished without error, so there is no dataset to push")
             summary["push"] = {"repo_id": self.repo_id, "ok": error is None, "error": error}
-
 
     def missing(self, output_dir: Path, results: list[EpisodeResult]) -> set[int]:
         """Resume: the episodes that finished without error but are neither in ``output_dir/dataset``
@@ -140,7 +147,12 @@ def _slug(text: str) -> str:
 
 
 class LeRobotRecorder(Recorder):
-    """One worker's writer: frames stream into the current shard; errors are never saved."""
+    """One worker's writer: frames stream into the current shard; errors are never saved.
+
+    An expert's recording stops ``hold_steps`` after its first successful step: a demonstration
+    that idles to the horizon teaches a policy to stand still. The last recorded frame is marked
+    ``next.done``; the rollout goes on unrecorded (and unrendered) for the episode's score.
+    """
 
     wants_images = True
 
@@ -156,20 +168,31 @@ class LeRobotRecorder(Recorder):
         self._saved: list[dict[str, Any]] = []
         self._discarded: list[dict[str, Any]] = []
         self._info: EpisodeInfo | None = None
-        self._frames = 0
+        self._frames = 0  # recorded this episode
+        self._steps = 0  # seen this episode
+        self._last: int | None = None  # the last step to record, once the success hold has begun
 
     # Recorder interface -------------------------------------------------------------
     def start_episode(self, info: EpisodeInfo) -> None:
         previous = self._info
         if self._saved and previous is not None and info.episode_index != previous.episode_index + 1:
             self._close_shard()  # out of benchmark order: the next shard starts here
-        self._info, self._frames = info, 0
+        self._info, self._frames, self._steps, self._last = info, 0, 0, None
+
+    def wants_images_at(self, step: int, horizon: int) -> bool:
+        return self._last is None or step <= self._last
 
     def record_step(self, obs: dict[str, Any], action: dict[str, Any], reward: float | None,
                     success: bool, done: bool) -> None:
         info = self._info
         if info is None:
             raise RuntimeError("record_step called before start_episode")
+        step, self._steps = self._steps, self._steps + 1
+        if self._last is not None and step > self._last:
+            return  # past the success hold: the rollout goes on for its score only
+        if success and self._last is None and info.expert and self.factory.hold_steps is not None:
+            self._last = step + self.factory.hold_steps
+        done = done or step == self._last
         if self._frames == 0:
             layout = FrameLayout.from_step(info, obs, reward)
             if self._ds is not None and layout != self._layout:
@@ -184,11 +207,12 @@ class LeRobotRecorder(Recorder):
         frames, self._frames = self._frames, 0
         if self._ds is None:
             return
+        expected = result.steps if self._last is None else min(result.steps, self._last + 1)
         reason = None
         if result.error is not None:
             reason = "episode error"
-        elif frames != result.steps:
-            reason = f"recorded {frames} frames for {result.steps} steps"
+        elif frames != expected:
+            reason = f"recorded {frames} frames for {expected} steps"
         if reason is not None:
             self._ds.clear_episode_buffer()
             if frames:
@@ -202,7 +226,7 @@ class LeRobotRecorder(Recorder):
             self._abandon_shard()  # half-saved: leave it torn (no marker) so it is never merged
             raise
         self._saved.append({"episode_index": result.episode_index, "seed": result.seed,
-                            "success": result.success, "steps": result.steps})
+                            "success": result.success, "steps": result.steps, "frames": frames})
         if len(self._saved) >= self.factory.shard_episodes:
             self._close_shard()
 
@@ -211,7 +235,7 @@ class LeRobotRecorder(Recorder):
 
     # Shards ----------------------------------------------------------------------------
     def _open_shard(self, layout: FrameLayout, horizon: int) -> None:
-        self.shards_dir.mkdir(parents=True, exist_ok=True)
+        fileio.make_dirs(self.shards_dir, root=self.shards_dir.parent)  # LeRobot makes the new shard in it
         root = self.shards_dir / shard_name(self.factory.session, self.worker_id, self._seq)
         while root.exists():  # never reuse a directory, whatever left it there
             self._seq += 1

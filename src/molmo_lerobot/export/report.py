@@ -325,4 +325,4 @@ def write_report(output_dir: Path | str, summary: dict[str, Any], results: list[
     output_dir = Path(output_dir)
     page = render_report(summary, results, episode_videos(output_dir), output_dir)
     path = output_dir / REPORT_FILE
-    return atomic_write(path, page)
+    return atomic_write(path, page, root=output_dir)

@@ -18,6 +18,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from molmo_lerobot import fileio
 from molmo_lerobot.fileio import atomic_write
 
 SHARDS_DIR = "dataset_shards"
@@ -52,14 +53,14 @@ class Shard:
 
 
 def write_marker(root: Path, record: dict[str, Any]) -> None:
-    """Declare a finalized shard complete (atomic: a torn write never counts)."""
-    path = root / MARKER
-    atomic_write(path, json.dumps(record))
+    """Declare a finalized shard complete (atomic: a torn write never counts; no link below ``root``)."""
+    atomic_write(root / MARKER, json.dumps(record), root=root)
 
 
 def list_shards(output_dir: Path) -> list[Shard]:
     """Every shard under ``output_dir``, oldest first; torn ones have ``complete=False``."""
     base = Path(output_dir) / SHARDS_DIR
+    fileio.refuse_link(base)  # shards from elsewhere must not be merged into this run's dataset
     shards: list[Shard] = []
     if not base.is_dir():
         return shards

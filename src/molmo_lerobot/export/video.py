@@ -22,6 +22,7 @@ threads) turned into LeRobot's ``RGBEncoderConfig``; codec options are LeRobot's
 from __future__ import annotations
 
 import io
+import os
 import queue
 import shutil
 import tempfile
@@ -40,10 +41,17 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from molmo_lerobot.config import ConfigError
 
 #: h264 quality and speed when the config leaves them null: crf 18 matches the picture quality
-#: of LeRobot's default AV1 (crf 30) on our 224x224 renders (42.0 dB PSNR both) with files
-#: 28 % larger and a quarter of the encoding CPU (``tests/perf/test_video_codecs.py``).
+#: of LeRobot's default AV1 (crf 30, preset 12) on our 224x224 renders (42.0 dB PSNR both) with
+#: files 28 % larger and a third of the encoding CPU (1.8 against 5.4 ms per frame of two
+#: cameras, ``tests/perf/test_video_codecs.py``). AV1 stays the default: LeRobot's
+#: ``aggregate_datasets`` merges only datasets whose ``video.codec`` agree, and LeRobot records AV1.
 #: Other codecs (``auto`` included) get LeRobot's own defaults.
 H264_DEFAULTS: dict[str, Any] = {"crf": 18, "preset": "veryfast"}
+
+
+#: SVT-AV1 prints its configuration banner (a dozen lines) to stderr for every stream it opens,
+#: reading ``SVT_LOG`` once, at its first encoder: errors only, unless the user set it.
+os.environ.setdefault("SVT_LOG", "1")
 
 
 class VideoConfigError(ConfigError):
@@ -54,7 +62,7 @@ class VideoConfigError(ConfigError):
 class VideoSettings:
     """How camera streams are encoded: the run config's ``video`` block."""
 
-    vcodec: str = "h264"
+    vcodec: str = "libsvtav1"
     crf: int | float | None = None
     g: int | None = 2
     preset: int | str | None = None

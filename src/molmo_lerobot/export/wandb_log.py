@@ -12,6 +12,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from molmo_lerobot import fileio
 from molmo_lerobot.runner.results import EpisodeResult
 
 log = logging.getLogger(__name__)
@@ -40,6 +41,7 @@ def log_run(output_dir: Path | str, summary: dict[str, Any], results: list[Episo
     try:
         import wandb
 
+        fileio.make_dirs(output_dir / "wandb", root=output_dir)  # W&B writes its own files in there
         bench = (summary.get("benchmark") or {}).get("name", "benchmark")
         policy = (summary.get("policy") or {}).get("name", "policy")
         run = wandb.init(project=settings.get("project") or "molmo-eval", entity=settings.get("entity"),

@@ -27,6 +27,7 @@ from pathlib import Path
 import lmdb
 import zstandard
 
+from molmo_lerobot import fileio
 from molmo_lerobot.assets.grasps import GraspLibrary
 from molmo_lerobot.assets.libraries import AssetError, AssetLibrary, MetadataStore, UidLocation
 from molmo_lerobot.molmospaces import layout
@@ -117,7 +118,7 @@ def _store_for(source: Path) -> MetadataStore:
         raise AssetError(f"{source}: cannot read object metadata ({exc})") from None
     if not isinstance(docs, dict):
         raise AssetError(f"{source}: expected an object mapping UID to metadata")
-    store.path.parent.mkdir(parents=True, exist_ok=True)
+    fileio.make_dirs(store.path.parent, root=home)
     return MetadataStore.build_from(store.path, docs.items(), where=str(source))
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from molmo_lerobot.cpu_threads import cap_threads
+from molmo_lerobot.fileio import atomic_write
 
 STATS_FILE = "serve_stats.json"
 
@@ -90,7 +91,8 @@ def served_policy(policy_cfg: dict[str, Any], workers: int, output_dir: str | Pa
     finally:
         stats = fetch_stats(port) if port is not None else None
         if stats is not None and output_dir is not None:
-            Path(output_dir, STATS_FILE).write_text(json.dumps({**stats, **options}, indent=2) + "\n")
+            atomic_write(Path(output_dir, STATS_FILE), json.dumps({**stats, **options}, indent=2) + "\n",
+                         root=output_dir)
         proc.terminate()  # SIGTERM: the server closes its connections and exits
         proc.join(30)
         if proc.is_alive():

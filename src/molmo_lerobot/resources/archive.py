@@ -3,6 +3,7 @@ and never writes more than the archive's index says."""
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import io
 import os
@@ -14,10 +15,9 @@ from pathlib import Path, PurePosixPath
 
 import zstandard
 
-from molmo_lerobot.fileio import atomic_open
+from molmo_lerobot.fileio import UnsafePathError, atomic_open, make_dirs_at, open_dir, parent_of
 from molmo_lerobot.resources.errors import CorruptArchiveError, ResourceError, UnsafeArchiveError
 from molmo_lerobot.resources.manifests import link_escapes
-from molmo_lerobot.resources.nofollow import make_dirs, open_root, parent_of
 
 CHUNK = 1 << 20
 _HEADER_ALLOWANCE = 8 << 10  # tar header, PAX record and padding per member
@@ -151,17 +151,19 @@ class _Capped(io.RawIOBase):
 
 
 def safe_extract(archive_path: Path, dest: Path, name: str, expected: Mapping[str, list] | None = None,
-                 limit: int | None = None) -> list[str]:
+                 limit: int | None = None, *, root: Path | None = None) -> list[str]:
     """Stream-extract ``archive_path`` into the new directory ``dest``; returns the member paths.
 
-    Nothing is written through a link: every path is walked with ``O_NOFOLLOW`` from ``dest``.
+    Nothing is written through a link: ``dest`` is made below ``root`` (default: its parent) and
+    every path is walked with ``O_NOFOLLOW`` from it (:mod:`molmo_lerobot.fileio`).
     With ``expected`` (the index's ``{path: entry}``) a member that is not indexed, repeated,
     of another kind, or larger than its indexed size is refused before a byte of it is
     written, so an archive never writes more than its index says; ``limit`` (default:
     :func:`extract_limit` of ``expected``) caps the decompressed stream itself.
     """
     dest = Path(dest)
-    dest.mkdir(parents=True, exist_ok=False)
+    if dest.exists() or dest.is_symlink():
+        raise FileExistsError(errno.EEXIST, f"{dest} already exists; extraction needs a new directory")
     if expected is not None and limit is None:
         limit = extract_limit(expected)
     dirs = _ancestors(expected) if expected is not None else set()
@@ -169,7 +171,8 @@ def safe_extract(archive_path: Path, dest: Path, name: str, expected: Mapping[st
     written = 0
     dctx = zstandard.ZstdDecompressor()
     try:
-        with open(archive_path, "rb") as fh, dctx.stream_reader(fh) as zr, open_root(dest) as root, \
+        with open(archive_path, "rb") as fh, dctx.stream_reader(fh) as zr, \
+                open_dir(dest, root=root or dest.parent) as dfd, \
                 tarfile.open(fileobj=_Capped(zr, limit, name), mode="r|") as tar:
             for member in tar:
                 check_member(member, name)
@@ -184,8 +187,10 @@ def safe_extract(archive_path: Path, dest: Path, name: str, expected: Mapping[st
                     raise UnsafeArchiveError(f"{where} would take the archive past its limit of {limit} bytes "
                                              "(from its index); refusing to extract")
                 written += size
-                _write_member(tar, member, rel, root, seen, where)
+                _write_member(tar, member, rel, dfd, seen, where)
                 seen[rel] = "d" if member.isdir() else "l" if member.issym() else "f"
+    except UnsafePathError as exc:
+        raise UnsafeArchiveError(str(exc)) from None
     except (tarfile.TarError, zstandard.ZstdError, EOFError) as exc:
         raise CorruptArchiveError(f"archive {name}: cannot be read ({type(exc).__name__}: {exc})") from None
     if expected is not None:
@@ -230,7 +235,7 @@ def _check_expected(member: tarfile.TarInfo, rel: str, expected: Mapping[str, li
 def _write_member(tar: tarfile.TarFile, member: tarfile.TarInfo, rel: str, root: int, seen: dict[str, str],
                   where: str) -> None:
     if member.isdir():
-        make_dirs(root, rel, where)
+        make_dirs_at(root, rel, where)
         return
     with parent_of(root, rel, create=True, where=where) as (fd, leaf):
         if member.issym():

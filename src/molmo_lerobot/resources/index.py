@@ -11,7 +11,6 @@ import contextlib
 import hashlib
 import json
 import os
-import shutil
 import threading
 import uuid
 from collections.abc import Iterator, Mapping
@@ -20,6 +19,7 @@ from pathlib import Path, PurePosixPath
 import lmdb
 import zstandard
 
+from molmo_lerobot import fileio
 from molmo_lerobot.resources.errors import ResourceError
 
 COMPLETE_KEY = b"__complete__"
@@ -169,9 +169,8 @@ class PathIndex:
             env.sync(True)
         finally:
             env.close()
-        if path.exists():
-            shutil.rmtree(path)
-        os.replace(tmp, path)
+        fileio.rmtree(path, root=path.parent)
+        fileio.replace(tmp, path, root=path.parent)
         return cls(path)
 
 

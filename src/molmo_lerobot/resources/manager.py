@@ -6,9 +6,10 @@ per-archive completion flags, locks, temporary extraction dirs). The install dir
 ``<install>/<data_type>/<source>`` — one link to the version dir (``link="dir"``) or a tree
 of per-file links (``link="file"``, so relative MJCF paths resolve). Upgrades re-point links.
 
-Nothing is ever written through a link: archives are extracted and moved into place by
-walking every path with ``O_NOFOLLOW`` (:mod:`~molmo_lerobot.resources.nofollow`), and each
-link a version brings is resolved through the real tree and must stay inside the version.
+Nothing is ever written through a link below the cache or install dir (either may itself be a
+link): every write, new directory, rename and removal walks its path from that root with
+``O_NOFOLLOW`` (:mod:`molmo_lerobot.fileio`), and each link a version brings is resolved
+through the real tree and must stay inside the version.
 """
 
 from __future__ import annotations
@@ -32,9 +33,9 @@ from pathlib import Path, PurePosixPath
 
 from filelock import FileLock, Timeout
 
-from molmo_lerobot.fileio import atomic_open, atomic_write
+from molmo_lerobot import fileio
+from molmo_lerobot.fileio import UnsafePathError, atomic_open, atomic_write
 from molmo_lerobot.resources import molmospaces as ms
-from molmo_lerobot.resources import nofollow
 from molmo_lerobot.resources.archive import (
     extract_limit,
     pack_archive,
@@ -157,6 +158,13 @@ class ResourceManager:
             self._indexes, self._manifests, self._locks, self._pid = {}, {}, {}, os.getpid()
             self._place_lock = threading.Lock()
 
+    def _root(self, path: Path) -> Path:
+        """The cache or install dir ``path`` lies in: writes walk from there without following links."""
+        for root in (self.cache_dir, self.install_dir):
+            if root is not None and path.is_relative_to(root):
+                return root
+        raise ValueError(f"{path} is neither in cache dir {self.cache_dir} nor in install dir {self.install_dir}")
+
     # -- locks -------------------------------------------------------------------------
     @contextlib.contextmanager
     def _lock(self, path: Path) -> Iterator[None]:
@@ -164,7 +172,8 @@ class ResourceManager:
         if not self.use_lock:
             yield
             return
-        path.parent.mkdir(parents=True, exist_ok=True)
+        root = self._root(path)
+        os.close(fileio.open_fd(path, os.O_RDWR | os.O_CREAT, root=root))  # FileLock would follow a link
         lock = self._locks.setdefault(str(path), FileLock(str(path), timeout=self.lock_timeout))
         try:
             lock.acquire()
@@ -173,12 +182,13 @@ class ResourceManager:
         owner = Path(f"{path}.owner")
         try:
             if lock.lock_counter == 1:
-                owner.write_text(json.dumps({"pid": os.getpid(), "host": socket.gethostname(), "since": time.time()}))
+                atomic_write(owner, json.dumps({"pid": os.getpid(), "host": socket.gethostname(),
+                                                "since": time.time()}), root=root)
             yield
         finally:
             if lock.lock_counter == 1:
                 with contextlib.suppress(OSError):
-                    owner.unlink()
+                    fileio.remove(owner, root=root)
             lock.release()
 
     def _version_lock(self, spec: ResourceSpec):
@@ -213,8 +223,7 @@ class ResourceManager:
         meta = self.meta_dir(spec)
         if (meta / "manifest.json").is_file():
             return
-        tmp = meta / "tmp"
-        tmp.mkdir(parents=True, exist_ok=True)
+        tmp = fileio.make_dirs(meta / "tmp", root=self.cache_dir)
         vdir = self.version_dir(spec)
         if (vdir / ms.REMOTE_MANIFEST).is_file() and (vdir / ms.TRIES).is_file():
             return self._convert_ms_meta(spec, vdir, f"{spec}: cache {vdir}")
@@ -237,8 +246,9 @@ class ResourceManager:
             raise ResourceError(f"{where} describes another resource")
         check_index(read_json(tmp / "index.json.gz", f"{spec}: remote index.json.gz"), manifest["archives"],
                     f"{spec}: remote {self.remote.url} {spec.rel}/index.json.gz")
-        os.replace(tmp / "index.json.gz", meta / "index.json.gz")
-        os.replace(tmp / "manifest.json", meta / "manifest.json")  # last: its presence means meta is complete
+        fileio.replace(tmp / "index.json.gz", meta / "index.json.gz", root=self.cache_dir)
+        # last: its presence means meta is complete
+        fileio.replace(tmp / "manifest.json", meta / "manifest.json", root=self.cache_dir)
 
     def _remote_versions(self, spec: ResourceSpec) -> str:
         try:
@@ -258,11 +268,12 @@ class ResourceManager:
         check_index(index, manifest["archives"], f"{where}/{ms.TRIES}")
         for name in (ms.REMOTE_MANIFEST, ms.TRIES):
             if src != meta / "raw":
-                (meta / "raw").mkdir(parents=True, exist_ok=True)
-                shutil.copyfile(src / name, meta / "raw" / name)
-        with atomic_open(meta / "index.json.gz", "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as fh:
+                with open(src / name, "rb") as fsrc, atomic_open(meta / "raw" / name, "wb", root=self.cache_dir) as dst:
+                    shutil.copyfileobj(fsrc, dst)
+        with atomic_open(meta / "index.json.gz", "wb", root=self.cache_dir) as raw, \
+                gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as fh:
             fh.write(json.dumps(index).encode())
-        atomic_write(meta / "manifest.json", json.dumps(manifest, indent=1, sort_keys=True), parents=True)
+        atomic_write(meta / "manifest.json", json.dumps(manifest, indent=1, sort_keys=True), root=self.cache_dir)
 
     def is_molmospaces(self, spec: ResourceSpec | str) -> bool:
         """Whether the version has MolmoSpaces' layout (their flags, manifests and locks are kept)."""
@@ -274,11 +285,11 @@ class ResourceManager:
 
     def _ms_prepare(self, spec: ResourceSpec) -> None:
         """Their metadata files inside the version dir, as molmospaces-resources keeps them."""
-        vdir = self.version_dir(spec)
-        vdir.mkdir(parents=True, exist_ok=True)
+        vdir = fileio.make_dirs(self.version_dir(spec), root=self.cache_dir)
         for name in (ms.REMOTE_MANIFEST, ms.TRIES):
             if not (vdir / name).is_file():
-                with open(self.meta_dir(spec) / "raw" / name, "rb") as src, atomic_open(vdir / name, "wb") as dst:
+                with open(self.meta_dir(spec) / "raw" / name, "rb") as src, \
+                        atomic_open(vdir / name, "wb", root=self.cache_dir) as dst:
                     shutil.copyfileobj(src, dst)
 
     def index(self, spec: ResourceSpec | str) -> PathIndex:
@@ -301,6 +312,7 @@ class ResourceManager:
                 except ResourceError:
                     path = self.meta_dir(spec) / "index.json.gz"
                     entries = check_index(read_json(path, f"{spec}: {path}"), manifest["archives"], f"{spec}: {path}")
+                    fileio.make_dirs(idx.path.parent, root=self.cache_dir)  # LMDB writes in there itself
                     idx = PathIndex.build(idx.path, entries, uid_depth=manifest["uid_depth"])
         self._indexes[spec] = idx
         return idx
@@ -314,9 +326,9 @@ class ResourceManager:
 
     def _mark_done(self, spec: ResourceSpec, name: str, entry: dict) -> None:
         if self.is_molmospaces(spec):
-            ms.extract_flag(self.version_dir(spec), name).touch()
+            atomic_write(ms.extract_flag(self.version_dir(spec), name), "", root=self.cache_dir)
         else:
-            atomic_write(self.meta_dir(spec) / "done" / f"{name}.ok", entry["sha256"], parents=True)
+            atomic_write(self.meta_dir(spec) / "done" / f"{name}.ok", entry["sha256"], root=self.cache_dir)
 
     def is_complete(self, spec: ResourceSpec | str) -> bool:
         spec = ResourceSpec.parse(spec)
@@ -402,13 +414,11 @@ class ResourceManager:
 
     def _clean_tmp(self, spec: ResourceSpec) -> None:
         """Remove what a killed install left behind (we hold the version lock)."""
-        tmp = self.meta_dir(spec) / "tmp"
-        if tmp.exists():
-            shutil.rmtree(tmp, onexc=_force_remove)
+        fileio.rmtree(self.meta_dir(spec) / "tmp", root=self.cache_dir, onexc=_force_remove)
 
     def _mark_complete(self, spec: ResourceSpec) -> None:
         if set(self.manifest(spec)["archives"]) <= self._done(spec):
-            atomic_write(self.meta_dir(spec) / "complete", "1", parents=True)
+            atomic_write(self.meta_dir(spec) / "complete", "1", root=self.cache_dir)
 
     def _extract(self, spec: ResourceSpec, archives: list[str]) -> None:
         """Download, verify and extract ``archives`` on a thread pool, with one retry pass."""
@@ -440,7 +450,7 @@ class ResourceManager:
                         except Exception as exc:  # collected, retried once, then raised
                             errors[name] = exc
                 fatal = [e for e in errors.values()
-                         if isinstance(e, UnsafeArchiveError) or not getattr(e, "retryable", True)]
+                         if isinstance(e, (UnsafeArchiveError, UnsafePathError)) or not getattr(e, "retryable", True)]
                 if not errors or fatal or attempt == 1:
                     break
                 pending = list(errors)
@@ -459,8 +469,7 @@ class ResourceManager:
         checksum fails to extract or place, the same bytes would fail again.
         """
         files = self.index(spec).files(name)
-        tmp = self.meta_dir(spec) / "tmp"
-        tmp.mkdir(parents=True, exist_ok=True)
+        tmp = fileio.make_dirs(self.meta_dir(spec) / "tmp", root=self.cache_dir)
         token = uuid.uuid4().hex
         part, xdir = tmp / f"{token}.part", tmp / f"x-{token}"
         try:
@@ -473,47 +482,47 @@ class ResourceManager:
                 verify_archive(part, name, entry["size"], entry["sha256"])
                 limit = extract_limit(files)
             try:
-                safe_extract(part, xdir, name, files, limit)
+                safe_extract(part, xdir, name, files, limit, root=self.cache_dir)
                 self._place(spec, name, xdir, files)
             except ResourceError as exc:
                 exc.retryable = False
                 raise
             self._mark_done(spec, name, entry)
         finally:
-            with contextlib.suppress(FileNotFoundError):
-                part.unlink()
-            if xdir.exists():
-                shutil.rmtree(xdir, onexc=_force_remove)
+            fileio.remove(part, root=self.cache_dir)
+            fileio.rmtree(xdir, root=self.cache_dir, onexc=_force_remove)
 
     def _place(self, spec: ResourceSpec, name: str, xdir: Path, files: dict[str, list]) -> None:
         """Move an extracted archive into the version dir without following any link, then check
         every link of the version against the real tree; on a problem, take the archive out again."""
         vdir = self.version_dir(spec)
-        vdir.mkdir(parents=True, exist_ok=True)
         where = f"archive {name}"
-        with self._place_lock, nofollow.open_root(xdir) as xroot, nofollow.open_root(vdir) as vroot:
+        with self._place_lock, fileio.open_dir(xdir, root=self.cache_dir, create=False) as xroot, \
+                fileio.open_dir(vdir, root=self.cache_dir) as vroot:
             placed: list[str] = []
             try:
                 for rel in sorted(files):
-                    with nofollow.parent_of(xroot, rel, create=False, where=where) as (xfd, leaf), \
-                            nofollow.parent_of(vroot, rel, create=True, where=where) as (vfd, _):
-                        st = nofollow.lstat_at(xfd, leaf)
+                    with fileio.parent_of(xroot, rel, create=False, where=where) as (xfd, leaf), \
+                            fileio.parent_of(vroot, rel, create=True, where=where) as (vfd, _):
+                        st = fileio.lstat_at(xfd, leaf)
                         if st is None:
                             raise CorruptArchiveError(f"{where}: {rel} was not extracted")
                         if stat.S_ISDIR(st.st_mode):
-                            nofollow.make_dirs(vroot, rel, where)
+                            fileio.make_dirs_at(vroot, rel, where)
                             continue
                         if stat.S_ISREG(st.st_mode):
                             os.chmod(leaf, 0o444, dir_fd=xfd)
-                        old = nofollow.lstat_at(vfd, leaf)
+                        old = fileio.lstat_at(vfd, leaf)
                         if old is not None and stat.S_ISDIR(old.st_mode):
                             raise ResourceError(f"{where}: {rel} would replace a directory in {vdir}")
                         os.replace(leaf, leaf, src_dir_fd=xfd, dst_dir_fd=vfd)
                         placed.append(rel)
                 self._check_links(spec, [r for r in placed if files[r][0] in ("->", None)], where)
-            except BaseException:
+            except BaseException as exc:
                 for rel in placed:
-                    nofollow.remove(vroot, rel)
+                    fileio.remove_at(vroot, rel)
+                if isinstance(exc, UnsafePathError):
+                    raise UnsafeArchiveError(str(exc)) from None
                 raise
 
     def _check_links(self, spec: ResourceSpec, new: list[str], where: str) -> None:
@@ -529,12 +538,12 @@ class ResourceManager:
         path = self.meta_dir(spec) / "links.json"
         known = read_json(path) if path.is_file() else []
         links = sorted({r for r in known if isinstance(r, str) and os.path.islink(vdir / r)} | set(new))
-        bad = [r for r in links if not nofollow.resolves_inside(vdir, r)]
+        bad = [r for r in links if not fileio.resolves_inside(vdir, r)]
         if bad:
             raise UnsafeArchiveError(f"{where}: link {bad[0]!r} -> {os.readlink(vdir / bad[0])!r} resolves to "
                                      f"{os.path.realpath(vdir / bad[0])}, outside {vdir}, through the links of "
                                      "this version; refusing to install")
-        atomic_write(path, json.dumps(links), parents=True)
+        atomic_write(path, json.dumps(links), root=self.cache_dir)
 
     # -- links -------------------------------------------------------------------------
     def _link(self, spec: ResourceSpec) -> Path:
@@ -544,48 +553,49 @@ class ResourceManager:
         mode = self.manifest(spec)["link"]
         theirs = self.is_molmospaces(spec)
         their_lock = self._lock(self.install_dir / ms.LOCK) if theirs else contextlib.nullcontext()
+        install = self.install_dir
         with self._install_lock(), their_lock:
-            link.parent.mkdir(parents=True, exist_ok=True)
+            fileio.make_dirs(link.parent, root=install)
             current = self.linked().get(spec.data_type, {}).get(spec.source)
             token = uuid.uuid4().hex
             if mode == "dir":
                 if not (link.is_symlink() and os.readlink(link) == str(target)):
-                    target.mkdir(parents=True, exist_ok=True)
+                    fileio.make_dirs(target, root=self.cache_dir)
                     tmp = link.parent / f".{link.name}.{token}.link"
-                    os.symlink(target, tmp, target_is_directory=True)
+                    fileio.symlink(target, tmp, root=install)
                     if link.is_dir() and not link.is_symlink():
-                        _remove_link_tree(link)
-                    os.replace(tmp, link)
+                        _remove_link_tree(link, install)
+                    fileio.replace(tmp, link, root=install)
             else:
                 index, done = self.index(spec), sorted(self._done(spec) & set(self.manifest(spec)["archives"]))
                 files = [rel for a in done for rel in index.files(a)]
                 if theirs:  # their metadata files are linked too, and each linked archive flagged
                     files += [ms.REMOTE_MANIFEST, ms.TRIES]
                 if current == spec.version and link.is_dir() and not link.is_symlink():
-                    _make_links(link, target, files)  # same version: add what on-demand installs brought
+                    _make_links(link, target, files, install)  # same version: add what on-demand installs brought
                     if theirs:
-                        _flag_links(link, done)
+                        _flag_links(link, done, install)
                 else:
                     new = link.parent / f".{link.name}.{token}.new"
-                    _make_links(new, target, files)
+                    _make_links(new, target, files, install)
                     if theirs:
-                        _flag_links(new, done)
+                        _flag_links(new, done, install)
                     if link.is_symlink():
-                        link.unlink()
+                        fileio.remove(link, root=install)
                     elif link.exists():
                         old = link.parent / f".{link.name}.{token}.old"
-                        os.replace(link, old)
-                        os.replace(new, link)
-                        _remove_link_tree(old)
+                        fileio.replace(link, old, root=install)
+                        fileio.replace(new, link, root=install)
+                        _remove_link_tree(old, install)
                     if not link.exists():
-                        os.replace(new, link)
+                        fileio.replace(new, link, root=install)
             def point(d: dict) -> None:
                 d.setdefault(spec.data_type, {})[spec.source] = spec.version
 
             self._update_json(self.install_dir / META / "installed.json", point, "str")
             if theirs:
                 if current is not None and current != spec.version:  # their cached tries index is per version
-                    shutil.rmtree(self.install_dir / ".lmdb" / spec.data_type / spec.source, ignore_errors=True)
+                    fileio.rmtree(install / ".lmdb" / spec.data_type / spec.source, root=install, ignore_errors=True)
                 self._update_json(self.install_dir / ms.LOCAL_MANIFEST, point, "str", indent=2)
         return link
 
@@ -602,11 +612,10 @@ class ResourceManager:
             if self.is_molmospaces(spec):  # under their cache lock (held by the caller)
                 self._update_json(self.cache_dir / ms.LOCAL_MANIFEST, add, "list", indent=2)
 
-    @staticmethod
-    def _update_json(path: Path, edit: Callable[[dict], None], values: str, indent: int = 1) -> None:
+    def _update_json(self, path: Path, edit: Callable[[dict], None], values: str, indent: int = 1) -> None:
         data = check_local(read_json(path), path, values) if path.is_file() else {}
         edit(data)
-        atomic_write(path, json.dumps(data, indent=indent, sort_keys=indent == 1), parents=True)
+        atomic_write(path, json.dumps(data, indent=indent, sort_keys=indent == 1), root=self._root(path))
 
     def installed(self) -> dict[str, dict[str, list[str]]]:
         """``{data_type: {source: [versions]}}`` present in the cache (ours and molmospaces-resources')."""
@@ -661,7 +670,7 @@ class ResourceManager:
         if self.is_complete(spec) and not set(manifest["archives"]) <= done:
             problems.append(f"{spec}: marked complete but archives are missing")
         vdir = self.version_dir(spec)
-        tree = nofollow.walk(vdir) if vdir.is_dir() and not vdir.is_symlink() else {}
+        tree = fileio.walk(vdir) if vdir.is_dir() and not vdir.is_symlink() else {}
         expected: dict[str, tuple[str, list]] = {}
         for archive in sorted(done & set(manifest["archives"])):
             expected.update((rel, (archive, want)) for rel, want in index.files(archive).items())
@@ -685,7 +694,7 @@ class ResourceManager:
         for rel, got in sorted(tree.items()):
             if rel not in expected and not (got == ("d",) and PurePosixPath(rel) in dirs) and not self._own_file(spec, rel):
                 problems.append(f"{spec}: {rel} is not in the index of any installed archive")
-            if got[0] == "l" and not nofollow.resolves_inside(vdir, rel):
+            if got[0] == "l" and not fileio.resolves_inside(vdir, rel):
                 problems.append(f"{spec}: link {rel} -> {got[1]!r} resolves to {os.path.realpath(vdir / rel)}, "
                                 f"outside {vdir}")
         return problems
@@ -725,7 +734,7 @@ def pack(src: str | os.PathLike, remote: Remote | str | os.PathLike, spec: Resou
         size += group_size
     with tempfile.TemporaryDirectory(prefix="molmo-pack-") as tmp:
         staging = Path(tmp) / "version"
-        (staging / "archives").mkdir(parents=True)
+        fileio.make_dirs(staging / "archives", root=tmp)
         archives, index = {}, {}
         for i, paths in enumerate(parts):
             name = f"{spec.source}-{spec.version}-{i:05d}.tar.zst"
@@ -734,9 +743,10 @@ def pack(src: str | os.PathLike, remote: Remote | str | os.PathLike, spec: Resou
             index[name] = {p: entries[p] for p in paths}
         manifest = {"format": 1, "data_type": spec.data_type, "source": spec.source, "version": spec.version,
                     "link": link, "uid_depth": uid_depth, "archives": archives}
-        with gzip.GzipFile(staging / "index.json.gz", "wb", mtime=0) as fh:
+        with atomic_open(staging / "index.json.gz", "wb", root=tmp) as raw, \
+                gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as fh:
             fh.write(json.dumps(index, sort_keys=True).encode())
-        (staging / "manifest.json").write_text(json.dumps(manifest, indent=1, sort_keys=True))
+        atomic_write(staging / "manifest.json", json.dumps(manifest, indent=1, sort_keys=True), root=tmp)
         remote.upload_dir(staging, spec.rel, message=f"Add {spec}")
     return manifest
 
@@ -772,23 +782,22 @@ def _is_tty() -> bool:
     return sys.stderr.isatty()
 
 
-def _make_links(root: Path, target: Path, files: Iterable[str]) -> None:
-    """Per-file links ``root/rel -> target/rel``, made without following any link below ``root``."""
-    root.mkdir(parents=True, exist_ok=True)
-    with nofollow.open_root(root) as rfd:
+def _make_links(root: Path, target: Path, files: Iterable[str], install: Path) -> None:
+    """Per-file links ``root/rel -> target/rel``, made without following any link below ``install``."""
+    with fileio.open_dir(root, root=install) as rfd:
         for rel in files:
-            with nofollow.parent_of(rfd, rel, create=True, where=f"install dir {root}") as (fd, leaf):
-                if nofollow.lstat_at(fd, leaf) is None:
+            with fileio.parent_of(rfd, rel, create=True, where=f"install dir {root}") as (fd, leaf):
+                if fileio.lstat_at(fd, leaf) is None:
                     os.symlink(target / rel, leaf, dir_fd=fd)
 
 
-def _flag_links(root: Path, archives: Iterable[str]) -> None:
+def _flag_links(root: Path, archives: Iterable[str], install: Path) -> None:
     """molmospaces-resources' per-archive "links made" flags in a per-file link dir."""
     for archive in archives:
-        ms.link_flag(root, archive).touch()
+        atomic_write(ms.link_flag(root, archive), "", root=install)
 
 
-def _remove_link_tree(path: Path) -> None:
+def _remove_link_tree(path: Path, install: Path) -> None:
     """Delete a tree of links made by :func:`_make_links` (and their flags), refusing one that holds real files."""
     for dirpath, dirnames, filenames in os.walk(path):
         for name in filenames:
@@ -796,7 +805,7 @@ def _remove_link_tree(path: Path) -> None:
                 continue
             if not os.path.islink(os.path.join(dirpath, name)):
                 raise ResourceError(f"{path} holds real files ({name}); refusing to replace it with links")
-    shutil.rmtree(path)
+    fileio.rmtree(path, root=install)
 
 
 def _force_remove(func, path, _exc: BaseException) -> None:

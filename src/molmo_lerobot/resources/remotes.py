@@ -13,7 +13,6 @@ Two layouts below a remote's root, per ``<data_type>/<source>/<version>/``:
 
 from __future__ import annotations
 
-import contextlib
 import os
 import shutil
 import tempfile
@@ -22,6 +21,7 @@ from abc import ABC, abstractmethod
 from pathlib import Path
 from urllib.parse import quote, unquote, urlparse
 
+from molmo_lerobot import fileio
 from molmo_lerobot.fileio import atomic_open, atomic_write
 from molmo_lerobot.resources.errors import RemoteNotFoundError, ResourceError
 
@@ -93,15 +93,13 @@ class LocalRemote(Remote):
         target = self._path(rel_prefix)
         if target.exists():
             raise ResourceError(f"remote {self.url}: {rel_prefix} already exists (versions are immutable)")
-        target.parent.mkdir(parents=True, exist_ok=True)
+        fileio.make_dirs(target.parent, root=self.root)
         staging = target.parent / f".{target.name}.{uuid.uuid4().hex}.tmp"
-        shutil.copytree(local_dir, staging)
-        os.replace(staging, target)  # appears complete or not at all
+        shutil.copytree(local_dir, staging)  # a new directory: copytree makes it, never through a link
+        fileio.replace(staging, target, root=self.root)  # appears complete or not at all
 
     def put_bytes(self, rel: str, data: bytes, message: str = "") -> None:
-        path = self._path(rel)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write(path, data)
+        atomic_write(self._path(rel), data, root=self.root)
 
     def list_files(self, prefix: str = "") -> list[str]:
         base = self._path(prefix) if prefix else self.root
@@ -157,7 +155,7 @@ class HfRemote(Remote):
                 raise RemoteNotFoundError(f"remote {self.url}: {rel} not found ({type(exc).__name__})") from None
             except HfHubHTTPError as exc:
                 raise ResourceError(_http_failure(self.url, rel, _status(exc), exc)) from None
-            os.replace(got, dest)
+            fileio.replace(got, dest, root=dest.parent)
 
     def fetch_archive(self, version_rel: str, name: str, dest: Path, layout: int | str) -> int | None:
         """MolmoSpaces' layout: a Range read of the archive's bytes inside its shard."""
@@ -212,7 +210,7 @@ class HfRemote(Remote):
         from huggingface_hub.utils import build_hf_headers
 
         if size == 0:
-            Path(dest).write_bytes(b"")
+            atomic_write(dest, b"")
             return
         url = hf_hub_url(self.repo_id, self._full(rel), repo_type=self.repo_type, revision=self.revision,
                          endpoint=self.endpoint)
@@ -302,7 +300,7 @@ def _stream_to(open_stream, remote: str, rel: str, dest: Path, what: str = "the 
                                         f"{what} (HTTP {resp.status_code}, Content-Range {got or 'none'!r})")
                 want = size
             n = 0
-            with open(part, "wb") as fh:
+            with open(fileio.open_fd(part, os.O_WRONLY | os.O_CREAT | os.O_EXCL), "wb") as fh:
                 for block in resp.iter_raw():
                     n += len(block)
                     if want is not None and n > want:
@@ -310,13 +308,12 @@ def _stream_to(open_stream, remote: str, rel: str, dest: Path, what: str = "the 
                     fh.write(block)
         if want is not None and n != want:
             raise ResourceError(f"remote {remote}: {rel}: truncated response for {what} ({n} of {want} bytes)")
-        os.replace(part, dest)
+        fileio.replace(part, dest, root=Path(dest).parent)
     except httpx.HTTPError as exc:
         reason = str(exc).splitlines()[0][:160] if str(exc) else ""
         raise ResourceError(f"remote {remote}: {rel}: transfer of {what} failed ({type(exc).__name__}: {reason})") from None
     finally:
-        with contextlib.suppress(FileNotFoundError):
-            part.unlink()
+        fileio.remove(part)
 
 
 def _status_error(remote: str, rel: str, status: int) -> ResourceError:

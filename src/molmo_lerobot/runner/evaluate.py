@@ -35,6 +35,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from molmo_lerobot.export.report import write_report
 from molmo_lerobot.export.wandb_log import log_run
+from molmo_lerobot import fileio
 from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import resolve as molmospaces_settings
@@ -109,7 +110,7 @@ class _EpisodeLog:
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self.fd = os.open(path, os.O_WRONLY | os.O_APPEND)
+        self.fd = fileio.open_fd(path, os.O_WRONLY | os.O_APPEND, root=path.parent)
 
     def append(self, result: EpisodeResult) -> None:
         data = (json.dumps(result.to_dict()) + "\n").encode()
@@ -296,8 +297,8 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     )
     scored = json.dumps(summary, indent=2) + "\n"
     try:
-        atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered))
-        atomic_write(out / RESULTS_FILE, scored)  # the score, before any export
+        atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered), root=out)
+        atomic_write(out / RESULTS_FILE, scored, root=out)  # the score, before any export
     except OSError as exc:
         raise _write_error(out, "the run's outputs", exc) from None
     failed = []
@@ -311,7 +312,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     if failed:
         summary["export_errors"] = failed
     if json.dumps(summary, indent=2) + "\n" != scored:  # what the export did (push status, failures); same score
-        atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
+        atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n", root=out)
     if failed:
         raise ExportError(f"export failed after the run was scored ({'; '.join(failed)}); the score stands: "
                           f"{summary['n_success']}/{summary['n_episodes']} successes in {out / RESULTS_FILE}")
@@ -349,9 +350,8 @@ def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool,
                 raise RunError(f"output_dir {out} already holds a run; pass resume=true to continue it "
                                "or choose another output_dir")
             return _reopen(out, run_info, recorders)
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write(run_file, json.dumps(run_info, indent=2) + "\n")
-        (out / EPISODES_FILE).touch()
+        atomic_write(run_file, json.dumps(run_info, indent=2) + "\n", root=out)  # makes ``out`` too
+        os.close(fileio.open_fd(out / EPISODES_FILE, os.O_WRONLY | os.O_CREAT, root=out))
     except OSError as exc:
         raise RunError(f"cannot write output_dir {out}: {exc.strerror or exc}") from None
     return []
@@ -388,10 +388,10 @@ def _reopen(out: Path, run_info: dict[str, Any], recorders: list[Any]) -> list[E
               f"{' …' if len(rerun) > 10 else ''}): infrastructure errors, outputs not written or not in the "
               "dataset", file=sys.stderr)
         done = [r for r in done if r.episode_index not in rerun]
-    (out / RESULTS_FILE).unlink(missing_ok=True)
-    atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done))
+    fileio.remove(out / RESULTS_FILE, root=out)
+    atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done), root=out)
     if new != old:  # a larger limit extends the run
-        atomic_write(run_file, json.dumps({**previous, "limit": new}, indent=2) + "\n")
+        atomic_write(run_file, json.dumps({**previous, "limit": new}, indent=2) + "\n", root=out)
     return done
 
 

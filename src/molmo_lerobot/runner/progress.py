@@ -17,7 +17,6 @@ from __future__ import annotations
 import json
 import logging
 import os
-import shutil
 import sys
 import threading
 import time
@@ -25,6 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
+from molmo_lerobot import fileio
+from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder, RecorderFactory
 
 PROGRESS_DIR = ".progress"
@@ -34,7 +35,8 @@ LOGS_DIR = "logs"
 def redirect_worker_output(output_dir: str | Path, worker_id: str) -> Path | None:
     """Point this worker process's stdout and stderr (file descriptors 1 and 2) at its log file.
 
-    Kept on the console when ``MOLMO_DEBUG`` is set (tracebacks are wanted there).
+    Kept on the console when ``MOLMO_DEBUG`` is set (tracebacks are wanted there), or when the log
+    would be written through a link inside the run directory (refused, with a warning).
     """
     if os.environ.get("MOLMO_DEBUG"):
         return None
@@ -45,8 +47,10 @@ def redirect_worker_output(output_dir: str | Path, worker_id: str) -> Path | Non
         except (OSError, ValueError):
             pass
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        fd = fileio.open_fd(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644, root=output_dir)
+    except fileio.UnsafePathError as exc:
+        print(f"molmo-eval: warning: worker output stays on the console: {exc}", file=sys.stderr, flush=True)
+        return None
     except OSError:  # e.g. a remote Ray node without the output directory: keep Ray's own log capture
         return None
     os.dup2(fd, 1)
@@ -62,7 +66,7 @@ class StepProgressFactory(RecorderFactory):
     interval_s: float = 0.5
 
     def make(self, worker_id: str, output_dir: Path) -> StepProgressRecorder:
-        return StepProgressRecorder(Path(output_dir) / PROGRESS_DIR / f"{worker_id}.json", self.interval_s)
+        return StepProgressRecorder(Path(output_dir), worker_id, self.interval_s)
 
 
 class StepProgressRecorder(Recorder):
@@ -70,8 +74,9 @@ class StepProgressRecorder(Recorder):
 
     wants_images = False
 
-    def __init__(self, path: Path, interval_s: float) -> None:
-        self.path, self.interval_s = path, interval_s
+    def __init__(self, output_dir: Path, worker_id: str, interval_s: float) -> None:
+        self.root, self.interval_s = output_dir, interval_s
+        self.path = output_dir / PROGRESS_DIR / f"{worker_id}.json"
         self._episode = self._horizon = self._step = 0
         self._last = 0.0
 
@@ -85,17 +90,15 @@ class StepProgressRecorder(Recorder):
             self._write()
 
     def end_episode(self, result: Any) -> None:
-        self.path.unlink(missing_ok=True)
+        fileio.remove(self.path, root=self.root)
 
     def close(self) -> None:
-        self.path.unlink(missing_ok=True)
+        fileio.remove(self.path, root=self.root)
 
     def _write(self) -> None:
         self._last = time.monotonic()
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.path.with_name(f".{self.path.name}.tmp")
-        tmp.write_text(json.dumps({"episode": self._episode, "step": self._step, "horizon": self._horizon}))
-        os.replace(tmp, self.path)
+        atomic_write(self.path, json.dumps({"episode": self._episode, "step": self._step, "horizon": self._horizon}),
+                     root=self.root, durable=False)
 
 
 def running_episodes(output_dir: Path) -> list[dict[str, int]]:
@@ -139,7 +142,7 @@ class Progress:
         return [StepProgressFactory()] if self.enabled else []
 
     def __enter__(self) -> Progress:
-        shutil.rmtree(self.output_dir / PROGRESS_DIR, ignore_errors=True)
+        fileio.rmtree(self.output_dir / PROGRESS_DIR, root=self.output_dir, ignore_errors=True)
         if not self.enabled:
             return self
         if self.tty:
@@ -161,7 +164,7 @@ class Progress:
             self._redirect.__exit__(None, None, None)
         if self._bar is not None:
             self._bar.close()
-        shutil.rmtree(self.output_dir / PROGRESS_DIR, ignore_errors=True)
+        fileio.rmtree(self.output_dir / PROGRESS_DIR, root=self.output_dir, ignore_errors=True)
 
     def episode_done(self, success: bool, error: bool) -> None:
         """One more episode is accounted for."""

@@ -42,6 +42,8 @@ class EpisodeInfo:
     img_resolution: tuple[int, int]  # (width, height)
     joint_names: dict[str, list[str]]
     move_groups: dict[str, int]
+    #: the policy is a privileged scripted expert (it reads the simulator): its rollouts are demonstrations
+    expert: bool = False
     extra: dict[str, Any] = field(default_factory=dict)
 
 

@@ -122,6 +122,7 @@ class EpisodeWorker:
                     task_type=task_type.name, fps=1000.0 / self.timing.policy_dt_ms, horizon=horizon,
                     camera_names=list(env.camera_names), img_resolution=tuple(spec.img_resolution),
                     joint_names=dict(env.joint_names), move_groups=dict(env.move_groups),
+                    expert=self.policy.needs_simulator,
                     extra={"task_cls": task_cls, "policy": self.policy_name, "robot": spec.robot.robot_name,
                            "object": getattr(spec.task, "pickup_obj_name", None),
                            "benchmark": self.job.benchmark_name, "benchmark_sha256": self.job.benchmark_sha256},
