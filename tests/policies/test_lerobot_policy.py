@@ -22,12 +22,12 @@ from molmo_lerobot.policies.lerobot_policy import (  # noqa: E402
 CHUNK = 4
 
 
-def save_tiny_act(root, image_hw=(24, 32)) -> str:
+def save_tiny_act(root, image_hw=(24, 32), state_dim=8) -> str:
     torch.manual_seed(0)
     cfg = ACTConfig(
         input_features={
             "observation.images.front": PolicyFeature(FeatureType.VISUAL, (3, *image_hw)),
-            "observation.state": PolicyFeature(FeatureType.STATE, (8,)),
+            "observation.state": PolicyFeature(FeatureType.STATE, (state_dim,)),
         },
         output_features={"action": PolicyFeature(FeatureType.ACTION, (8,))},
         pretrained_backbone_weights=None,
@@ -92,6 +92,20 @@ def test_missing_camera_and_bad_state_are_clear(act_dir):
     bad.reset(ctx())
     with pytest.raises(ValueError, match="needs 8 values"):
         bad.act(obs())
+
+
+def test_molmospaces_convention_state_and_gripper_units(tmp_path):
+    """convention=molmospaces: the state holds the gripper's two driver angles, the action's gripper is 0..255."""
+    policy = LeRobotPolicy({"name": "lerobot", "path": save_tiny_act(tmp_path, state_dim=9), "device": "cpu",
+                            "convention": "molmospaces"})
+    policy.reset(ctx())
+    native = {**obs(), "joint_qpos": {"arm": np.linspace(-1, 1, 7), "gripper": np.array([0.3, 0.31])},
+              "joint_qvel": {"arm": np.zeros(7), "gripper": np.zeros(2)}, "tcp_pose": np.array([0, 0, 0, 1.0, 0, 0, 0]),
+              "robot_base_pose": np.array([0, 0, 0, 1.0, 0, 0, 0])}
+    state = policy._batch(native)["observation.state"].numpy()
+    np.testing.assert_array_equal(state, np.float32([*np.linspace(-1, 1, 7), 0.3, 0.31]))
+    assert policy.act(native)["arm"].shape == (7,)
+    assert policy._to_action(np.array([[0.0] * 7 + [255.0]]))["gripper"][0] == 1.0
 
 
 def test_bad_config_names_field(act_dir):

@@ -66,9 +66,7 @@ class FakeDroidServer:
                 except Exception:
                     self.errors.append(traceback.format_exc())
                     raise
-                actions = np.zeros((self.horizon, 8), dtype=np.float32)
-                actions[:, :7] = self.velocity
-                actions[:, 7] = np.linspace(0, 1, self.horizon)
+                actions = np.array(self.answer(obs), dtype=np.float32)
                 if self.mode == "nan":
                     actions[1, 3] = np.nan
                 elif self.mode == "bad_shape":
@@ -80,6 +78,13 @@ class FakeDroidServer:
             with contextlib.suppress(ConnectionClosed):
                 await ws.send(traceback.format_exc())
                 await ws.close(CloseCode.INTERNAL_ERROR, "Internal server error. Traceback included in previous frame.")
+
+    def answer(self, obs: dict) -> np.ndarray:
+        """The (H, 8) actions for a checked request: ``velocity`` on every joint, the gripper 0 … 1."""
+        actions = np.zeros((self.horizon, 8), dtype=np.float32)
+        actions[:, :7] = self.velocity
+        actions[:, 7] = np.linspace(0, 1, self.horizon)
+        return actions
 
     @staticmethod
     def _health(connection, request):

@@ -39,9 +39,10 @@ def test_pi0_remote_completes_episodes_with_two_workers(bench_dir, tmp_path):
     assert res.summary["n_episodes"] == 4 and res.summary["n_errors"] == 0
     assert all(e.error is None and e.steps == HORIZON for e in res.episodes)
     assert srv.connections == 2  # one connection per worker, kept across episodes
-    assert srv.requests == 4 * HORIZON // 10  # chunks of 10 run open loop
+    assert srv.requests == 4 * 3  # the default preset (MolmoSpaces'): 8 of each 10 actions, open loop
     results = json.loads((tmp_path / "run" / "results.json").read_text())
     assert results["policy"]["name"] == "pi0" and results["n_errors"] == 0
+    assert results["policy"]["convention"] == "molmospaces" and results["eval_options"]["end_on_success"] is True
 
 
 @pytest.mark.parametrize("mode, reason", [

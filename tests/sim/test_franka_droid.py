@@ -289,7 +289,8 @@ def test_pi0_against_a_droid_server_on_franka_droid(tmp_path):
     bench.mkdir()
     (bench / "benchmark.json").write_text(json.dumps([droid_episode(pick_episode(k)) for k in (0, 1)]))
     with FakeDroidServer(horizon=15, velocity=0.0).running() as srv:
-        cfg = compose(["policy=pi0", f"policy.port={srv.port}", "workers=1", f"benchmark.path={bench}",
+        cfg = compose(["policy=pi0_droid", "policy.open_loop_horizon=null", f"policy.port={srv.port}", "workers=1",
+                       f"benchmark.path={bench}",
                        "horizon=30", "record=true", f"output_dir={tmp_path / 'run'}", "progress=false"])
         res = run_evaluation(cfg)
     assert srv.errors == [] and res.summary["n_errors"] == 0 and res.summary["n_episodes"] == 2

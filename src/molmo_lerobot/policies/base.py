@@ -8,13 +8,18 @@ Observation (a plain dict, so it crosses process and network boundaries unchange
       "qpos":   {move_group: float array},                 # e.g. {"arm": (7,) rad, "gripper": (1,)}
       "qvel":   {move_group: float array},                 # gripper: 0 open … 1 closed (and per second)
       "tcp_pose": float array (7,),                        # x, y, z, qw, qx, qy, qz in world
+      "robot_base_pose": float array (7,),                 # the robot base's world pose, same layout
+      "joint_qpos": {move_group: float array},             # joints in their own units (rad, m): the gripper's
+      "joint_qvel": {move_group: float array},             #   as MolmoSpaces lists them (Robotiq: 2 driver angles)
       "prompt": str,                                       # the episode's language instruction
       "step": int,                                         # policy step index in the episode
     }
 
 Action: a dict keyed by move group, ``{"arm": (7,) joint positions, "gripper": (1,)}``. A
 *chunk* is the same dict with a leading time axis, ``{"arm": (H, 7), "gripper": (H, 1)}``;
-chunks run open loop. Conventions (DROID's, LeRobot's and MolmoSpaces'):
+chunks run open loop. This is the *native* convention (DROID's and LeRobot's units); a policy
+configured with ``convention: molmospaces`` sees MolmoSpaces' keys, units and frames instead
+(:mod:`molmo_lerobot.policies.convention`). Native:
 
 * **gripper**: one value normalized to [0, 1], **0 = open, 1 = closed**, in the action and in
   the observed ``qpos["gripper"]`` (so ``observation.state``'s last entry) alike. Each robot maps
@@ -122,3 +127,8 @@ class PolicyType:
     factory: Callable[[dict[str, Any]], Policy]
     description: str = ""
     aliases: tuple[str, ...] = ()
+    #: The factory reads ``policy.convention`` itself (its boundary is a wire, a state vector or a
+    #: request, not the observation dict). Otherwise ``policy.convention`` is taken out of the config
+    #: and a non-native one wraps the policy: it acts on that convention's view of each observation
+    #: and returns that convention's actions (:class:`~molmo_lerobot.policies.convention.ConventionAdapter`).
+    conventions: bool = False

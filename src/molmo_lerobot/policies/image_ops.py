@@ -24,3 +24,23 @@ def resize_with_pad(image: np.ndarray, height: int, width: int) -> np.ndarray:
     top, left = (height - new_h) // 2, (width - new_w) // 2
     out[top : top + new_h, left : left + new_w] = resized
     return out
+
+
+def resize_with_pad_pil(image: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Letterbox as openpi's client (``image_tools.resize_with_pad``) and MolmoSpaces' pi policy do:
+    PIL bilinear to the aspect-kept size (truncated to whole pixels), pasted centred on black."""
+    from PIL import Image
+
+    image = np.asarray(image)
+    if image.ndim != 3 or image.shape[2] != 3:
+        raise ValueError(f"expected an (H, W, 3) RGB image, got shape {image.shape}")
+    h, w = image.shape[:2]
+    if (h, w) == (height, width):
+        return image
+    ratio = max(w / width, h / height)
+    new_h, new_w = int(h / ratio), int(w / ratio)
+    src = Image.fromarray(np.ascontiguousarray(image, dtype=np.uint8))
+    out = np.zeros((height, width, 3), dtype=np.uint8)
+    top, left = max(0, int((height - new_h) / 2)), max(0, int((width - new_w) / 2))
+    out[top : top + new_h, left : left + new_w] = np.asarray(src.resize((new_w, new_h), resample=Image.BILINEAR))
+    return out

@@ -4,7 +4,9 @@ Our observation (images by camera name, ``qpos`` by move group, prompt) is mappe
 policy's feature keys: each image feature ``observation.images.<key>`` takes the camera named
 in ``cameras`` (default: the camera with the same name), ``observation.state`` is the
 concatenation of the ``state`` move groups, and the prompt goes under ``task``. The action
-vector is split into move groups in ``action_groups`` order (default: the episode's).
+vector is split into move groups in ``action_groups`` order (default: the episode's). With
+``convention: molmospaces`` the state takes MolmoSpaces' joint units (the Robotiq gripper as its
+two driver angles) and the action's gripper is their 0 … 255 command.
 
 ``mode: step`` calls ``select_action`` every step (LeRobot's own action queue and temporal
 ensembling); ``mode: chunk`` returns the whole predicted chunk, which our rollout runs open
@@ -25,6 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from molmo_lerobot.hookspecs import hookimpl
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
+from molmo_lerobot.policies.convention import ConventionName, get_convention
 from molmo_lerobot.policies.image_ops import resize_with_pad
 
 
@@ -53,6 +56,7 @@ class LeRobotPolicyConfig(BaseModel):
     serve: bool = False
     serve_max_batch: int | None = Field(default=None, ge=1)
     serve_batch_timeout_ms: float = Field(default=50.0, ge=0)
+    convention: ConventionName = "native"
 
 
 def parse_config(cfg: dict[str, Any], model: type[BaseModel] = LeRobotPolicyConfig) -> Any:
@@ -162,6 +166,7 @@ class LeRobotPolicy(Policy):
 
     def __init__(self, cfg: dict[str, Any]) -> None:
         self.cfg: LeRobotPolicyConfig = parse_config(cfg)
+        self.convention = get_convention(self.cfg.convention)
         self.device = pick_device(self.cfg.device)
         self.policy, self.preprocessor, self.postprocessor = self._load()
         features = self.policy.config.input_features
@@ -281,7 +286,7 @@ class LeRobotPolicy(Policy):
         for group, dim in zip(groups, dims):
             out[group] = actions[:, start : start + dim]
             start += dim
-        return {g: a[0] for g, a in out.items()} if self.cfg.mode == "step" else out
+        return self.convention.action({g: a[0] for g, a in out.items()} if self.cfg.mode == "step" else out)
 
     def predict(self, obs: Observation) -> np.ndarray:
         """Unnormalized actions (H, A): H = 1 in step mode, the executed chunk in chunk mode."""
@@ -303,7 +308,8 @@ class LeRobotPolicy(Policy):
     def _batch(self, obs: Observation) -> dict[str, Any]:
         import torch
 
-        images = obs.get("images") or {}
+        view = self.convention.observation(obs)
+        images = self.convention.images(view)
         batch: dict[str, Any] = {}
         for key, (c, h, w) in self.image_features.items():
             short = key.removeprefix("observation.images.")
@@ -321,7 +327,7 @@ class LeRobotPolicy(Policy):
             img = img if img.flags.writeable and img.flags.c_contiguous else np.array(img, order="C")
             batch[key] = torch.from_numpy(img).permute(2, 0, 1).float().div_(255.0)
         if self.state_dim is not None:
-            qpos = obs.get("qpos") or {}
+            qpos = view.get("qpos") or {}
             missing = [g for g in self.cfg.state if g not in qpos]
             if missing:
                 raise KeyError(f"policy.state names move groups {missing} absent from the observation ({sorted(qpos)})")
@@ -357,4 +363,4 @@ def make_lerobot_policy(cfg: dict[str, Any]) -> Policy:
 
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
-    return [PolicyType("lerobot", make_lerobot_policy, "any LeRobot pretrained policy (policy.path=…)")]
+    return [PolicyType("lerobot", make_lerobot_policy, "any LeRobot pretrained policy (policy.path=…)", conventions=True)]

@@ -6,7 +6,9 @@ move groups, policy period), so the served policy sees what it would see in proc
 deterministic policy gives the same outcomes. Timeouts, connect retries with backoff and
 reconnects are the pi0 client's (:class:`~molmo_lerobot.protocol.client.PolicyClient`); a
 connection lost between episodes is re-opened at the next reset, one lost mid-episode fails
-that episode (the served policy's episode state is gone).
+that episode (the served policy's episode state is gone). ``policy.convention=molmospaces``
+sends MolmoSpaces' observation layout instead and reads MolmoSpaces' actions back
+(:mod:`molmo_lerobot.policies.convention`).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from molmo_lerobot.hookspecs import hookimpl
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
+from molmo_lerobot.policies.convention import ConventionName, get_convention
 from molmo_lerobot.policies.lerobot_policy import parse_config
 from molmo_lerobot.protocol.client import PolicyClient, PolicyConnectionError
 
@@ -33,6 +36,7 @@ class RemotePolicyConfig(BaseModel):
     timeout_s: float = Field(default=120.0, gt=0)
     connect_timeout_s: float = Field(default=60.0, ge=0)
     max_message_bytes: int = Field(default=64 * 2**20, ge=1024)
+    convention: ConventionName = "native"
 
 
 class RemotePolicy(Policy):
@@ -40,6 +44,7 @@ class RemotePolicy(Policy):
 
     def __init__(self, cfg: dict[str, Any]) -> None:
         self.cfg: RemotePolicyConfig = parse_config(cfg, RemotePolicyConfig)
+        self.convention = get_convention(self.cfg.convention)
         self.client = PolicyClient(self.cfg.host, self.cfg.port, timeout_s=self.cfg.timeout_s,
                                    connect_timeout_s=self.cfg.connect_timeout_s,
                                    max_message_bytes=self.cfg.max_message_bytes, api_key=self.cfg.api_key)
@@ -60,13 +65,13 @@ class RemotePolicy(Policy):
     def act(self, obs: Observation) -> Action:
         if self._connects < 0:
             raise RuntimeError("policy=remote: act() before reset()")
-        response = self.client.infer(obs)
+        response = self.client.infer(self.convention.observation(obs))
         if self.client.connects != self._connects:
             self._connects = -1
             raise PolicyConnectionError(f"policy server {self.client.uri} dropped the connection mid-episode; the "
                                         "served policy's episode state is lost (the next episode reconnects)")
         response.pop("server_timing", None)
-        return response
+        return self.convention.action(response)
 
     def close(self) -> None:
         self.client.close()
@@ -74,4 +79,5 @@ class RemotePolicy(Policy):
 
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
-    return [PolicyType("remote", RemotePolicy, "any policy served by molmo-serve (policy.host=… policy.port=…)")]
+    return [PolicyType("remote", RemotePolicy, "any policy served by molmo-serve (policy.host=… policy.port=…)",
+                       conventions=True)]

@@ -44,6 +44,14 @@ class RobotHandle(ABC):
         interpolates controller ticks in ctrl space.
         """
 
+    def joint_qpos(self, data: mujoco.MjData, group: str) -> np.ndarray:
+        """``group``'s joints in their own units (rad, m), as MolmoSpaces' ``qpos`` reports them."""
+        return self.qpos(data, group)
+
+    def joint_qvel(self, data: mujoco.MjData, group: str) -> np.ndarray:
+        """Their velocities, as MolmoSpaces' ``qvel`` reports them."""
+        return self.qvel(data, group)
+
     @property
     @abstractmethod
     def tcp_site(self) -> int:
@@ -61,6 +69,9 @@ class ArmGripperHandle(RobotHandle):
     hand's joints and actuators (the ``_gripper_*`` methods)."""
 
     robot_name: str
+    #: qpos / qvel addresses of the gripper joints MolmoSpaces' gripper move group lists (set by subclasses)
+    _grip_q: np.ndarray
+    _grip_v: np.ndarray
 
     def __init__(self, model: mujoco.MjModel, arm_joints: Sequence[str], arm_actuators: Sequence[str],
                  tcp_site: str, root_body: str) -> None:
@@ -84,6 +95,14 @@ class ArmGripperHandle(RobotHandle):
     def qvel(self, data, group):
         self._check(group)
         return data.qvel[self._arm_v].copy() if group == "arm" else np.array([self._gripper_qvel(data)])
+
+    def joint_qpos(self, data, group):
+        self._check(group)
+        return data.qpos[self._arm_q if group == "arm" else self._grip_q].copy()
+
+    def joint_qvel(self, data, group):
+        self._check(group)
+        return data.qvel[self._arm_v if group == "arm" else self._grip_v].copy()
 
     def set_qpos(self, data, group, values):
         self._check(group)

@@ -118,6 +118,7 @@ class FrankaHandle(ArmGripperHandle):
         self._fin_q = np.array([model.jnt_qposadr[j] for j in fingers])
         self._fin_v = np.array([model.jnt_dofadr[j] for j in fingers])
         self._fin_u = np.array([model.actuator(f"{prefix}finger_actuator{k}").id for k in (1, 2)])
+        self._grip_q, self._grip_v = self._fin_q, self._fin_v
 
     def _gripper_qpos(self, data):
         return float(1.0 - data.qpos[self._fin_q].sum() / (2 * FINGER_TRAVEL))

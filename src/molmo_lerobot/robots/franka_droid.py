@@ -189,6 +189,7 @@ class FrankaDroidHandle(ArmGripperHandle):
         drivers = [model.joint(f"{prefix}gripper/{s}_driver_joint").id for s in ("left", "right")]
         self._drv_q = np.array([model.jnt_qposadr[j] for j in drivers])
         self._drv_v = np.array([model.jnt_dofadr[j] for j in drivers])
+        self._grip_q, self._grip_v = self._drv_q, self._drv_v
         self._grip_u = model.actuator(f"{prefix}gripper/fingers_actuator").id
         self._g_lo, self._g_hi = (float(v) for v in model.actuator_ctrlrange[self._grip_u])
         # every joint of the finger linkage follows the drivers: teleports set them too

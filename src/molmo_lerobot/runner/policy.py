@@ -6,12 +6,20 @@ from typing import Any
 
 from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.policies.base import Policy
+from molmo_lerobot.policies.convention import ConventionAdapter, get_convention
 
 
 def make_policy(policy_cfg: dict[str, Any]) -> Policy:
-    """Look the policy plugin up by ``policy_cfg["name"]`` and call its factory."""
+    """Look the policy plugin up by ``policy_cfg["name"]`` and call its factory; ``policy.convention``
+    goes to plugins that read it (``PolicyType.conventions``), else wraps the policy."""
     policy_type = get_plugins().policy(str(policy_cfg["name"]))
-    policy = policy_type.factory(dict(policy_cfg))
+    cfg = dict(policy_cfg)
+    convention = get_convention(str(cfg.get("convention") or "native"))
+    if not policy_type.conventions:
+        cfg.pop("convention", None)
+    policy = policy_type.factory(cfg)
     if not isinstance(policy, Policy):
         raise TypeError(f"policy plugin {policy_type.name!r} built {type(policy).__name__}, not a Policy")
+    if convention.name != "native" and not policy_type.conventions:
+        policy = ConventionAdapter(policy, convention)
     return policy

@@ -227,6 +227,9 @@ class Env:
         self._view = self.camera_view_options()
         self.seed: int | None = None
         self.rng = np.random.default_rng()
+        base = np.asarray(robot.base_pose(spec.task.robot_base_pose), dtype=np.float64)
+        #: the robot base's world pose (x, y, z, qw, qx, qy, qz): where MolmoSpaces puts its base body
+        self.base_pose = np.concatenate([base[:3], base[3:] / np.linalg.norm(base[3:])])
 
     # Lifecycle -----------------------------------------------------------------------------------
     def reset(self, seed: int) -> None:
@@ -315,6 +318,9 @@ class Env:
             "qpos": {g: self.robot.qpos(d, g) for g in self.move_groups},
             "qvel": {g: self.robot.qvel(d, g) for g in self.move_groups},
             "tcp_pose": pose7(d.site_xpos[site], d.site_xmat[site]),
+            "robot_base_pose": self.base_pose.copy(),
+            "joint_qpos": {g: self.robot.joint_qpos(d, g) for g in self.move_groups},
+            "joint_qvel": {g: self.robot.joint_qvel(d, g) for g in self.move_groups},
         }
         if images:
             obs["images"] = {name: self.render(name) for name in self.camera_names}

@@ -1,13 +1,30 @@
-"""DROID observation/action conventions used by pi0_droid, pi0_fast_droid and pi05_droid."""
+"""DROID requests and responses: our observation -> openpi's DROID keys, its (H, 8) actions -> ours.
+
+Two presets fit two families of checkpoints (conf/policy/pi0_*.yaml):
+
+* ``molmospaces`` (``policy=pi0``, ``policy=pi0_molmospaces``): MolmoSpaces' ``PiPolicyEvalConfig``
+  / ``PI_Policy``, for checkpoints that output absolute joint positions (openpi's
+  ``pi0_fast_droid_jointpos``, ``pi05_droid_jointpos``, MolmoSpaces' fine-tunes). The request is
+  built from the MolmoSpaces observation (:mod:`molmo_lerobot.policies.convention`): the first
+  Robotiq driver angle / 0.824033 as the gripper, prompt lower-cased; the first 8 actions of
+  each chunk run as joint targets, the gripper thresholded at 0.5.
+* ``droid`` (``policy=pi0_droid``): openpi's DROID joint-velocity checkpoints (``pi0_droid``,
+  ``pi0_fast_droid``, ``pi05_droid``): our native observation; the first 8 actions of each chunk
+  (openpi's DROID client's open-loop horizon) are velocities integrated over the policy step.
+
+The Python defaults below are the ``molmospaces`` preset; the presets themselves are the yaml files.
+"""
 
 from __future__ import annotations
 
+from pathlib import PurePosixPath
 from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from molmo_lerobot.policies.image_ops import resize_with_pad
+from molmo_lerobot.policies.convention import ConventionName
+from molmo_lerobot.policies.image_ops import resize_with_pad_pil
 
 EXTERIOR = "observation/exterior_image_1_left"
 WRIST = "observation/wrist_image_left"
@@ -15,13 +32,15 @@ JOINTS = "observation/joint_position"
 GRIPPER = "observation/gripper_position"
 PROMPT = "prompt"
 ACTIONS = "actions"
+#: openpi's DROID checkpoints that output joint velocities (their ``*_jointpos`` twins output positions)
+VELOCITY_CHECKPOINTS = frozenset({"pi0_droid", "pi0_fast_droid", "pi05_droid"})
 
 
 class GripperConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    obs_open: float = 0.0
-    obs_closed: float = 1.0
+    obs_open: float = 0.0       # observed gripper joint value sent as 0 (open) …
+    obs_closed: float = 0.824033  # … and as 1 (closed); clipped to [0, 1]
     binarize: bool = True
     threshold: float = 0.5
     invert: bool = False
@@ -30,45 +49,61 @@ class GripperConfig(BaseModel):
 class CameraConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    exterior: str | None = None
-    wrist: str | None = None
+    #: a camera name, or candidates of which the first present is used; None: guessed from the names
+    exterior: str | list[str] | None = None
+    wrist: str | list[str] | None = None
 
 
 class DroidConfig(BaseModel):
-    """How our observations and actions map onto DROID's."""
+    """How our observations and actions map onto DROID's (defaults: the ``molmospaces`` preset)."""
 
     model_config = ConfigDict(extra="ignore")
 
+    convention: ConventionName = "molmospaces"
     cameras: CameraConfig = Field(default_factory=CameraConfig)
     image_size: int = Field(default=224, ge=8)
-    action_mode: Literal["joint_velocity", "joint_position"] = "joint_velocity"
+    lowercase_prompt: bool = True
+    action_mode: Literal["joint_velocity", "joint_position"] = "joint_position"
     velocity_scale: float = 1.0
     max_joint_delta: float | None = Field(default=None, gt=0)
-    open_loop_horizon: int | None = Field(default=None, ge=1)
+    open_loop_horizon: int | None = Field(default=8, ge=1)
     action_dim: int = Field(default=8, ge=8)
     gripper: GripperConfig = Field(default_factory=GripperConfig)
 
 
+def _first_present(wanted: str | list[str], available: list[str]) -> str | None:
+    return next((c for c in ([wanted] if isinstance(wanted, str) else wanted) if c in available), None)
+
+
 def pick_cameras(cameras: CameraConfig, available: list[str]) -> tuple[str, str]:
     """(exterior, wrist) camera names; unset ones are guessed from the names (``*wrist*``)."""
-    wrist = cameras.wrist or next((c for c in available if "wrist" in c.lower()), None)
-    exterior = cameras.exterior or next((c for c in sorted(available) if c != wrist and "wrist" not in c.lower()), None)
+    if cameras.wrist:
+        wrist = _first_present(cameras.wrist, available)
+    else:
+        wrist = next((c for c in available if "wrist" in c.lower()), None)
+    if cameras.exterior:
+        exterior = _first_present(cameras.exterior, available)
+    else:
+        exterior = next((c for c in sorted(available) if c != wrist and "wrist" not in c.lower()), None)
     for role, name in (("exterior", exterior), ("wrist", wrist)):
-        if name is None or name not in available:
+        if name is None:
+            wanted = getattr(cameras, role)
             raise KeyError(
-                f"pi0 needs a {role} camera: {'policy.cameras.' + role + '=' + repr(name) if name else 'none found'}; "
-                f"the observation has {sorted(available)} (set policy.cameras.{role}=<camera>)"
+                f"pi0 needs a {role} camera: {f'policy.cameras.{role}={wanted!r}' if wanted else 'none found'} is not "
+                f"among the observation's {sorted(available)} (set policy.cameras.{role}=<camera>)"
             )
     return exterior, wrist  # type: ignore[return-value]
 
 
-def droid_observation(obs: dict[str, Any], cfg: DroidConfig, prompt: str) -> dict[str, Any]:
-    """Our observation dict -> the DROID request dict (224x224 letterboxed uint8 images)."""
-    images = obs.get("images") or {}
+def droid_request(images: dict[str, np.ndarray], qpos: dict[str, Any], prompt: str, cfg: DroidConfig) -> dict[str, Any]:
+    """The DROID request: letterboxed uint8 images, 7 arm joints, the gripper in [0, 1], the prompt.
+
+    ``images`` and ``qpos`` are the policy's view of the observation in ``cfg.convention``; the
+    gripper value sent is its first joint mapped by ``cfg.gripper.obs_open`` / ``obs_closed``.
+    """
     exterior, wrist = pick_cameras(cfg.cameras, list(images))
-    qpos = obs.get("qpos") or {}
     if "arm" not in qpos or "gripper" not in qpos:
-        raise KeyError(f"pi0 needs qpos 'arm' (7) and 'gripper' (1); observation has {sorted(qpos)}")
+        raise KeyError(f"pi0 needs qpos 'arm' (7) and 'gripper'; observation has {sorted(qpos)}")
     arm = np.asarray(qpos["arm"], dtype=np.float64).reshape(-1)
     if arm.shape != (7,):
         raise ValueError(f"pi0 needs 7 arm joint positions, observation qpos['arm'] has shape {arm.shape}")
@@ -77,11 +112,11 @@ def droid_observation(obs: dict[str, Any], cfg: DroidConfig, prompt: str) -> dic
     g = float(np.clip((g - cfg.gripper.obs_open) / span if span else g, 0.0, 1.0))
     size = cfg.image_size
     return {
-        EXTERIOR: resize_with_pad(images[exterior], size, size),
-        WRIST: resize_with_pad(images[wrist], size, size),
+        EXTERIOR: resize_with_pad_pil(images[exterior], size, size),
+        WRIST: resize_with_pad_pil(images[wrist], size, size),
         JOINTS: arm,
         GRIPPER: np.array([g], dtype=np.float64),
-        PROMPT: obs.get("prompt") or prompt,
+        PROMPT: prompt.lower() if cfg.lowercase_prompt else prompt,
     }
 
 
@@ -109,3 +144,16 @@ def droid_actions(raw: Any, arm_qpos: np.ndarray, cfg: DroidConfig, dt_s: float,
         grip = 1.0 - grip
     grip = (grip > cfg.gripper.threshold).astype(np.float64) if cfg.gripper.binarize else np.clip(grip, 0.0, 1.0)
     return {"arm": arm, "gripper": grip[:, None]}
+
+
+def check_checkpoint(name: str | None, action_mode: str) -> None:
+    """Refuse an openpi checkpoint name whose action space is not ``action_mode`` (one line, the fix)."""
+    if not name:
+        return
+    parts = [p for p in PurePosixPath(name.replace("\\", "/")).parts if p not in ("/", "")]
+    if action_mode == "joint_position" and any(p in VELOCITY_CHECKPOINTS for p in parts):
+        raise ValueError(f"checkpoint {name!r} is an openpi DROID joint-velocity checkpoint but this pi0 preset applies "
+                         "absolute joint targets (MolmoSpaces' pi0 eval config): use policy=pi0_droid")
+    if action_mode == "joint_velocity" and any("jointpos" in p for p in parts):
+        raise ValueError(f"checkpoint {name!r} outputs joint positions but this pi0 preset integrates joint "
+                         "velocities (openpi's DROID): use policy=pi0_molmospaces")

@@ -1,4 +1,7 @@
-"""The pi0 policy in its two modes: remote (openpi protocol, DROID keys) and in process (LeRobot PI0)."""
+"""The pi0 policy in its two modes: remote (openpi protocol, DROID keys) and in process (LeRobot PI0).
+
+Which checkpoints each preset fits: :mod:`molmo_pi0.droid`.
+"""
 
 from __future__ import annotations
 
@@ -8,9 +11,10 @@ import numpy as np
 from pydantic import ConfigDict, Field
 
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
+from molmo_lerobot.policies.convention import get_convention
 from molmo_lerobot.policies.lerobot_policy import parse_config
 from molmo_lerobot.protocol.client import PolicyClient
-from molmo_pi0.droid import ACTIONS, DroidConfig, droid_actions, droid_observation
+from molmo_pi0.droid import ACTIONS, JOINTS, DroidConfig, check_checkpoint, droid_actions, droid_request
 
 
 class Pi0Config(DroidConfig):
@@ -30,6 +34,8 @@ class Pi0Config(DroidConfig):
     reset: Literal["none", "message", "reconnect"] = "none"
     inprocess_cameras: dict[str, str] = Field(default_factory=dict)
     inprocess_state: list[str] = Field(default_factory=lambda: ["arm", "gripper"])
+    checkpoint: str | None = None  # the served checkpoint (name or path), recorded and checked against action_mode
+    end_on_success: bool = True    # read by the run (top-level end_on_success follows it), not by the policy
 
 
 class Pi0RemotePolicy(Policy):
@@ -37,6 +43,8 @@ class Pi0RemotePolicy(Policy):
 
     def __init__(self, cfg: dict[str, Any]) -> None:
         self.cfg: Pi0Config = parse_config(cfg, Pi0Config)
+        check_checkpoint(self.cfg.checkpoint, self.cfg.action_mode)
+        self.convention = get_convention(self.cfg.convention)
         self.client = PolicyClient(
             self.cfg.host,
             self.cfg.port,
@@ -56,22 +64,29 @@ class Pi0RemotePolicy(Policy):
 
     def act(self, obs: Observation) -> Action:
         assert self._ctx is not None, "reset() must be called before act()"
-        request = droid_observation(obs, self.cfg, self._ctx.prompt)
+        view = self.convention.observation(obs)
+        request = droid_request(self.convention.images(view), view.get("qpos") or {},
+                                obs.get("prompt") or self._ctx.prompt, self.cfg)
         response = self.client.infer(request)
         if ACTIONS not in response:
             raise ValueError(f"policy server {self.client.uri} answered without 'actions' (keys: {sorted(response)})")
-        return droid_actions(response[ACTIONS], request["observation/joint_position"], self.cfg,
-                             self._ctx.policy_dt_s, f"policy server {self.client.uri}")
+        return droid_actions(response[ACTIONS], request[JOINTS], self.cfg, self._ctx.policy_dt_s,
+                             f"policy server {self.client.uri}")
 
     def close(self) -> None:
         self.client.close()
 
 
 class Pi0InProcessPolicy(Policy):
-    """LeRobot's PI0 (or any LeRobot checkpoint emitting DROID-style actions) in this process."""
+    """LeRobot's PI0 (or any LeRobot checkpoint emitting DROID-style actions) in this process.
+
+    Its inputs follow the checkpoint's LeRobot features (``inprocess_cameras``, ``inprocess_state``);
+    the preset's action side (``action_mode``, ``open_loop_horizon``, ``gripper``) applies as remote.
+    """
 
     def __init__(self, cfg: dict[str, Any]) -> None:
         self.cfg: Pi0Config = parse_config(cfg, Pi0Config)
+        check_checkpoint(self.cfg.path, self.cfg.action_mode)
         from molmo_lerobot.policies.lerobot_policy import LeRobotPolicy
 
         try:
