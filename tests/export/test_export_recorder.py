@@ -229,9 +229,12 @@ def test_a_failed_save_leaves_the_shard_torn_and_never_merged(tmp_path, monkeypa
     w.close()
     assert [s.complete for s in list_shards(tmp_path)] == [True, False]
     second = S.run_episode(S.NullRecorder(), 1, 5, success_from=1)
+    second.output_errors = ["LeRobotRecorder: OSError: [Errno 28] No space left on device"]  # as the worker saw it
     factory.finalize(tmp_path, [first, second], S.summary_for([first, second]))
     records = read_eval_records(tmp_path / "dataset")  # the torn shard's episode is never merged
     assert [r["episode_index"] for r in records] == [0, None]
+    assert records[1]["not_recorded"] == "output failed: LeRobotRecorder: OSError: [Errno 28] No space left on device"
+    assert factory.missing(tmp_path, [first, second]) == {1}, "a resume records it"
 
 
 def test_shards_rotate_and_merge_in_order(tmp_path):
@@ -298,3 +301,39 @@ def test_portable_paths_name_no_place_of_this_machine(tmp_path):
         "output_dir": ".", "video": "dataset/videos", "n": 3, "url": "http://host/a/b", "repo": "me/pick",
         "rel": "runs/x", "error": "FileNotFoundError: <local>/mug.xml is missing. See <local>/x.",
         "paths": ["<local>/pick_v1", "<local>"], "<local>/key": 1}
+
+
+def test_a_merge_killed_between_the_swap_renames_is_completed_by_the_next(two_worker_run, tmp_path, monkeypatch):
+    """A resume's merge is killed after ``dataset`` moved away and before the new one moved in:
+    the next merge finds the intact copy and puts it in place (nothing recorded is lost), leaves
+    no ``.dataset-merge-*`` behind, and a resume knows which episodes the dataset still lacks."""
+    from molmo_lerobot import fileio
+
+    out0, _, results, _, _ = two_worker_run
+    out = tmp_path / "run"
+    shutil.copytree(out0, out)
+    factory = LeRobotRecorderFactory.from_config(CFG)
+    w = factory.make("w0g0", out)
+    redo = S.run_episode(w, 2, 5, success_from=1)  # the resume stores episode 2 (errored before)
+    w.close()
+    everything = [redo if r.episode_index == 2 else r for r in results]
+    replace = fileio.replace
+
+    def killed_mid_swap(src, dst, **kwargs):
+        if src.name == "dataset" and src.parent.name.startswith(".dataset-merge-"):
+            raise KeyboardInterrupt  # stands for the SIGKILL: the previous dataset is already moved away
+        return replace(src, dst, **kwargs)
+
+    monkeypatch.setattr(fileio, "replace", killed_mid_swap)
+    with pytest.raises(KeyboardInterrupt):
+        factory.finalize(out, everything, S.summary_for(everything))
+    monkeypatch.undo()
+    assert not (out / "dataset").exists() and list(out.glob(".dataset-merge-*"))
+
+    again = LeRobotRecorderFactory.from_config(CFG)  # the next resume: a new session
+    again.finalize(out, everything, S.summary_for(everything))
+    records = [r for r in read_eval_records(out / "dataset") if r["episode_index"] is not None]
+    assert [r["benchmark_episode_index"] for r in records] == [0, 1, 2, 3, 4]
+    assert _load(out / "dataset", again.repo_id).num_episodes == 5
+    assert not list(out.glob(".dataset-merge-*")) and not (out / SHARDS_DIR).exists()
+    assert again.missing(out, everything) == {5}, "episode 5 finished but its recording was lost"

@@ -72,3 +72,58 @@ def test_reconnects_after_server_restart():
     with FakeDroidServer(horizon=6, port=srv.port).running():
         assert c.infer(OBS)["actions"].shape == (6, 8)
         assert c.connects == 2
+
+
+def _http_listener(reply: bytes):
+    """A TCP server on a free port that answers every connection with ``reply`` and closes it."""
+    import threading
+
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    sock.listen(8)
+
+    def serve():
+        while True:
+            try:
+                conn, _ = sock.accept()
+            except OSError:
+                return
+            with conn:
+                conn.recv(4096)
+                conn.sendall(reply)
+
+    threading.Thread(target=serve, daemon=True).start()
+    return sock
+
+
+@pytest.mark.parametrize(("reply", "why"), [
+    (b"HTTP/1.1 503 Service Unavailable\r\nContent-Length: 0\r\n\r\n", "HTTP 503 instead of a websocket handshake"),
+    (b"", "no valid websocket handshake (InvalidMessage)"),
+])
+def test_an_unreachable_server_is_one_line_naming_it_and_an_infrastructure_failure(reply, why):
+    """A server that is gone or answers no handshake: one line of ours naming the URL, and an
+    infrastructure failure (``resume=true`` reruns such an episode), never websockets' own text."""
+    from molmo_lerobot.errors import describe, error_kind
+
+    with _http_listener(reply) as sock:
+        port = sock.getsockname()[1]
+        c = PolicyClient("127.0.0.1", port, timeout_s=0.5, connect_timeout_s=0.3, backoff_s=0.05)
+        with pytest.raises(PolicyTimeoutError) as info:
+            c.connect()
+    line = describe(info.value)
+    assert f"ws://127.0.0.1:{port}" in line and "\n" not in line
+    assert f"last error: {why})" in line, line
+    assert error_kind(info.value) == "infrastructure"
+
+
+def test_a_server_lost_mid_session_is_an_infrastructure_failure():
+    from molmo_lerobot.errors import error_kind
+    from molmo_lerobot.protocol.client import PolicyConnectionError
+
+    srv = FakeDroidServer(horizon=4)
+    with srv.running():
+        c = PolicyClient("127.0.0.1", srv.port, timeout_s=1, connect_timeout_s=0.3, backoff_s=0.05)
+        c.infer(OBS)
+    with pytest.raises(PolicyConnectionError, match=f"policy server ws://127.0.0.1:{srv.port} ") as info:
+        c.infer(OBS)  # the stale connection fails, the reconnect finds nobody
+    assert error_kind(info.value) == "infrastructure"

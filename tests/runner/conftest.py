@@ -12,6 +12,8 @@ misbehaves in the episodes named by ``policy.faults={episode_index: kind}``:
 * ``raise`` — ``act`` raises ``RuntimeError``;
 * ``keyboard_interrupt`` / ``system_exit`` — ``act`` raises ``KeyboardInterrupt`` / calls ``sys.exit(7)``;
 * ``nan`` / ``wrong_shape`` — ``act`` returns a non-finite / wrongly shaped arm action.
+* ``disk_full_until_fixed`` / ``sigkill_until_fixed`` — ``act`` raises ``OSError(ENOSPC)`` / the worker
+  SIGKILLs itself, until ``<marker_dir>/fixed`` exists (the machine was repaired; a resume runs it again).
 
 ``policy.act_sleep_s`` slows every ``act``; every attempt appends the worker's pid to
 ``<marker_dir>/pids-<episode_index>`` at reset (so a test can ``kill -9`` it from outside);
@@ -20,7 +22,9 @@ first N workers that start after a ``sigkill*`` fault fired SIGKILL themselves w
 
 The distribution also provides a recorder: with ``+trace_dir=D`` every finished episode writes
 ``D/trace-<episode_index>``, a SHA-256 of every action and joint position of the episode;
-``+trace_fail_finalize=true`` makes its run-level ``finalize`` (the export step) raise.
+``+trace_fail_finalize=true`` makes its run-level ``finalize`` (the export step) raise; while
+``D/disk-full`` exists, writing a trace raises ``OSError(ENOSPC)`` (a full disk); on resume it
+reports the episodes without a trace file as ``missing`` (they run again).
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ from molmo_lerobot.plugins import get_plugins
 MODULE = textwrap.dedent('''
     """Test-only policies that misbehave on purpose (see tests/runner/conftest.py)."""
 
+    import errno
     import hashlib
     import os
     import signal
@@ -90,6 +95,11 @@ MODULE = textwrap.dedent('''
                     time.sleep(60)
             if kind == "raise":
                 raise RuntimeError(f"faulty policy: raising in episode {self.episode}")
+            if not (self.marker_dir / "fixed").exists():
+                if kind == "disk_full_until_fixed":
+                    raise OSError(errno.ENOSPC, "No space left on device", str(self.marker_dir / "scratch"))
+                if kind == "sigkill_until_fixed":
+                    os.kill(os.getpid(), signal.SIGKILL)
             if kind == "keyboard_interrupt":
                 raise KeyboardInterrupt
             if kind == "system_exit":
@@ -130,6 +140,10 @@ MODULE = textwrap.dedent('''
             if self.fail_finalize:
                 raise OSError("trace export: disk full (trace_fail_finalize=true)")
 
+        def missing(self, output_dir, results):
+            return {r.episode_index for r in results
+                    if r.error is None and not (self.out / f"trace-{r.episode_index}").exists()}
+
 
     class TraceRecorder(Recorder):
         """SHA-256 of every action and joint position of an episode, written when it ends."""
@@ -148,10 +162,13 @@ MODULE = textwrap.dedent('''
                     self.digest.update(np.asarray(part[key], dtype=np.float64).tobytes())
 
         def end_episode(self, result):
-            if self.digest is not None and result.error is None:
+            digest, self.digest = self.digest, None
+            if digest is not None and result.error is None:
+                path = self.out / f"trace-{result.episode_index}"
+                if (self.out / "disk-full").exists():
+                    raise OSError(errno.ENOSPC, "No space left on device", str(path))
                 self.out.mkdir(parents=True, exist_ok=True)
-                (self.out / f"trace-{result.episode_index}").write_text(self.digest.hexdigest())
-            self.digest = None
+                path.write_text(digest.hexdigest())
 
 
     @hookimpl

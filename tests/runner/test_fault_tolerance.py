@@ -320,3 +320,12 @@ def test_supervisor_watchdog_records_a_timeout_and_stops_the_worker():
     assert n == 3 and by[1].error == "episode timed out after 0.2 s (watchdog)" and by[1].attempts == 1
     assert by[0].error is None and by[2].error is None
     assert "w1g0" in t.stopped, "the hung worker was asked to stop"
+
+
+def test_the_readme_gives_the_exit_codes_an_interrupted_run_has():
+    """An interrupted molmo-eval exits 128 + the signal number (asserted above for SIGTERM and SIGINT),
+    as a shell reports a process the signal ended; the README says so for both."""
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    assert f"{128 + signal.SIGINT} for Ctrl-C/SIGINT, {128 + signal.SIGTERM} for SIGTERM" in readme

@@ -30,7 +30,7 @@ def test_summary_counts_errors_as_failures_and_splits_tasks():
     assert s["success_once_rate"] == pytest.approx(2 / 3)
     assert s["per_task"]["pick"]["n_episodes"] == 2
     assert s["per_task"]["open"]["n_errors"] == 1
-    assert s["errors"] == [{"episode_index": 2, "error": "RuntimeError: boom"}]
+    assert s["errors"] == [{"episode_index": 2, "error": "RuntimeError: boom", "error_kind": "episode"}]
     assert s["seed"] == 0
 
 
@@ -66,3 +66,25 @@ def test_errors_lead_the_headline_and_tasks_without_a_valid_episode_have_no_rate
     lines = summary_lines(s)
     assert lines[0].startswith("1 of 2 episodes errored · b · p: success 0.500")
     assert "  open: no episode ran (0/1, 1 errored)" in lines
+
+
+def test_infrastructure_errors_and_output_failures_are_told_apart():
+    """A dead worker is an infrastructure error (rerun by resume, and the summary says so); a
+    thumbnail that could not be written leaves the outcome and is listed on its own."""
+    from molmo_lerobot.runner.results import summary_lines
+
+    kept = EpisodeResult(0, 1, "a.Pick", True, True, 10, 1, task_type="pick",
+                         output_errors=["GlanceRecorder: OSError: [Errno 28] No space left on device"])
+    died = EpisodeResult.failed(1, 1, "a.Pick", 2, "worker process died with signal SIGKILL", "infrastructure",
+                                task_type="pick")
+    raised = EpisodeResult.failed(2, 1, "a.Pick", 3, "RuntimeError: boom", task_type="pick")
+    assert died.rerun_on_resume and not raised.rerun_on_resume and not kept.rerun_on_resume
+    s = summarize([kept, died, raised], benchmark={"name": "b"}, policy={"name": "p"})
+    assert s["n_success"] == 1 and s["n_errors"] == 2
+    assert [e["error_kind"] for e in s["errors"]] == ["infrastructure", "episode"]
+    assert s["output_errors"] == [{"episode_index": 0, "errors": kept.output_errors}]
+    lines = summary_lines(s)
+    assert any(ln.startswith("  1 of the errors are infrastructure failures") and "resume=true" in ln for ln in lines)
+    assert "  outputs not written for 1 episode, outcomes kept (episode 0: GlanceRecorder: OSError: [Errno 28] No " \
+           "space left on device; all in results.json output_errors)" in lines
+    assert EpisodeResult.from_dict(died.to_dict()) == died

@@ -3,9 +3,11 @@
 Sources are the previous merged dataset (a resumed run) and every finished shard, oldest
 first. Each benchmark episode is stored at most once (a retried episode can sit in two
 shards) and only if its final result has no error. The merged dataset is built in a
-temporary directory, checked (episode count, lengths, ``next.success`` at each episode's
-last frame against the results) and only then swapped into place, so a failed merge
-never leaves a dataset that looks complete.
+work directory (``.dataset-merge-<session>/``), checked (episode count, lengths,
+``next.success`` at each episode's last frame against the results) and only then swapped
+into place, so a failed merge never leaves a dataset that looks complete. A merge killed
+inside the swap (the previous dataset moved away, the new one not yet in place) is finished
+by the next merge or resume (:func:`recover_dataset`); no work directory outlives a merge.
 
 Layout added to the LeRobot dataset root:
 
@@ -35,7 +37,7 @@ from molmo_lerobot import fileio
 from molmo_lerobot.export.card import make_card
 from molmo_lerobot.export.frames import EVAL_EPISODE_INDEX
 from molmo_lerobot.export.portable import portable
-from molmo_lerobot.export.shards import SHARDS_DIR, list_shards
+from molmo_lerobot.export.shards import SHARDS_DIR, Shard, list_shards
 from molmo_lerobot.runner.results import EpisodeResult
 
 if TYPE_CHECKING:
@@ -46,6 +48,8 @@ log = logging.getLogger(__name__)
 DATASET_DIR = "dataset"
 EVAL_EPISODES = "meta/eval/episodes.jsonl"
 EVAL_INFO = "meta/eval/info.json"
+MERGE_PREFIX = ".dataset-merge-"  # + session: a merge's work directory
+PREVIOUS = "previous"  # in the work directory: the dataset being replaced, during the swap
 
 
 class ExportError(RuntimeError):
@@ -112,23 +116,67 @@ def _segments(order: list[int], chosen: dict[int, tuple[int, int]]) -> list[tupl
     return segments
 
 
+def recover_dataset(output_dir: Path) -> None:
+    """Finish what a killed merge left: a swap stopped between its two renames (``dataset`` moved
+    to ``<work>/previous``, the checked new one still at ``<work>/dataset``) is completed, and every
+    ``.dataset-merge-*`` work directory is removed."""
+    final = Path(output_dir) / DATASET_DIR
+    for work in sorted(Path(output_dir).glob(f"{MERGE_PREFIX}*")):
+        previous, new = work / PREVIOUS, work / DATASET_DIR
+        if previous.is_dir() and not final.exists():
+            kept = new if new.is_dir() else previous  # the new one was checked before the swap began
+            log.warning("completing a dataset merge that was killed mid-swap: %s -> %s", kept, final)
+            fileio.replace(kept, final, root=output_dir)
+        fileio.rmtree(work, root=output_dir, ignore_errors=True)
+
+
+def _sources(output_dir: Path) -> tuple[list[_Source], list[Shard]]:
+    """The copies a merge chooses from (the previous dataset, then every finished shard) and all shards."""
+    recover_dataset(output_dir)
+    shards = list_shards(output_dir)
+    sources = [s for s in [_previous_source(output_dir / DATASET_DIR)] if s is not None]
+    sources += [_Source(s.root, s.episodes) for s in shards if s.complete and s.episodes]
+    return sources, shards
+
+
+def stored_episodes(output_dir: Path, results: list[EpisodeResult]) -> set[int]:
+    """The episodes of ``results`` that a merge of ``output_dir`` now would store."""
+    sources, _ = _sources(Path(output_dir))
+    return set(_choose(sources, {r.episode_index: r for r in results}))
+
+
 def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any],
                  factory: LeRobotRecorderFactory) -> Path | None:
     """Build ``output_dir/dataset`` from the shards; returns its root, or None when nothing was recorded."""
-    from lerobot.datasets.aggregate import aggregate_datasets
-    from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
-
     output_dir = Path(output_dir)
-    final = output_dir / DATASET_DIR
-    work = output_dir / f".dataset-merge-{factory.session}"
-    fileio.rmtree(work, root=output_dir, ignore_errors=True)
-    shards = list_shards(output_dir)
+    sources, shards = _sources(output_dir)
     torn = [s.root.name for s in shards if not s.complete]
     for name in torn:
         log.warning("skipping dataset shard %s: its worker did not finish it (killed or crashed); "
                     "its episodes are not stored in the dataset", name)
-    sources = [s for s in [_previous_source(final)] if s is not None]
-    sources += [_Source(s.root, s.episodes) for s in shards if s.complete and s.episodes]
+    work = output_dir / f"{MERGE_PREFIX}{factory.session}"
+    try:
+        tmp = _build(work, sources, shards, torn, results, summary, factory)
+    except BaseException:
+        fileio.rmtree(work, root=output_dir, ignore_errors=True)
+        raise
+    if tmp is None:
+        fileio.rmtree(work, root=output_dir, ignore_errors=True)
+        return None
+    final = output_dir / DATASET_DIR
+    _swap_into_place(tmp, final, work)
+    fileio.rmtree(output_dir / SHARDS_DIR, root=output_dir, ignore_errors=True)
+    fileio.rmtree(work, root=output_dir, ignore_errors=True)
+    return final
+
+
+def _build(work: Path, sources: list[_Source], shards: list[Shard], torn: list[str], results: list[EpisodeResult],
+           summary: dict[str, Any], factory: LeRobotRecorderFactory) -> Path | None:
+    """The merged, checked dataset at ``work/dataset``; None when no episode is to be stored."""
+    from lerobot.datasets.aggregate import aggregate_datasets
+    from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
+
+    output_dir = work.parent
     discarded = {int(d["episode_index"]): d["reason"] for s in shards for d in s.discarded}
     by_index = {r.episode_index: r for r in results}
     chosen = _choose(sources, by_index)
@@ -144,7 +192,6 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
 
     if not roots:
         log.warning("record=true but no episode finished without error: no dataset written")
-        fileio.rmtree(work, root=output_dir, ignore_errors=True)
         return None
 
     tmp = work / DATASET_DIR
@@ -168,10 +215,7 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
     meta = LeRobotDatasetMetadata(factory.repo_id, root=tmp)
     check_dataset(tmp, results)
     fileio.atomic_write(tmp / "README.md", str(make_card(meta.info, shared, factory.repo_id, records)), root=tmp)
-    _swap_into_place(tmp, final, work)
-    fileio.rmtree(output_dir / SHARDS_DIR, root=output_dir, ignore_errors=True)
-    fileio.rmtree(work, root=output_dir, ignore_errors=True)
-    return final
+    return tmp
 
 
 def _subset(src: _Source, keep: list[int], out: Path, repo_id: str) -> Path:
@@ -196,6 +240,8 @@ def _eval_records(results: list[EpisodeResult], dataset_index: dict[int, int], f
             why = None
         elif r.error is not None:
             why = "episode error"
+        elif r.output_errors:
+            why = f"output failed: {r.output_errors[0]}"
         else:
             why = discarded.get(r.episode_index, "not in any finished shard (its worker was killed or crashed)")
         records.append({
@@ -238,7 +284,8 @@ def check_dataset(root: Path, results: list[EpisodeResult]) -> None:
 
 
 def _swap_into_place(tmp: Path, final: Path, work: Path) -> None:
-    old = work / "previous"
+    """Two renames; one killed between them is completed by :func:`recover_dataset`."""
+    old = work / PREVIOUS
     if final.exists():
         fileio.replace(final, old, root=work.parent)
     fileio.replace(tmp, final, root=work.parent)

@@ -121,6 +121,15 @@ class LeRobotRecorderFactory(RecorderFactory):
                      else "no episode finished without error, so there is no dataset to push")
             summary["push"] = {"repo_id": self.repo_id, "ok": error is None, "error": error}
 
+    def missing(self, output_dir: Path, results: list[EpisodeResult]) -> set[int]:
+        """Resume: the episodes that finished without error but are neither in ``output_dir/dataset``
+        nor in a finished shard (their worker was killed before it finished its shard, or saving
+        failed); the resume runs them again so that the dataset holds every such episode."""
+        from molmo_lerobot.export.merge import stored_episodes
+
+        stored = stored_episodes(Path(output_dir), results)
+        return {r.episode_index for r in results if r.error is None and r.episode_index not in stored}
+
 
 def quiet_libraries() -> None:
     """FFmpeg prints errors only (LeRobot's video helpers reinstate FFmpeg's stderr logger at

@@ -21,7 +21,7 @@ from molmo_lerobot.hookspecs import hookimpl
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
 from molmo_lerobot.policies.convention import ConventionName, get_convention
 from molmo_lerobot.policies.lerobot_policy import parse_config
-from molmo_lerobot.protocol.client import PolicyClient, PolicyClientError
+from molmo_lerobot.protocol.client import PolicyClient, PolicyConnectionError
 
 
 class RemotePolicyConfig(BaseModel):
@@ -68,8 +68,8 @@ class RemotePolicy(Policy):
         response = self.client.infer(self.convention.observation(obs))
         if self.client.connects != self._connects:
             self._connects = -1
-            raise PolicyClientError(f"policy server {self.client.uri} dropped the connection mid-episode; the served "
-                                    f"policy's episode state is lost (the next episode reconnects)")
+            raise PolicyConnectionError(f"policy server {self.client.uri} dropped the connection mid-episode; the "
+                                        "served policy's episode state is lost (the next episode reconnects)")
         response.pop("server_timing", None)
         return self.convention.action(response)
 

@@ -11,9 +11,10 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
+from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
 from websockets.sync.client import ClientConnection, connect
 
+from molmo_lerobot.errors import InfrastructureError
 from molmo_lerobot.protocol.codec import CodecError, packb, unpackb
 
 RESET_ENDPOINT = "reset"
@@ -23,7 +24,11 @@ class PolicyClientError(RuntimeError):
     """Talking to the policy server failed; the message says where and why."""
 
 
-class PolicyTimeoutError(PolicyClientError, TimeoutError):
+class PolicyConnectionError(PolicyClientError, InfrastructureError):
+    """The server could not be reached or dropped the connection: not the episode's failure."""
+
+
+class PolicyTimeoutError(PolicyConnectionError, TimeoutError):
     """The server did not answer (or could not be reached) in time."""
 
 
@@ -92,7 +97,7 @@ class PolicyClient:
             if time.monotonic() + delay > deadline:
                 raise PolicyTimeoutError(
                     f"could not connect to policy server {self.uri} within {self.connect_timeout_s:g} s "
-                    f"({attempts} attempts; last error: {type(last).__name__}: {last})"
+                    f"({attempts} attempts; last error: {_why(last)})"
                 )
             time.sleep(delay)
             delay = min(delay * 2, 5.0)
@@ -101,7 +106,8 @@ class PolicyClient:
             metadata = self._receive("metadata frame")
         except _Stale:
             self.close()
-            raise PolicyClientError(f"policy server {self.uri} closed the connection before its metadata frame") from None
+            raise PolicyConnectionError(
+                f"policy server {self.uri} closed the connection before its metadata frame") from None
         except PolicyClientError:
             self.close()
             raise
@@ -160,7 +166,8 @@ class PolicyClient:
             except _Stale:
                 self.close()
                 if attempt:
-                    raise PolicyClientError(f"policy server {self.uri} closed the connection before answering") from None
+                    raise PolicyConnectionError(
+                        f"policy server {self.uri} closed the connection before answering") from None
         raise AssertionError("unreachable")
 
     def _receive(self, what: str) -> Any:
@@ -177,8 +184,9 @@ class PolicyClient:
             if code in (None, 1000, 1001, 1006):
                 raise _Stale() from exc
             self.close()
-            reason = exc.rcvd.reason if exc.rcvd else ""
-            raise PolicyClientError(f"policy server {self.uri} closed the connection (code {code}: {reason})") from exc
+            reason = " ".join((exc.rcvd.reason if exc.rcvd else "").split())
+            error = PolicyClientError if code in _REFUSED else PolicyConnectionError
+            raise error(f"policy server {self.uri} closed the connection (code {code}: {reason})") from None
         if isinstance(frame, str):
             self.close()
             last = frame.strip().splitlines()[-1] if frame.strip() else "(empty message)"
@@ -192,3 +200,22 @@ class PolicyClient:
 
 class _Stale(Exception):
     """The connection closed without an answer (internal: triggers one reconnect)."""
+
+
+#: close codes by which the server refuses the request itself (unsupported, invalid, policy,
+#: too big): the same request would be refused again, so it is the episode's error
+_REFUSED = {1003, 1007, 1008, 1009}
+
+
+def _why(exc: BaseException | None) -> str:
+    """A failed connection attempt in a few words of ours (no library text spanning lines)."""
+    if isinstance(exc, InvalidStatus):
+        return f"HTTP {exc.response.status_code} instead of a websocket handshake"
+    if isinstance(exc, InvalidHandshake):
+        return f"no valid websocket handshake ({type(exc).__name__})"
+    if isinstance(exc, TimeoutError):
+        return "no handshake in time"
+    if isinstance(exc, OSError) and exc.strerror:
+        return f"{type(exc).__name__}: {exc.strerror}"
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__

@@ -4,8 +4,11 @@ Progress is durable: each finished episode is appended to ``episodes.jsonl`` (fl
 fsynced) as it completes, and ``results.json`` is written atomically only when every
 episode is accounted for, so an interrupted run never looks complete. A write that fails
 (full disk) is rolled back to the last whole record. ``resume=true`` on the same
-``output_dir`` reruns only the episodes that are missing; it never drops a recorded
-episode (a larger ``limit`` extends the run, a smaller one is refused).
+``output_dir`` runs the episodes that are missing or incomplete: not recorded, recorded
+with an infrastructure error (worker died, full disk, policy server gone), with an output
+that was not written, or absent from a recorder's output (the dataset of a killed run).
+It never drops a recorded episode (a larger ``limit`` extends the run, a smaller one is
+refused).
 
 Every attempted episode, even one that errors before it simulates, is recorded with its task
 type, prompt, horizon and where that horizon came from (``horizon_source``), all resolved
@@ -234,7 +237,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                          "molmospaces": molmospaces_settings(cfg).to_config(),
                          **({"plugins_prefer": plugins.prefer} if plugins.prefer else {})},  # pinned providers
     }
-    done = _prepare_output(out, run_info, bool(cfg.get("resume")))
+    done = _prepare_output(out, run_info, bool(cfg.get("resume")), recorders)
     outside = sorted(r.episode_index for r in done if r.episode_index not in described)
     if outside:  # cannot happen with an unchanged benchmark and limit check; never drop them silently
         raise RunError(f"cannot resume {out}: it records episodes {outside[:10]} that this run would not evaluate")
@@ -356,7 +359,8 @@ def _describe(spec: Any, plugins: Any, cfg: dict[str, Any], horizons: dict[str, 
             "horizon_source": source}
 
 
-def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool) -> list[EpisodeResult]:
+def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool,
+                    recorders: list[Any]) -> list[EpisodeResult]:
     """Create ``out`` (or reopen it on resume) and return the episodes already done."""
     run_file = out / RUN_FILE
     if out.exists() and not out.is_dir():
@@ -366,7 +370,7 @@ def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool) -> list[E
             if not resume:
                 raise RunError(f"output_dir {out} already holds a run; pass resume=true to continue it "
                                "or choose another output_dir")
-            return _reopen(out, run_info)
+            return _reopen(out, run_info, recorders)
         atomic_write(run_file, json.dumps(run_info, indent=2) + "\n", root=out)  # makes ``out`` too
         os.close(fileio.open_fd(out / EPISODES_FILE, os.O_WRONLY | os.O_CREAT, root=out))
     except OSError as exc:
@@ -374,8 +378,9 @@ def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool) -> list[E
     return []
 
 
-def _reopen(out: Path, run_info: dict[str, Any]) -> list[EpisodeResult]:
-    """Check that ``out`` holds this same run and return its recorded episodes (resume)."""
+def _reopen(out: Path, run_info: dict[str, Any], recorders: list[Any]) -> list[EpisodeResult]:
+    """Check that ``out`` holds this same run and return its recorded episodes that stand (resume);
+    the others (:func:`_incomplete`) are dropped from ``episodes.jsonl`` and run again."""
     run_file = out / RUN_FILE
     if not run_file.exists():
         raise RunError(f"cannot resume: {run_file} is missing")
@@ -398,11 +403,31 @@ def _reopen(out: Path, run_info: dict[str, Any]) -> list[EpisodeResult]:
                        f"({recorded} episode{'s' * (recorded != 1)} recorded) and a resume never drops recorded "
                        + ("episodes; use limit=null" if old is None else
                           f"episodes; use limit={old} or larger (or limit=null)"))
+    rerun = _incomplete(out, done, recorders)
+    if rerun:
+        print(f"molmo-eval: resume runs {len(rerun)} recorded episodes again ({sorted(rerun)[:10]}"
+              f"{' …' if len(rerun) > 10 else ''}): infrastructure errors, outputs not written or not in the "
+              "dataset", file=sys.stderr)
+        done = [r for r in done if r.episode_index not in rerun]
     fileio.remove(out / RESULTS_FILE, root=out)
     atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done), root=out)
     if new != old:  # a larger limit extends the run
         atomic_write(run_file, json.dumps({**previous, "limit": new}, indent=2) + "\n", root=out)
     return done
+
+
+def _incomplete(out: Path, done: list[EpisodeResult], recorders: list[Any]) -> set[int]:
+    """Recorded episodes a resume runs again: infrastructure failures, episodes with an output not
+    written, and those a recorder's output lacks (``RecorderFactory.missing``)."""
+    rerun = {r.episode_index for r in done if r.rerun_on_resume or r.output_errors}
+    standing = [r for r in done if r.episode_index not in rerun]
+    for factory in recorders:
+        try:
+            rerun |= set(factory.missing(out, standing))
+        except Exception as exc:
+            raise RunError(f"cannot resume {out}: {type(factory).__name__} cannot tell which episodes its output "
+                           f"lacks: {type(exc).__name__}: {exc}".splitlines()[0]) from None
+    return rerun
 
 
 #: ``episodes.jsonl`` fields a record must have, with their JSON types.

@@ -4,18 +4,27 @@ A :class:`RecorderFactory` is built in the main process from the run config, pic
 every worker (process or Ray actor), and asked for one :class:`Recorder` per worker. After
 all workers are done, ``finalize`` runs once in the main process (e.g. to merge per-worker
 dataset shards).
+
+A worker drives its recorders through one :class:`RecorderGroup`: a recorder that raises (a
+full disk, a broken plugin) fails its own output, never the episode.
 """
 
 from __future__ import annotations
 
+import logging
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from molmo_lerobot.errors import describe
 
 if TYPE_CHECKING:
     from molmo_lerobot.policies.base import Action, Observation
     from molmo_lerobot.runner.results import EpisodeResult
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -75,3 +84,61 @@ class RecorderFactory(ABC):
 
     def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any]) -> None:
         """Runs once in the main process after every worker closed."""
+
+    def missing(self, output_dir: Path, results: list[EpisodeResult]) -> set[int]:
+        """On ``resume=true``, before any worker starts: the episodes among ``results`` whose output
+        this recorder lacks and cannot make without running them (a killed worker's dataset shard);
+        the resume runs them again. None by default."""
+        return set()
+
+
+class RecorderGroup:
+    """A worker's recorders, called as one. A recorder that raises is an output failure: it gets
+    no further calls in that episode, is told at its end that the episode is not its to keep (a
+    copy of the result with ``error`` set), and the failure goes into ``result.output_errors``;
+    the episode and the other recorders go on."""
+
+    def __init__(self, recorders: list[Recorder]) -> None:
+        self.recorders = list(recorders)
+        self._failed: dict[int, str] = {}  # position in ``recorders`` -> its failure this episode
+
+    def wants_images_at(self, step: int, horizon: int) -> bool:
+        return any(r.wants_images_at(step, horizon) for i, r in enumerate(self.recorders) if i not in self._failed)
+
+    def start_episode(self, info: EpisodeInfo) -> None:
+        self._failed = {}
+        self._each("start_episode", info)
+
+    def record_step(self, obs: Observation, action: Action, reward: float | None, success: bool, done: bool) -> None:
+        self._each("record_step", obs, action, reward, success, done)
+
+    def end_episode(self, result: EpisodeResult) -> None:
+        """Hand ``result`` to every recorder; the failures of this episode go into ``result.output_errors``."""
+        failed, self._failed = self._failed, {}
+        for i, rec in enumerate(self.recorders):
+            mine = result if i not in failed else replace(result, error=f"output failed: {failed[i]}",
+                                                          extra=dict(result.extra))
+            self._call(i, rec.end_episode, mine, failed=failed)
+        for i in sorted(failed):
+            result.output_errors.append(failed[i])
+
+    def close(self) -> None:
+        """Close every recorder, even after one failed to (each failure is logged)."""
+        for rec in self.recorders:
+            try:
+                rec.close()
+            except Exception as exc:
+                log.error("%s could not finish its output: %s", type(rec).__name__, describe(exc))
+
+    def _each(self, method: str, *args: object) -> None:
+        for i, rec in enumerate(self.recorders):
+            if i not in self._failed:
+                self._call(i, getattr(rec, method), *args, failed=self._failed)
+
+    def _call(self, i: int, fn: Callable[..., None], *args: object, failed: dict[int, str]) -> None:
+        try:
+            fn(*args)
+        except Exception as exc:
+            failed.setdefault(i, f"{type(self.recorders[i]).__name__}: {describe(exc)}")
+            log.warning("output of %s failed (the episode's outcome stands): %s", type(self.recorders[i]).__name__,
+                        describe(exc))

@@ -5,6 +5,11 @@ died is a failure with its ``error`` recorded; it is never dropped from the deno
 ``n_valid`` counts the episodes that simulated (no error). A block in which no episode
 simulated measured nothing about the policy: its rates and intervals are ``null`` (not a
 0 % score) while every count stays recorded.
+
+An error's ``error_kind`` says whose it is (:mod:`molmo_lerobot.errors`): ``"episode"`` stays
+when the run is resumed, ``"infrastructure"`` (worker died, full disk, policy server gone) is
+run again. An output that could not be written (a thumbnail, the dataset episode) never
+changes the outcome: it is listed in the episode's ``output_errors``.
 """
 
 from __future__ import annotations
@@ -12,6 +17,8 @@ from __future__ import annotations
 from collections import defaultdict
 from dataclasses import asdict, dataclass, field
 from typing import Any
+
+from molmo_lerobot.errors import EPISODE, INFRASTRUCTURE
 
 
 @dataclass
@@ -32,6 +39,8 @@ class EpisodeResult:
     horizon_source: str | None = None  # cli | task_horizons | task_horizon_sec | default
     duration_s: float = 0.0
     attempts: int = 1
+    error_kind: str | None = None  # with an error: "episode" | "infrastructure" (resume reruns it)
+    output_errors: list[str] = field(default_factory=list)  # outputs not written; the outcome stands
     extra: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
@@ -44,8 +53,13 @@ class EpisodeResult:
 
     @classmethod
     def failed(cls, episode_index: int, house_index: int | None, task_cls: str | None, seed: int,
-               error: str, **kw: Any) -> EpisodeResult:
-        return cls(episode_index, house_index, task_cls, False, False, 0, seed, error, **kw)
+               error: str, error_kind: str = EPISODE, **kw: Any) -> EpisodeResult:
+        return cls(episode_index, house_index, task_cls, False, False, 0, seed, error, error_kind=error_kind, **kw)
+
+    @property
+    def rerun_on_resume(self) -> bool:
+        """An infrastructure failure: it says nothing about the policy, so ``resume=true`` reruns it."""
+        return self.error is not None and self.error_kind == INFRASTRUCTURE
 
 
 def wilson_ci(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
@@ -85,7 +99,11 @@ def summarize(results: list[EpisodeResult], **context: Any) -> dict[str, Any]:
     summary = {"primary_metric": "success_rate (success at the final step)", **_block(results)}
     summary["per_task"] = {t: _block(rs) for t, rs in sorted(by_task.items())}
     summary["errors"] = [
-        {"episode_index": r.episode_index, "error": r.error} for r in results if r.error is not None
+        {"episode_index": r.episode_index, "error": r.error, "error_kind": r.error_kind}
+        for r in results if r.error is not None
+    ]
+    summary["output_errors"] = [
+        {"episode_index": r.episode_index, "errors": r.output_errors} for r in results if r.output_errors
     ]
     summary.update(context)
     return summary
@@ -113,4 +131,13 @@ def summary_lines(s: dict[str, Any], max_errors: int = 10) -> list[str]:
     lines.extend(f"  episode {e['episode_index']}: {e['error']}" for e in s["errors"][:max_errors])
     if len(s["errors"]) > max_errors:
         lines.append(f"  ... and {len(s['errors']) - max_errors} more errors (results.json)")
+    n_infra = sum(e.get("error_kind") == INFRASTRUCTURE for e in s["errors"])
+    if n_infra:
+        lines.append(f"  {n_infra} of the errors are infrastructure failures (worker, disk, policy server): "
+                     "fix the cause and rerun with resume=true to run those episodes again")
+    outputs = s.get("output_errors") or []
+    if outputs:
+        first = outputs[0]
+        lines.append(f"  outputs not written for {len(outputs)} episode{'s' * (len(outputs) != 1)}, outcomes kept "
+                     f"(episode {first['episode_index']}: {first['errors'][0]}; all in results.json output_errors)")
     return lines

@@ -11,7 +11,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from molmo_lerobot.policies.base import Action, EpisodeContext, Policy
-    from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder
+    from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder, RecorderGroup
 
 
 class ActionError(ValueError):
@@ -127,7 +127,7 @@ def advance(env: Any, task: Any, action: Action, when: str) -> bool:
 
 
 def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: int,
-            recorders: list[Recorder], info: EpisodeInfo, policy_name: str,
+            recorders: RecorderGroup | list[Recorder], info: EpisodeInfo, policy_name: str,
             end_on_success: bool = False) -> RolloutOutcome:
     """Run one episode for up to ``horizon`` policy steps; report success at the end and at any step.
 
@@ -135,17 +135,20 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
     after a step whose action says ``done``, or, with ``end_on_success``, after the first
     successful step. Images are rendered only when someone needs them: the policy at the
     steps where it is asked for a new action (chunks run open loop), recorders at the steps
-    they ask for.
+    they ask for. A recorder that raises fails its output, not the episode (:class:`RecorderGroup`).
     """
+    from molmo_lerobot.runner.recorders import RecorderGroup
+
+    recs = recorders if isinstance(recorders, RecorderGroup) else RecorderGroup(recorders)
     policy.reset(ctx)
     task.setup()
     data = getattr(env, "data", None)
     if data is not None:
         check_divergence(data, "at the initial state")
-    for rec in recorders:
-        rec.start_episode(info)
+    recs.start_episode(info)
+
     def record_images(step: int) -> bool:
-        return any(r.wants_images_at(step, horizon) for r in recorders)
+        return recs.wants_images_at(step, horizon)
 
     obs = env.observe(images=policy.needs_images or record_images(0))
     obs["prompt"], obs["step"] = ctx.prompt, 0
@@ -169,10 +172,8 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
         done = step == horizon - 1 or ended_by != "horizon"
         if not queue or done:  # an observation instant: MolmoSpaces samples success here
             success_once |= success
-        if recorders:
-            reward = task.reward()
-            for rec in recorders:
-                rec.record_step(obs, action, reward, success, done)
+        if recs.recorders:
+            recs.record_step(obs, action, task.reward(), success, done)
         if done:
             steps = step + 1
             break

@@ -7,8 +7,8 @@ episode. For every slot the supervisor waits on the transport and reacts:
 
 * a result comes back → reported through ``on_result``;
 * the worker dies (SIGKILL, segfault, OOM, node loss), during an episode or while starting →
-  the episode is retried on a fresh worker up to ``retries`` times, then recorded as an error
-  naming the death; the run goes on;
+  the episode is retried on a fresh worker up to ``retries`` times, then recorded as an
+  infrastructure error naming the death (``resume=true`` runs it again); the run goes on;
 * a slot is free → it gets the pending item that follows its previous one in run order, else
   the start of the longest run of pending items that no slot continues (or that run's second
   half), so each worker plays stretches of consecutive episodes and its dataset shards are in
@@ -39,6 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from molmo_lerobot.errors import INFRASTRUCTURE
 from molmo_lerobot.runner.results import EpisodeResult
 from molmo_lerobot.runner.worker import WorkerJob, WorkItem
 
@@ -251,7 +252,7 @@ class Supervisor:
             self._pending[position] = item
             slot.last = position - 1  # the slot's next worker retries it first
         else:
-            self._on_result(item.failed(reason, attempts=n))
+            self._on_result(item.failed(reason, INFRASTRUCTURE, attempts=n))
 
     def _retire(self, slot: _Slot) -> None:
         """Ask the slot's worker to stop; it is killed if still there after ``stop_timeout_s``."""

@@ -15,8 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from molmo_lerobot.cpu_threads import cap_threads
+from molmo_lerobot.errors import EPISODE, describe, error_kind
 from molmo_lerobot.policies.base import EpisodeContext
-from molmo_lerobot.runner.recorders import EpisodeInfo, RecorderFactory
+from molmo_lerobot.runner.recorders import EpisodeInfo, RecorderFactory, RecorderGroup
 from molmo_lerobot.runner.results import EpisodeResult
 from molmo_lerobot.runner.rollout import rollout
 
@@ -32,12 +33,12 @@ class WorkItem:
     task_type: str
     horizon: int
 
-    def failed(self, error: str, **kw: Any) -> EpisodeResult:
+    def failed(self, error: str, kind: str = EPISODE, **kw: Any) -> EpisodeResult:
         """This episode as an error record (keeping its task type, prompt and horizon)."""
         task, language = self.spec.get("task"), self.spec.get("language")
         return EpisodeResult.failed(
             self.episode_index, self.spec.get("house_index"), task.get("task_cls") if isinstance(task, dict) else None,
-            self.seed, error, task_type=self.task_type, horizon=self.horizon,
+            self.seed, error, kind, task_type=self.task_type, horizon=self.horizon,
             prompt=language.get("task_description") if isinstance(language, dict) else "", **kw)
 
 
@@ -81,7 +82,7 @@ class EpisodeWorker:
         self.policy_name = str(job.policy["name"])
         self.policy = make_policy(job.policy)
         cap_threads(job.threads)  # a policy that imported torch reads the cap now
-        self.recorders = [f.make(worker_id, Path(job.output_dir)) for f in job.recorders]
+        self.recorders = RecorderGroup([f.make(worker_id, Path(job.output_dir)) for f in job.recorders])
         self.stopping = False
         self._in_rollout = False
 
@@ -94,7 +95,8 @@ class EpisodeWorker:
 
     def run(self, item: WorkItem) -> EpisodeResult:
         """Run one episode; any exception (a policy's ``KeyboardInterrupt`` or ``SystemExit``
-        too) becomes this episode's recorded error. :class:`WorkerStop` propagates."""
+        too) becomes this episode's recorded error, with its ``error_kind``. A recorder that fails
+        changes only ``output_errors``, never the outcome. :class:`WorkerStop` propagates."""
         from molmo_lerobot.benchmark.schema import EpisodeSpec
         from molmo_lerobot.runner.episode import start_episode
 
@@ -143,23 +145,15 @@ class EpisodeWorker:
                        "success_any_step": outcome.success_any_step, "camera_system": env.camera_system},
             )
         except (Exception, KeyboardInterrupt, SystemExit) as exc:
-            result = item.failed(_describe(exc))
+            result = item.failed(describe(exc), error_kind(exc))
             if os.environ.get("MOLMO_DEBUG"):
                 traceback.print_exc()
         result.duration_s = time.perf_counter() - t0
-        for rec in self.recorders:
-            rec.end_episode(result)
+        self.recorders.end_episode(result)
         return result
 
     def close(self) -> None:
-        for rec in self.recorders:
-            rec.close()
-        self.policy.close()
-
-
-def _describe(exc: BaseException) -> str:
-    """One line: exception type, message and where it was raised."""
-    tb = traceback.extract_tb(exc.__traceback__)
-    where = f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
-    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-    return f"{type(exc).__name__}: {msg}{where}"
+        try:
+            self.recorders.close()
+        finally:
+            self.policy.close()

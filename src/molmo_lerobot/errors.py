@@ -1,0 +1,37 @@
+"""Whose failure it is: the episode's, or the machinery's around it (disk, network, policy server).
+
+An episode error is part of the result (the policy raised, the physics diverged) and stays
+when a run is resumed. An infrastructure failure says nothing about the policy: it is
+recorded with ``error_kind="infrastructure"`` and ``resume=true`` runs the episode again.
+"""
+
+from __future__ import annotations
+
+import errno
+import traceback
+from pathlib import Path
+
+EPISODE, INFRASTRUCTURE = "episode", "infrastructure"
+
+#: ``OSError`` numbers that mean the machine, not the episode, failed: a full disk or quota,
+#: a read-only or failing file system
+MACHINE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EIO})
+
+
+class InfrastructureError(RuntimeError):
+    """A failure of what runs the episode, not of the episode (e.g. the policy server is gone)."""
+
+
+def error_kind(exc: BaseException) -> str:
+    """:data:`INFRASTRUCTURE` for an :class:`InfrastructureError` or a full/failing disk, else :data:`EPISODE`."""
+    if isinstance(exc, InfrastructureError) or (isinstance(exc, OSError) and exc.errno in MACHINE_ERRNOS):
+        return INFRASTRUCTURE
+    return EPISODE
+
+
+def describe(exc: BaseException) -> str:
+    """One line: exception type, the first line of its message and where it was raised."""
+    tb = traceback.extract_tb(exc.__traceback__)
+    where = f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
+    text = str(exc).strip()
+    return f"{type(exc).__name__}: {text.splitlines()[0] if text else ''}{where}"
