@@ -40,8 +40,10 @@ def _tree() -> list[dict]:
     out = []
     for b in range(1, model.nbody):
         name = model.body(b).name
-        joints = [{"name": model.joint(j).name, "axis": model.jnt_axis[j].tolist(), "range": model.jnt_range[j].tolist()}
-                  for j in range(model.njnt) if model.jnt_bodyid[j] == b and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]
+        joints = [{"name": model.joint(j).name, "axis": model.jnt_axis[j].tolist(),
+                   "range": model.jnt_range[j].tolist()}
+                  for j in range(model.njnt)
+                  if model.jnt_bodyid[j] == b and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]
         sites = [{"name": model.site(s).name, "pos": model.site_pos[s].tolist(), "quat": model.site_quat[s].tolist()}
                  for s in range(model.nsite) if model.site_bodyid[s] == b]
         out.append({"name": name, "parent": model.body(model.body_parentid[b]).name or "world",

@@ -214,7 +214,8 @@ def test_deeply_nested_run_files_are_one_line(tmp_path, capsys):
 def test_control_mode_and_mujoco_version_are_part_of_the_trial(tmp_path, path, value):
     """timing.control (hold | ramp) and the MuJoCo version change the dynamics: never paired silently."""
     a = _write_run(tmp_path / "a", {i: (True, True) for i in range(4)}, header={**TRIAL, "mujoco": "4.0.0"})
-    b = _write_run(tmp_path / "b", {i: (True, True) for i in range(4)}, header={**TRIAL, "mujoco": "4.0.0", path: value})
+    b = _write_run(tmp_path / "b", {i: (True, True) for i in range(4)},
+                   header={**TRIAL, "mujoco": "4.0.0", path: value})
     with pytest.raises(CompareError, match="ran different trials") as info:
         compare_runs(load_run(a), load_run(b))
     assert path in str(info.value)

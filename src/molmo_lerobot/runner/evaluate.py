@@ -334,7 +334,8 @@ def _warn_default_horizons(path: Path, described: list[dict[str, Any]], policy_d
             used[d["task_type"]] = d["horizon"]
             count += 1
     if count:
-        table = ", ".join(f"{task} {steps * policy_dt_ms / 1000:.3g} s = {steps} steps" for task, steps in sorted(used.items()))
+        table = ", ".join(f"{task} {steps * policy_dt_ms / 1000:.3g} s = {steps} steps"
+                          for task, steps in sorted(used.items()))
         print(f"molmo-eval: warning: {path}: {count} episode{'s' * (count != 1)} carry no task.task_horizon_sec; "
               f"running MolmoSpaces' default horizons ({table}); MolmoSpaces refuses such a file without a "
               "horizon: pass horizon=<steps> or horizons.<task>=<seconds> to choose", file=sys.stderr)
