@@ -16,6 +16,7 @@ from shapely.geometry import MultiPoint, Polygon, box
 #: points on a circle when a round geom's footprint becomes a polygon
 CIRCLE_POINTS = 32
 VISIBLE_GROUPS = (0, 1, 2)
+_BOX_CORNERS = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)])
 
 
 def root_body(model: mujoco.MjModel, body: int) -> int:
@@ -83,20 +84,28 @@ def geom_points(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> np.ndarra
 
 
 def aabb(model: mujoco.MjModel, data: mujoco.MjData, geoms: Iterable[int]) -> tuple[np.ndarray, np.ndarray]:
-    """World axis-aligned box of ``geoms`` as (centre, size); ``ValueError`` when there are none."""
+    """World axis-aligned box of ``geoms`` as (centre, size), as MolmoSpaces' ``geom_aabb`` bounds them:
+    a mesh by its vertices, any other geom by the 8 corners of its local box (``model.geom_aabb``) in
+    the world, so a turned sphere or cylinder counts its box's corners. ``ValueError`` when there are none."""
     geoms = list(geoms)
     if not geoms:
         raise ValueError("no geoms to bound")
-    pts = np.concatenate([geom_points(model, data, g) for g in geoms])
+    pts = []
+    for g in geoms:
+        if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
+            pts.append(geom_points(model, data, g))
+        else:
+            centre, half = model.geom_aabb[g, :3], model.geom_aabb[g, 3:]
+            pts.append(data.geom_xpos[g] + (centre + _BOX_CORNERS * half) @ data.geom_xmat[g].reshape(3, 3).T)
+    pts = np.concatenate(pts)
     lo, hi = pts.min(0), pts.max(0)
     return (lo + hi) / 2, hi - lo
 
 
 def body_aabb(model: mujoco.MjModel, data: mujoco.MjData, body: int) -> tuple[np.ndarray, np.ndarray]:
     """AABB (centre, size) of the visible geoms of ``body``'s subtree (MolmoSpaces' ``body_aabb``);
-    all its geoms when none is visible, its position with zero size when it has none."""
-    bodies = subtree(model, body)
-    geoms = body_geoms(model, bodies) or body_geoms(model, bodies, visible_only=False)
+    its position with zero size when none is visible."""
+    geoms = body_geoms(model, subtree(model, body))
     if not geoms:
         return data.xpos[body].copy(), np.zeros(3)
     return aabb(model, data, geoms)
