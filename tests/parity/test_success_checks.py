@@ -300,6 +300,11 @@ def put(s: State, obj: str, rec: np.ndarray, receptacle: str, local_xy=(0.0, 0.0
     return s.place(obj, pos, q)
 
 
+def lying_drop(obj: str) -> float:
+    """A capsule lies on its side: its centre sits a radius (not a half length) above the floor."""
+    return -(HALF_HEIGHT[obj] - MARKER_R) if obj == "marker" else 0.0
+
+
 def pnp_cases(rng, task_type: str = "pick_and_place", receptacles=("tray",), colors: dict | None = None) -> list:
     """In the receptacle at rest, hovering (the contactless fallback's height band and the edge of the
     receptacle's box), on the table, held, pushed sideways, the receptacle moved, turned or tilted to
@@ -325,7 +330,7 @@ def pnp_cases(rng, task_type: str = "pick_and_place", receptacles=("tray",), col
         yaw = Rotation.from_euler("z", rng.uniform(-math.pi, math.pi))
         lying = Rotation.from_euler("y", math.pi / 2) if obj == "marker" else Rotation.identity()
         if kind in ("rest", "rest_moved", "tilted", "held", "pushed"):
-            put(s, obj, rec, receptacle, xy, local_rot=yaw * lying, lift=-PEN + (_lying_drop(obj)))
+            put(s, obj, rec, receptacle, xy, local_rot=yaw * lying, lift=-PEN + lying_drop(obj))
         elif kind == "hover":
             put(s, obj, rec, receptacle, xy, lift=rng.uniform(0.0, 0.07), local_rot=random_rotation(rng))
         elif kind == "hover_edge":  # the object's centre at the edge of the receptacle's box
@@ -380,11 +385,6 @@ def pnp_cases(rng, task_type: str = "pick_and_place", receptacles=("tray",), col
             case(cases, task, "carry_forward_away_and_back", rest, away, up)
             case(cases, task, "carry_forward_never_supported", away, up)
     return cases
-
-
-def _lying_drop(obj: str) -> float:
-    """A capsule lies on its side: its centre sits a radius (not a half length) above the floor."""
-    return -(HALF_HEIGHT[obj] - MARKER_R) if obj == "marker" else 0.0
 
 
 CRATE_START = np.array([0.15, 0.1, TABLE_TOP - PEN, 1.0, 0.0, 0.0, 0.0])

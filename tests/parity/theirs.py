@@ -140,8 +140,7 @@ def _serve(helper: str, io_dir: Path) -> None:
     """The other side: import the helper module from this directory and run it on the inputs."""
     import importlib
 
-    module, func = helper.split(":")
-    sys.path.insert(0, str(HERE))
+    module, func = helper.split(":")  # the module is found next to this file: sys.path[0]
     result = getattr(importlib.import_module(module), func)(_read(io_dir, "in"))
     _write(io_dir, "out", result)
 
