@@ -9,40 +9,22 @@ Their task classes are built with their own constructors and judged with their o
   one :class:`ObjectManager` (theirs), the robot's root body and the robot namespace;
 * the experiment config: a namespace with the five fields their task constructors read (their
   ``MlSpacesExpConfig`` needs a robot config and policy classes); the task config is theirs;
-* downloaded resources touched while importing or judging: the resource manager is not set up
-  (``get_resource_manager`` returns None), the object-annotation database is empty (our objects carry no
-  ``asset_id``, so it is only asked for ``"DUMMY"``, which it never holds), and ThOR's two material
-  tables, read when the colour task's sampler module is imported, are empty JSON files under the
-  helper's own ``MLSPACES_ASSETS_DIR``.
+* downloaded resources touched while importing or judging: ``theirs.offline`` (our objects carry no
+  ``asset_id``, so the empty annotation database is only asked for ``"DUMMY"``, which it never holds;
+  the material tables are read when the colour task's sampler module is imported).
 """
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
 from types import SimpleNamespace
 
 import mujoco
 import numpy as np
+from theirs import contact_table, offline
 
-
-def _offline() -> None:
-    """Swap the downloaded resources for empty ones (module docstring); before any task import."""
-    thor = Path(os.environ["MLSPACES_ASSETS_DIR"]) / "objects" / "thor"
-    thor.mkdir(parents=True, exist_ok=True)
-    for name in ("material-database.json", "material_to_textures.json"):
-        (thor / name).write_text("{}")
-    import molmo_spaces.molmo_spaces_constants as constants
-    import molmo_spaces.utils.object_metadata as object_metadata
-
-    constants.get_resource_manager = lambda *args, **kwargs: None
-    object_metadata.get_db = lambda: {}
-
-
-_offline()
+offline()
 
 from molmo_spaces.configs import task_configs  # noqa: E402
-from theirs import contact_table  # noqa: E402
 from molmo_spaces.env.object_manager import ObjectManager  # noqa: E402
 from molmo_spaces.tasks.opening_tasks import OpeningTask  # noqa: E402
 from molmo_spaces.tasks.pick_and_place_color_task import PickAndPlaceColorTask  # noqa: E402

@@ -109,6 +109,24 @@ def same_contacts(a, b, atol: float = 1e-6, force_rtol: float = 1e-3) -> bool:
     return bool(np.allclose(a[:, :9], b[:, :9], rtol=0, atol=atol) and np.all(np.abs(a[:, 9:] - b[:, 9:]) <= force_rtol * scale))
 
 
+def offline() -> None:
+    """On their side, before importing their task or sampler modules: MolmoSpaces downloads resources
+    (scene archives, object annotations, ThOR material tables) on first use; swap them for empty
+    ones. The resource manager is not set up (``get_resource_manager`` returns None), the object
+    annotation database is empty, and ThOR's two material tables, read at import by
+    ``env/arena/randomization/texture.py``, are ``{}`` under this call's ``MLSPACES_ASSETS_DIR``.
+    Code that needs a real resource then fails loudly instead of downloading it."""
+    thor = Path(os.environ["MLSPACES_ASSETS_DIR"]) / "objects" / "thor"
+    thor.mkdir(parents=True, exist_ok=True)
+    for name in ("material-database.json", "material_to_textures.json"):
+        (thor / name).write_text("{}")
+    import molmo_spaces.molmo_spaces_constants as constants
+    import molmo_spaces.utils.object_metadata as object_metadata
+
+    constants.get_resource_manager = lambda *args, **kwargs: None
+    object_metadata.get_db = lambda: {}
+
+
 DOC = HERE.parents[1] / "docs" / "parity.md"
 
 
