@@ -9,7 +9,9 @@ set with zero velocity and followed by ``mj_forward``. Episodes of several state
 remember (pick-and-place's carry-forward). Their verdict comes from their task class's
 ``judge_success`` (tests/parity/their_success.py), ours from our task plugin's ``success``.
 
-Every case must agree. docs/parity.md's agreement table is checked against the counts here.
+Every state on which both MuJoCo versions find the same contacts must be judged alike, but for the
+documented deliberate differences (docs/parity.md); where the contacts differ, the disagreements are
+counted, not failed. docs/parity.md's agreement table is checked against the counts here.
 """
 
 from __future__ import annotations
@@ -368,8 +370,8 @@ def pnp_cases(rng, task_type: str = "pick_and_place", receptacles=("tray",), col
         rec = receptacle_pose(task, rng, moved=0.0, tilt=task["max_place_receptacle_rot_displacement"] + delta)
         s = State().place("tray", rec[:3], rec[3:])
         case(cases, task, "tilt_boundary", put(s, "apple", rec, "tray"))
-    # Carry-forward: supported, then lifted off the floor (no contact, below the fallback's band) by
-    # 5 mm or turned by 10 degrees, at and either side; and away and back.
+    # Carry-forward: supported, then lifted from that pose (off the floor: no contact, below the
+    # fallback's band) by 5 mm or turned by 10 degrees, at and either side; and away and back.
     for i, (lift, turn) in enumerate([(0.005 - EPS, 0.0), (0.005, 0.0), (0.005 + EPS, 0.0), (0.003, 0.0),
                                       (0.008, 0.0), (0.002, math.radians(10) - EPS),
                                       (0.002, math.radians(10) + EPS), (0.002, math.radians(5)),
@@ -378,7 +380,7 @@ def pnp_cases(rng, task_type: str = "pick_and_place", receptacles=("tray",), col
         xy = rng.uniform(-0.05, 0.05, size=2)
         base = State().place("tray", TRAY_START[:3], TRAY_START[3:])
         rest = put(base.copy(), "apple", TRAY_START, "tray", xy)
-        up = put(base.copy(), "apple", TRAY_START, "tray", xy, lift=lift, local_rot=Rotation.from_euler("z", turn))
+        up = put(base.copy(), "apple", TRAY_START, "tray", xy, lift=lift - PEN, local_rot=Rotation.from_euler("z", turn))
         case(cases, task, "carry_forward", rest, up)
         if i == 0:
             away = base.copy().place("apple", [-0.3, 0.2, resting_z("apple")])
@@ -648,6 +650,8 @@ def test_success_check_agrees_with_molmospaces(comparisons, family, theirs):
     documented deliberate differences; the counts are docs/parity.md's."""
     c = comparisons[family]
     assert len(c.kinds) >= 200
+    for kind in {k for k in c.kinds if k.endswith("_boundary")}:  # each threshold is really straddled
+        assert {o for k, o in zip(c.kinds, c.ours, strict=True) if k == kind} == {True, False}, kind
     assert not c.disagreements(same_contacts=True), f"{family}: rule disagreements by kind: {c.disagreements(True)}"
     row = theirs.table_row(TABLE_ROWS[family])
     reported = {"cases": len(c.kinds), "agreed": c.agreed, "same contacts": sum(c.same_contacts),
