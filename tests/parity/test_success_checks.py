@@ -87,7 +87,8 @@ SCENE_XML = f"""
     <body name="ghost"><freejoint name="ghost/free"/>
       <geom name="ghost" type="box" size="0.02 0.02 0.02" group="3" mass="0.1"/></body>
     <body name="tray"><freejoint name="tray/free"/>
-      <geom name="tray_floor" type="box" size="{TRAY_HALF} {TRAY_HALF} {TRAY_FLOOR / 2}" pos="0 0 {TRAY_FLOOR / 2}" mass="0.3"/>
+      <geom name="tray_floor" type="box" size="{TRAY_HALF} {TRAY_HALF} {TRAY_FLOOR / 2}"
+            pos="0 0 {TRAY_FLOOR / 2}" mass="0.3"/>
       <geom name="tray_north" type="box" size="{TRAY_HALF} 0.005 0.025" pos="0 0.095 0.035" mass="0.05"/>
       <geom name="tray_south" type="box" size="{TRAY_HALF} 0.005 0.025" pos="0 -0.095 0.035" mass="0.05"/>
       <geom name="tray_east" type="box" size="0.005 0.09 0.025" pos="0.095 0 0.035" mass="0.05"/>
@@ -95,9 +96,11 @@ SCENE_XML = f"""
       <geom name="tray_collider" type="box" size="0.1 0.1 0.002" pos="0 0 -0.01" group="3" contype="0" conaffinity="0"/>
     </body>
     <body name="crate"><freejoint name="crate/free"/>
-      <geom name="crate" type="box" size="{CRATE_HALF} {CRATE_HALF} {CRATE_HEIGHT / 2}" pos="0 0 {CRATE_HEIGHT / 2}" mass="0.5"/></body>
+      <geom name="crate" type="box" size="{CRATE_HALF} {CRATE_HALF} {CRATE_HEIGHT / 2}"
+            pos="0 0 {CRATE_HEIGHT / 2}" mass="0.5"/></body>
     <body name="plate"><freejoint name="plate/free"/>
-      <geom name="plate" type="cylinder" size="{PLATE_R} {PLATE_HEIGHT / 2}" pos="0 0 {PLATE_HEIGHT / 2}" mass="0.2"/></body>
+      <geom name="plate" type="cylinder" size="{PLATE_R} {PLATE_HEIGHT / 2}"
+            pos="0 0 {PLATE_HEIGHT / 2}" mass="0.2"/></body>
     <body name="cabinet" pos="1.5 0 0">
       <geom name="cabinet" type="box" size="0.2 0.3 0.4" pos="0 0 0.4"/>
       <body name="cabinet/knob" pos="-0.21 0.2 0.7">
@@ -135,7 +138,8 @@ SCENE_XML = f"""
 METADATA = {"objects": {
     "table": {"category": "DiningTable"}, "shelf": {"category": "Shelf"}, "apple": {"category": "Apple"},
     "ball": {"category": "Ball"}, "can": {"category": "Can"}, "marker": {"category": "Pen"},
-    "ghost": {"category": "Ghost"}, "tray": {"category": "Tray"}, "crate": {"category": "Box"}, "plate": {"category": "Plate"},
+    "ghost": {"category": "Ghost"}, "tray": {"category": "Tray"}, "crate": {"category": "Box"},
+    "plate": {"category": "Plate"},
     "cabinet": {"category": "Cabinet"}, "cabinet2": {"category": "Cabinet"}, "fridge": {"category": "Fridge"},
 }}
 FREE_BODIES = ("apple", "ball", "can", "marker", "ghost", "tray", "crate", "plate")
@@ -366,7 +370,8 @@ def pnp_cases(rng, task_type: str = "pick_and_place", receptacles=("tray",), col
         s = State().place("tray", rec[:3], rec[3:])
         case(cases, task, "moved_boundary", put(s, "apple", rec, "tray"))
         # a 20 degree limit: friction holds the object firmly, so only the tilt decides
-        task = place_task(task_type, "apple", "tray", rng, **extra, max_place_receptacle_rot_displacement=math.radians(20))
+        task = place_task(task_type, "apple", "tray", rng, **extra,
+                          max_place_receptacle_rot_displacement=math.radians(20))
         rec = receptacle_pose(task, rng, moved=0.0, tilt=task["max_place_receptacle_rot_displacement"] + delta)
         s = State().place("tray", rec[:3], rec[3:])
         case(cases, task, "tilt_boundary", put(s, "apple", rec, "tray"))
@@ -380,7 +385,8 @@ def pnp_cases(rng, task_type: str = "pick_and_place", receptacles=("tray",), col
         xy = rng.uniform(-0.05, 0.05, size=2)
         base = State().place("tray", TRAY_START[:3], TRAY_START[3:])
         rest = put(base.copy(), "apple", TRAY_START, "tray", xy)
-        up = put(base.copy(), "apple", TRAY_START, "tray", xy, lift=lift - PEN, local_rot=Rotation.from_euler("z", turn))
+        up = put(base.copy(), "apple", TRAY_START, "tray", xy, lift=lift - PEN,
+                 local_rot=Rotation.from_euler("z", turn))
         case(cases, task, "carry_forward", rest, up)
         if i == 0:
             away = base.copy().place("apple", [-0.3, 0.2, resting_z("apple")])

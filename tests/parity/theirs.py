@@ -106,7 +106,8 @@ def same_contacts(a, b, atol: float = 1e-6, force_rtol: float = 1e-3) -> bool:
         return False
     a, b = (t[np.lexsort(np.round(t[:, [5, 4, 3, 1, 0]], 5).T)] for t in (a, b))
     scale = np.maximum(1.0, np.abs(a[:, 9:]))
-    return bool(np.allclose(a[:, :9], b[:, :9], rtol=0, atol=atol) and np.all(np.abs(a[:, 9:] - b[:, 9:]) <= force_rtol * scale))
+    return bool(np.allclose(a[:, :9], b[:, :9], rtol=0, atol=atol)
+                and np.all(np.abs(a[:, 9:] - b[:, 9:]) <= force_rtol * scale))
 
 
 def offline() -> None:

@@ -154,7 +154,8 @@ def test_next_to_without_a_supporting_contact_falls_back_to_boxes(dz, ok):
         top = max(c[2] + s[2] / 2 for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == surface
                   for c, s in [geometry.aabb(m, d, [g])])
         centre, size = geometry.body_aabb(m, d, obj)
-        env._place(task.object_name, env.body_pose(task.object_name) + [0, 0, top + dz - (centre[2] - size[2] / 2), 0, 0, 0, 0])
+        rise = top + dz - (centre[2] - size[2] / 2)
+        env._place(task.object_name, env.body_pose(task.object_name) + [0, 0, rise, 0, 0, 0, 0])
         mujoco.mj_forward(m, d)
         assert task.supporting_root(obj) is None
         task.min_gap, task.max_gap = 0.0, 10.0
