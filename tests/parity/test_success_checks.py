@@ -49,6 +49,7 @@ PEN = 0.0005  # how far a resting body sinks into what carries it
 SCENE_XML = f"""
 <mujoco model="parity_success">
   <option timestep="0.002"/>
+  <asset><material name="wood" rgba="0.6 0.4 0.2 1"/></asset>
   <worldbody>
     <geom name="floor" type="plane" size="4 4 0.1"/>
     <body name="table">
@@ -89,7 +90,8 @@ SCENE_XML = f"""
     <body name="tray"><freejoint name="tray/free"/>
       <geom name="tray_floor" type="box" size="{TRAY_HALF} {TRAY_HALF} {TRAY_FLOOR / 2}"
             pos="0 0 {TRAY_FLOOR / 2}" mass="0.3"/>
-      <geom name="tray_north" type="box" size="{TRAY_HALF} 0.005 0.025" pos="0 0.095 0.035" mass="0.05"/>
+      <geom name="tray_north" type="box" size="{TRAY_HALF} 0.005 0.025" pos="0 0.095 0.035" mass="0.05"
+            material="wood"/>
       <geom name="tray_south" type="box" size="{TRAY_HALF} 0.005 0.025" pos="0 -0.095 0.035" mass="0.05"/>
       <geom name="tray_east" type="box" size="0.005 0.09 0.025" pos="0.095 0 0.035" mass="0.05"/>
       <geom name="tray_west" type="box" size="0.005 0.09 0.025" pos="-0.095 0 0.035" mass="0.05"/>
@@ -102,7 +104,7 @@ SCENE_XML = f"""
       <geom name="plate" type="cylinder" size="{PLATE_R} {PLATE_HEIGHT / 2}"
             pos="0 0 {PLATE_HEIGHT / 2}" mass="0.2"/></body>
     <body name="cabinet" pos="1.5 0 0">
-      <geom name="cabinet" type="box" size="0.2 0.3 0.4" pos="0 0 0.4"/>
+      <geom name="cabinet" type="box" size="0.2 0.3 0.4" pos="0 0 0.4" material="wood"/>
       <body name="cabinet/knob" pos="-0.21 0.2 0.7">
         <joint name="cabinet/knob_turn" type="hinge" axis="1 0 0"/>
         <geom type="cylinder" size="0.01 0.01" euler="0 1.5708 0" contype="0" conaffinity="0"/></body>
@@ -664,3 +666,25 @@ def test_success_check_agrees_with_molmospaces(comparisons, family, theirs):
                 "deliberate": sum(c.deliberate), "contacts differ, judged differently":
                 sum(o != t and not s for o, t, s in zip(c.ours, c.theirs, c.same_contacts, strict=True))}
     assert row == reported, f"docs/parity.md's row for {family} is out of date: it should read {reported}"
+
+
+PAINTABLE = ("tray", "crate", "plate", "apple", "ghost", "cabinet", "fridge")
+
+
+def test_colours_are_painted_as_molmospaces_paints_them(theirs):
+    """pick_and_place_color: every geom's rgba and material after painting ``object_colors`` equal their
+    JSON evaluation's (visible geoms of each body's subtree, material cleared), for random colourings."""
+    rng = np.random.default_rng(7)
+    colorings = [{name: [float(v) for v in rng.uniform(0, 1, 4).round(3)]
+                  for name in rng.choice(PAINTABLE, size=int(rng.integers(1, 4)), replace=False)} for _ in range(24)]
+    got = theirs.run("their_success:paint", {**theirs_inputs([]), "colorings": colorings})
+    plugins = get_plugins()
+    agreed = 0
+    for colors, rgba, matid in zip(colorings, got["rgba"], got["matid"], strict=True):
+        task = place_task("pick_and_place_color", "apple", "tray", rng, object_colors=colors)
+        spec = episode_spec(task)
+        env = Env(spec, Timing(), copy.copy(MODEL), GRIPPER, [])
+        plugins.task_type(spec.task_name).create(spec, env)
+        agreed += bool(np.array_equal(env.model.geom_rgba, rgba) and np.array_equal(env.model.geom_matid, matid))
+    assert theirs.table_row("colour painting") == {"cases": len(colorings), "agreed": agreed}
+    assert agreed == len(colorings)

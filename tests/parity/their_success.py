@@ -86,3 +86,21 @@ def judge(inputs: dict) -> dict:
             success[s] = bool(task.judge_success())
             contacts[s] = contact_table(model, data).tolist()
     return {"success": success, "contacts": contacts}
+
+
+def paint(inputs: dict) -> dict:
+    """Their JSON evaluation's colouring of ``object_colors`` (``JsonEvalTaskSampler._randomize_colors``)
+    on a fresh model per colouring; returns every geom's ``rgba`` (C, ngeom, 4) and ``matid`` (C, ngeom)."""
+    import molmo_spaces.evaluation  # noqa: F401  (their import order: evaluation before the sampler)
+    from molmo_spaces.tasks.json_eval_task_sampler import JsonEvalTaskSampler
+
+    rgba, matid = [], []
+    for colors in inputs["colorings"]:
+        model = mujoco.MjModel.from_xml_string(inputs["xml"])
+        env = SceneEnv(model, mujoco.MjData(model), model.body(inputs["robot_root"]).id, inputs["robot_namespace"],
+                       inputs["metadata"])
+        sampler = SimpleNamespace(episode_spec=SimpleNamespace(task={"object_colors": colors}))
+        JsonEvalTaskSampler._randomize_colors(sampler, env)
+        rgba.append(model.geom_rgba.copy())
+        matid.append(model.geom_matid.copy())
+    return {"rgba": np.array(rgba), "matid": np.array(matid)}
