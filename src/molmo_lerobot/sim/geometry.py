@@ -83,22 +83,31 @@ def geom_points(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> np.ndarra
     return pos + local @ rot.T
 
 
+def geom_boxes(model: mujoco.MjModel, data: mujoco.MjData, geoms: Iterable[int]) -> tuple[np.ndarray, np.ndarray]:
+    """World axis-aligned box of each geom as (lows, highs), each (n, 3), as MolmoSpaces' ``geom_aabb``
+    bounds a geom: a mesh by its vertices, any other geom by the 8 corners of its local box
+    (``model.geom_aabb``) in the world, so a turned sphere or cylinder counts its box's corners."""
+    geoms = np.asarray(list(geoms), dtype=int)
+    lo, hi = np.empty((len(geoms), 3)), np.empty((len(geoms), 3))
+    is_mesh = model.geom_type[geoms] == mujoco.mjtGeom.mjGEOM_MESH
+    for i in np.flatnonzero(is_mesh):
+        pts = geom_points(model, data, int(geoms[i]))
+        lo[i], hi[i] = pts.min(0), pts.max(0)
+    boxes = geoms[~is_mesh]
+    if len(boxes):
+        local = model.geom_aabb[boxes, None, :3] + _BOX_CORNERS * model.geom_aabb[boxes, None, 3:]  # (n, 8, 3)
+        world = data.geom_xpos[boxes, None, :] + local @ data.geom_xmat[boxes].reshape(-1, 3, 3).transpose(0, 2, 1)
+        lo[~is_mesh], hi[~is_mesh] = world.min(1), world.max(1)
+    return lo, hi
+
+
 def aabb(model: mujoco.MjModel, data: mujoco.MjData, geoms: Iterable[int]) -> tuple[np.ndarray, np.ndarray]:
-    """World axis-aligned box of ``geoms`` as (centre, size), as MolmoSpaces' ``geom_aabb`` bounds them:
-    a mesh by its vertices, any other geom by the 8 corners of its local box (``model.geom_aabb``) in
-    the world, so a turned sphere or cylinder counts its box's corners. ``ValueError`` when there are none."""
-    geoms = list(geoms)
-    if not geoms:
+    """World axis-aligned box of ``geoms`` together as (centre, size) (each geom as :func:`geom_boxes`
+    bounds it); ``ValueError`` when there are none."""
+    lo, hi = geom_boxes(model, data, geoms)
+    if not len(lo):
         raise ValueError("no geoms to bound")
-    pts = []
-    for g in geoms:
-        if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
-            pts.append(geom_points(model, data, g))
-        else:
-            centre, half = model.geom_aabb[g, :3], model.geom_aabb[g, 3:]
-            pts.append(data.geom_xpos[g] + (centre + _BOX_CORNERS * half) @ data.geom_xmat[g].reshape(3, 3).T)
-    pts = np.concatenate(pts)
-    lo, hi = pts.min(0), pts.max(0)
+    lo, hi = lo.min(0), hi.max(0)
     return (lo + hi) / 2, hi - lo
 
 

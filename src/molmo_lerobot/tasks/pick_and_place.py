@@ -30,6 +30,7 @@ task spec's fields with the defaults of :mod:`molmo_lerobot.benchmark.schema`.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import TYPE_CHECKING, Any
 
@@ -257,6 +258,19 @@ class PickAndPlaceNextToTask(PickAndPlaceTask):
                 return geometry.root_body(m, other)
         return None
 
+    @functools.cached_property
+    def _support_candidates(self) -> list[tuple[int, list[int], list[int]]]:
+        """(root, visible geoms of its subtree, its own geoms) of every top-level body (the world too)
+        that may carry something by boxes: not the robot's, with a visible geom."""
+        m = self.env.model
+        roots = np.asarray(m.body_rootid)[np.asarray(m.geom_bodyid)]
+        out = []
+        for root in sorted(set(roots.tolist()) - set(self.env.robot.body_ids)):
+            visible = geometry.body_geoms(m, geometry.subtree(m, root))
+            if visible:
+                out.append((root, visible, np.flatnonzero(roots == root).tolist()))
+        return out
+
     def approximate_supports(self, body: int) -> set[int]:
         """Geoms ``body`` may rest on by boxes alone (MolmoSpaces' ``approximate_supporting_geoms``, the
         fallback when a body has no supporting contact): geoms of the other top-level bodies (not the
@@ -265,20 +279,16 @@ class PickAndPlaceNextToTask(PickAndPlaceTask):
         m, d = self.env.model, self.env.data
         centre, size = geometry.body_aabb(m, d, body)
         rect, bottom = geometry.xy_rect(centre, size), centre[2] - size[2] / 2
-        roots = np.asarray(m.body_rootid)[np.asarray(m.geom_bodyid)]
+        own = geometry.root_body(m, body)
         out: set[int] = set()
-        for root in sorted(set(roots.tolist())):
-            bodies = geometry.subtree(m, root)
-            if root == body or root in self.env.robot.body_ids or not geometry.body_geoms(m, bodies):
+        for root, visible, geoms in self._support_candidates:
+            if root == own or not geometry.xy_rect(*geometry.aabb(m, d, visible)).intersects(rect):
                 continue
-            if not geometry.xy_rect(*geometry.body_aabb(m, d, root)).intersects(rect):
-                continue
-            for g in np.flatnonzero(roots == root).tolist():
-                g_centre, g_size = geometry.aabb(m, d, [g])
-                top = g_centre[2] + g_size[2] / 2
-                if abs(bottom - top) < APPROX_SUPPORT_DZ and \
-                        geometry.xy_rect(g_centre, g_size).intersection(rect).area >= rect.area / 2:
-                    out.add(g)
+            lo, hi = geometry.geom_boxes(m, d, geoms)
+            for i in np.flatnonzero(np.abs(bottom - hi[:, 2]) < APPROX_SUPPORT_DZ):
+                footprint = geometry.xy_rect((lo[i] + hi[i]) / 2, hi[i] - lo[i])
+                if footprint.intersection(rect).area >= rect.area / 2:
+                    out.add(geoms[i])
         return out
 
     def on_same_surface(self) -> bool:
