@@ -28,6 +28,7 @@ from scipy.spatial.transform import Rotation
 
 from molmo_lerobot.benchmark.schema import EpisodeSpec
 from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.robots.base import RobotType
 from molmo_lerobot.sim.env import Env, Timing
 from molmo_lerobot.sim.geometry import subtree
 from theirs import contact_table
@@ -554,9 +555,9 @@ def opening_task(mode: str, obj: str, joint: str, **fields) -> dict:
             "pickup_obj_start_pose": [1.5, 0.0, 0.4, 1.0, 0.0, 0.0, 0.0], **fields}
 
 
-#: our Env needs from its robot only the bodies it is made of (the contact tests)
+#: our Env needs from its robot only the bodies it is made of (the contact tests) and its base pose check
 GRIPPER = SimpleNamespace(bind=lambda model: SimpleNamespace(body_ids=subtree(model, model.body("robot/base").id)),
-                          move_groups={}, joint_names={})
+                          move_groups={}, joint_names={}, base_pose=RobotType.base_pose)
 
 
 def ours(cases: list) -> tuple[list[bool], list[np.ndarray]]:
