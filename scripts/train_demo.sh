@@ -84,8 +84,8 @@ work = Path(sys.argv[1])
 rand, trained = (json.loads((work / f"eval-{p}" / "results.json").read_text()) for p in ("random", "trained"))
 expert = json.loads((work / "expert" / "results.json").read_text())
 for name, r in (("expert (training data)", expert), ("random", rand), ("trained", trained)):
-    lo, hi = r["ci95"] or (None, None)
-    print(f"{name:24s} success {r['n_success']}/{r['n_valid']}  Wilson 95% CI [{lo}, {hi}]")
+    ci = "[{:.3f}, {:.3f}]".format(*r["ci95"]) if r["ci95"] else "none (no episode ran)"
+    print(f"{name:24s} success {r['n_success']}/{r['n_valid']}  Wilson 95% CI {ci}")
 beats = trained["ci95"] is not None and rand["ci95"] is not None and trained["ci95"][0] > rand["ci95"][1]
 print(f"trained beats random with non-overlapping CIs: {'yes' if beats else 'no'}")
 EOF
