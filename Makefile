@@ -10,7 +10,7 @@ PYTHON312 ?= $(shell scripts/find-python312.sh)
 # Plugin distributions to install; the example plugin is installed by its own test instead.
 PLUGINS := $(filter-out plugins/molmo-example-%,$(wildcard plugins/*/pyproject.toml))
 
-.PHONY: eval test test-all perf parity clean
+.PHONY: eval test test-all perf parity train-demo clean
 
 $(VENV): pyproject.toml $(PLUGINS)
 	@test -n "$(PYTHON312)" || { echo "Python 3.12 not found (PATH or pyenv)"; exit 1; }
@@ -49,6 +49,10 @@ $(PARITY_VENV): scripts/parity-venv.sh tests/parity/requirements.txt
 
 parity: $(VENV) $(PARITY_VENV)
 	MOLMO_PARITY_REQUIRED=1 $(PY) -m pytest -q -m parity tests/parity
+
+# Expert recordings -> lerobot-train ACT -> trained vs random on pick_v1 (knobs: scripts/train_demo.sh).
+train-demo: $(VENV)
+	PYTHON=$(PY) scripts/train_demo.sh
 
 clean:
 	rm -rf $(VENV) $(PARITY_VENV) outputs runs

@@ -9,11 +9,12 @@ MOLMO_SPACES=molmo-spaces==0.2.9
 RESOURCES=molmospaces-resources==0.0.2
 
 PY312=${PYTHON312:-$(scripts/find-python312.sh)}
+pip_install() {  # quiet, minus the notes about this machine's unreachable extra indexes
+  "$VENV_DIR/bin/python" -m pip install -q --disable-pip-version-check "$@" 2>&1 | { grep -v "^WARNING: Location" || true; }
+}
 rm -rf "$VENV_DIR"
 "$PY312" -m venv "$VENV_DIR"
-PIP=("$VENV_DIR/bin/python" -m pip install -q --disable-pip-version-check)
-"${PIP[@]}" --upgrade pip 2>&1 | grep -v "^WARNING: Location" || true
-"${PIP[@]}" -r tests/parity/requirements.txt 2>&1 | grep -v "^WARNING: Location"; test "${PIPESTATUS[0]}" -eq 0
-# --no-deps: see tests/parity/requirements.txt.
-"${PIP[@]}" --no-deps "$MOLMO_SPACES" "$RESOURCES" 2>&1 | grep -v "^WARNING: Location"; test "${PIPESTATUS[0]}" -eq 0
-"$VENV_DIR/bin/python" -c "import molmo_spaces, mujoco; print('parity venv:', '$VENV_DIR', 'molmo_spaces', molmo_spaces.__file__, 'mujoco', mujoco.__version__)"
+pip_install --upgrade pip
+pip_install -r tests/parity/requirements.txt
+pip_install --no-deps "$MOLMO_SPACES" "$RESOURCES"  # --no-deps: see tests/parity/requirements.txt
+"$VENV_DIR/bin/python" -c "import molmo_spaces, mujoco; print('parity venv $VENV_DIR: molmo_spaces at', molmo_spaces.__file__, '| mujoco', mujoco.__version__)"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -401,3 +402,46 @@ def test_molmo_bench_validate_reports_a_clash_in_one_line(impostor_dist):
     assert res.stderr.strip().splitlines() == [
         "molmo-bench: error: robot 'franka' is provided by plugin 'franka' (molmo-lerobot 0.1.0) and plugin "
         "'impostor_franka' (impostor-bots 0.1); choose one with plugins.prefer.robot.franka=<plugin>"]
+
+
+# A policy plugin that ships no Hydra yaml ---------------------------------------------------------
+HOLD_STILL = textwrap.dedent("""
+    import json, os
+    import numpy as np
+    from molmo_lerobot import hookimpl
+    from molmo_lerobot.policies.base import Policy, PolicyType
+
+    class HoldStill(Policy):
+        needs_images = False
+
+        def __init__(self, config):
+            with open(os.environ["HOLD_STILL_CONFIG"], "w") as fh:
+                json.dump(dict(config), fh)
+
+        def reset(self, ctx):
+            self.groups = dict(ctx.move_groups)
+
+        def act(self, obs):
+            return {g: np.asarray(obs["qpos"][g], float)[None] for g in self.groups}
+
+    def make(config):
+        return HoldStill(config)
+
+    @hookimpl
+    def molmo_policies():
+        return [PolicyType(name="hold_still", factory=make)]
+""")
+
+
+def test_a_policy_plugin_without_a_yaml_is_chosen_by_name(tmp_path):
+    """Friction: `molmo-plugins` listed such a policy but `policy=<name>` said "unknown policy"."""
+    dist = write_dist(tmp_path / "dist", "holdstill", {"holdstill": HOLD_STILL}, {"hold_still": "holdstill"})
+    seen = tmp_path / "config.json"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(dist), os.environ.get("PYTHONPATH", "")]),
+           "MUJOCO_GL": "egl", "HOLD_STILL_CONFIG": str(seen)}
+    res = subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.eval", "policy=hold_still", "+policy.speed=2",
+                          "limit=1", "workers=1", "horizon=3", "progress=false", f"output_dir={tmp_path / 'out'}"],
+                         capture_output=True, text=True, env=env, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert "pick_v1 · hold_still: success" in res.stdout
+    assert json.loads(seen.read_text()) == {"name": "hold_still", "speed": 2}

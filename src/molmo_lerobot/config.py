@@ -37,7 +37,8 @@ def primary_config_dir() -> Path:
 
 
 class PluginConfigDirs(SearchPathPlugin):
-    """Appends every ``molmo_config_dirs`` directory to the search path of our configs."""
+    """Appends every ``molmo_config_dirs`` directory to the search path of our configs, and gives
+    every registered policy that none of them configures a default ``policy/<name>``."""
 
     def manipulate_search_path(self, search_path: ConfigSearchPath) -> None:
         primary = primary_config_dir()
@@ -45,12 +46,23 @@ class PluginConfigDirs(SearchPathPlugin):
                  if e.path and "://" not in e.path.removeprefix("file://")}
         if primary not in paths:
             return  # some other Hydra app in this process
-        seen = {primary}
+        seen = [primary]
         for d in get_plugins().config_dirs():
             path = Path(d).resolve()
             if path not in seen:
-                seen.add(path)
+                seen.append(path)
                 search_path.append(provider="molmo-plugin", path=f"file://{path}")
+        _default_policy_configs(seen)
+
+
+def _default_policy_configs(config_dirs: list[Path]) -> None:
+    """``policy/<name>`` = ``{name: <name>}`` (Hydra's ConfigStore) for each registered policy no
+    config dir has a ``policy/<name>.yaml`` for, so a plugin that ships no yaml is still
+    ``policy=<name>``; its factory gets ``{"name": <name>}`` plus any ``+policy.<key>=`` given."""
+    store = ConfigStore.instance()
+    for name in get_plugins().names("policy"):
+        if not any((d / "policy" / f"{name}.yaml").is_file() for d in config_dirs):
+            store.store(group="policy", name=name, node={"name": name}, provider="molmo_lerobot")
 
 
 def _register() -> None:

@@ -87,7 +87,8 @@ def molmo_config_dirs() -> list[str]:
     """Directories holding Hydra config groups (``policy/<name>.yaml`` …) to add to the search path.
 
     A third-party policy plugin returns the directory of its own ``policy/<name>.yaml`` so
-    that ``molmo-eval policy=<name>`` finds it without touching this repository.
+    that ``molmo-eval policy=<name>`` finds it without touching this repository (a policy with no
+    yaml anywhere gets ``{name: <name>}``).
     """
 
 

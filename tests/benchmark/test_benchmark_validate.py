@@ -67,6 +67,8 @@ def test_mobile_robot_episodes_fail_cleanly(data, fake_plugins):
          "no scene dataset plugin provides 'procthor-objaverse' (available: procedural_tabletop)"),
         (lambda ep: ep["cameras"][1].update(name="wrist_camera"), "cameras[1].name",
          "duplicate camera name 'wrist_camera' (also cameras[0])"),
+        (lambda ep: ep["cameras"][0].update(name="cam/x") or ep["cameras"][1].update(name="cam_x"), "cameras[1].name",
+         "cameras 'cam/x' (cameras[0]) and 'cam_x' would both be recorded as 'observation.images.cam_x'; rename one"),
         (lambda ep: ep.update(cameras=[]), "source.camera_system_class",
          "warning: no camera system plugin provides 'FrankaDroidCameraSystem' (available: none); "
          "install a plugin that provides it, or set camera.system= for the run"),

@@ -73,11 +73,77 @@ def run(helper: str, inputs: dict | None = None, timeout: float = 600) -> dict:
         _write(io_dir, "in", inputs or {})
         env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
         env.setdefault("MUJOCO_GL", "egl")
+        # MolmoSpaces' resource manager works under these: keep it inside this call's temp dir
+        env["MLSPACES_ASSETS_DIR"] = str(io_dir / "mlspaces-assets")
+        env["MLSPACES_CACHE_DIR"] = str(io_dir / "mlspaces-cache")
         proc = subprocess.run([str(exe), str(Path(__file__).resolve()), helper, str(io_dir)],
                               cwd=io_dir, env=env, capture_output=True, text=True, timeout=timeout)
         if proc.returncode != 0:
             raise TheirError(f"{helper} failed in the parity venv (exit {proc.returncode}):\n{proc.stderr[-6000:]}")
         return _read(io_dir, "out")
+
+
+def contact_table(model, data) -> np.ndarray:
+    """One row per contact of an ``mj_forward``-ed state: geom1, geom2, dist, position (3), normal (3),
+    force in the contact frame (3). Both sides compute it; where the tables differ, MuJoCo's collision
+    or solver differs between the two versions, whatever the rule says."""
+    import mujoco
+
+    rows = np.zeros((data.ncon, 12))
+    force = np.zeros(6)
+    for i in range(data.ncon):
+        c = data.contact[i]
+        mujoco.mj_contactForce(model, data, i, force)
+        rows[i] = [c.geom1, c.geom2, c.dist, *c.pos, *c.frame[:3], *force[:3]]
+    return rows
+
+
+def same_contacts(a, b, atol: float = 1e-6, force_rtol: float = 1e-3) -> bool:
+    """Whether two :func:`contact_table` s hold the same contacts (any order): geoms, distance, position
+    and normal within ``atol``, forces within ``force_rtol`` of their size (at least 1 N)."""
+    a, b = np.asarray(a, dtype=np.float64).reshape(-1, 12), np.asarray(b, dtype=np.float64).reshape(-1, 12)
+    if a.shape != b.shape:
+        return False
+    a, b = (t[np.lexsort(np.round(t[:, [5, 4, 3, 1, 0]], 5).T)] for t in (a, b))
+    scale = np.maximum(1.0, np.abs(a[:, 9:]))
+    return bool(np.allclose(a[:, :9], b[:, :9], rtol=0, atol=atol)
+                and np.all(np.abs(a[:, 9:] - b[:, 9:]) <= force_rtol * scale))
+
+
+def offline() -> None:
+    """On their side, before importing their task or sampler modules: MolmoSpaces downloads resources
+    (scene archives, object annotations, ThOR material tables) on first use; swap them for empty
+    ones. The resource manager is not set up (``get_resource_manager`` returns None), the object
+    annotation database is empty, and ThOR's two material tables, read at import by
+    ``env/arena/randomization/texture.py``, are ``{}`` under this call's ``MLSPACES_ASSETS_DIR``.
+    Code that needs a real resource then fails loudly instead of downloading it."""
+    thor = Path(os.environ["MLSPACES_ASSETS_DIR"]) / "objects" / "thor"
+    thor.mkdir(parents=True, exist_ok=True)
+    for name in ("material-database.json", "material_to_textures.json"):
+        (thor / name).write_text("{}")
+    import molmo_spaces.molmo_spaces_constants as constants
+    import molmo_spaces.utils.object_metadata as object_metadata
+
+    constants.get_resource_manager = lambda *args, **kwargs: None
+    object_metadata.get_db = lambda: {}
+
+
+DOC = HERE.parents[1] / "docs" / "parity.md"
+
+
+def table_row(key: str) -> dict[str, int]:
+    """The numeric cells of the docs/parity.md table row whose first cell is ``key``, by column header:
+    tests compare their counts with it, so the published table stays true."""
+    header: list[str] = []
+    for line in DOC.read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")] if line.startswith("|") else []
+        if not cells:
+            header = []
+        elif not header:
+            header = cells
+        elif cells[0] == key:
+            return {h: int(c) for h, c in zip(header, cells, strict=False) if c.isdigit()}
+    raise KeyError(f"{DOC}: no table row starting with {key!r}")
 
 
 def versions(_inputs: dict) -> dict:
@@ -93,8 +159,7 @@ def _serve(helper: str, io_dir: Path) -> None:
     """The other side: import the helper module from this directory and run it on the inputs."""
     import importlib
 
-    module, func = helper.split(":")
-    sys.path.insert(0, str(HERE))
+    module, func = helper.split(":")  # the module is found next to this file: sys.path[0]
     result = getattr(importlib.import_module(module), func)(_read(io_dir, "in"))
     _write(io_dir, "out", result)
 

@@ -16,6 +16,7 @@ import traceback
 from collections.abc import Iterator
 from http import HTTPStatus
 
+import msgpack
 import numpy as np
 from websockets.asyncio.server import serve
 from websockets.exceptions import ConnectionClosed
@@ -39,7 +40,7 @@ def check_droid(obs: dict) -> None:
 
 
 class FakeDroidServer:
-    """``mode``: ok | nan | bad_shape | silent (never answers a request) | silent_metadata."""
+    """``mode``: ok | nan | bad_shape | string_dtype | silent (never answers a request) | silent_metadata."""
 
     def __init__(self, horizon: int = 10, mode: str = "ok", velocity: float = 0.1, port: int = 0) -> None:
         self.horizon, self.mode, self.velocity = horizon, mode, velocity
@@ -71,6 +72,10 @@ class FakeDroidServer:
                     actions[1, 3] = np.nan
                 elif self.mode == "bad_shape":
                     actions = actions[:, :5]
+                if self.mode == "string_dtype":  # a hostile server: numpy 2 StringDType bytes hold pointers
+                    await ws.send(msgpack.packb({"actions": {b"__ndarray__": True, b"data": b"\x41" * 16,
+                                                             b"dtype": "T", b"shape": [1]}}, use_bin_type=True))
+                    continue
                 await ws.send(packb({"actions": actions, "server_timing": {"infer_ms": 0.1}}))
         except ConnectionClosed:
             pass

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from droid_server import FakeDroidServer
 
-from molmo_lerobot.protocol.client import PolicyClient, PolicyTimeoutError
+from molmo_lerobot.protocol.client import PolicyClient, PolicyClientError, PolicyTimeoutError
 
 OBS = {
     "observation/exterior_image_1_left": np.zeros((224, 224, 3), np.uint8),
@@ -26,6 +26,14 @@ def test_talks_to_openpi_style_server():
         assert c.connect() == {"policy": "fake-droid"}
         assert c.infer(OBS)["actions"].shape == (15, 8)
         assert srv.errors == []
+
+
+def test_string_dtype_from_a_hostile_server_is_refused():
+    with FakeDroidServer(mode="string_dtype").running() as srv:
+        c = PolicyClient("127.0.0.1", srv.port, timeout_s=5)
+        with pytest.raises(PolicyClientError, match="malformed inference response: refusing dtype 'T'"):
+            c.infer(OBS)
+        assert not c.connected
 
 
 def test_server_that_never_answers_times_out():

@@ -35,8 +35,11 @@ def test_decodes_openpi_style_bytes_keys_and_str_keys():
     assert isinstance(scalar, np.float32) and scalar == 0.25
 
 
-@pytest.mark.parametrize("value", [np.zeros(2, np.complex64), np.array([object()]), np.zeros(2, "V4"), np.complex128(1j)])
-def test_refuses_void_object_complex_on_encode(value):
+@pytest.mark.parametrize("value", [
+    np.zeros(2, np.complex64), np.array([object()]), np.zeros(2, "V4"), np.complex128(1j), np.array(["ab"], "T"),
+    np.array(["ab"]), np.array([b"ab"]), np.zeros(2, "M8[s]"), np.zeros(2, np.longdouble),
+])
+def test_encodes_only_bool_int_and_float_dtypes(value):
     with pytest.raises(CodecError, match="refusing"):
         packb({"x": value})
 
@@ -49,6 +52,8 @@ def test_refuses_bad_messages_on_decode():
         unpackb(ext(data=b"\0" * 8, dtype="<c8", shape=[1]))
     with pytest.raises(CodecError, match="refusing dtype"):
         unpackb(ext(data=b"\0" * 8, dtype="|O", shape=[1]))
+    with pytest.raises(CodecError, match="refusing dtype 'f4,i4'"):
+        unpackb(ext(data=b"\0" * 8, dtype="f4,i4", shape=[1]))
     with pytest.raises(CodecError, match="needs 16 bytes, got 8"):
         unpackb(ext(data=b"\0" * 8, dtype="<f8", shape=[2]))
     with pytest.raises(CodecError, match="lacks field 'shape'"):
@@ -57,6 +62,15 @@ def test_refuses_bad_messages_on_decode():
         unpackb(b"\xc1\xff\x00 definitely not msgpack")
     with pytest.raises(CodecError):
         unpackb(packb({"a": 1}) + b"trailing")
+
+
+@pytest.mark.parametrize("dtype", ["T", "|T16", "<U2", "|S8", "<M8[s]", "<m8", "<f16", "|V8", "float32", 7])
+def test_decodes_only_whitelisted_dtypes(dtype):
+    """numpy 2's StringDType ('T') holds pointers: decoding one from wire bytes and printing it crashed CPython."""
+    for key in (b"__ndarray__", b"__npgeneric__"):
+        msg = msgpack.packb({key: True, b"data": b"\x41" * 16, b"dtype": dtype, b"shape": [1]}, use_bin_type=True)
+        with pytest.raises(CodecError, match="dtype"):
+            unpackb(msg)
 
 
 def test_never_pickles_arbitrary_objects():

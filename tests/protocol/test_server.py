@@ -5,6 +5,7 @@ from __future__ import annotations
 import http.client
 import threading
 
+import msgpack
 import numpy as np
 import pytest
 from websockets.sync.client import connect
@@ -37,6 +38,10 @@ class CountingPolicy(Policy):
         self.closed = True
 
 
+# numpy 2 StringDType bytes hold pointers: printing such an array from wire bytes crashed molmo-serve
+STRING_ARRAY_FRAME = msgpack.packb(
+    {"tokens": {b"__ndarray__": True, b"data": b"\x41" * 16, b"dtype": "T", b"shape": [1]}}, use_bin_type=True
+)
 OBS = {"qpos": {"arm": np.zeros(7), "gripper": np.zeros(1)}, "prompt": "pick"}
 
 
@@ -82,6 +87,7 @@ def test_openpi_style_raw_client(server):
         (packb([1, 2, 3]), "must be a msgpack map"),
         (packb({"x": np.zeros(1000)}), "exceeds the limit of 4096 bytes"),
         (packb({"boom": True}), "policy exploded on purpose"),
+        (STRING_ARRAY_FRAME, "refusing dtype 'T'"),
     ],
 )
 def test_bad_request_closes_only_that_client(server, frame, reason):

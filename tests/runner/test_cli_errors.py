@@ -39,6 +39,27 @@ def test_malformed_benchmark_names_the_file(tmp_path, capsys):
     assert str(bench / "benchmark.json") in err and "line 1" in err and "Traceback" not in err
 
 
+@pytest.mark.parametrize(
+    ("override", "needle"),
+    [
+        ("output_dir=/tmp/ü", """cannot parse override 'output_dir=/tmp/ü': 'ü' is allowed only in a quoted value; """
+                              """quote it, e.g. molmo-eval 'output_dir="/tmp/ü"'"""),
+        ("wörkers=2", "cannot parse override 'wörkers=2': 'ö' is not allowed there (grammar: "
+                      "https://hydra.cc/docs/advanced/override_grammar/basic)"),
+        ("limit=[1,", "cannot parse override 'limit=[1,': no viable alternative at input '[1,' "
+                      "(grammar: https://hydra.cc/docs/advanced/override_grammar/basic)"),
+    ],
+)
+def test_unparsable_override_is_one_line_that_says_how_to_quote(override, needle, capsys):
+    assert main([override]) == 2
+    assert capsys.readouterr().err == f"molmo-eval: error: {needle}\n"
+
+
+def test_quoted_unicode_value_parses(capsys):
+    assert main(["--cfg", 'output_dir="/tmp/ü"']) == 0
+    assert "output_dir: /tmp/ü" in capsys.readouterr().out
+
+
 def test_existing_output_dir_is_not_overwritten(tmp_path, capsys):
     out = tmp_path / "out"
     out.mkdir()

@@ -139,12 +139,14 @@ def _changed(path: str, value):
 @pytest.mark.parametrize(
     ("path", "value", "needle"),
     [
-        ("timing.sim_dt_ms", 1.0, 'timing {"ctrl_dt_ms": 2.0, "policy_dt_ms": 66.0, "sim_dt_ms": 2.0} vs'),
+        ("timing.sim_dt_ms", 1.0, "timing.sim_dt_ms 2.0 vs 1.0"),
         ("horizon", 50, "horizon null vs 50"),
-        ("eval_options.horizons", {"pick": 5}, "eval_options"),
-        ("eval_options.camera.randomization", 2, "eval_options"),
-        ("eval_options.custom_object.path", "/x.xml", "eval_options"),
-        ("thresholds.pick.succ_pos_threshold", 0.05, "thresholds.pick"),
+        ("eval_options.horizons", {"pick": 5}, "eval_options.horizons.pick (unset) vs 5"),
+        ("eval_options.camera.randomization", 2, "eval_options.camera.randomization 0 vs 2"),
+        # the key and both values are named, however long the options are
+        ("eval_options.custom_object.path", "/data/objects/" + "x" * 90 + ".xml",
+         f'eval_options.custom_object.path null vs "/data/objects/{"x" * 90}.xml"'),
+        ("thresholds.pick.succ_pos_threshold", 0.05, "thresholds.pick.succ_pos_threshold 0.01 vs 0.05"),
     ],
 )
 def test_compare_refuses_runs_of_different_trials(tmp_path, path, value, needle):

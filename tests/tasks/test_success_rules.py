@@ -19,7 +19,7 @@ from molmo_lerobot.plugins import get_plugins  # noqa: E402
 from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
 from molmo_lerobot.sim.env import Timing  # noqa: E402
 from molmo_lerobot.tasks.pick_and_place import tilt  # noqa: E402
-from task_scenes import hold, make_task_env, put_in_receptacle  # noqa: E402
+from task_scenes import hold, make_task_env, put_in_receptacle, settle  # noqa: E402
 
 
 @pytest.fixture
@@ -46,6 +46,26 @@ def test_tilt_boundary(deg):
     start = Rotation.from_euler("zyx", [30, 10, 5], degrees=True).as_matrix()
     now = Rotation.from_euler("y", deg, degrees=True).as_matrix() @ start
     assert math.degrees(tilt(start, now)) == pytest.approx(deg, abs=1e-6)
+
+
+# Boxes (MolmoSpaces' body_aabb) -------------------------------------------------------------------
+
+
+def test_box_of_a_turned_round_geom_is_its_local_box_turned():
+    """A sphere turned 45 degrees about z spans its local cube's diagonal (MolmoSpaces' geom_aabb),
+    not its radius; a body with no visible geom is a point at its position."""
+    from molmo_lerobot.sim import geometry
+
+    m = mujoco.MjModel.from_xml_string("""<mujoco><worldbody>
+      <body name="ball" euler="0 0 45"><geom type="sphere" size="0.03"/></body>
+      <body name="ghost" pos="1 2 3"><geom type="box" size="0.1 0.1 0.1" group="3"/></body>
+    </worldbody></mujoco>""")
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    _, size = geometry.body_aabb(m, d, m.body("ball").id)
+    assert size == pytest.approx([0.06 * math.sqrt(2), 0.06 * math.sqrt(2), 0.06])
+    centre, size = geometry.body_aabb(m, d, m.body("ghost").id)
+    assert centre == pytest.approx([1, 2, 3]) and size == pytest.approx([0, 0, 0])
 
 
 # Support ------------------------------------------------------------------------------------------
@@ -114,6 +134,32 @@ def test_next_to_counts_any_receptacle_rotation():
             task.supporting_root = lambda body: 1  # the same surface under both
             assert task.success() is ok
             task.supporting_root = monkey
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("dz,ok", [(0.019, True), (0.021, False)])
+def test_next_to_without_a_supporting_contact_falls_back_to_boxes(dz, ok):
+    """An object hovering beside the receptacle, no contact under it: it is on the receptacle's surface
+    while its box bottom is within 2 cm of the table geom's top (MolmoSpaces' approximate_supporting_geoms)."""
+    from molmo_lerobot.sim import geometry
+
+    env, task = make_task_env(generate_benchmark("pick_and_place_next_to", 1, 1, 3, "t")[0][0])
+    try:
+        settle(env)
+        m, d = env.model, env.data
+        obj = env.body_id(task.object_name)
+        surface = task.supporting_root(obj)
+        assert surface is not None and surface == task.supporting_root(task._receptacle)
+        top = max(c[2] + s[2] / 2 for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == surface
+                  for c, s in [geometry.aabb(m, d, [g])])
+        centre, size = geometry.body_aabb(m, d, obj)
+        rise = top + dz - (centre[2] - size[2] / 2)
+        env._place(task.object_name, env.body_pose(task.object_name) + [0, 0, rise, 0, 0, 0, 0])
+        mujoco.mj_forward(m, d)
+        assert task.supporting_root(obj) is None
+        task.min_gap, task.max_gap = 0.0, 10.0
+        assert task.success() is ok
     finally:
         env.close()
 

@@ -3,7 +3,7 @@
 Every episode is checked and every problem returned (never raised), each naming the file,
 the episode index and the field: unknown task classes (with "did you mean"), robots no
 plugin provides, init_qpos that does not fit the robot's move groups, unknown scene
-datasets, duplicate cameras, empty instructions.
+datasets, duplicate cameras (or names recorded as one dataset feature), empty instructions.
 
 A file MolmoSpaces loads is valid here: what only stops it from *running here* is a
 ``warning`` problem (a robot, task type or camera system no installed plugin provides,
@@ -21,6 +21,7 @@ from typing import Any
 from molmo_lerobot.benchmark import molmospaces
 from molmo_lerobot.benchmark.load import Benchmark, Problem
 from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.export.frames import image_feature
 from molmo_lerobot.plugins import PluginConflict, PluginError, Plugins, get_plugins
 
 
@@ -89,11 +90,15 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, *, index: int | Non
         else:
             _lookup(plugins, "camera_system", system, "source.camera_system_class", warning, "camera system",
                     "install a plugin that provides it, or set camera.system= for the run")
-    seen: dict[str, int] = {}
+    seen: dict[str, int] = {}  # dataset feature -> first camera recorded as it
     for i, cam in enumerate(episode.cameras):
-        if cam.name in seen:
-            problem(f"cameras[{i}].name", f"duplicate camera name {cam.name!r} (also cameras[{seen[cam.name]}])")
-        seen.setdefault(cam.name, i)
+        feature = image_feature(cam.name)
+        if feature in seen:
+            other = episode.cameras[seen[feature]].name
+            problem(f"cameras[{i}].name", f"duplicate camera name {cam.name!r} (also cameras[{seen[feature]}])"
+                    if other == cam.name else f"cameras {other!r} (cameras[{seen[feature]}]) and {cam.name!r} "
+                    f"would both be recorded as {feature!r}; rename one")
+        seen.setdefault(feature, i)
         if not 0 < cam.fov < 180:
             problem(f"cameras[{i}].fov", f"field of view must be in (0, 180) degrees, got {cam.fov}")
 

@@ -33,7 +33,7 @@ def _main(argv: list[str] | None = None) -> int:
     from hydra._internal.hydra import Hydra
     from hydra._internal.utils import create_config_search_path, get_args_parser
     from hydra.core.global_hydra import GlobalHydra
-    from hydra.errors import HydraException
+    from hydra.errors import HydraException, OverrideParseException
     from omegaconf.errors import OmegaConfBaseException
 
     from molmo_lerobot.config import config_message, primary_config_dir
@@ -66,6 +66,9 @@ def _main(argv: list[str] | None = None) -> int:
         else:
             hydra.run(config_name="eval", task_function=lambda cfg: codes.append(_job(cfg, sweep=False)),
                       overrides=[*ns.overrides, "hydra.mode=RUN"])
+    except OverrideParseException as exc:
+        print(f"molmo-eval: error: {_override_message(exc.override, exc.message)}", file=sys.stderr)
+        return 2
     except (HydraException, OmegaConfBaseException, PluginError) as exc:
         print(f"molmo-eval: error: {config_message(exc)}", file=sys.stderr)
         return 2
@@ -79,6 +82,20 @@ def _main(argv: list[str] | None = None) -> int:
     finally:
         GlobalHydra.instance().clear()
     return max(codes, default=0)
+
+
+def _override_message(override: str, message: str) -> str:
+    """One line for an override Hydra's grammar cannot parse; says how to quote a value that needs it."""
+    lines = [line for line in message.splitlines() if not line.startswith("See https://")]
+    detail = lines[0].split(": ", 1)[-1] if lines else "syntax error"
+    if len(lines) > 1 and lines[0].startswith("LexerNoViableAltException"):  # Hydra points at the character
+        at = len(lines[1]) - len(lines[1].lstrip()) - lines[0].rfind(override)
+        detail = f"{override[at]!r} is not allowed there" if 0 <= at < len(override) else "a character is not allowed"
+        key, sep, value = override.partition("=")
+        if sep and len(key) < at < len(override) and not {"'", '"'} & set(value):
+            return (f"cannot parse override {override!r}: {override[at]!r} is allowed only in a quoted value; "
+                    f"quote it, e.g. molmo-eval '{key}=\"{value}\"'")
+    return f"cannot parse override {override!r}: {detail} (grammar: https://hydra.cc/docs/advanced/override_grammar/basic)"
 
 
 def _job(cfg: Any, *, sweep: bool) -> int:

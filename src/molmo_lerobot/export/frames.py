@@ -34,6 +34,11 @@ def _safe(name: str) -> str:
     return str(name).replace("/", "_")
 
 
+def image_feature(camera: str) -> str:
+    """The dataset feature of a camera's frames (different names can map to one: ``a/b``, ``a_b``)."""
+    return IMAGE_PREFIX + _safe(camera)
+
+
 def _names(group: str, declared: list[str] | None, size: int) -> list[str]:
     if declared is not None and len(declared) == size:
         return [_safe(n) for n in declared]
@@ -88,7 +93,7 @@ class FrameLayout:
         """The ``features`` argument of ``LeRobotDataset.create``."""
         feats: dict[str, dict[str, Any]] = {}
         for cam, h, w in self.cameras:
-            feats[IMAGE_PREFIX + _safe(cam)] = {
+            feats[image_feature(cam)] = {
                 "dtype": "video", "shape": (h, w, 3), "names": ["height", "width", "channels"],
             }
         feats["observation.state"] = {"dtype": "float32", "shape": (len(self.state_names),),
@@ -114,7 +119,7 @@ class FrameLayout:
             img = np.asarray(img)
             if img.shape != (h, w, 3) or img.dtype != np.uint8:
                 raise FrameError(f"observation.images.{cam}: got {img.dtype} {img.shape}, expected uint8 {(h, w, 3)}")
-            frame[IMAGE_PREFIX + _safe(cam)] = img
+            frame[image_feature(cam)] = img
         frame["observation.state"] = self._concat(obs.get("qpos") or {}, self.state_sizes, "observation.state")
         frame["action"] = self._concat(action, self.action_sizes, "action")
         if self.has_reward:

@@ -40,10 +40,12 @@ LMDB_COMPLETE_KEY = "__LMDBMap__dump_complete__"
 
 
 class _DataUnpickler(pickle.Unpickler):
-    """Unpickles plain containers, strings, numbers and numpy arrays; refuses everything else."""
+    """Unpickles plain containers, strings, numbers and numpy arrays (protocols 2-5, in-band
+    buffers only); refuses everything else."""
 
     ALLOWED = {("numpy.core.multiarray", "_reconstruct"), ("numpy._core.multiarray", "_reconstruct"),
                ("numpy.core.multiarray", "scalar"), ("numpy._core.multiarray", "scalar"),
+               ("numpy.core.numeric", "_frombuffer"), ("numpy._core.numeric", "_frombuffer"),  # protocol 5
                ("numpy", "ndarray"), ("numpy", "dtype"), ("builtins", "set"), ("builtins", "frozenset"),
                ("collections", "OrderedDict")}
 
@@ -51,6 +53,17 @@ class _DataUnpickler(pickle.Unpickler):
         if (module, name) not in self.ALLOWED:
             raise pickle.UnpicklingError(f"refusing to load {module}.{name} from object metadata")
         return super().find_class(module, name)
+
+    @classmethod
+    def loads(cls, data: bytes) -> object:
+        """The unpickled object; any failure is one :class:`pickle.UnpicklingError` line."""
+        try:
+            return cls(io.BytesIO(data)).load()
+        except pickle.UnpicklingError:
+            raise
+        except Exception as exc:  # allowed callables given bad arguments raise anything (TypeError, RuntimeError...)
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else "no message"
+            raise pickle.UnpicklingError(f"{type(exc).__name__}: {first}") from None
 
 
 class ObjathorMetadata:
@@ -97,8 +110,8 @@ class ObjathorMetadata:
             if raw is None:
                 return None
             try:
-                return _DataUnpickler(io.BytesIO(zstandard.decompress(raw))).load()
-            except (pickle.UnpicklingError, zstandard.ZstdError, EOFError) as exc:
+                return _DataUnpickler.loads(zstandard.decompress(raw))
+            except (pickle.UnpicklingError, zstandard.ZstdError) as exc:
                 raise AssetError(f"{self.assets}/.lmdb/objathor_metadata: entry {uid!r} unreadable ({exc})") from None
         return self._store.get(uid) if self._store is not None else None
 

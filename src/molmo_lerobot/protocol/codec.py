@@ -1,9 +1,11 @@
 """msgpack with numpy arrays, byte-compatible with openpi's ``msgpack_numpy``.
 
 Arrays travel as ``{b"__ndarray__": True, b"data": <bytes>, b"dtype": dtype.str, b"shape": [...]}``
-and numpy scalars as ``{b"__npgeneric__": True, b"data": item, b"dtype": dtype.str}``. Void,
-object and complex dtypes are refused on both sides; nothing is ever pickled. Decoded arrays
-are read-only views on the received bytes.
+and numpy scalars as ``{b"__npgeneric__": True, b"data": item, b"dtype": dtype.str}``. Only the
+bool, integer and float dtypes of :data:`ALLOWED_DTYPES` (either byte order) are encoded or decoded:
+a received dtype string is looked up, never parsed by numpy, so string, object, void, datetime and
+complex arrays (whose raw bytes can hold pointers) never reach a policy or a worker. Nothing is
+ever pickled. Decoded arrays are read-only views on the received bytes.
 """
 
 from __future__ import annotations
@@ -13,7 +15,12 @@ from typing import Any
 import msgpack
 import numpy as np
 
-_REFUSED_KINDS = frozenset("VOc")
+ALLOWED_DTYPES = tuple(np.dtype(t) for t in (
+    np.bool_, np.int8, np.int16, np.int32, np.int64, np.uint8, np.uint16, np.uint32, np.uint64,
+    np.float16, np.float32, np.float64,
+))
+_BY_NAME = {d.str: d for dt in ALLOWED_DTYPES for d in (dt.newbyteorder("<"), dt.newbyteorder(">"))}
+_ALLOWED_TEXT = "bool, int8-64, uint8-64, float16/32/64"
 _ARRAY, _GENERIC = "__ndarray__", "__npgeneric__"
 
 
@@ -26,18 +33,15 @@ def _dtype(name: Any) -> np.dtype:
         name = name.decode("ascii", "replace")
     if not isinstance(name, str):
         raise CodecError(f"dtype must be a string, got {type(name).__name__}")
-    try:
-        dtype = np.dtype(name)
-    except TypeError as exc:
-        raise CodecError(f"unknown dtype {name!r}") from exc
-    if dtype.kind in _REFUSED_KINDS:
-        raise CodecError(f"refusing dtype {dtype} (void, object and complex are not allowed)")
+    dtype = _BY_NAME.get(name)
+    if dtype is None:
+        raise CodecError(f"refusing dtype {name[:40]!r} (allowed: {_ALLOWED_TEXT})")
     return dtype
 
 
 def _encode(obj: Any) -> Any:
-    if isinstance(obj, (np.ndarray, np.generic)) and obj.dtype.kind in _REFUSED_KINDS:
-        raise CodecError(f"refusing to encode dtype {obj.dtype} (void, object and complex are not allowed)")
+    if isinstance(obj, (np.ndarray, np.generic)) and obj.dtype.str not in _BY_NAME:
+        raise CodecError(f"refusing to encode dtype {obj.dtype} (allowed: {_ALLOWED_TEXT})")
     if isinstance(obj, np.ndarray):
         return {b"__ndarray__": True, b"data": obj.tobytes(), b"dtype": obj.dtype.str, b"shape": list(obj.shape)}
     if isinstance(obj, np.generic):

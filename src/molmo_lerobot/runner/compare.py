@@ -164,9 +164,20 @@ def _outcome(ep: dict[str, Any], metric: str) -> bool:
     return bool(ep.get(metric)) and ep.get("error") is None
 
 
-def _short(value: Any, limit: int = 80) -> str:
-    text = json.dumps(value, sort_keys=True, default=str)
+_UNSET = object()
+
+
+def _short(value: Any, limit: int = 200) -> str:
+    text = "(unset)" if value is _UNSET else json.dumps(value, sort_keys=True, default=str)
     return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _differences(key: str, a: Any, b: Any) -> list[str]:
+    """``"<dotted key> <a> vs <b>"`` for each leaf in which ``a`` and ``b`` differ (nested dicts are walked)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return [d for k in sorted(set(a) | set(b), key=str)
+                for d in _differences(f"{key}.{k}", a.get(k, _UNSET), b.get(k, _UNSET))]
+    return [] if a == b else [f"{key} {_short(a)} vs {_short(b)}"]
 
 
 def trial_differences(run_a: Run, run_b: Run, shared: list[int]) -> tuple[list[str], list[str]]:
@@ -176,14 +187,13 @@ def trial_differences(run_a: Run, run_b: Run, shared: list[int]) -> tuple[list[s
     for key in TRIAL_FIELDS:
         if key not in ra or key not in rb:
             unchecked.append(key)
-        elif ra[key] != rb[key]:
-            diffs.append(f"{key} {_short(ra[key])} vs {_short(rb[key])}")
+        else:
+            diffs.extend(_differences(key, ra[key], rb[key]))
     ta, tb = ra.get("thresholds") or {}, rb.get("thresholds") or {}
     for task in sorted(set(ta) & set(tb)):  # horizon_steps depends on which episodes ran; checked per episode
         rule_a = {k: v for k, v in ta[task].items() if k != "horizon_steps"}
         rule_b = {k: v for k, v in tb[task].items() if k != "horizon_steps"}
-        if rule_a != rule_b:
-            diffs.append(f"thresholds.{task} {_short(rule_a)} vs {_short(rule_b)}")
+        diffs.extend(_differences(f"thresholds.{task}", rule_a, rule_b))
     horizons = [(i, run_a.episodes[i].get("horizon"), run_b.episodes[i].get("horizon")) for i in shared]
     horizons = [h for h in horizons if h[1] is not None and h[2] is not None and h[1] != h[2]]
     if horizons:
@@ -202,8 +212,8 @@ def _flags(run_a: Run, run_b: Run) -> list[str]:
     ca, cb = run_a.results.get("config") or {}, run_b.results.get("config") or {}
     other = [k for k in sorted(set(ca) | set(cb)) if k not in NEUTRAL_CONFIG and ca.get(k) != cb.get(k)]
     if other:
-        notes.append("config differs: " + ", ".join(f"{k} {_short(ca.get(k), 40)} vs {_short(cb.get(k), 40)}"
-                                                    for k in other))
+        notes.append("config differs: " + ", ".join(d for k in other for d in _differences(k, ca.get(k, _UNSET),
+                                                                                           cb.get(k, _UNSET))))
     return notes
 
 

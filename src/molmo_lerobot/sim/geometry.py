@@ -16,6 +16,7 @@ from shapely.geometry import MultiPoint, Polygon, box
 #: points on a circle when a round geom's footprint becomes a polygon
 CIRCLE_POINTS = 32
 VISIBLE_GROUPS = (0, 1, 2)
+_BOX_CORNERS = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)])
 
 
 def root_body(model: mujoco.MjModel, body: int) -> int:
@@ -82,21 +83,38 @@ def geom_points(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> np.ndarra
     return pos + local @ rot.T
 
 
+def geom_boxes(model: mujoco.MjModel, data: mujoco.MjData, geoms: Iterable[int]) -> tuple[np.ndarray, np.ndarray]:
+    """World axis-aligned box of each geom as (lows, highs), each (n, 3), as MolmoSpaces' ``geom_aabb``
+    bounds a geom: a mesh by its vertices, any other geom by the 8 corners of its local box
+    (``model.geom_aabb``) in the world, so a turned sphere or cylinder counts its box's corners."""
+    geoms = np.asarray(list(geoms), dtype=int)
+    lo, hi = np.empty((len(geoms), 3)), np.empty((len(geoms), 3))
+    is_mesh = model.geom_type[geoms] == mujoco.mjtGeom.mjGEOM_MESH
+    for i in np.flatnonzero(is_mesh):
+        pts = geom_points(model, data, int(geoms[i]))
+        lo[i], hi[i] = pts.min(0), pts.max(0)
+    boxes = geoms[~is_mesh]
+    if len(boxes):
+        local = model.geom_aabb[boxes, None, :3] + _BOX_CORNERS * model.geom_aabb[boxes, None, 3:]  # (n, 8, 3)
+        world = data.geom_xpos[boxes, None, :] + local @ data.geom_xmat[boxes].reshape(-1, 3, 3).transpose(0, 2, 1)
+        lo[~is_mesh], hi[~is_mesh] = world.min(1), world.max(1)
+    return lo, hi
+
+
 def aabb(model: mujoco.MjModel, data: mujoco.MjData, geoms: Iterable[int]) -> tuple[np.ndarray, np.ndarray]:
-    """World axis-aligned box of ``geoms`` as (centre, size); ``ValueError`` when there are none."""
-    geoms = list(geoms)
-    if not geoms:
+    """World axis-aligned box of ``geoms`` together as (centre, size) (each geom as :func:`geom_boxes`
+    bounds it); ``ValueError`` when there are none."""
+    lo, hi = geom_boxes(model, data, geoms)
+    if not len(lo):
         raise ValueError("no geoms to bound")
-    pts = np.concatenate([geom_points(model, data, g) for g in geoms])
-    lo, hi = pts.min(0), pts.max(0)
+    lo, hi = lo.min(0), hi.max(0)
     return (lo + hi) / 2, hi - lo
 
 
 def body_aabb(model: mujoco.MjModel, data: mujoco.MjData, body: int) -> tuple[np.ndarray, np.ndarray]:
     """AABB (centre, size) of the visible geoms of ``body``'s subtree (MolmoSpaces' ``body_aabb``);
-    all its geoms when none is visible, its position with zero size when it has none."""
-    bodies = subtree(model, body)
-    geoms = body_geoms(model, bodies) or body_geoms(model, bodies, visible_only=False)
+    its position with zero size when none is visible."""
+    geoms = body_geoms(model, subtree(model, body))
     if not geoms:
         return data.xpos[body].copy(), np.zeros(3)
     return aabb(model, data, geoms)

@@ -20,8 +20,9 @@ task spec's fields with the defaults of :mod:`molmo_lerobot.benchmark.schema`.
     the XY gap between the two boxes (visible geoms) lies in [``min_surface_to_surface_gap``,
     ``max_surface_to_surface_gap`` + :data:`GAP_TOLERANCE`] **and** both rest on the same
     top-level body (each one's supporting geom: a contact below its box centre whose normal is
-    within 80° of vertical) **and** the receptacle moved at most the position limit and turned
-    (any rotation, yaw included) at most the rotation limit.
+    within 80° of vertical; when either has none, the two share a geom whose box top is within
+    2 cm of each one's box bottom and covers half its footprint) **and** the receptacle moved at
+    most the position limit and turned (any rotation, yaw included) at most the rotation limit.
 ``pick_and_place_color``
     as ``pick_and_place``; the task first paints the visible geoms of ``object_colors`` (their
     materials cleared), so the instruction's colours are what the cameras see.
@@ -29,6 +30,7 @@ task spec's fields with the defaults of :mod:`molmo_lerobot.benchmark.schema`.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import TYPE_CHECKING, Any
 
@@ -54,6 +56,8 @@ SUPPORT_MAX_ANGLE = math.radians(30)
 SURFACE_MAX_ANGLE = math.radians(80)
 #: contactless fallback: the object's base may float this far above the receptacle's top
 FALLBACK_ABOVE = 0.01
+#: next-to without a supporting contact: a geom whose top is this close to a body's bottom may carry it
+APPROX_SUPPORT_DZ = 0.02
 #: carry-forward tolerances (MolmoSpaces' defaults; an episode may set its own)
 CARRY_FORWARD_POS, CARRY_FORWARD_ROT = 0.005, math.radians(10)
 
@@ -254,6 +258,48 @@ class PickAndPlaceNextToTask(PickAndPlaceTask):
                 return geometry.root_body(m, other)
         return None
 
+    @functools.cached_property
+    def _support_candidates(self) -> list[tuple[int, list[int], list[int]]]:
+        """(root, visible geoms of its subtree, its own geoms) of every top-level body (the world too)
+        that may carry something by boxes: not the robot's, with a visible geom."""
+        m = self.env.model
+        roots = np.asarray(m.body_rootid)[np.asarray(m.geom_bodyid)]
+        out = []
+        for root in sorted(set(roots.tolist()) - set(self.env.robot.body_ids)):
+            visible = geometry.body_geoms(m, geometry.subtree(m, root))
+            if visible:
+                out.append((root, visible, np.flatnonzero(roots == root).tolist()))
+        return out
+
+    def approximate_supports(self, body: int) -> set[int]:
+        """Geoms ``body`` may rest on by boxes alone (MolmoSpaces' ``approximate_supporting_geoms``, the
+        fallback when a body has no supporting contact): geoms of the other top-level bodies (not the
+        robot's, and only bodies with a visible geom) whose box top is within :data:`APPROX_SUPPORT_DZ`
+        of ``body``'s box bottom and whose XY box covers at least half of ``body``'s."""
+        m, d = self.env.model, self.env.data
+        centre, size = geometry.body_aabb(m, d, body)
+        rect, bottom = geometry.xy_rect(centre, size), centre[2] - size[2] / 2
+        own = geometry.root_body(m, body)
+        out: set[int] = set()
+        for root, visible, geoms in self._support_candidates:
+            if root == own or not geometry.xy_rect(*geometry.aabb(m, d, visible)).intersects(rect):
+                continue
+            lo, hi = geometry.geom_boxes(m, d, geoms)
+            for i in np.flatnonzero(np.abs(bottom - hi[:, 2]) < APPROX_SUPPORT_DZ):
+                footprint = geometry.xy_rect((lo[i] + hi[i]) / 2, hi[i] - lo[i])
+                if footprint.intersection(rect).area >= rect.area / 2:
+                    out.add(geoms[i])
+        return out
+
+    def on_same_surface(self) -> bool:
+        """Object and receptacle rest on the same top-level body; when either has no supporting contact,
+        on a common geom by :meth:`approximate_supports` (MolmoSpaces' fallback)."""
+        under = self.supporting_root(self._object)
+        under_receptacle = self.supporting_root(self._receptacle)
+        if under is not None and under_receptacle is not None:
+            return under == under_receptacle
+        return bool(self.approximate_supports(self._object) & self.approximate_supports(self._receptacle))
+
     def gap(self) -> float:
         """XY gap between the object's and the receptacle's boxes (visible geoms)."""
         m, d = self.env.model, self.env.data
@@ -265,8 +311,7 @@ class PickAndPlaceNextToTask(PickAndPlaceTask):
             return False
         if not self.min_gap <= self.gap() <= self.max_gap + GAP_TOLERANCE:
             return False
-        under = self.supporting_root(self._object)
-        return under is not None and under == self.supporting_root(self._receptacle)
+        return self.on_same_surface()
 
 
 class PickAndPlaceColorTask(PickAndPlaceTask):
