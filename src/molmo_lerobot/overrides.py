@@ -7,6 +7,8 @@ edited episode is what the seeds, the rollout and the recorded dataset all see:
   position and yaw (resting on the same support), removing the original and renaming the
   task's target to ``custom_object.name``;
 * ``camera.overrides``: set fields of named cameras (``{exterior: {fov: 60}}``);
+* ``robot.base_size``: the robot's pedestal for every episode (``[x, y, z]`` metres, ``null``
+  for none; ``default`` leaves each episode's ``robot.base_size`` or the robot's own);
 * ``camera.randomization``: level 0-3 of seeded camera jitter (position, direction, field of
   view) of the episode's recorded cameras; the seed comes from the episode's own content, so
   every run, worker and executor sees the same cameras for the same episode. Our own option,
@@ -48,6 +50,10 @@ def molmo_episode_overrides(episode: EpisodeSpec, config: Any) -> EpisodeSpec | 
     if custom.get("path"):
         _swap_target(data, episode, Path(custom["path"]).expanduser(), custom.get("name") or "custom_object",
                      custom.get("description"))
+        changed = True
+    base_size = (cfg.get("robot") or {}).get("base_size", "default")
+    if base_size != "default":
+        data["robot"]["base_size"] = base_size
         changed = True
     camera = cfg.get("camera") or {}
     for name, fields in (camera.get("overrides") or {}).items():

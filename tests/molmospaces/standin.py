@@ -29,6 +29,8 @@ import lmdb
 import numpy as np
 import zstandard
 
+from molmo_lerobot.robots.franka_droid import BASE_SIZE
+
 HALF = (0.02, 0.02, 0.03)  # the box objects' half sizes
 TABLE_H = 0.75
 THOR_UIDS = ("Mug_1", "Mug_2")
@@ -212,7 +214,12 @@ FRANKA_ARM = [0.0, -0.55, 0.0, -2.4, 0.0, 1.85, 0.785]
 
 def pick_episode(house: House, robot: str = "franka", gripper: list[float] | None = None,
                  cameras: list[dict] | None = None) -> dict:
-    """A MolmoSpaces-format pick episode on ``house`` (their field set and defaults)."""
+    """A MolmoSpaces-format pick episode on ``house`` (their field set and defaults). ``franka_droid``
+    stands on MolmoSpaces' pedestal: its base pose is lowered by the pedestal's height, as their base
+    poses stand on the floor, so the arm's root stays where the Panda's is."""
+    base_pose = list(house.base_pose)
+    if robot == "franka_droid":
+        base_pose[2] = round(base_pose[2] - BASE_SIZE[2], 5)
     bx, by, bz = house.base_pose[:3]
     yaw = 2 * math.atan2(house.base_pose[6], house.base_pose[3])
     fx, fy = _rot(yaw, 1.0, 0.0)
@@ -229,7 +236,7 @@ def pick_episode(house: House, robot: str = "franka", gripper: list[float] | Non
         "img_resolution": [96, 64],
         "cameras": [exo] if cameras is None else cameras,
         "scene_modifications": {"added_objects": {}, "object_poses": {house.body: house.object_pose}},
-        "task": {"task_cls": "molmo_spaces.tasks.pick_task.PickTask", "robot_base_pose": house.base_pose,
+        "task": {"task_cls": "molmo_spaces.tasks.pick_task.PickTask", "robot_base_pose": base_pose,
                  "pickup_obj_name": house.body, "pickup_obj_start_pose": house.object_pose,
                  "pickup_obj_goal_pose": goal, "succ_pos_threshold": 0.01},
         "language": {"task_description": "Pick up the mug", "referral_expressions": {"pickup_obj_name": "mug"},

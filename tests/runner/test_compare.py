@@ -210,3 +210,14 @@ def test_deeply_nested_run_files_are_one_line(tmp_path, capsys):
     (b / "results.json").write_text("[" * 100_000 + "]" * 100_000)
     assert main([str(a), str(b)]) == 2
     assert capsys.readouterr().err == f"molmo-compare: error: {b / 'results.json'}: JSON nested too deeply\n"
+
+
+@pytest.mark.parametrize(("path", "value"), [("timing", {**TRIAL["timing"], "control": "hold"}), ("mujoco", "3.5.0")])
+def test_control_mode_and_mujoco_version_are_part_of_the_trial(tmp_path, path, value):
+    """timing.control (hold | ramp) and the MuJoCo version change the dynamics: never paired silently."""
+    a = _write_run(tmp_path / "a", {i: (True, True) for i in range(4)}, header={**TRIAL, "mujoco": "4.0.0"})
+    b = _write_run(tmp_path / "b", {i: (True, True) for i in range(4)},
+                   header={**TRIAL, "mujoco": "4.0.0", path: value})
+    with pytest.raises(CompareError, match="ran different trials") as info:
+        compare_runs(load_run(a), load_run(b))
+    assert path in str(info.value)

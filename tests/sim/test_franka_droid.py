@@ -7,6 +7,7 @@ import json
 import os
 import sys
 from pathlib import Path
+from xml.etree import ElementTree
 
 import mujoco
 import numpy as np
@@ -25,7 +26,7 @@ from molmo_lerobot.runner.evaluate import run_evaluation  # noqa: E402
 from molmo_lerobot.sim.env import Timing  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tasks"))
-from droid_variants import OPEN_DRIVERS, droid_episode  # noqa: E402
+from droid_variants import OPEN_DRIVERS, droid_episode, on_pedestal  # noqa: E402
 
 #: MolmoSpaces' FrankaRobotConfig.init_qpos and a wrist camera as their benchmark files write it
 MS_INIT_QPOS = {"base": [], "arm": [0, -0.7853, 0, -2.35619, 0, 1.57079, 0.0], "gripper": [0.00296, 0.00296]}
@@ -40,7 +41,7 @@ def pick_episode(k: int = 0) -> dict:
 
 def ms_pick_episode(k: int = 0) -> dict:
     """A pick_v1 episode rewritten as MolmoSpaces writes franka_droid episodes (their init_qpos and wrist camera)."""
-    raw = copy.deepcopy(pick_episode(k))
+    raw = on_pedestal(pick_episode(k))
     raw["robot"] = {"robot_name": "franka_droid", "init_qpos": copy.deepcopy(MS_INIT_QPOS)}
     exo = next(c for c in raw["cameras"] if c["type"] == "exocentric")
     raw["cameras"] = [MS_WRIST, {**exo, "name": "exo_camera_1"}]
@@ -246,20 +247,32 @@ def test_molmospaces_grasp_file_transfers(tmp_path):
 
 
 def test_their_model_is_loaded_when_installed(tmp_path, monkeypatch):
-    """With MolmoSpaces' assets dir holding robots/franka_droid/model.xml, that file is the robot."""
+    """With MolmoSpaces' assets dir holding robots/franka_droid/model.xml, that file is the robot, used
+    as their add_robot_to_scene uses it: its fr3_link0 subtree on our mount and pedestal, every body
+    gravity-compensated (their FrankaRobotConfig.gravcomp); the file's own top body is not carried."""
     robot_dir = tmp_path / "robots" / "franka_droid"
     robot_dir.mkdir(parents=True)
-    world = mujoco.MjSpec()
-    base = world.worldbody.add_body(name="base")
-    base.add_geom(name="their_marker", size=[0.01, 0.01, 0.01], type=mujoco.mjtGeom.mjGEOM_BOX)
-    base.add_frame().attach_body(mujoco.MjSpec.from_string(franka_droid._registry_xml()).body("fr3_link0"), "", "")
-    (robot_dir / "model.xml").write_text(world.to_xml())
+    arm = mujoco.MjSpec.from_string(franka_droid._registry_xml())
+    for body in arm.bodies:
+        body.gravcomp = 0.0
+    arm.body("fr3_link0").add_geom(name="their_marker", size=[0.01, 0.01, 0.01], type=mujoco.mjtGeom.mjGEOM_BOX)
+    root = ElementTree.fromstring(arm.to_xml())  # their file: a top body "base" holding fr3_link0
+    worldbody = root.find("worldbody")
+    base = ElementTree.SubElement(worldbody, "body", name="base")
+    ElementTree.SubElement(base, "geom", name="their_base_marker", type="box", size="0.01 0.01 0.01")
+    link0 = worldbody.find("body[@name='fr3_link0']")
+    worldbody.remove(link0)
+    base.append(link0)
+    (robot_dir / "model.xml").write_text(ElementTree.tostring(root, encoding="unicode"))
     monkeypatch.setenv("MLSPACES_ASSETS_DIR", str(tmp_path))
     assert franka_droid.molmospaces_model() == robot_dir / "model.xml"
     w = mujoco.MjSpec()
-    franka_droid.FrankaDroid().add_to(w, [0, 0, 0, 1, 0, 0, 0])
+    franka_droid.FrankaDroid().add_to(w, [0, 0, 0, 1, 0, 0, 0], franka_droid.BASE_SIZE)
     m = w.compile()
-    assert m.geom("robot_0/their_marker").id >= 0
+    assert m.geom_bodyid[m.geom("robot_0/their_marker").id] == m.body("robot_0/fr3_link0").id
+    assert "robot_0/their_base_marker" not in {m.geom(i).name for i in range(m.ngeom)}
+    assert m.body_gravcomp[m.body("robot_0/fr3_link4").id] == 1.0
+    assert m.body("robot_0/fr3_link0").pos[2] == pytest.approx(0.58)
     franka_droid.FrankaDroid().bind(m)
 
 

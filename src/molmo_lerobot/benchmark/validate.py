@@ -67,6 +67,14 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, *, index: int | Non
             elif len(values) != sizes[group]:
                 warning(field, f"expected {sizes[group]} values, got {len(values)}")
 
+    if "base_size" in (episode.robot.model_extra or {}):
+        from molmo_lerobot.robots.base import parse_base_size
+
+        try:
+            parse_base_size(episode.robot.model_extra["base_size"])
+        except ValueError as exc:
+            problem("robot.base_size", str(exc))
+
     scene = _lookup(plugins, "scene_dataset", episode.scene_dataset, "scene_dataset", problem, "scene dataset")
     missing = getattr(scene, "missing", None)
     reason = missing(episode) if missing is not None else None

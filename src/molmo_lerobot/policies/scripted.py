@@ -72,20 +72,26 @@ def robot_grasps(uid: str, robot: str, joint: str | None = None) -> np.ndarray:
 
 
 @cache
-def _ik_model(robot_name: str, base_pose: tuple[float, ...]) -> mujoco.MjModel:
-    """The robot alone at its base pose (world coordinates, no objects) for IK."""
+def _ik_model(robot_name: str, base_pose: tuple[float, ...],
+              base_size: tuple[float, ...] | None = None) -> mujoco.MjModel:
+    """The robot alone at its base pose on its pedestal (world coordinates, no objects) for IK."""
     from molmo_lerobot.plugins import get_plugins
 
     world = mujoco.MjSpec()
-    get_plugins().robot(robot_name).add_to(world, base_pose)
+    robot = get_plugins().robot(robot_name)
+    if base_size is None:
+        robot.add_to(world, base_pose)
+    else:
+        robot.add_to(world, base_pose, base_size)
     return world.compile()
 
 
 class IKSolver:
     """Differential IK with mink on the robot alone, for its TCP site, in world coordinates."""
 
-    def __init__(self, robot: Any, robot_name: str, base_pose: tuple[float, ...]) -> None:
-        self.model = _ik_model(robot_name, base_pose)
+    def __init__(self, robot: Any, robot_name: str, base_pose: tuple[float, ...],
+                 base_size: tuple[float, ...] | None = None) -> None:
+        self.model = _ik_model(robot_name, base_pose, base_size)
         self.handle = robot.bind(self.model)
         self.scratch = mujoco.MjData(self.model)
         self.config = mink.Configuration(self.model)
@@ -138,7 +144,8 @@ class PhasedExpert(Policy):
         env = self.env = ctx.env
         self.dt = ctx.policy_dt_s
         self.ik = IKSolver(env.robot_type, env.spec.robot.robot_name,
-                           tuple(float(v) for v in env.spec.task.robot_base_pose))
+                           tuple(float(v) for v in env.spec.task.robot_base_pose),
+                           env.robot_type.base_size(env.spec.robot))
         self.phases = list(phases)
         self.queue: list[Action] = []
         self.grasp_local: np.ndarray | None = None

@@ -8,6 +8,7 @@ robot to a world :class:`mujoco.MjSpec` at a base pose, then :meth:`RobotType.bi
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 
@@ -40,8 +41,8 @@ class RobotHandle(ABC):
     def command(self, data: mujoco.MjData, group: str, values: np.ndarray) -> None:
         """Write position targets for ``group`` (clipped to the actuator range) into ``data.ctrl``.
 
-        The map from ``values`` to ``ctrl`` must be affine (up to clipping): the environment
-        interpolates controller ticks in ctrl space.
+        The map from ``values`` to ``ctrl`` must be affine (up to clipping): with
+        ``timing.control=ramp`` the environment interpolates controller ticks in ctrl space.
         """
 
     def joint_qpos(self, data: mujoco.MjData, group: str) -> np.ndarray:
@@ -155,6 +156,37 @@ class ArmGripperHandle(RobotHandle):
         """Write the actuator targets for ``closed`` (0 … 1)."""
 
 
+def parse_base_size(value: object) -> tuple[float, float, float] | None:
+    """A ``base_size`` as given (``null`` or three positive sizes in metres); ``ValueError`` otherwise."""
+    if value is None:
+        return None
+    numbers = isinstance(value, list | tuple) and all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+    size = tuple(float(v) for v in value) if numbers else ()  # type: ignore[union-attr]
+    if len(size) != 3 or not all(math.isfinite(v) and v > 0 for v in size):
+        raise ValueError(f"base_size must be null or three positive sizes in metres [x, y, z], got {value!r}")
+    return size  # type: ignore[return-value]
+
+
+#: the pedestal's colour (MolmoSpaces textures theirs with a dark wood)
+PEDESTAL_RGBA = (0.33, 0.24, 0.17, 1.0)
+
+
+def add_mount(world: mujoco.MjSpec, name: str, pose: Sequence[float],
+              base_size: Sequence[float] | None) -> mujoco.MjsFrame:
+    """MolmoSpaces' robot mount (their ``add_robot_to_scene``): a body ``name`` at ``pose``
+    (x, y, z, qw, qx, qy, qz) with a box pedestal of ``base_size`` (full x, y, z extents,
+    metres) standing on it; returns the frame on the pedestal's top where the arm's root is
+    attached (at the body's origin without a pedestal)."""
+    body = world.worldbody.add_body(name=name, pos=list(pose[:3]), quat=list(pose[3:]))
+    if base_size is None:
+        return body.add_frame()
+    x, y, z = (float(v) for v in base_size)
+    body.add_geom(name=name + "/pedestal", type=mujoco.mjtGeom.mjGEOM_BOX, size=[x / 2, y / 2, z / 2],
+                  pos=[0.0, 0.0, z / 2], rgba=list(PEDESTAL_RGBA), group=0)
+    return body.add_frame(pos=[0.0, 0.0, z])
+
+
 class RobotType(ABC):
     """A robot plugin's descriptor, keyed by ``name`` and ``aliases`` (episode ``robot.robot_name``)."""
 
@@ -168,6 +200,9 @@ class RobotType(ABC):
     default_init_qpos: dict[str, list[float]]
     #: camera system for episodes that name no cameras and no ``source.camera_system_class``
     default_camera_system: str | None = None
+    #: MolmoSpaces' ``base_size``: the box pedestal (x, y, z extents, metres) between the base
+    #: pose and the arm's root, where an episode gives no ``robot.base_size``; None: no pedestal
+    default_base_size: tuple[float, float, float] | None = None
 
     def init_qpos(self, group: str, values: Sequence[float]) -> np.ndarray:
         """An episode's ``robot.init_qpos[group]`` in public units; ``ValueError`` if it does not fit."""
@@ -187,9 +222,29 @@ class RobotType(ABC):
             raise ValueError(f"robot_base_pose needs 7 values (x, y, z, qw, qx, qy, qz), got {len(pose)}")
         return pose
 
+    def base_size(self, robot_spec: object) -> tuple[float, float, float] | None:
+        """The pedestal of an episode's robot (its ``RobotSpec``): ``robot.base_size`` where the
+        episode gives one (``null``: none), else :attr:`default_base_size`; ``ValueError`` if
+        it is not three positive sizes."""
+        extra = getattr(robot_spec, "model_extra", None) or {}
+        if "base_size" not in extra:
+            return self.default_base_size
+        return parse_base_size(extra["base_size"])
+
+    def place(self, world: mujoco.MjSpec, episode: object) -> None:
+        """Add the robot to ``world`` where ``episode`` (an ``EpisodeSpec``) puts it: at
+        ``task.robot_base_pose``, on the pedestal of :meth:`base_size`."""
+        pose, size = episode.task.robot_base_pose, self.base_size(episode.robot)  # type: ignore[attr-defined]
+        if size is None:
+            self.add_to(world, pose)  # robots of older plugins take no base_size
+        else:
+            self.add_to(world, pose, size)
+
     @abstractmethod
-    def add_to(self, world: mujoco.MjSpec, base_pose: Sequence[float]) -> None:
-        """Attach the robot to ``world`` at ``base_pose`` (x, y, z, qw, qx, qy, qz)."""
+    def add_to(self, world: mujoco.MjSpec, base_pose: Sequence[float],
+               base_size: Sequence[float] | None = None) -> None:
+        """Attach the robot to ``world`` at ``base_pose`` (x, y, z, qw, qx, qy, qz), on a
+        pedestal of ``base_size`` (see :func:`add_mount`) unless it is None."""
 
     @abstractmethod
     def bind(self, model: mujoco.MjModel) -> RobotHandle:

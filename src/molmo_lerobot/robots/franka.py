@@ -28,7 +28,8 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.paths import package_asset_dir
-from molmo_lerobot.robots.base import ArmGripperHandle, RobotType
+from molmo_lerobot.robots.base import ArmGripperHandle, RobotType, add_mount
+from molmo_lerobot.sim.spec_compat import set_joint_damping
 
 PREFIX = "robot/"
 #: finger joint travel (each finger, metres)
@@ -93,7 +94,7 @@ def load_franka_spec() -> mujoco.MjSpec:
         kp, kv = ARM_KP[k - 1], ARM_KV[k - 1]
         act.gainprm = [kp] + [0.0] * 9
         act.biasprm = [0.0, -kp, -kv] + [0.0] * 7
-        joint.damping = [1.0, 0.0, 0.0]
+        set_joint_damping(joint, 1.0)
         joint.armature = 0.1
     for body in spec.bodies:
         if body.name != "world":
@@ -156,9 +157,15 @@ class Franka(RobotType):
     def spec(self) -> mujoco.MjSpec:
         return load_franka_spec()
 
-    def add_to(self, world: mujoco.MjSpec, base_pose: Sequence[float]) -> None:
+    def add_to(self, world: mujoco.MjSpec, base_pose: Sequence[float],
+               base_size: Sequence[float] | None = None) -> None:
+        """No pedestal by default (the published ``*_v1`` benchmarks place the Panda's root at
+        the base pose); with ``base_size``, MolmoSpaces' mount body ``robot/base`` and pedestal."""
         pose = self.base_pose(base_pose)
-        frame = world.worldbody.add_frame(pos=pose[:3], quat=pose[3:])
+        if base_size is None:
+            frame = world.worldbody.add_frame(pos=pose[:3], quat=pose[3:])
+        else:
+            frame = add_mount(world, PREFIX + "base", pose, base_size)
         frame.attach_body(load_franka_spec().body("panda0_link0"), PREFIX, "")
 
     def bind(self, model: mujoco.MjModel) -> FrankaHandle:

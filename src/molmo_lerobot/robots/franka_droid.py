@@ -1,11 +1,20 @@
 """``franka_droid``: a Franka arm with a Robotiq 2F-85 gripper, DROID's set-up, named as in MolmoSpaces.
 
 Where MolmoSpaces' assets dir (:func:`molmo_lerobot.paths.molmospaces_assets_dir`) holds their
-robot (``robots/franka_droid/model.xml``), that model is loaded as is. Otherwise the robot is
-built at run time from registry packages (nothing is copied into this repository): the arm of
+robot (``robots/franka_droid/model.xml``), that model is used as their ``FrankaRobot`` uses it:
+its ``fr3_link0`` subtree, with gravity compensation on every body (their
+``FrankaRobotConfig.gravcomp``). Otherwise the robot is built at run time from registry
+packages (nothing is copied into this repository): the arm of
 :mod:`molmo_lerobot.robots.franka` (gymnasium-robotics' Panda meshes, standard joint zeros,
-joint-impedance gains) without its hand, and robosuite's ``robotiq_gripper_85.xml`` with its
-meshes, found through the installed package's path (robosuite is never imported).
+joint-impedance gains) without its hand, with the FR3's published joint ranges, damping,
+armature and friction (:data:`FR3_JOINTS`; the FR3 and the Panda share their kinematics), and
+robosuite's ``robotiq_gripper_85.xml`` with its meshes, found through the installed package's
+path (robosuite is never imported). ``docs/parity.md`` ("Robot") lists what still differs.
+
+Either way the robot stands as MolmoSpaces' ``add_robot_to_scene`` places it: a mount body
+``robot_0/base`` at ``task.robot_base_pose``, a box pedestal of ``base_size`` on it (their
+``FrankaRobotConfig.base_size``, :data:`BASE_SIZE`, unless the episode or run overrides it), and
+``fr3_link0`` on the pedestal's top.
 
 Both share MolmoSpaces' names under the namespace ``robot_0/``, so their camera specs and
 robot views resolve: bodies ``base`` (the mount), ``fr3_link0`` … and ``gripper/base``; arm
@@ -39,10 +48,20 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.paths import molmospaces_assets_dir, package_asset_dir
-from molmo_lerobot.robots.base import ArmGripperHandle, RobotType
+from molmo_lerobot.robots.base import ArmGripperHandle, RobotType, add_mount
 from molmo_lerobot.robots.franka import load_franka_spec
+from molmo_lerobot.sim.spec_compat import equality_data, set_joint_damping
 
 NAMESPACE = "robot_0/"
+#: MolmoSpaces' ``FrankaRobotConfig.base_size``: the pedestal under the arm (x, y, z metres)
+BASE_SIZE = (0.5, 0.5, 0.58)
+#: the FR3's joints (Franka's published limits, as in mujoco_menagerie's franka_fr3):
+#: range (rad), armature (kg·m²), friction loss (N·m); damping :data:`FR3_DAMPING` on all
+FR3_JOINTS = (((-2.9007, 2.9007), 0.195, 1.137), ((-1.8361, 1.8361), 0.195, 1.137),
+              ((-2.9007, 2.9007), 0.195, 1.137), ((-3.0770, -0.1169), 0.195, 1.137),
+              ((-2.8763, 2.8763), 0.074, 0.763), ((0.4398, 4.6216), 0.074, 0.44),
+              ((-3.0508, 3.0508), 0.074, 0.248))
+FR3_DAMPING = 0.21
 #: driver joint travel (rad): 0 open … DRIVER_CLOSED closed
 DRIVER_CLOSED = 0.8
 #: MolmoSpaces' gripper actuator range (0 open … 255 closed)
@@ -108,12 +127,12 @@ def _robotiq_spec() -> mujoco.MjSpec:
         spec.joint(old).name = new
     for follower, (driver, coef) in _FOLLOWERS.items():
         spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1=follower, name2=_DRIVERS[driver],
-                          data=[0.0, coef] + [0.0] * 9 + [0.0], solref=[0.005, 1.0])
+                          data=equality_data(0.0, coef), solref=[0.005, 1.0])
     spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1="right_driver_joint", name2="left_driver_joint",
-                      data=[0.0, 1.0] + [0.0] * 10, solref=[0.005, 1.0])
+                      data=equality_data(0.0, 1.0), solref=[0.005, 1.0])
     for joint in spec.joints:
         joint.armature = 0.005
-        joint.damping = [0.1, 0.0, 0.0]
+        set_joint_damping(joint, 0.1)
     split = spec.add_tendon(name="split")
     split.wrap_joint("left_driver_joint", 0.5)
     split.wrap_joint("right_driver_joint", 0.5)
@@ -139,11 +158,15 @@ def _registry_xml() -> str:
             arm.delete(geom)
     for site in list(link7.sites):
         arm.delete(site)
-    for k in range(1, 8):
+    for k, (limits, armature, friction) in enumerate(FR3_JOINTS, start=1):
         arm.body(f"panda0_link{k}").name = f"fr3_link{k}"
-        arm.joint(f"joint{k}").name = f"fr3_joint{k}"
+        joint = arm.joint(f"joint{k}")
+        joint.name = f"fr3_joint{k}"
+        joint.range, joint.armature, joint.frictionloss = list(limits), armature, friction
+        set_joint_damping(joint, FR3_DAMPING)
         act = arm.actuator(f"actuator{k}")
         act.name = act.target = f"fr3_joint{k}"
+        act.ctrlrange = list(limits)
     arm.body("panda0_link0").name = "fr3_link0"
     # link 7's frame is the standard one (see franka.py); the gripper at the flange, fingers
     # along link 7's ±y rotated by the DROID mount so that q7 = 0 aligns them with the base
@@ -170,12 +193,18 @@ def _registry_xml() -> str:
 
 
 def load_droid_spec(assets_dir: Path | None = None) -> mujoco.MjSpec:
-    """The robot as a standalone spec at the origin: MolmoSpaces' model (top body ``base``) if
-    installed, else the registry-built one (top body ``fr3_link0``)."""
+    """The robot as a standalone spec at the origin, its arm's root body ``fr3_link0``:
+    MolmoSpaces' model if installed (every body gravity-compensated, as their
+    ``apply_control_overrides`` does), else the registry-built one."""
     theirs = molmospaces_model(assets_dir)
-    if theirs is not None:
-        return mujoco.MjSpec.from_file(str(theirs))
-    return mujoco.MjSpec.from_string(_registry_xml())
+    if theirs is None:
+        return mujoco.MjSpec.from_string(_registry_xml())
+    spec = mujoco.MjSpec.from_file(str(theirs))
+    if spec.body("fr3_link0") is None:
+        raise ValueError(f"{theirs}: no body 'fr3_link0' (MolmoSpaces' Franka root body)")
+    for body in spec.body("fr3_link0").find_all("body"):
+        body.gravcomp = 1.0
+    return spec
 
 
 class FrankaDroidHandle(ArmGripperHandle):
@@ -229,6 +258,7 @@ class FrankaDroid(RobotType):
     move_groups = {"arm": 7, "gripper": 1}
     joint_names = {"arm": [f"fr3_joint{k}" for k in range(1, 8)], "gripper": ["robotiq_gripper"]}
     default_camera_system = "FrankaDroidCameraSystem"
+    default_base_size = BASE_SIZE
     #: MolmoSpaces' FrankaRobotConfig.init_qpos (gripper open)
     default_init_qpos = {"arm": [0.0, -0.7853, 0.0, -2.35619, 0.0, 1.57079, 0.0], "gripper": [0.0]}
 
@@ -244,14 +274,12 @@ class FrankaDroid(RobotType):
     def spec(self) -> mujoco.MjSpec:
         return load_droid_spec()
 
-    def add_to(self, world: mujoco.MjSpec, base_pose: Sequence[float]) -> None:
-        pose = self.base_pose(base_pose)
-        robot = load_droid_spec()
-        if robot.body("base") is not None:  # MolmoSpaces' model brings its mount body
-            world.worldbody.add_frame(pos=pose[:3], quat=pose[3:]).attach_body(robot.body("base"), NAMESPACE, "")
-        else:
-            mount = world.worldbody.add_body(name=NAMESPACE + "base", pos=pose[:3], quat=pose[3:])
-            mount.add_frame().attach_body(robot.body("fr3_link0"), NAMESPACE, "")
+    def add_to(self, world: mujoco.MjSpec, base_pose: Sequence[float],
+               base_size: Sequence[float] | None = None) -> None:
+        """Mount body ``robot_0/base`` at ``base_pose``, pedestal ``base_size``, arm on top (their
+        ``add_robot_to_scene``); :meth:`place` passes :data:`BASE_SIZE` unless overridden."""
+        top = add_mount(world, NAMESPACE + "base", self.base_pose(base_pose), base_size)
+        top.attach_body(load_droid_spec().body("fr3_link0"), NAMESPACE, "")
 
     def bind(self, model: mujoco.MjModel) -> FrankaDroidHandle:
         return FrankaDroidHandle(model, NAMESPACE)

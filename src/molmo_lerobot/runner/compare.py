@@ -31,12 +31,12 @@ from molmo_lerobot.runner.results import wilson_ci
 
 METRICS = {"success": "success at the final step", "success_once": "success at any step"}
 #: ``results.json`` fields that define the trial an episode is (besides the benchmark).
-TRIAL_FIELDS = ("timing", "horizon", "eval_options")
+TRIAL_FIELDS = ("timing", "horizon", "eval_options", "mujoco")
 #: ``config`` keys that do not change an episode's trial (who runs it, where its outputs go);
 #: a difference in any other key is flagged.
 NEUTRAL_CONFIG = frozenset({"policy", "benchmark", "seed", "limit", "workers", "executor", "output_dir", "record",
                             "record_hold_steps", "push", "resume", "progress", "hub", "wandb", "video", *TRIAL_FIELDS,
-                            "horizons", "custom_object", "camera"})
+                            "horizons", "custom_object", "camera", "robot"})
 Z95 = 1.959963984540054
 
 

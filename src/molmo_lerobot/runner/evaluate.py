@@ -31,6 +31,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+import mujoco
 from omegaconf import DictConfig, OmegaConf
 
 from molmo_lerobot.export.report import write_report
@@ -222,14 +223,16 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     if too_long:
         more = f" (and {len(too_long) - 1} more episodes)" if len(too_long) > 1 else ""
         raise RunError(too_long[0][1] + more)
+    _warn_default_horizons(bench.path, [described[i] for i in indices], cfg["timing"]["policy_dt_ms"])
 
     run_info = {
         "benchmark": {"name": bench.name, "sha256": bench.sha256, "n_episodes": len(bench.episodes),
                       "path": str(bench.path)},
         "policy": cfg["policy"], "policy_checkpoint": policy_checkpoints(cfg["policy"]), "seed": cfg["seed"],
         "limit": limit, "horizon": cfg.get("horizon"),
-        "timing": cfg["timing"],
+        "timing": cfg["timing"], "mujoco": mujoco.__version__,
         "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
+                         "robot": cfg.get("robot"),
                          "end_on_success": bool(cfg.get("end_on_success", False)),
                          "molmospaces": molmospaces_settings(cfg).to_config(),
                          **({"plugins_prefer": plugins.prefer} if plugins.prefer else {})},  # pinned providers
@@ -319,6 +322,25 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     return EvalResults(summary=summary, episodes=ordered, output_dir=out)
 
 
+def _warn_default_horizons(path: Path, described: list[dict[str, Any]], policy_dt_ms: float) -> None:
+    """One stderr line when episodes run the task types' default horizons (MolmoSpaces' table:
+    pick 20 s, pick-and-place 40 s, open/close 30 s): MolmoSpaces refuses a file without
+    ``task_horizon_sec`` unless given a horizon; here it runs, says so, and records
+    ``horizon_source: default`` per episode (molmo-compare checks per-episode horizons)."""
+    used: dict[str, int] = {}
+    count = 0
+    for d in described:
+        if d["horizon_source"] == "default":
+            used[d["task_type"]] = d["horizon"]
+            count += 1
+    if count:
+        table = ", ".join(f"{task} {steps * policy_dt_ms / 1000:.3g} s = {steps} steps"
+                          for task, steps in sorted(used.items()))
+        print(f"molmo-eval: warning: {path}: {count} episode{'s' * (count != 1)} carry no task.task_horizon_sec; "
+              f"running MolmoSpaces' default horizons ({table}); MolmoSpaces refuses such a file without a "
+              "horizon: pass horizon=<steps> or horizons.<task>=<seconds> to choose", file=sys.stderr)
+
+
 def _describe(spec: Any, plugins: Any, cfg: dict[str, Any], horizons: dict[str, float]) -> dict[str, Any]:
     """Task type, prompt, horizon and its source of one episode, from its spec alone (never raises)."""
     from molmo_lerobot.benchmark.schema import known_task_type
@@ -370,7 +392,7 @@ def _reopen(out: Path, run_info: dict[str, Any], recorders: list[Any]) -> list[E
     if not isinstance(previous, dict):
         raise RunError(f"cannot resume: {run_file} is not a run description (not a JSON object)")
     current = json.loads(json.dumps(run_info))  # compare as stored (JSON turns int keys into strings)
-    for key in ("benchmark", "policy", "policy_checkpoint", "seed", "horizon", "timing", "eval_options"):
+    for key in ("benchmark", "policy", "policy_checkpoint", "seed", "horizon", "timing", "mujoco", "eval_options"):
         if previous.get(key) != current.get(key):
             raise RunError(f"cannot resume {out}: its {key} differs from this run's "
                            f"({previous.get(key)!r} vs {current.get(key)!r})")

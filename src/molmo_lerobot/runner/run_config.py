@@ -64,6 +64,14 @@ def config_problems(cfg: Mapping[str, Any]) -> list[str]:
             out.append(f"horizons.{task}: expected a positive number of seconds, got {value!r} "
                        f"(at most {MAX_TASK_HORIZON_SEC:g})")
     out.extend(_timing_problems(cfg.get("timing")))
+    base_size = (cfg.get("robot") or {}).get("base_size", "default")
+    if base_size != "default":
+        from molmo_lerobot.robots.base import parse_base_size
+
+        try:
+            parse_base_size(base_size)
+        except ValueError as exc:
+            out.append(f"robot.{exc} (or default)")
     from molmo_lerobot.cameras.options import camera_option_problems
 
     out.extend(camera_option_problems(cfg.get("camera")))
@@ -93,11 +101,15 @@ def _timing_problems(timing: Any) -> list[str]:
         return [f"timing: expected a mapping with {', '.join(TIMING_KEYS)}, got {timing!r}"]
     out = [f"timing.{key}: expected a positive number of milliseconds, got {timing.get(key)!r}"
            for key in TIMING_KEYS if not (_is_number(timing.get(key)) and timing[key] > 0)]
+    known = (*TIMING_KEYS, "control", "sleep")
+    unknown = sorted(set(timing) - set(known))
+    if unknown:
+        out.append(f"timing: unknown keys {unknown} (known: {', '.join(known)})")
     if not out:
         from molmo_lerobot.sim.env import Timing
 
         try:
-            Timing(**{k: timing[k] for k in TIMING_KEYS})
+            Timing(**timing)
         except ValueError as exc:
             out.append(str(exc))
     return out

@@ -2,7 +2,8 @@
 
 ``make_env(spec, timing, scene, robot, cameras)`` assembles the scene with MjSpec from the
 plugin objects the caller resolved (this module never looks plugins up) — scene dataset house
-→ robot at ``task.robot_base_pose`` → ``scene_modifications`` → cameras — and compiles it
+→ robot at ``task.robot_base_pose`` on its pedestal (``RobotType.place``) →
+``scene_modifications`` → cameras — and compiles it
 with the physics timestep set from ``timing.sim_dt_ms`` (never taken from any XML) and
 the solver options every scene shares (:data:`PHYSICS_OPTIONS`: the ``implicitfast``
 integrator for stiff position actuators, elliptic friction cones and ``impratio`` 10 so
@@ -10,8 +11,15 @@ that grasped objects do not creep out of the fingers), unless the scene dataset 
 scenes' own (``SceneDataset.physics_options``: MolmoSpaces' scene XMLs).
 
 One :meth:`Env.step` is one policy step: ``policy_dt / ctrl_dt`` controller ticks, each
-moving the position targets linearly from the previous command towards the new one, and
-each followed by ``ctrl_dt / sim_dt`` physics steps.
+followed by ``ctrl_dt / sim_dt`` physics steps. ``Timing.control`` says how the step's
+position targets reach the actuators: ``hold`` (MolmoSpaces' controllers) writes the new
+targets at the first tick and holds them for the step; ``ramp`` (the default for now: the
+scripted experts are tuned for it) moves them linearly from the previous command to the new
+one over the ticks. ``Timing.sleep`` enables MuJoCo's
+body sleeping from the reset state on, as MolmoSpaces' rollouts do (where the MuJoCo in use
+has it). It is off by default: MuJoCo leaves a sleeping body's contacts out of
+``data.contact``, which the contact-based success rules read (theirs too), so an object that
+has settled on its receptacle reads as unsupported (``docs/parity.md``).
 """
 
 from __future__ import annotations
@@ -29,6 +37,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.sim.geometry import subtree
+from molmo_lerobot.sim.spec_compat import set_joint_damping
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
@@ -48,19 +57,37 @@ def _ratio(num: float, den: float, what: str) -> int:
     return int(n)
 
 
+#: how a policy step's targets reach the actuators (see the module docstring)
+CONTROL_MODES = ("hold", "ramp")
+#: MolmoSpaces' sleep tolerance for rollouts (MuJoCo 3.5's default is 1e-4, 4.0's 1e-3)
+SLEEP_TOLERANCE = 1e-3
+
+
+def sleep_supported() -> bool:
+    """Whether the MuJoCo in use can put bodies to sleep (``mjENBL_SLEEP``)."""
+    return hasattr(mujoco.mjtEnableBit, "mjENBL_SLEEP")
+
+
 @dataclass(frozen=True)
 class Timing:
-    """Policy, controller and physics periods in milliseconds (MolmoSpaces: 66 / 2 / 2)."""
+    """Policy, controller and physics periods in milliseconds (MolmoSpaces: 66 / 2 / 2), how
+    targets are applied over a policy step (``control``) and whether bodies may sleep."""
 
     policy_dt_ms: float = 66.0
     ctrl_dt_ms: float = 2.0
     sim_dt_ms: float = 2.0
+    control: str = "ramp"
+    sleep: bool = False
 
     def __post_init__(self) -> None:
         for name in ("policy_dt_ms", "ctrl_dt_ms", "sim_dt_ms"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"timing: {name} must be a positive number, got {value!r}")
+        if self.control not in CONTROL_MODES:
+            raise ValueError(f"timing: control must be one of {', '.join(CONTROL_MODES)}, got {self.control!r}")
+        if not isinstance(self.sleep, bool):
+            raise ValueError(f"timing: sleep must be true or false, got {self.sleep!r}")
         _ratio(self.policy_dt_ms, self.ctrl_dt_ms, "policy_dt_ms / ctrl_dt_ms")
         _ratio(self.ctrl_dt_ms, self.sim_dt_ms, "ctrl_dt_ms / sim_dt_ms")
 
@@ -94,6 +121,7 @@ def _model_key(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: Ro
                cameras: CameraSystem) -> str:
     mods = spec.scene_modifications.model_dump(mode="json", exclude={"object_poses"})
     return json.dumps([spec.scene_dataset, spec.data_split, spec.house_index, robot.name, spec.task.robot_base_pose,
+                       robot.base_size(spec.robot),
                        list(spec.img_resolution), [c.model_dump(mode="json") for c in spec.cameras], mods,
                        timing.sim_dt_ms, type(scene).__qualname__, cameras.name,
                        cameras.episode_key(spec)], sort_keys=True)
@@ -104,7 +132,7 @@ def _add_primitive(world: mujoco.MjSpec, name: str, prim: Any) -> None:
     if prim.add_freejoint:
         joint = body.add_freejoint(name=prim.freejoint_name or f"{body.name}/free")
         if prim.freejoint_damping is not None:
-            joint.damping = float(prim.freejoint_damping)
+            set_joint_damping(joint, prim.freejoint_damping)
     types = {"box": mujoco.mjtGeom.mjGEOM_BOX, "sphere": mujoco.mjtGeom.mjGEOM_SPHERE,
              "capsule": mujoco.mjtGeom.mjGEOM_CAPSULE, "cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,
              "ellipsoid": mujoco.mjtGeom.mjGEOM_ELLIPSOID}
@@ -121,7 +149,7 @@ def _add_primitive(world: mujoco.MjSpec, name: str, prim: Any) -> None:
 def _build_model(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: RobotType,
                  camera_system: CameraSystem) -> tuple[mujoco.MjModel, list[str]]:
     world = scene.build_episode(spec)
-    robot.add_to(world, spec.task.robot_base_pose)
+    robot.place(world, spec)
     mods = spec.scene_modifications
     scene.modify(world, spec)
     for name, prim in mods.primitive_objects.items():
@@ -255,6 +283,13 @@ class Env:
         for name, pose in self.spec.scene_modifications.object_poses.items():
             self._place(name, np.asarray(pose, dtype=np.float64))
         mujoco.mj_forward(m, d)
+        if sleep_supported():  # after the reset state is computed, as MolmoSpaces' rollouts
+            flag = int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+            if self.timing.sleep:
+                m.opt.enableflags |= flag
+                m.opt.sleep_tolerance = SLEEP_TOLERANCE
+            else:
+                m.opt.enableflags &= ~flag
 
     def _place(self, name: str, pose: np.ndarray) -> None:
         bid = self.body_id(name, f"scene_modifications.object_poses[{name!r}]")
@@ -301,11 +336,14 @@ class Env:
         start = d.ctrl.copy()
         for g, goal in target.items():
             self.robot.command(d, g, goal)
-        delta = d.ctrl - start
         ticks, substeps = self.timing.ctrl_ticks, self.timing.substeps
-        for k in range(1, ticks + 1):  # the robot's command maps are affine: interpolate in ctrl space
-            d.ctrl[:] = start + delta * (k / ticks)
-            mujoco.mj_step(m, d, nstep=substeps)
+        if self.timing.control == "hold":
+            mujoco.mj_step(m, d, nstep=ticks * substeps)
+        else:
+            delta = d.ctrl - start
+            for k in range(1, ticks + 1):  # the robot's command maps are affine: interpolate in ctrl space
+                d.ctrl[:] = start + delta * (k / ticks)
+                mujoco.mj_step(m, d, nstep=substeps)
         if not np.all(np.isfinite(d.qpos)):
             raise RuntimeError(f"physics diverged at t={d.time:.3f}s (non-finite state)")
 

@@ -140,7 +140,7 @@ class OpenCloseTask(Task):
 
 class _OpenCloseType(TaskType):
     mode: str
-    default_horizon_sec = 15.0
+    default_horizon_sec = 30.0  # MolmoSpaces' table; the open/close v1 files carry 15 s
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
         return {"task_success_threshold": float(getattr(spec.task, "task_success_threshold", DEFAULT_THRESHOLD))}
