@@ -1,4 +1,4 @@
-"""MolmoSpaces' side of tests/parity/test_placement.py: their FrankaRobot.add_robot_to_scene.
+"""MolmoSpaces' side of tests/parity/test_robot_placement.py: their FrankaRobot.add_robot_to_scene.
 
 Their robot directory is gated, so it is made here in their layout (``model.xml`` + the base
 texture their code insists on): ``model.xml`` is our franka_droid arm's kinematic tree (bodies,
