@@ -208,15 +208,6 @@ def open_fd(path: str | os.PathLike, flags: int, mode: int = 0o666, *, root: str
             _refuse(fd, leaf, rel, rel, str(base))
 
 
-def fsync_dir(path: str | os.PathLike) -> None:
-    """Make renames and new entries in directory ``path`` durable."""
-    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 @contextlib.contextmanager
 def atomic_open(path: str | os.PathLike, mode: str = "w", *, root: str | os.PathLike | None = None,
                 parents: bool = False, durable: bool = True, **kwargs: Any) -> Iterator[IO[Any]]:
