@@ -32,6 +32,11 @@ MAX_TILT_DEG = 40.0
 #: clearance kept between open fingers and neighbouring objects / between fingertips and the support
 FINGER_CLEARANCE = 0.012
 TABLE_CLEARANCE = 0.004
+#: largest per-step change of a joint target in contact (rad): the Panda/FR3 shoulder actuators' force
+#: limit over their gain (87 N m / 4500 N m/rad = 0.019 rad) with a margin; see PhasedExpert._path
+CONTACT_STEP = 0.015
+#: policy steps over which a move in contact speeds up and slows down
+CONTACT_RAMP = 4
 
 
 def _pose_matrix(pose7: np.ndarray) -> np.ndarray:
@@ -173,6 +178,29 @@ class PhasedExpert(Policy):
             self.queue.append({"arm": self.q_cmd + s * (q_goal - self.q_cmd),
                                "gripper": np.array([self.g_cmd + s * (gripper - self.g_cmd)])})
         self.q_cmd, self.g_cmd = q_goal.copy(), gripper
+
+    def _path(self, waypoints: list[np.ndarray], gripper: float, duration: float, gentle: bool = False) -> None:
+        """Queue one smooth move from the last command through the joint ``waypoints``: piecewise
+        linear in joint space, timed by one minimum-jerk profile over the whole path, so the arm
+        does not stop at each via-point.
+
+        ``gentle`` (moves in contact): no joint's target changes by more than :data:`CONTACT_STEP`
+        in a step, the path timed at that pace (constant, with ramps at both ends). A target
+        applied at once and held for the step (``timing.control=hold``) then does not saturate
+        the shoulder and elbow actuators; saturated they lose their damping and the arm chatters
+        against what it holds (the handle slips out of the fingers)."""
+        points = np.array([self.q_cmd, *waypoints])
+        reach = np.concatenate([[0.0], np.cumsum(np.max(np.abs(np.diff(points, axis=0)), axis=1))])
+        n = max(1, int(np.ceil(max(duration, reach[-1] / self.speed) / self.dt)))
+        profile = _min_jerk(n)
+        if gentle:
+            n = max(n, int(np.ceil(reach[-1] / CONTACT_STEP)) + CONTACT_RAMP)
+            pace = np.minimum(1.0, np.minimum(np.arange(1, n + 1), np.arange(n, 0, -1)) / CONTACT_RAMP)
+            profile = np.cumsum(pace) / pace.sum()
+        for s in profile:
+            q = np.array([np.interp(s * reach[-1], reach, points[:, j]) for j in range(points.shape[1])])
+            self.queue.append({"arm": q, "gripper": np.array([self.g_cmd + s * (gripper - self.g_cmd)])})
+        self.q_cmd, self.g_cmd = points[-1].copy(), gripper
 
     def act(self, obs: Observation) -> Action:
         while not self.queue:
