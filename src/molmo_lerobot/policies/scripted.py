@@ -32,6 +32,8 @@ MAX_TILT_DEG = 40.0
 #: clearance kept between open fingers and neighbouring objects / between fingertips and the support
 FINGER_CLEARANCE = 0.012
 TABLE_CLEARANCE = 0.004
+#: seconds the arm is given to settle on a pose before a move that starts in or near contact
+SETTLE_S = 0.3
 #: largest per-step change of a joint target in contact (rad): the Panda/FR3 shoulder actuators' force
 #: limit over their gain (87 N m / 4500 N m/rad = 0.019 rad) with a margin; see PhasedExpert._path
 CONTACT_STEP = 0.015
@@ -295,6 +297,7 @@ class ScriptedPick(PhasedExpert):
         if phase == "approach":
             self.grasp_local, q_pre, _ = self._choose_grasp()
             self._move(q_pre, 0.0, 1.0)
+            self._move(q_pre, 0.0, SETTLE_S)  # arrive at the pre-grasp before descending past neighbours
         elif phase == "descend":
             T_grasp = self._object_T() @ self.grasp_local  # the object may have been nudged
             T_pre = T_grasp.copy()
