@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
 import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -69,3 +70,23 @@ def test_expert_on_every_object_kind(task):
         if kind not in seen:
             seen[kind] = _run(raw, ScriptedExpert({}))[0]
     assert seen and all(seen.values()), seen
+
+
+def test_moves_in_contact_keep_each_step_within_what_the_arm_follows():
+    """A path in contact (``gentle``) is one move through its via-points, no joint target changing
+    by more than CONTACT_STEP a step; a free move may take larger steps."""
+    from molmo_lerobot.policies.scripted import CONTACT_STEP
+    from molmo_lerobot.policies.scripted_articulated import ScriptedArticulated
+
+    def queued(gentle: bool) -> np.ndarray:
+        expert = ScriptedArticulated({})
+        expert.dt, expert.queue, expert.q_cmd, expert.g_cmd = 0.066, [], np.zeros(7), 1.0
+        waypoints = [np.array([0.4 * k, -0.3 * k, 0.1, 0, 0, 0.05 * k, 0]) for k in range(1, 6)]
+        expert._path(waypoints, 1.0, 1.0, gentle=gentle)
+        return np.array([np.zeros(7)] + [a["arm"] for a in expert.queue])
+
+    gentle, free = queued(True), queued(False)
+    assert np.allclose(gentle[-1], free[-1]) and np.allclose(gentle[-1], [2.0, -1.5, 0.1, 0, 0, 0.25, 0])
+    assert np.abs(np.diff(gentle, axis=0)).max() <= CONTACT_STEP + 1e-9
+    assert np.abs(np.diff(free, axis=0)).max() > CONTACT_STEP
+    assert np.all(np.diff(gentle[:, 0]) > 0)  # never stops at a via-point

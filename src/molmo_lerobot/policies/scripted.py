@@ -27,6 +27,8 @@ from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Pol
 
 PREGRASP_DISTANCE = 0.10
 LIFT_HEIGHT = 0.12
+#: the approach passes this far (m) above the pre-grasp and comes straight down onto it
+APPROACH_ABOVE = 0.08
 #: steepest accepted approach tilt from straight down
 MAX_TILT_DEG = 40.0
 #: clearance kept between open fingers and neighbouring objects / between fingertips and the support
@@ -281,23 +283,33 @@ class ScriptedPick(PhasedExpert):
 
     def _line(self, T_from: np.ndarray, T_to: np.ndarray, q_seed: np.ndarray, gripper: float, duration: float,
               points: int = 4) -> None:
-        """Queue a straight TCP line (IK at ``points`` via-points, fixed orientation)."""
-        q = q_seed
+        """Queue a straight TCP line (IK at ``points`` via-points, fixed orientation), one smooth
+        move; holding the object (gripper closed) it is a move in contact (``_path``'s ``gentle``)."""
+        qs = [q_seed]
         for k in range(1, points + 1):
             T = T_to.copy()
             T[:3, 3] = T_from[:3, 3] + (T_to[:3, 3] - T_from[:3, 3]) * k / points
-            q_next = self.ik.solve(T, q)
-            if q_next is None:
+            q = self.ik.solve(T, qs[-1])
+            if q is None:
                 raise RuntimeError(f"scripted policy: IK failed on the straight line for {self.target!r}")
-            self._move(q_next, gripper, duration / points)
-            q = q_next
+            qs.append(q)
+        self._path(qs[1:], gripper, duration, gentle=gripper > 0.5)
 
     def _plan(self, phase: str) -> None:
         env = self.env
         if phase == "approach":
             self.grasp_local, q_pre, _ = self._choose_grasp()
-            self._move(q_pre, 0.0, 1.0)
-            self._move(q_pre, 0.0, SETTLE_S)  # arrive at the pre-grasp before descending past neighbours
+            T_pre = self._object_T() @ self.grasp_local
+            T_pre[:3, 3] -= PREGRASP_DISTANCE * T_pre[:3, 2]
+            T_above = T_pre.copy()
+            T_above[2, 3] += APPROACH_ABOVE
+            q_above = self.ik.solve(T_above, q_pre)
+            if q_above is None:
+                self._move(q_pre, 0.0, 1.0)
+            else:  # come down onto the pre-grasp: a joint-space sweep straight to it may clip the object
+                self._move(q_above, 0.0, 1.0)
+                self._line(T_above, T_pre, q_above, 0.0, 0.4, points=2)
+            self._move(self.q_cmd, 0.0, SETTLE_S)  # arrive at the pre-grasp before descending past neighbours
         elif phase == "descend":
             T_grasp = self._object_T() @ self.grasp_local  # the object may have been nudged
             T_pre = T_grasp.copy()
