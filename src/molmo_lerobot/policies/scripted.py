@@ -27,11 +27,20 @@ from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Pol
 
 PREGRASP_DISTANCE = 0.10
 LIFT_HEIGHT = 0.12
+#: the approach passes this far (m) above the pre-grasp and comes straight down onto it
+APPROACH_ABOVE = 0.08
 #: steepest accepted approach tilt from straight down
 MAX_TILT_DEG = 40.0
 #: clearance kept between open fingers and neighbouring objects / between fingertips and the support
 FINGER_CLEARANCE = 0.012
 TABLE_CLEARANCE = 0.004
+#: seconds the arm is given to settle on a pose before a move that starts in or near contact
+SETTLE_S = 0.3
+#: largest per-step change of a joint target in contact (rad): the Panda/FR3 shoulder actuators' force
+#: limit over their gain (87 N m / 4500 N m/rad = 0.019 rad) with a margin; see PhasedExpert._path
+CONTACT_STEP = 0.015
+#: policy steps over which a move in contact speeds up and slows down
+CONTACT_RAMP = 4
 
 
 def _pose_matrix(pose7: np.ndarray) -> np.ndarray:
@@ -174,6 +183,29 @@ class PhasedExpert(Policy):
                                "gripper": np.array([self.g_cmd + s * (gripper - self.g_cmd)])})
         self.q_cmd, self.g_cmd = q_goal.copy(), gripper
 
+    def _path(self, waypoints: list[np.ndarray], gripper: float, duration: float, gentle: bool = False) -> None:
+        """Queue one smooth move from the last command through the joint ``waypoints``: piecewise
+        linear in joint space, timed by one minimum-jerk profile over the whole path, so the arm
+        does not stop at each via-point.
+
+        ``gentle`` (moves in contact): no joint's target changes by more than :data:`CONTACT_STEP`
+        in a step, the path timed at that pace (constant, with ramps at both ends). A target
+        applied at once and held for the step (``timing.control=hold``) then does not saturate
+        the shoulder and elbow actuators; saturated they lose their damping and the arm chatters
+        against what it holds (the handle slips out of the fingers)."""
+        points = np.array([self.q_cmd, *waypoints])
+        reach = np.concatenate([[0.0], np.cumsum(np.max(np.abs(np.diff(points, axis=0)), axis=1))])
+        n = max(1, int(np.ceil(max(duration, reach[-1] / self.speed) / self.dt)))
+        profile = _min_jerk(n)
+        if gentle:
+            n = max(n, int(np.ceil(reach[-1] / CONTACT_STEP)) + CONTACT_RAMP)
+            pace = np.minimum(1.0, np.minimum(np.arange(1, n + 1), np.arange(n, 0, -1)) / CONTACT_RAMP)
+            profile = np.cumsum(pace) / pace.sum()
+        for s in profile:
+            q = np.array([np.interp(s * reach[-1], reach, points[:, j]) for j in range(points.shape[1])])
+            self.queue.append({"arm": q, "gripper": np.array([self.g_cmd + s * (gripper - self.g_cmd)])})
+        self.q_cmd, self.g_cmd = points[-1].copy(), gripper
+
     def act(self, obs: Observation) -> Action:
         while not self.queue:
             phase = self.phases[0] if len(self.phases) == 1 else self.phases.pop(0)
@@ -251,22 +283,33 @@ class ScriptedPick(PhasedExpert):
 
     def _line(self, T_from: np.ndarray, T_to: np.ndarray, q_seed: np.ndarray, gripper: float, duration: float,
               points: int = 4) -> None:
-        """Queue a straight TCP line (IK at ``points`` via-points, fixed orientation)."""
-        q = q_seed
+        """Queue a straight TCP line (IK at ``points`` via-points, fixed orientation), one smooth
+        move; holding the object (gripper closed) it is a move in contact (``_path``'s ``gentle``)."""
+        qs = [q_seed]
         for k in range(1, points + 1):
             T = T_to.copy()
             T[:3, 3] = T_from[:3, 3] + (T_to[:3, 3] - T_from[:3, 3]) * k / points
-            q_next = self.ik.solve(T, q)
-            if q_next is None:
+            q = self.ik.solve(T, qs[-1])
+            if q is None:
                 raise RuntimeError(f"scripted policy: IK failed on the straight line for {self.target!r}")
-            self._move(q_next, gripper, duration / points)
-            q = q_next
+            qs.append(q)
+        self._path(qs[1:], gripper, duration, gentle=gripper > 0.5)
 
     def _plan(self, phase: str) -> None:
         env = self.env
         if phase == "approach":
             self.grasp_local, q_pre, _ = self._choose_grasp()
-            self._move(q_pre, 0.0, 1.0)
+            T_pre = self._object_T() @ self.grasp_local
+            T_pre[:3, 3] -= PREGRASP_DISTANCE * T_pre[:3, 2]
+            T_above = T_pre.copy()
+            T_above[2, 3] += APPROACH_ABOVE
+            q_above = self.ik.solve(T_above, q_pre)
+            if q_above is None:
+                self._move(q_pre, 0.0, 1.0)
+            else:  # come down onto the pre-grasp: a joint-space sweep straight to it may clip the object
+                self._move(q_above, 0.0, 1.0)
+                self._line(T_above, T_pre, q_above, 0.0, 0.4, points=2)
+            self._move(self.q_cmd, 0.0, SETTLE_S)  # arrive at the pre-grasp before descending past neighbours
         elif phase == "descend":
             T_grasp = self._object_T() @ self.grasp_local  # the object may have been nudged
             T_pre = T_grasp.copy()

@@ -126,20 +126,21 @@ class ScriptedArticulated(PhasedExpert):
         return [self._body_T(q0 + (self.q_goal - q0) * k / n) @ grasp_local for k in range(1, n + 1)]
 
     # Queueing -----------------------------------------------------------------------------------
-    def _via(self, poses: list[np.ndarray], gripper: float, duration: float, partial: bool = False) -> None:
+    def _via(self, poses: list[np.ndarray], gripper: float, duration: float, partial: bool = False,
+             gentle: bool = False) -> None:
         """Queue IK via-points through ``poses`` (world TCP poses), ``duration`` seconds in all.
 
         With ``partial`` the path stops at the last reachable via-point instead of failing.
         """
-        q = self.q_cmd
-        for k, T in enumerate(poses):
-            q_next = self.ik.solve(T, q, iters=IK_ITERS)
-            if q_next is None:
-                if partial and k > 0:
-                    return
+        qs = [self.q_cmd]
+        for T in poses:
+            q = self.ik.solve(T, qs[-1], iters=IK_ITERS)
+            if q is None:
+                if partial and len(qs) > 1:
+                    break
                 raise RuntimeError(f"scripted policy: IK failed on the way for {self.object_name!r}")
-            self._move(q_next, gripper, duration / len(poses))
-            q = q_next
+            qs.append(q)
+        self._path(qs[1:], gripper, duration * (len(qs) - 1) / len(poses), gentle)
 
     def _line(self, T_from: np.ndarray, T_to: np.ndarray, gripper: float, duration: float, points: int = 4) -> None:
         poses = []
@@ -167,7 +168,7 @@ class ScriptedArticulated(PhasedExpert):
             q0 = float(self.env.data.qpos[self.qadr])
             n = max(2, int(np.ceil(abs(self.q_goal - q0) / VIA_STEP[self.kind])))
             duration = max(1.0, abs(self.q_goal - q0) * ARTICULATE_TIME[self.kind])
-            self._via(self._arc(self.grasp_local, n), 1.0, duration, partial=True)
+            self._via(self._arc(self.grasp_local, n), 1.0, duration, partial=True, gentle=True)
             self._move(self.q_cmd, 1.0, 0.3)
         elif phase == "release":
             self._move(self.q_cmd, 0.0, 0.5)

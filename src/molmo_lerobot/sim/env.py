@@ -13,9 +13,8 @@ scenes' own (``SceneDataset.physics_options``: MolmoSpaces' scene XMLs).
 One :meth:`Env.step` is one policy step: ``policy_dt / ctrl_dt`` controller ticks, each
 followed by ``ctrl_dt / sim_dt`` physics steps. ``Timing.control`` says how the step's
 position targets reach the actuators: ``hold`` (MolmoSpaces' controllers) writes the new
-targets at the first tick and holds them for the step; ``ramp`` (the default for now: the
-scripted experts are tuned for it) moves them linearly from the previous command to the new
-one over the ticks. ``Timing.sleep`` enables MuJoCo's
+targets at the first tick and holds them for the step (the default); ``ramp`` moves them
+linearly from the previous command to the new one over the ticks. ``Timing.sleep`` enables MuJoCo's
 body sleeping from the reset state on, as MolmoSpaces' rollouts do (where the MuJoCo in use
 has it). It is off by default: MuJoCo leaves a sleeping body's contacts out of
 ``data.contact``, which the contact-based success rules read (theirs too), so an object that
@@ -76,7 +75,7 @@ class Timing:
     policy_dt_ms: float = 66.0
     ctrl_dt_ms: float = 2.0
     sim_dt_ms: float = 2.0
-    control: str = "ramp"
+    control: str = "hold"
     sleep: bool = False
 
     def __post_init__(self) -> None:
