@@ -87,7 +87,7 @@ def test_molmospaces_init_qpos_starts_open():
     try:
         assert env.observe(images=False)["qpos"]["gripper"][0] < 0.01
         assert _pad_gap(env) > 0.08  # a 2F-85 opens to 85 mm
-        assert env.robot.driver_angles(env.data) == pytest.approx(OPEN_DRIVERS, abs=1e-6)
+        assert env.robot.joint_qpos(env.data, "gripper") == pytest.approx(OPEN_DRIVERS, abs=1e-6)
     finally:
         env.close()
 

@@ -232,10 +232,6 @@ class FrankaDroidHandle(ArmGripperHandle):
     def _gripper_qvel(self, data):
         return float(data.qvel[self._drv_v].mean() / DRIVER_CLOSED)
 
-    def driver_angles(self, data: mujoco.MjData) -> np.ndarray:
-        """The two driver joints in radians (MolmoSpaces' gripper joint positions)."""
-        return data.qpos[self._drv_q].copy()
-
     def _gripper_set_qpos(self, data, closed):
         angle = DRIVER_CLOSED * closed
         data.qpos[self._drv_q] = angle
