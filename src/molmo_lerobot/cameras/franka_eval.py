@@ -152,7 +152,7 @@ def eval_exo_draws(ref_pos: np.ndarray, ref_rot: np.ndarray, centre: np.ndarray,
         lookat = centre + rng.uniform(*ranges.lookat_noise, size=3)
         looking = Rotation.from_matrix(look_rotation(lookat - pos, (0.0, 0.0, 1.0)))
         rot = Slerp([0.0, 1.0], Rotation.concatenate([calibrated, looking]))(ranges.lookat_weight)
-        fovy = EXO_FOV + (rng.uniform(*ranges.fov) - EXO_FOV)
+        fovy = EXO_FOV + (rng.uniform(*ranges.fov) - EXO_FOV)  # their arithmetic (shift from the base fov), bit for bit
         return pos, mat_to_quat(rot.as_matrix()), float(fovy)
 
     return draw
