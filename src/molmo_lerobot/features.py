@@ -68,17 +68,16 @@ def value_names(group: str, declared: Sequence[str] | None, size: int) -> list[s
     return [f"{safe_name(group)}_{i}" for i in range(size)]
 
 
-def concat(parts: Mapping[str, Any], groups: Iterable[str], field: str,
-           sizes: Iterable[int] | None = None) -> np.ndarray:
-    """float32: each group's values of ``parts`` flattened, in ``groups`` order (each of its size, if given)."""
-    groups = list(groups)
+def concat(parts: Mapping[str, Any], groups: Sequence[str], field: str,
+           sizes: Sequence[int] | None = None) -> np.ndarray:
+    """float32: each group's values of ``parts`` flattened, in ``groups`` order (``sizes``: checked)."""
     out = []
-    for group, size in zip(groups, sizes if sizes is not None else [None] * len(groups), strict=True):
+    for i, group in enumerate(groups):
         if group not in parts:
             raise FeatureError(f"{field}: move group {group!r} missing")
         a = np.asarray(parts[group], dtype=np.float32).reshape(-1)
-        if size is not None and a.size != size:
-            raise FeatureError(f"{field}: move group {group!r} has {a.size} values, expected {size}")
+        if sizes is not None and a.size != sizes[i]:
+            raise FeatureError(f"{field}: move group {group!r} has {a.size} values, expected {sizes[i]}")
         out.append(a)
     return np.concatenate(out)
 
@@ -120,7 +119,8 @@ class FeatureMap:
             action_names += value_names(group, joints.get(group), int(dim))
         return cls(
             cameras=tuple((str(c), int(h), int(w)) for c, h, w in cameras), groups=tuple(move_groups),
-            state_sizes=tuple(int(sizes[g]) for g in move_groups), action_sizes=tuple(int(d) for d in move_groups.values()),
+            state_sizes=tuple(int(sizes[g]) for g in move_groups),
+            action_sizes=tuple(int(d) for d in move_groups.values()),
             state_names=tuple(state_names), action_names=tuple(action_names),
         )
 

@@ -135,7 +135,8 @@ class MolmoEnv(gym.Env):
     def _spaces(self) -> tuple[spaces.Dict, spaces.Box]:
         #: the feature map of this env's episodes: ``agent_pos`` is its ``observation.state``, the action its ``action``
         self.features = self._feature_map(self._episode.env.observe(images=True))
-        pixels = spaces.Dict({c: spaces.Box(0, 255, shape, np.uint8) for c, shape in self.features.camera_shapes.items()})
+        cams = self.features.camera_shapes
+        pixels = spaces.Dict({c: spaces.Box(0, 255, shape, np.uint8) for c, shape in cams.items()})
         obs_space = spaces.Dict({"pixels": pixels,
                                  "agent_pos": spaces.Box(-np.inf, np.inf, (self.features.state_dim,), np.float32)})
         act_space = spaces.Box(-np.inf, np.inf, (self.features.action_dim,), np.float32)

@@ -52,7 +52,7 @@ class FrameLayout:
 
     def frame(self, obs: dict[str, Any], action: dict[str, Any], reward: float | None,
               success: bool, done: bool, task: str, info: EpisodeInfo) -> dict[str, Any]:
-        """One ``add_frame`` dict; raises :class:`~molmo_lerobot.features.FeatureError` naming the field that does not fit."""
+        """One ``add_frame`` dict; raises :class:`~molmo_lerobot.features.FeatureError` naming the misfit."""
         fmap = self.feature_map
         frame: dict[str, Any] = fmap.images(obs.get("images") or {})
         frame[STATE] = fmap.state_vector(obs.get("qpos") or {})
