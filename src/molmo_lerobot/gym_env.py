@@ -16,7 +16,8 @@ Episodes and seeds
 Observation
     ``{"pixels": {camera: uint8 (H, W, 3)}, "agent_pos": float32 (n,)}``: ``agent_pos`` is the
     ``observation.state`` of our recorded datasets (each move group's joint positions, in the
-    robot's move-group order; the gripper as 0 open … 1 closed).
+    robot's move-group order; the gripper as 0 open … 1 closed), both from one feature map
+    (:mod:`molmo_lerobot.features`, the env's ``features``).
 
 Action
     float32 ``(n,)``: the robot's move groups concatenated in that same order (the
@@ -37,6 +38,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from molmo_lerobot.features import FeatureMap, is_wrist
 from molmo_lerobot.runner.episode import EpisodeRunner, load_run_benchmark
 
 NAMESPACE = "molmo_lerobot"
@@ -93,10 +95,10 @@ class MolmoEnv(gym.Env):
             raise RuntimeError("step() before reset()")
         ep = self._episode
         a = np.asarray(action, dtype=np.float64).reshape(-1) if not isinstance(action, dict) else action
-        if isinstance(a, np.ndarray) and a.shape != (self._action_dim,):
-            raise ValueError(f"action has shape {np.shape(action)}, expected ({self._action_dim},): "
-                             f"{self._action_doc()}")
-        success = ep.step(self._split(a) if isinstance(a, np.ndarray) else a)
+        if isinstance(a, np.ndarray) and a.shape != (self.features.action_dim,):
+            raise ValueError(f"action has shape {np.shape(action)}, expected ({self.features.action_dim},): "
+                             f"{self.features.action_layout()}")
+        success = ep.step(self.features.split_action(a) if isinstance(a, np.ndarray) else a)
         self._steps += 1
         self._success_once |= success
         terminated = bool(success and self.end_on_success)
@@ -110,7 +112,7 @@ class MolmoEnv(gym.Env):
         if self.render_mode is None or self._episode is None:
             return None
         cams = self._episode.env.camera_names
-        exterior = next((c for c in cams if "wrist" not in c.lower()), cams[0])
+        exterior = next((c for c in cams if not is_wrist(c)), cams[0])
         return self._episode.env.render(exterior)
 
     def close(self) -> None:
@@ -131,39 +133,30 @@ class MolmoEnv(gym.Env):
         return int(index)
 
     def _spaces(self) -> tuple[spaces.Dict, spaces.Box]:
-        env = self._episode.env
-        obs = env.observe(images=True)
-        self._groups = dict(env.move_groups)
-        self._cams = {c: np.asarray(img).shape for c, img in obs["images"].items()}
-        self._action_dim = sum(self._groups.values())
-        state_dim = sum(np.asarray(obs["qpos"][g]).size for g in self._groups)
-        pixels = spaces.Dict({c: spaces.Box(0, 255, shape, np.uint8) for c, shape in self._cams.items()})
+        #: the feature map of this env's episodes: ``agent_pos`` is its ``observation.state``, the action its ``action``
+        self.features = self._feature_map(self._episode.env.observe(images=True))
+        cams = self.features.camera_shapes
+        pixels = spaces.Dict({c: spaces.Box(0, 255, shape, np.uint8) for c, shape in cams.items()})
         obs_space = spaces.Dict({"pixels": pixels,
-                                 "agent_pos": spaces.Box(-np.inf, np.inf, (state_dim,), np.float32)})
-        act_space = spaces.Box(-np.inf, np.inf, (self._action_dim,), np.float32)
+                                 "agent_pos": spaces.Box(-np.inf, np.inf, (self.features.state_dim,), np.float32)})
+        act_space = spaces.Box(-np.inf, np.inf, (self.features.action_dim,), np.float32)
         return obs_space, act_space
+
+    def _feature_map(self, obs: dict[str, Any]) -> FeatureMap:
+        env = self._episode.env
+        return FeatureMap.from_observation(env.move_groups, env.joint_names, env.camera_names, obs)
 
     def _check_layout(self, obs: dict[str, Any]) -> None:
         """Every episode of one env must share the spaces (cameras, resolution, move groups)."""
-        cams = {c: np.asarray(img).shape for c, img in obs["images"].items()}
-        if cams != self._cams or dict(self._episode.env.move_groups) != self._groups:
-            raise ValueError(f"{self.bench.where(self._episode.index)}: cameras {cams} / move groups "
-                             f"{dict(self._episode.env.move_groups)} differ from this env's spaces "
-                             f"({self._cams} / {self._groups}); pin episode_index to run it")
-
-    def _action_doc(self) -> str:
-        return " + ".join(f"{g} ({d})" for g, d in self._groups.items())
-
-    def _split(self, a: np.ndarray) -> dict[str, np.ndarray]:
-        out, i = {}, 0
-        for g, d in self._groups.items():
-            out[g] = a[i:i + d]
-            i += d
-        return out
+        new, ours = self._feature_map(obs), self.features
+        if new.camera_shapes != ours.camera_shapes or new.move_groups != ours.move_groups:
+            raise ValueError(f"{self.bench.where(self._episode.index)}: cameras {new.camera_shapes} / move groups "
+                             f"{new.move_groups} differ from this env's spaces "
+                             f"({ours.camera_shapes} / {ours.move_groups}); pin episode_index to run it")
 
     def _obs(self, obs: dict[str, Any]) -> dict[str, Any]:
-        state = np.concatenate([np.asarray(obs["qpos"][g], dtype=np.float32).reshape(-1) for g in self._groups])
-        return {"pixels": {c: np.asarray(obs["images"][c], dtype=np.uint8) for c in self._cams}, "agent_pos": state}
+        return {"pixels": {c: np.asarray(obs["images"][c], dtype=np.uint8) for c in self.features.camera_shapes},
+                "agent_pos": self.features.state_vector(obs["qpos"])}
 
     def _info(self, success: bool) -> dict[str, Any]:
         ep = self._episode

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
-from molmo_lerobot.export.frames import FrameError, FrameLayout
+from molmo_lerobot.export.frames import FrameLayout
 from molmo_lerobot.export.merge import EVAL_EPISODES, read_eval_records
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory, RecordConfigError
 from molmo_lerobot.export.shards import SHARDS_DIR, list_shards
+from molmo_lerobot.features import FeatureError
 
 CFG = {"benchmark": {"name": "synth_v1"}, "policy": {"name": "scripted"},
        "timing": {"policy_dt_ms": 66.0}, "hub": {"repo_id": None, "private": False}, "push": False}
@@ -181,13 +182,13 @@ def test_frame_layout_rejects_mismatched_steps():
     layout = FrameLayout.from_step(info, S.obs(0, 0), None)
     bad = S.obs(0, 1)
     bad["images"]["wrist"] = np.zeros((S.H + 1, S.W, 3), np.uint8)
-    with pytest.raises(FrameError, match="observation.images.wrist"):
+    with pytest.raises(FeatureError, match="observation.images.wrist"):
         layout.frame(bad, {"arm": np.zeros(3), "gripper": np.zeros(1)}, None, False, False, "t", S.info(0, 5))
-    with pytest.raises(FrameError, match="action: move group 'arm' has 2 values"):
+    with pytest.raises(FeatureError, match="action: move group 'arm' has 2 values"):
         layout.frame(S.obs(0, 1), {"arm": np.zeros(2), "gripper": np.zeros(1)}, None, False, False, "t", S.info(0, 5))
     no_cam = S.obs(0, 0)
     del no_cam["images"]["exo"]
-    with pytest.raises(FrameError, match="camera 'exo'"):
+    with pytest.raises(FeatureError, match="camera 'exo'"):
         FrameLayout.from_step(info, no_cam, None)
 
 

@@ -21,7 +21,7 @@ from typing import Any
 from molmo_lerobot.benchmark import molmospaces
 from molmo_lerobot.benchmark.load import Benchmark, Problem
 from molmo_lerobot.benchmark.schema import EpisodeSpec
-from molmo_lerobot.export.frames import image_feature
+from molmo_lerobot.features import image_feature
 from molmo_lerobot.plugins import PluginConflict, PluginError, Plugins, get_plugins
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from molmo_lerobot.features import IMAGE_PREFIX, STATE
+
 TAGS = ["molmo-lerobot", "evaluation", "rollouts", "mujoco", "simulation", "synthetic"]
 
 
@@ -41,7 +43,7 @@ def _cameras(meta_info: dict[str, Any]) -> list[str]:
     for key, feature in (meta_info.get("features") or {}).items():
         if feature.get("dtype") == "video":
             h, w = list(feature.get("shape") or [0, 0])[:2]
-            out.append(f"`{key.removeprefix('observation.images.')}` ({w}x{h})")
+            out.append(f"`{key.removeprefix(IMAGE_PREFIX)}` ({w}x{h})")
     return out
 
 
@@ -57,7 +59,7 @@ def description(meta_info: dict[str, Any], summary: dict[str, Any], records: lis
     tasks = sorted((summary.get("per_task") or {}).items())
     cameras = _cameras(meta_info)
     fps = meta_info.get("fps")
-    state = ((meta_info.get("features") or {}).get("observation.state") or {}).get("shape") or ["?"]
+    state = ((meta_info.get("features") or {}).get(STATE) or {}).get("shape") or ["?"]
     lines = [
         f"Evaluation rollouts of policy `{policy_name}` on benchmark `{bench.get('name', '?')}` "
         f"(sha256 `{sha[:16]}`), recorded with molmo_lerobot.",

@@ -1,10 +1,11 @@
 """``policy=lerobot policy.path=…``: any LeRobot pretrained policy with its pre/post processors.
 
 Our observation (images by camera name, ``qpos`` by move group, prompt) is mapped to the
-policy's feature keys: each image feature ``observation.images.<key>`` takes the camera named
-in ``cameras`` (default: the camera with the same name), ``observation.state`` is the
-concatenation of the ``state`` move groups, and the prompt goes under ``task``. The action
-vector is split into move groups in ``action_groups`` order (default: the episode's). With
+policy's feature keys as our datasets name them (:mod:`molmo_lerobot.features`): each image
+feature ``observation.images.<key>`` takes the camera named in ``cameras`` (default: the camera
+recorded as that feature), ``observation.state`` is the concatenation of the ``state`` move
+groups (default: the episode's, in the robot's order), and the prompt goes under ``task``. The
+action vector is split into move groups in ``action_groups`` order (default: the episode's). With
 ``convention: molmospaces`` the state takes MolmoSpaces' joint units (the Robotiq gripper as its
 two driver angles) and the action's gripper is their 0 … 255 command.
 
@@ -25,6 +26,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from molmo_lerobot.features import IMAGE_PREFIX, STATE, camera_of, concat, split
 from molmo_lerobot.hookspecs import hookimpl
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
 from molmo_lerobot.policies.convention import ConventionName, get_convention
@@ -46,8 +48,8 @@ class LeRobotPolicyConfig(BaseModel):
     mode: Literal["step", "chunk"] = "step"
     n_action_steps: int | None = Field(default=None, ge=1)
     cameras: dict[str, str] = Field(default_factory=dict)
-    state: list[str] = Field(default_factory=lambda: ["arm", "gripper"])
-    state_key: str = "observation.state"
+    state: list[str] | None = None
+    state_key: str = STATE
     action_groups: list[str] | None = None
     task_key: str = "task"
     resize: Literal["pad", "stretch", "none"] = "pad"
@@ -276,16 +278,13 @@ class LeRobotPolicy(Policy):
     def _to_action(self, actions: np.ndarray) -> Action:
         """(H, A) unnormalized actions -> our action (step mode) or chunk, split into move groups."""
         groups = self.cfg.action_groups or list(self._groups)
-        dims = [self._groups.get(g, 0) for g in groups]
-        if sum(dims) != actions.shape[-1]:
+        dims = {g: self._groups.get(g, 0) for g in groups}
+        if sum(dims.values()) != actions.shape[-1]:
             raise ValueError(
                 f"policy {self.cfg.path!r} outputs {actions.shape[-1]} action values but move groups "
-                f"{dict(zip(groups, dims))} need {sum(dims)} (set policy.action_groups)"
+                f"{dims} need {sum(dims.values())} (set policy.action_groups)"
             )
-        out, start = {}, 0
-        for group, dim in zip(groups, dims):
-            out[group] = actions[:, start : start + dim]
-            start += dim
+        out = split(actions, dims)
         return self.convention.action({g: a[0] for g, a in out.items()} if self.cfg.mode == "step" else out)
 
     def predict(self, obs: Observation) -> np.ndarray:
@@ -312,8 +311,9 @@ class LeRobotPolicy(Policy):
         images = self.convention.images(view)
         batch: dict[str, Any] = {}
         for key, (c, h, w) in self.image_features.items():
-            short = key.removeprefix("observation.images.")
-            camera = next((cam for cam, k in self.cfg.cameras.items() if k in (key, short)), short)
+            short = key.removeprefix(IMAGE_PREFIX)
+            camera = next((cam for cam, k in self.cfg.cameras.items() if k in (key, short)), None)
+            camera = camera or camera_of(key, images) or short
             if camera not in images:
                 raise KeyError(
                     f"policy feature {key!r} wants camera {camera!r}, observation has {sorted(images)} "
@@ -328,13 +328,14 @@ class LeRobotPolicy(Policy):
             batch[key] = torch.from_numpy(img).permute(2, 0, 1).float().div_(255.0)
         if self.state_dim is not None:
             qpos = view.get("qpos") or {}
-            missing = [g for g in self.cfg.state if g not in qpos]
+            groups = self.cfg.state if self.cfg.state is not None else list(self._groups)
+            missing = [g for g in groups if g not in qpos]
             if missing:
                 raise KeyError(f"policy.state names move groups {missing} absent from the observation ({sorted(qpos)})")
-            state = np.concatenate([np.asarray(qpos[g], np.float32).reshape(-1) for g in self.cfg.state])
+            state = concat(qpos, groups, self.cfg.state_key)
             if state.shape[0] != self.state_dim:
                 raise ValueError(
-                    f"{self.cfg.state_key} needs {self.state_dim} values, move groups {self.cfg.state} give {state.shape[0]}"
+                    f"{self.cfg.state_key} needs {self.state_dim} values, move groups {groups} give {state.shape[0]}"
                 )
             batch[self.cfg.state_key] = torch.from_numpy(state)
         batch[self.cfg.task_key] = obs.get("prompt", self._prompt) or self._prompt

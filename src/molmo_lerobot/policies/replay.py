@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from molmo_lerobot import hookimpl
+from molmo_lerobot.features import split
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
 
 
@@ -46,11 +47,7 @@ class ReplayPolicy(Policy):
     def act(self, obs: Observation) -> Action:
         row = self.actions[min(self.t, len(self.actions) - 1)]
         self.t += 1
-        out, start = {}, 0
-        for group, dim in self.move_groups.items():
-            out[group] = row[start:start + dim]
-            start += dim
-        return out
+        return split(row, self.move_groups)
 
 
 def make_replay(config: dict[str, Any]) -> ReplayPolicy:

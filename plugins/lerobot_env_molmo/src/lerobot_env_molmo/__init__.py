@@ -2,7 +2,8 @@
 
 ``lerobot-eval --policy.path=… --env.type=molmo --env.task=pick_v1`` (a shipped benchmark name or a
 benchmark directory). Observation and action features are named as in our ``record=true`` datasets
-(``observation.images.<camera>``, ``observation.state``, ``action``), so a policy trained with
+(``observation.images.<camera>``, ``observation.state``, ``action``: the env's feature map,
+:mod:`molmo_lerobot.features`), so a policy trained with
 ``lerobot-train`` on such a dataset evaluates here without mapping flags. ``--seed=0`` runs the
 benchmark's episodes in order; ``--seed=S`` starts at episode ``S mod N`` (see
 ``molmo_lerobot.gym_env``). LeRobot's ``pc_success`` counts an episode as a success if any step
@@ -17,7 +18,8 @@ from typing import Any
 
 from lerobot.configs.types import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
-from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
+
+from molmo_lerobot.features import ACTION, STATE, image_feature
 
 
 @EnvConfig.register_subclass("molmo")
@@ -40,17 +42,16 @@ class MolmoEnvConfig(EnvConfig):
         env = MolmoEnv(**self.gym_kwargs)
         try:
             self.fps = env.metadata["render_fps"]
-            n_action = env.action_space.shape[0]
-            self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(n_action,)),
-                             "agent_pos": PolicyFeature(type=FeatureType.STATE,
-                                                        shape=env.observation_space["agent_pos"].shape)}
-            self.features_map = {ACTION: ACTION, "agent_pos": OBS_STATE}
-            for cam, box in env.observation_space["pixels"].items():
-                key = f"pixels/{cam}"
-                self.features[key] = PolicyFeature(type=FeatureType.VISUAL, shape=box.shape)
-                self.features_map[key] = f"{OBS_IMAGES}.{cam.replace('/', '_')}"
+            fmap = env.features
         finally:
             env.close()
+        self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(fmap.action_dim,)),
+                         "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(fmap.state_dim,))}
+        self.features_map = {ACTION: ACTION, "agent_pos": STATE}
+        for cam, shape in fmap.camera_shapes.items():
+            key = f"pixels/{cam}"
+            self.features[key] = PolicyFeature(type=FeatureType.VISUAL, shape=shape)
+            self.features_map[key] = image_feature(cam)
 
     @property
     def gym_kwargs(self) -> dict[str, Any]:

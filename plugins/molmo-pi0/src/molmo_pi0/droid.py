@@ -23,6 +23,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from molmo_lerobot.features import FeatureMap, is_wrist
 from molmo_lerobot.policies.convention import ConventionName
 from molmo_lerobot.policies.image_ops import resize_with_pad_pil
 
@@ -32,6 +33,8 @@ JOINTS = "observation/joint_position"
 GRIPPER = "observation/gripper_position"
 PROMPT = "prompt"
 ACTIONS = "actions"
+#: DROID's joint state and action: a Franka's move groups in its order (its 8 values are our ``action`` feature)
+DROID = FeatureMap.build({"arm": 7, "gripper": 1})
 #: openpi's DROID checkpoints that output joint velocities (their ``*_jointpos`` twins output positions)
 VELOCITY_CHECKPOINTS = frozenset({"pi0_droid", "pi0_fast_droid", "pi05_droid"})
 
@@ -80,11 +83,11 @@ def pick_cameras(cameras: CameraConfig, available: list[str]) -> tuple[str, str]
     if cameras.wrist:
         wrist = _first_present(cameras.wrist, available)
     else:
-        wrist = next((c for c in available if "wrist" in c.lower()), None)
+        wrist = next((c for c in available if is_wrist(c)), None)
     if cameras.exterior:
         exterior = _first_present(cameras.exterior, available)
     else:
-        exterior = next((c for c in sorted(available) if c != wrist and "wrist" not in c.lower()), None)
+        exterior = next((c for c in sorted(available) if c != wrist and not is_wrist(c)), None)
     for role, name in (("exterior", exterior), ("wrist", wrist)):
         if name is None:
             wanted = getattr(cameras, role)
@@ -132,7 +135,8 @@ def droid_actions(raw: Any, arm_qpos: np.ndarray, cfg: DroidConfig, dt_s: float,
         raise ValueError(f"{source}: 'actions' has a non-finite value at step {t}")
     if cfg.open_loop_horizon:
         actions = actions[: cfg.open_loop_horizon]
-    joints, grip = actions[:, :7], actions[:, 7]
+    parts = DROID.split_action(actions[:, : DROID.action_dim])
+    joints, grip = parts["arm"], parts["gripper"][:, 0]
     if cfg.action_mode == "joint_velocity":
         deltas = joints * cfg.velocity_scale * dt_s
         if cfg.max_joint_delta is not None:
