@@ -39,3 +39,22 @@ def hub_standin(tmp_path_factory, monkeypatch):
             yield hub
         finally:
             set_client_factory(default_client_factory)
+
+
+@pytest.fixture
+def in_process_plugins(monkeypatch):
+    """``in_process_plugins(plugin, name)``: every run context built in this process (``RunContext.build``)
+    gets ``plugin`` as if it were installed; spawned workers do not."""
+    from molmo_lerobot import context
+    from molmo_lerobot.plugins import Plugins
+
+    added: list[tuple[object, str]] = []
+
+    class WithInProcess(Plugins):
+        def __init__(self) -> None:
+            super().__init__()
+            for plugin, name in added:
+                self.add(plugin, name)
+
+    monkeypatch.setattr(context, "Plugins", WithInProcess)
+    return lambda plugin, name: added.append((plugin, name))

@@ -12,9 +12,11 @@ import pytest
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.config import compose
-from molmo_lerobot.overrides import OverrideError, molmo_episode_overrides
+from molmo_lerobot.context import RunContext
+from molmo_lerobot.overrides import OverrideError
+from molmo_lerobot.overrides import molmo_episode_overrides as _override
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.runner.evaluate import RunError, run_evaluation
 from molmo_lerobot.sim.env import Timing
@@ -35,6 +37,11 @@ def custom_mjcf(tmp_path):
     return path
 
 
+def molmo_episode_overrides(episode, config):
+    """The built-in overrides under a run context of ``config``."""
+    return _override(episode, config, RunContext.build(config))
+
+
 def _rows(out: Path) -> list[dict]:
     return [json.loads(x) for x in (out / "episodes.jsonl").read_text().splitlines()]
 
@@ -48,10 +55,10 @@ def test_custom_object_replaces_the_target_keeping_its_pose(episode, custom_mjcf
     pose = new.scene_modifications.object_poses["thing"]
     assert pose[:2] == old_pose[:2] and pose[3:] == old_pose[3:]
     assert new.language.task_description == "pick up the green box"
-    env = build_env(new, Timing(), get_plugins())
+    env = build_env(new, Timing(), RunContext.build())
     env.reset(0)
     mujoco_body = env.body_pose("thing")
-    table_top = get_plugins().scene_dataset(new.scene_dataset).metadata(new.house_index)["table_height"]
+    table_top = Plugins().scene_dataset(new.scene_dataset).metadata(new.house_index)["table_height"]
     assert mujoco_body[2] == pytest.approx(table_top + 0.04, abs=2e-3)  # resting on the table, not in it
     with pytest.raises(ValueError, match=f"no body '{old}'"):
         env.body_id(old)
@@ -75,7 +82,7 @@ def test_camera_randomization_is_seeded_by_the_episode(episode):
     exo0, exo2 = episode.cameras[0], a.cameras[0]
     assert 0 < np.linalg.norm(np.subtract(exo2.pos, exo0.pos)) <= 0.04 * np.sqrt(3) + 1e-9
     assert molmo_episode_overrides(episode, {"camera": {"randomization": 0}}) is None
-    env0, env2 = build_env(episode, Timing(), get_plugins()), build_env(a, Timing(), get_plugins())
+    env0, env2 = build_env(episode, Timing(), RunContext.build()), build_env(a, Timing(), RunContext.build())
     env0.reset(0)
     env2.reset(0)
     assert not np.array_equal(env0.render(exo0.name), env2.render(exo0.name))
@@ -118,10 +125,8 @@ class _RobotOverride:
             "language": episode.language.model_copy(update={"task_description": "overridden"})})
 
 
-def test_plugin_episode_overrides_apply(tmp_path, monkeypatch):
-    plugins = get_plugins()
-    monkeypatch.setattr(plugins, "records", list(plugins.records))
-    plugins.add(_RobotOverride(), "robot_override")
+def test_plugin_episode_overrides_apply(tmp_path, in_process_plugins):
+    in_process_plugins(_RobotOverride(), "robot_override")
     run_evaluation(compose(["policy=random", "workers=1", "limit=1", "horizon=2", f"output_dir={tmp_path}",
                             "progress=false"]))
     assert [r["prompt"] for r in _rows(tmp_path)] == ["overridden"]

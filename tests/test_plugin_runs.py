@@ -12,7 +12,6 @@ from pathlib import Path
 import pytest
 
 from molmo_lerobot.cli.eval import main
-from molmo_lerobot.plugins import get_plugins
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_plugins import IMPOSTOR, write_dist  # noqa: E402
@@ -43,12 +42,10 @@ def install(monkeypatch):
         monkeypatch.syspath_prepend(str(root))
         monkeypatch.setenv("PYTHONPATH", os.pathsep.join(p for p in (str(root), os.environ.get("PYTHONPATH")) if p))
         modules.extend(names)
-        get_plugins.cache_clear()
 
     yield _install
     for name in modules:
         sys.modules.pop(name, None)
-    get_plugins.cache_clear()
 
 
 def _episodes(run: Path) -> list[dict]:

@@ -17,9 +17,12 @@ from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.benchmark.validate import validate_benchmark
 from molmo_lerobot.cli.plugins import format_table
 from molmo_lerobot.config import ConfigError
+from molmo_lerobot.context import RunContext
 from molmo_lerobot.plugins import ENTRY_POINT_GROUP, PluginConflict, PluginError, Plugins
 
 DATA = Path(__file__).resolve().parent / "data" / "molmospaces"
+#: what episode overrides see of a run with an empty config
+NO_RUN = SimpleNamespace(config={})
 
 
 @pytest.fixture
@@ -83,8 +86,8 @@ def test_asking_for_the_broken_plugin_names_it(broken_dist, monkeypatch, name, n
 
 def test_validation_is_unaffected_by_broken_plugins(broken_dist, monkeypatch):
     bench = load_benchmark(DATA / "pick_list")
-    clean = [str(p) for p in validate_benchmark(bench, Plugins())]
-    assert [str(p) for p in validate_benchmark(bench, _with_broken(broken_dist, monkeypatch))] == clean == []
+    clean = [str(p) for p in validate_benchmark(bench, Plugins(), RunContext.build())]
+    assert [str(p) for p in validate_benchmark(bench, _with_broken(broken_dist, monkeypatch), RunContext.build())] == clean == []
 
 
 def test_validation_names_the_broken_plugin_a_benchmark_needs(broken_dist, monkeypatch, tmp_path):
@@ -95,7 +98,7 @@ def test_validation_names_the_broken_plugin_a_benchmark_needs(broken_dist, monke
     d = tmp_path / "b"
     d.mkdir()
     (d / "benchmark.json").write_text(json.dumps(episodes))
-    (problem,) = validate_benchmark(load_benchmark(d), _with_broken(broken_dist, monkeypatch))
+    (problem,) = validate_benchmark(load_benchmark(d), _with_broken(broken_dist, monkeypatch), RunContext.build())
     assert (problem.episode_index, problem.field) == (0, "robot.robot_name")
     assert problem.message.startswith("no robot plugin provides 'ur5'")
     assert problem.message.endswith("; plugin 'ur5' from brokenbots failed to load: RuntimeError: ur5 driver missing")
@@ -166,7 +169,7 @@ def test_hooks_run_in_pluggys_order_with_tryfirst_and_trylast():
     plugins = _bare((override("last", trylast=True), "a"), (override("first", tryfirst=True), "b"),
                     (override("early"), "c"), (override("late"), "d"))
     # pluggy: tryfirst, then the most recently registered first, then trylast
-    assert plugins.apply_episode_overrides([], {}) == ["first", "late", "early", "last"]
+    assert plugins.apply_episode_overrides([], NO_RUN) == ["first", "late", "early", "last"]
 
 
 def test_a_hook_with_an_unknown_name_or_a_wrapper_marks_the_plugin_broken():
@@ -239,8 +242,8 @@ def test_a_broken_override_plugin_is_skipped_but_an_inapplicable_override_fails_
             raise KeyError("camera")
 
     plugins = _bare((Tag(), "tag"), (Broken(), "broken"))
-    assert plugins.apply_episode_overrides([], {}) == ["tag"]
-    assert plugins.apply_episode_overrides(["x"], {}) == ["x", "tag"]
+    assert plugins.apply_episode_overrides([], NO_RUN) == ["tag"]
+    assert plugins.apply_episode_overrides(["x"], NO_RUN) == ["x", "tag"]
     assert {r.name: r.status for r in plugins.records} == {"tag": "ok", "broken": "error"}
     assert "plugin 'broken'" in capsys.readouterr().err
 
@@ -251,7 +254,7 @@ def test_a_broken_override_plugin_is_skipped_but_an_inapplicable_override_fails_
 
     plugins = _bare((Tag(), "tag"), (Inapplicable(), "inapplicable"))
     with pytest.raises(ValueError, match="no target object"):
-        plugins.apply_episode_overrides([], {})
+        plugins.apply_episode_overrides([], NO_RUN)
     assert plugins.broken() == []
 
 

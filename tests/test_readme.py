@@ -76,14 +76,14 @@ def test_policy_interface_facts_match_the_code():
     from molmo_lerobot.benchmark.load import load_benchmark
     from molmo_lerobot.export.recorder import dataset_fps
     from molmo_lerobot.paths import data_path
-    from molmo_lerobot.plugins import get_plugins
+    from molmo_lerobot.plugins import Plugins
     from molmo_lerobot.sim.env import Timing
 
     text = _section("Policy interface")
     timing = Timing()
     assert f"`timing.policy_dt_ms` = {timing.policy_dt_ms:g} ms" in text
     assert f"= {timing.ctrl_ticks} ticks" in text and f"= {dataset_fps(timing.policy_dt_ms)};" in text
-    franka = get_plugins().robot("franka")
+    franka = Plugins().robot("franka")
     assert dict(franka.move_groups) == {"arm": 7, "gripper": 1}
     assert franka.joint_names["arm"][0] == "panda_joint1" and franka.joint_names["gripper"] == ["panda_gripper"]
     for name in ("pick_v1", "open_v1"):

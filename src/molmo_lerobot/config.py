@@ -5,7 +5,8 @@ Plugin config dirs join Hydra's search path through a Hydra ``SearchPathPlugin``
 ``molmo-eval --info searchpath`` all see them. ``molmo_open_map`` is a config node for
 free-form maps (``horizons``, ``camera.overrides``, ``plugins.prefer``, a policy's
 ``cameras``): placed with ``- /molmo_open_map@<key>`` in a defaults list, ``<key>.<new>=v``
-works on the command line without Hydra's ``+``.
+works on the command line without Hydra's ``+``. Config comes before any run, so these read a
+plugin set of their own (discovery is the same everywhere).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from molmo_lerobot.hookspecs import ConfigError
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.plugins import Plugins
 
 __all__ = ["ConfigError", "PluginConfigDirs", "compose", "config_message", "primary_config_dir"]
 
@@ -47,20 +48,21 @@ class PluginConfigDirs(SearchPathPlugin):
         if primary not in paths:
             return  # some other Hydra app in this process
         seen = [primary]
-        for d in get_plugins().config_dirs():
+        plugins = Plugins()
+        for d in plugins.config_dirs():
             path = Path(d).resolve()
             if path not in seen:
                 seen.append(path)
                 search_path.append(provider="molmo-plugin", path=f"file://{path}")
-        _default_policy_configs(seen)
+        _default_policy_configs(plugins, seen)
 
 
-def _default_policy_configs(config_dirs: list[Path]) -> None:
+def _default_policy_configs(plugins: Plugins, config_dirs: list[Path]) -> None:
     """``policy/<name>`` = ``{name: <name>}`` (Hydra's ConfigStore) for each registered policy no
     config dir has a ``policy/<name>.yaml`` for, so a plugin that ships no yaml is still
     ``policy=<name>``; its factory gets ``{"name": <name>}`` plus any ``+policy.<key>=`` given."""
     store = ConfigStore.instance()
-    for name in get_plugins().names("policy"):
+    for name in plugins.names("policy"):
         if not any((d / "policy" / f"{name}.yaml").is_file() for d in config_dirs):
             store.store(group="policy", name=name, node={"name": name}, provider="molmo_lerobot")
 
@@ -103,7 +105,7 @@ def config_message(exc: BaseException) -> str:
         if close:
             msg += f"; did you mean {', '.join(map(repr, close))}?"
         msg += f" (available: {', '.join(options) or 'none'})"
-        broken = get_plugins().broken()  # the option may be one a broken plugin would have added
+        broken = Plugins().broken()  # the option may be one a broken plugin would have added
         for r in [r for r in broken if name in r.name or r.name in name] or broken:
             msg += f"\n  plugin {r.name!r} from {r.distribution} failed to load: {r.error}"
         return msg

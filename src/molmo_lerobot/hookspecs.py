@@ -104,10 +104,12 @@ def molmo_recorders(config: dict[str, Any]) -> list[Any]:
 
 
 @hookspec
-def molmo_episode_overrides(episode: EpisodeSpec, config: Any) -> EpisodeSpec | None:
+def molmo_episode_overrides(episode: EpisodeSpec, config: Any, context: Any) -> EpisodeSpec | None:
     """Edit an episode before it runs (MolmoSpaces' robot eval overrides).
 
-    Called once per episode with the validated spec and the run config. Return a new
+    Called once per episode with the validated spec, the run config and the run's
+    :class:`~molmo_lerobot.context.RunContext` (its asset catalog, settings; take only the
+    arguments you need). Return a new
     :class:`EpisodeSpec` (e.g. ``episode.model_copy(update=...)``) to replace it, or
     ``None`` to leave it alone. Implementations run in pluggy's call order and each sees
     the previous one's result. Raise ``ValueError`` when your override cannot apply to this

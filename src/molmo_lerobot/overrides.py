@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from functools import cache
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
@@ -30,6 +30,9 @@ from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.schema import EpisodeSpec, episode_digest
 from molmo_lerobot.cameras.franka_eval import EVAL_IMG_RESOLUTION
 from molmo_lerobot.cameras.options import EVAL_NAMES, run_camera_system
+
+if TYPE_CHECKING:
+    from molmo_lerobot.assets.catalog import AssetCatalog
 
 #: per randomization level: position (m), direction (deg), fov (deg), wrist offset (m) jitter
 CAMERA_JITTER = {"pos": 0.02, "dir_deg": 2.0, "fov_deg": 2.0, "offset": 0.005}
@@ -41,7 +44,7 @@ class OverrideError(ValueError):
 
 
 @hookimpl
-def molmo_episode_overrides(episode: EpisodeSpec, config: Any) -> EpisodeSpec | None:
+def molmo_episode_overrides(episode: EpisodeSpec, config: Any, context: Any) -> EpisodeSpec | None:
     cfg = config if isinstance(config, dict) else {}
     data = episode.model_dump(mode="json")
     identity = episode_digest(episode)
@@ -49,7 +52,7 @@ def molmo_episode_overrides(episode: EpisodeSpec, config: Any) -> EpisodeSpec | 
     custom = cfg.get("custom_object") or {}
     if custom.get("path"):
         _swap_target(data, episode, Path(custom["path"]).expanduser(), custom.get("name") or "custom_object",
-                     custom.get("description"))
+                     custom.get("description"), context.catalog)
         changed = True
     base_size = (cfg.get("robot") or {}).get("base_size", "default")
     if base_size != "default":
@@ -91,7 +94,8 @@ def _bottom_offset(path: str) -> float:
     return float(data.xpos[top][2] - lowest) if np.isfinite(lowest) else 0.0
 
 
-def _swap_target(data: dict, episode: EpisodeSpec, path: Path, name: str, description: str | None) -> None:
+def _swap_target(data: dict, episode: EpisodeSpec, path: Path, name: str, description: str | None,
+                 catalog: AssetCatalog) -> None:
     if not path.is_file():
         raise OverrideError(f"custom_object.path: no MJCF file at {path}")
     task = data["task"]
@@ -106,9 +110,7 @@ def _swap_target(data: dict, episode: EpisodeSpec, path: Path, name: str, descri
                             "(scene_modifications.object_poses)")
     pose = list(mods["object_poses"].pop(old))
     try:
-        from molmo_lerobot.assets.catalog import annotation
-
-        pose[2] -= float(annotation(old)["boundingBox"]["z"]) / 2  # the original's bottom (upright primitives)
+        pose[2] -= float(catalog.annotation(old)["boundingBox"]["z"]) / 2  # the original's bottom (upright primitives)
         pose[2] += _bottom_offset(str(path))
     except LookupError:
         pass  # not in an asset library: keep the original height

@@ -9,6 +9,9 @@ what the broken plugin would have provided fails, naming it.
 Two plugins that provide the same name (a robot ``franka``, a policy ``random``) are a
 clash: ``molmo-plugins`` lists it, and resolving that name fails naming both providers
 unless the run pins one (``plugins.prefer.<kind>.<name>=<plugin>``, see :meth:`Plugins.set_preferences`).
+
+There is no process-wide plugin set: a run's :class:`~molmo_lerobot.context.RunContext` builds its
+own :class:`Plugins` (each process of the run builds one, with the run's pins).
 """
 
 from __future__ import annotations
@@ -19,7 +22,6 @@ import sys
 import traceback
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from functools import cache
 from typing import Any
 
 import pluggy
@@ -137,6 +139,8 @@ class Plugins:
         self._register(plugin, rec)
 
     def broken(self) -> list[PluginRecord]:
+        """Plugins that failed to load or in a provider hook (every provider hook is called first)."""
+        self._collect()
         return [r for r in self.records if r.status != "ok"]
 
     def _break(self, rec: PluginRecord, error: str, *, warn: bool = False) -> None:
@@ -334,16 +338,17 @@ class Plugins:
             raise ConfigError(str(exc)) from None
         return factories
 
-    def apply_episode_overrides(self, episode: Any, config: Any) -> Any:
-        """Run every ``molmo_episode_overrides`` implementation in pluggy's call order.
+    def apply_episode_overrides(self, episode: Any, context: Any) -> Any:
+        """Run every ``molmo_episode_overrides`` implementation in pluggy's call order, with the
+        run's :class:`~molmo_lerobot.context.RunContext` and its config.
 
         Each sees the previous one's result. ``ValueError`` (an override that cannot apply
         to this episode) propagates, failing the episode; any other failure marks the plugin
         broken and skips it (with a warning), so a broken override never breaks every run.
         """
         for rec, impl in self._impls("molmo_episode_overrides"):
-            ok, new = self._invoke(rec, "molmo_episode_overrides", impl, {"episode": episode, "config": config},
-                                   run_time=True)
+            kwargs = {"episode": episode, "config": context.config, "context": context}
+            ok, new = self._invoke(rec, "molmo_episode_overrides", impl, kwargs, run_time=True)
             if ok and new is not None:
                 episode = new
         return episode
@@ -357,12 +362,3 @@ def _dist_name(ep: md.EntryPoint) -> str:
 def _one_line(exc: BaseException) -> str:
     text = f"{type(exc).__name__}: {exc}" if str(exc).strip() else type(exc).__name__
     return text.strip().splitlines()[0]
-
-
-@cache
-def get_plugins() -> Plugins:
-    """The process-wide plugin set (loaded once per process; workers load their own).
-
-    A worker applies its run's pins with ``get_plugins().set_preferences(prefer)``.
-    """
-    return Plugins()

@@ -17,7 +17,6 @@ from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, analytic_grasps
 from molmo_lerobot.assets.grasps import (
     count_grasp_file,
     generate_builtin_grasps,
-    get_grasps,
     save_grasp_file,
 )
 from molmo_lerobot.resources import ResourceManager, pack
@@ -93,9 +92,9 @@ def test_builtin_grasps_fall_back_then_use_generated_files(tmp_path, monkeypatch
         cat.get_grasps(UID, robot="ur5")
 
 
-def test_module_level_get_grasps_works_on_fresh_clone(tmp_path, monkeypatch):
+def test_get_grasps_works_on_fresh_clone(tmp_path, monkeypatch):
     monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(tmp_path / "empty"))
-    g = get_grasps("builtin_red_block")
+    g = AssetCatalog().get_grasps("builtin_red_block")
     assert g.ndim == 3 and g.shape[1:] == (4, 4) and len(g) > 0
 
 

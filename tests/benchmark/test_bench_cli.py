@@ -103,6 +103,7 @@ def test_generate_never_leaves_partial_output(tmp_path, fake_generator, capsys):
 def test_generate_with_the_real_generator_is_deterministic(tmp_path, capsys):
     from molmo_lerobot.benchmark.load import load_benchmark
     from molmo_lerobot.benchmark.validate import validate_benchmark
+    from molmo_lerobot.context import RunContext
 
     def run(name, seed):
         args = ["generate", "--task", "pick", "--houses", "2", "--episodes-per-house", "2", "--seed", str(seed),
@@ -113,4 +114,5 @@ def test_generate_with_the_real_generator_is_deterministic(tmp_path, capsys):
     a, b, c = run("a", 0), run("b", 0), run("c", 1)
     assert a.sha256 == b.sha256 != c.sha256
     assert a.name == "tiny" and len(a) == 4 and len({ep.house_index for ep in a.episodes}) == 2
-    assert validate_benchmark(a) == []
+    run = RunContext.build()
+    assert validate_benchmark(a, run.plugins, run) == []

@@ -8,6 +8,7 @@ import pytest
 
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.benchmark.validate import validate_benchmark
+from molmo_lerobot.context import RunContext
 
 
 def _load_edited(data, tmp_path, edit):
@@ -20,24 +21,24 @@ def _load_edited(data, tmp_path, edit):
 
 
 def _texts(bench, plugins):
-    return [str(p) for p in validate_benchmark(bench, plugins)]
+    return [str(p) for p in validate_benchmark(bench, plugins, RunContext.build())]
 
 
 def test_molmospaces_files_in_both_layouts_validate(data, fake_plugins):
     for layout in ("pick_list", "pick_legacy"):
-        assert validate_benchmark(load_benchmark(data / layout), fake_plugins) == []
+        assert validate_benchmark(load_benchmark(data / layout), fake_plugins, RunContext.build()) == []
 
 
 def test_unknown_task_class_suggests_the_close_one(data, tmp_path, fake_plugins):
     bench = _load_edited(data, tmp_path, lambda eps: eps[2]["task"].update(task_cls="molmo_spaces.tasks.pick_task.PickTsk"))
-    (problem,) = validate_benchmark(bench, fake_plugins)
+    (problem,) = validate_benchmark(bench, fake_plugins, RunContext.build())
     assert (problem.episode_index, problem.field) == (2, "task.task_cls")
     assert problem.message.startswith("unknown task 'molmo_spaces.tasks.pick_task.PickTsk'; "
                                       "did you mean 'molmo_spaces.tasks.pick_task.PickTask'")
 
 
 def test_mobile_robot_episodes_fail_cleanly(data, fake_plugins):
-    problems = validate_benchmark(load_benchmark(data / "mixed_tasks"), fake_plugins)
+    problems = validate_benchmark(load_benchmark(data / "mixed_tasks"), fake_plugins, RunContext.build())
     robot = [p for p in problems if p.field == "robot.robot_name"]
     assert [(p.episode_index, p.message.split(" (")[0]) for p in robot] == [
         (6, "no robot plugin provides 'rby1'"), (7, "no robot plugin provides 'rby1'")]
@@ -88,7 +89,7 @@ def test_all_episodes_are_checked(data, tmp_path, fake_plugins):
         eps[0]["robot"]["robot_name"] = "ur5e"
         eps[3]["robot"]["init_qpos"]["arm"] = [0.0] * 8
 
-    problems = validate_benchmark(_load_edited(data, tmp_path, edit), fake_plugins)
+    problems = validate_benchmark(_load_edited(data, tmp_path, edit), fake_plugins, RunContext.build())
     assert [(p.episode_index, p.field) for p in problems] == [(0, "robot.robot_name"), (3, "robot.init_qpos.arm")]
 
 
@@ -99,4 +100,4 @@ def test_installed_plugins_accept_the_molmospaces_pick_files(data):
     if any(r.status != "ok" for r in plugins.records if r.name in ("pick", "franka", "tabletop")):
         pytest.fail("built-in plugins failed to load: " + "; ".join(f"{r.name}: {r.error}" for r in plugins.broken()))
     for layout in ("pick_list", "pick_legacy"):
-        assert [str(p) for p in validate_benchmark(load_benchmark(data / layout), plugins)] == []
+        assert [str(p) for p in validate_benchmark(load_benchmark(data / layout), plugins, RunContext.build())] == []

@@ -14,7 +14,7 @@ import pytest
 
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.rollout import horizon_with_source
 
 PLACE = {"max_place_receptacle_pos_displacement": 0.15, "max_place_receptacle_rot_displacement": 1.0472,
@@ -46,7 +46,7 @@ def test_every_shipped_v1_benchmark_is_pinned():
 def test_v1_trials_are_unchanged(name):
     sha, horizons, thresholds = PINNED[name]
     bench = load_benchmark(data_path("benchmarks") / name)
-    plugins = get_plugins()
+    plugins = Plugins()
     resolved, rules = Counter(), {}
     for spec in bench.episodes:
         task_type = plugins.task_type(spec.task_name)

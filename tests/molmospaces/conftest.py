@@ -1,4 +1,4 @@
-"""Fixtures: the stand-in MolmoSpaces assets dir (built once) and the settings pointing at it."""
+"""Fixtures: the stand-in MolmoSpaces assets dir (built once) and the environment pointing at it."""
 
 from __future__ import annotations
 
@@ -20,14 +20,8 @@ def standin(tmp_path_factory):
 
 @pytest.fixture
 def assets(standin, monkeypatch, tmp_path):
-    """The stand-in assets dir as ``MLSPACES_ASSETS_DIR``, with fresh process settings."""
-    from molmo_lerobot.assets.catalog import default_catalog
-    from molmo_lerobot.molmospaces import settings
-
+    """The stand-in assets dir as ``MLSPACES_ASSETS_DIR`` (run contexts built from here on read it)."""
     monkeypatch.chdir(tmp_path)  # MuJoCo writes MUJOCO_LOG.TXT (attach warnings) into the working directory
     monkeypatch.setenv("MLSPACES_ASSETS_DIR", str(standin[0]))
     monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(tmp_path / "home"))
-    monkeypatch.setattr(settings, "_CURRENT", None)
-    default_catalog.cache_clear()
-    yield standin
-    default_catalog.cache_clear()
+    return standin

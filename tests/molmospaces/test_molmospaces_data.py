@@ -12,12 +12,12 @@ import pytest
 from standin import OBJAVERSE_UID, pick_episode, top_down_grasps
 from user_library import UID, user_pick_episode, write_user_library
 
-from molmo_lerobot.assets import AssetCatalog, AssetError, GraspError, default_catalog
+from molmo_lerobot.assets import AssetCatalog, AssetError, GraspError
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.cli import bench as bench_cli
 from molmo_lerobot.config import compose
-from molmo_lerobot.molmospaces import configure, layout
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.context import RunContext
+from molmo_lerobot.molmospaces import layout
 from molmo_lerobot.runner.evaluate import RunError, run_evaluation
 
 
@@ -68,21 +68,22 @@ def test_scene_loads_with_its_physics_metadata_and_modifications(assets, tmp_pat
     del ep["scene_modifications"]["object_poses"]["Mug_1_15_0_0"]
     ep["task"]["pickup_obj_name"] = "place_receptacle/0/Bowl_27"
     spec = EpisodeSpec.model_validate(ep)
-    plugins = get_plugins()
-    env = build_env(spec, Timing(), plugins)
+    run = RunContext.build()
+    plugins = run.plugins
+    env = build_env(spec, Timing(), run)
     m = env.model
     names = {m.body(i).name for i in range(m.nbody)}
     assert {"place_receptacle/0/Bowl_27", "extra", "table_1_0_0"} <= names and "Mug_1_15_0_0" not in names
     assert m.opt.timestep == 0.002 and m.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     env.reset(0)
     np.testing.assert_allclose(env.body_pose("place_receptacle/0/Bowl_27")[:3], [0.6, -2.2, 0.8])
-    meta = plugins.scene_dataset("ithor").episode_metadata(spec)["objects"]
+    meta = plugins.scene_dataset("ithor").episode_metadata(spec, run)["objects"]
     assert meta["place_receptacle/0/Bowl_27"]["asset_id"] == "Bowl_27" and meta["Mug_1_15_0_0"]["asset_id"] == "Mug_1"
     # user scene: its XML says timestep 5 ms and the run says 2 ms; a run may override its options
     write_user_library(tmp_path)
-    configure({"scene_xml_paths": [str(tmp_path / "scene.xml")],
-               "molmospaces": {"physics_options": {"integrator": "rk4", "cone": "pyramidal"}}})
-    env = build_env(EpisodeSpec.model_validate(user_pick_episode()), Timing(), plugins)
+    run = RunContext.build({"scene_xml_paths": [str(tmp_path / "scene.xml")],
+                            "molmospaces": {"physics_options": {"integrator": "rk4", "cone": "pyramidal"}}})
+    env = build_env(EpisodeSpec.model_validate(user_pick_episode()), Timing(), run)
     assert env.model.opt.timestep == 0.002 and env.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
     assert env.model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL and PHYSICS_OPTIONS["cone"] != env.model.opt.cone
 
@@ -92,7 +93,7 @@ def test_scene_loads_with_its_physics_metadata_and_modifications(assets, tmp_pat
 
 def test_thor_and_objaverse_libraries_and_droid_grasps(assets, tmp_path):
     root, _ = assets
-    cat = default_catalog()
+    cat = RunContext.build().catalog
     loc = cat.locate_uid("Mug_1")
     assert (loc.library, loc.mjcf_path) == ("thor", root / "objects/thor/Kitchen/Mug_1.xml")
     assert cat.locate_uid(OBJAVERSE_UID).library == "objaverse"
@@ -121,7 +122,7 @@ def test_metadata_from_the_json_source_when_no_lmdb(assets, tmp_path, monkeypatc
     shutil.copytree(root, copy, symlinks=True)
     shutil.rmtree(copy / ".lmdb")
     monkeypatch.setenv("MLSPACES_ASSETS_DIR", str(copy))
-    assert default_catalog().annotation("Mug_2")["description_short"]["two_words"] == "small mug"
+    assert RunContext.build().catalog.annotation("Mug_2")["description_short"]["two_words"] == "small mug"
     assert any((tmp_path / "home" / "molmospaces" / "metadata").glob("*.lmdb"))
 
 
@@ -217,7 +218,7 @@ def test_user_scene_and_libraries_from_the_run_config(assets, tmp_path):
     res = run_evaluation(compose(["policy=scripted", "workers=1", f"benchmark.path={bench}", scene, libs[0],
                                   f"output_dir={tmp_path / 'run2'}", "progress=false"]))
     assert "no grasps for 'blue_block'" in res.episodes[0].error
-    assert [g.name for g, _ in default_catalog().grasp_libraries if "/" in g.name] == []  # nor in this process
+    assert [g.name for g, _ in RunContext.build().catalog.grasp_libraries if "/" in g.name] == []  # nor in this process
 
 
 def test_house_index_beyond_scene_xml_paths_fails_up_front(assets, tmp_path):
@@ -300,9 +301,7 @@ def test_every_task_type_in_both_layouts_is_valid(assets, tmp_path, capsys):
     assert len(load_benchmark(legacy).episodes) == len(episodes)
 
 
-def test_install_uid_fetches_objaverse_objects_and_grasps_through_the_resource_manager(tmp_path, monkeypatch):
-    from molmo_lerobot.assets.catalog import default_catalog as fresh_catalog
-    from molmo_lerobot.molmospaces import settings
+def test_install_uid_fetches_objaverse_objects_and_grasps_through_the_resource_manager(tmp_path):
     from molmo_lerobot.resources import pack
     from standin import object_xml, save_npz
 
@@ -316,17 +315,12 @@ def test_install_uid_fetches_objaverse_objects_and_grasps_through_the_resource_m
     pack(objects, remote, f"objects/objaverse@{layout.OBJECT_VERSIONS['objaverse']}", max_archive_bytes=1)
     pack(grasps, remote, f"grasps/droid_objaverse@{layout.GRASP_VERSIONS['droid_objaverse']}", max_archive_bytes=1)
     assets = tmp_path / "assets"
-    monkeypatch.setattr(settings, "_CURRENT", None)
-    fresh_catalog.cache_clear()
-    configure({"molmospaces": {"assets_dir": str(assets), "cache_dir": str(tmp_path / "cache"), "remote": str(remote)}})
-    try:
-        loc = fresh_catalog().library("objaverse").install(uids[0])
-        assert loc.mjcf_path == assets / "objects" / "objaverse" / uids[0] / f"{uids[0]}.xml" and loc.mjcf_path.is_file()
-        assert (assets / "grasps" / "droid_objaverse" / uids[0] / f"{uids[0]}_grasps_filtered.npz").is_file()
-        assert not (assets / "objects" / "objaverse" / uids[1] / f"{uids[1]}.xml").exists()  # one UID at a time
-    finally:
-        monkeypatch.setattr(settings, "_CURRENT", None)
-        fresh_catalog.cache_clear()
+    run = RunContext.build({"molmospaces": {"assets_dir": str(assets), "cache_dir": str(tmp_path / "cache"),
+                                            "remote": str(remote)}})
+    loc = run.catalog.library("objaverse").install(uids[0])
+    assert loc.mjcf_path == assets / "objects" / "objaverse" / uids[0] / f"{uids[0]}.xml" and loc.mjcf_path.is_file()
+    assert (assets / "grasps" / "droid_objaverse" / uids[0] / f"{uids[0]}_grasps_filtered.npz").is_file()
+    assert not (assets / "objects" / "objaverse" / uids[1] / f"{uids[1]}.xml").exists()  # one UID at a time
 
 
 def test_one_warning_per_missing_resource_and_user_scenes_from_overrides(assets, tmp_path, capsys):
@@ -357,7 +351,7 @@ def test_objaverse_uid_known_by_metadata_but_not_installed_says_how_to_install(a
     docs[uid] = {"assetId": uid, "category": "vase"}
     with gzip.open(copy / "objects/objathor_metadata/objects_metadata.json.gz", "wt") as fh:
         json.dump(docs, fh)
-    cat = default_catalog()
+    cat = RunContext.build().catalog
     assert cat.locate_uid(uid).mjcf_path == copy / "objects/objaverse" / uid / f"{uid}.xml"
     assert cat.annotation(uid)["category"] == "vase"
     with pytest.raises(AssetError, match=rf"object '{uid}' is not installed .*molmo-resources install objects/objaverse@"):
@@ -381,7 +375,7 @@ def test_scenes_installed_on_demand_are_fetched_per_house_before_the_run(assets,
     assert not xml.exists()
     cfg = {"molmospaces": {"assets_dir": str(fresh), "cache_dir": str(cache), "remote": str(remote)}}
     bench = load_benchmark(_write_bench(tmp_path / "b", [pick_episode(house)]))
-    assert preflight(bench, get_plugins(), cfg, [0]) is None
+    assert preflight(bench, RunContext.build(cfg), [0]) is None
     assert xml.is_file() and (fresh / "scenes" / "procthor-10k-val" / "val_3_metadata.json").is_file()
     assert not (fresh / "scenes" / "procthor-10k-val" / "val_7_ceiling.xml").exists()  # only the house asked for
     res = _run(tmp_path, tmp_path / "b", f"molmospaces.assets_dir={fresh}")

@@ -21,7 +21,7 @@ from molmo_lerobot.benchmark.schema import EpisodeSpec
 from molmo_lerobot.cameras import droid
 from molmo_lerobot.cameras.franka_eval import episode_camera_seed, exo_ranges, workspace_centre, wrist_noise
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.context import RunContext
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim import env as sim_env
 from molmo_lerobot.sim.env import Timing
@@ -92,7 +92,7 @@ def _build(raw: dict, camera: dict | None, monkeypatch, oracle: dict | None = No
     seen = _Visibility(oracle or {**ORACLES[0], "centre": [0.0, 0.0, 0.0]})  # sees everything
     monkeypatch.setattr(sim_env.Env, "visible_fractions", lambda env, cam, bodies: seen(env, cam, bodies))
     try:
-        env = build_env(EpisodeSpec.model_validate(raw), Timing(), get_plugins(), camera)
+        env = build_env(EpisodeSpec.model_validate(raw), Timing(), RunContext.build(), camera)
     except ValueError as exc:
         return None, seen.checks, str(exc)
     env.reset(0)
@@ -121,7 +121,7 @@ def scenes():
     """Each episode's reset scene (the fixed system: cameras do not move the robot or objects)."""
     out = []
     for raw in _episodes():
-        env = build_env(EpisodeSpec.model_validate(raw), Timing(), get_plugins(), None)
+        env = build_env(EpisodeSpec.model_validate(raw), Timing(), RunContext.build(), None)
         env.reset(0)
         out.append((raw, _scene(env), env))
     yield out

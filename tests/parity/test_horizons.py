@@ -14,7 +14,7 @@ import json
 import pytest
 
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.rollout import horizon_with_source
 
 pytestmark = pytest.mark.parity
@@ -51,7 +51,7 @@ class _Task:
 
 
 def _ours(case: dict) -> list[tuple[int, str]]:
-    plugins = get_plugins()
+    plugins = Plugins()
     return [horizon_with_source(case["override"], _Task(t), plugins.task_type(t["task_type"]).default_horizon_sec,
                                 case["policy_dt_ms"]) for t in case["tasks"]]
 

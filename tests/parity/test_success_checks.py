@@ -27,7 +27,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from molmo_lerobot.benchmark.schema import EpisodeSpec
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.robots.base import RobotType
 from molmo_lerobot.sim.env import Env, Timing
 from molmo_lerobot.sim.geometry import subtree
@@ -562,7 +562,7 @@ GRIPPER = SimpleNamespace(bind=lambda model: SimpleNamespace(body_ids=subtree(mo
 
 def ours(cases: list) -> tuple[list[bool], list[np.ndarray]]:
     """Our verdict and contact table (``theirs.contact_table``) for every state, a fresh task per case."""
-    plugins = get_plugins()
+    plugins = Plugins()
     verdicts, contacts = [], []
     for c in cases:
         spec = episode_spec(c["task"])
@@ -679,7 +679,7 @@ def test_colours_are_painted_as_molmospaces_paints_them(theirs):
     colorings = [{name: [float(v) for v in rng.uniform(0, 1, 4).round(3)]
                   for name in rng.choice(PAINTABLE, size=int(rng.integers(1, 4)), replace=False)} for _ in range(24)]
     got = theirs.run("their_success:paint", {**theirs_inputs([]), "colorings": colorings})
-    plugins = get_plugins()
+    plugins = Plugins()
     agreed = 0
     for colors, rgba, matid in zip(colorings, got["rgba"], got["matid"], strict=True):
         task = place_task("pick_and_place_color", "apple", "tray", rng, object_colors=colors)

@@ -27,7 +27,7 @@ from pathlib import Path
 import pytest
 
 from molmo_lerobot.config import compose
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner import evaluate
 from molmo_lerobot.runner.recorders import Recorder, RecorderFactory
 
@@ -76,7 +76,7 @@ def test_export_overhead(tmp_path, monkeypatch):
     _run(tmp_path / "warmup", "limit=1", "horizon=5", "record=true")  # warm the file cache and imports
     t_eval, summary = _run(tmp_path / "eval")
     with monkeypatch.context() as m:  # a recorder that only asks for images, through the plugin hook
-        m.setattr(get_plugins(), "recorder_factories", lambda cfg: [RenderOnlyFactory()])
+        m.setattr(Plugins, "recorder_factories", lambda self, cfg: [RenderOnlyFactory()])
         t_render, _ = _run(tmp_path / "render")
     t_export, _ = _run(tmp_path / "export", "record=true", "record_hold_steps=null")
     t_h264 = (_run(tmp_path / "export_h264", "record=true", "record_hold_steps=null", "video.vcodec=h264")[0]

@@ -82,7 +82,7 @@ RAW = textwrap.dedent('''
 
     from molmo_lerobot.benchmark.load import load_benchmark
     from molmo_lerobot.paths import data_path
-    from molmo_lerobot.plugins import get_plugins
+    from molmo_lerobot.context import RunContext
     from molmo_lerobot.policies.base import EpisodeContext
     from molmo_lerobot.runner.evaluate import episode_seed
     from molmo_lerobot.runner.episode_env import build_env
@@ -90,7 +90,8 @@ RAW = textwrap.dedent('''
     from molmo_perf_policies import ImageScripted
 
     args = json.loads(sys.argv[1])
-    plugins = get_plugins()
+    run = RunContext.build()
+    plugins = run.plugins
     bench = load_benchmark(data_path("benchmarks") / args["benchmark"])
     timing = Timing()
     policy = ImageScripted({"name": "image_scripted", "chunk": args["chunk"]})
@@ -100,13 +101,13 @@ RAW = textwrap.dedent('''
         spec = bench.episodes[i]
         seed = episode_seed(0, spec.model_dump(mode="json"))
         task_type = plugins.task_type(spec.task_name)
-        env = build_env(spec, timing, plugins)
+        env = build_env(spec, timing, run)
         env.reset(seed)
         task = task_type.create(spec, env)
         prompt = spec.language.task_description if spec.language else ""
         policy.reset(EpisodeContext(spec=spec, episode_index=i, seed=seed, prompt=prompt,
                                     move_groups=dict(env.move_groups), policy_dt_s=timing.policy_dt_ms / 1000.0,
-                                    env=env))
+                                    env=env, run=run))
         task.setup()
         obs = env.observe(images=True)
         obs["prompt"], obs["step"] = prompt, 0

@@ -14,7 +14,8 @@ import pytest
 
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.context import RunContext
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder
 from molmo_lerobot.runner.rollout import rollout
@@ -28,7 +29,7 @@ def episode(resolution=None):
     spec = load_benchmark(data_path("benchmarks") / "pick_v1").episodes[0]
     if resolution is not None:
         spec = spec.model_copy(update={"img_resolution": resolution})
-    env = build_env(spec, Timing(), get_plugins())
+    env = build_env(spec, Timing(), RunContext.build())
     env.reset(0)
     return spec, env
 
@@ -66,7 +67,7 @@ def test_each_camera_is_rendered_once_per_observation(monkeypatch):
     renders: list[str] = []
     original = env.render
     monkeypatch.setattr(env, "render", lambda cam: renders.append(cam) or original(cam))
-    task = get_plugins().task_type(spec.task_name).create(spec, env)
+    task = Plugins().task_type(spec.task_name).create(spec, env)
     policy, recorder, horizon = ImagePolicy(), FrameRecorder(), 10
     ctx = EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=dict(env.move_groups),
                          policy_dt_s=0.066, env=env)
@@ -86,7 +87,7 @@ def test_policy_without_images_and_no_recorder_renders_nothing(monkeypatch):
     monkeypatch.setattr(env, "render", lambda cam: pytest.fail("rendered without a consumer"))
     policy = ImagePolicy()
     policy.needs_images = False
-    task = get_plugins().task_type(spec.task_name).create(spec, env)
+    task = Plugins().task_type(spec.task_name).create(spec, env)
     ctx = EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=dict(env.move_groups),
                          policy_dt_s=0.066, env=env)
     info = EpisodeInfo(0, spec.house_index, 0, "", "pick", 15.0, 5, [], (224, 224), {}, {})

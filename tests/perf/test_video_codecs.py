@@ -23,7 +23,7 @@ from lerobot.datasets.compute_stats import RunningQuantileStats
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.export.video import CameraStreamEncoder, PixelStats, VideoSettings
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.context import RunContext
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.runner.evaluate import episode_seed
 from molmo_lerobot.runner.policy import make_policy
@@ -38,18 +38,19 @@ SETTINGS = [{"vcodec": "h264"}, {"vcodec": "libsvtav1"}, {"vcodec": "h264", "crf
 
 def _render_episode() -> dict[str, np.ndarray]:
     """Both cameras at every policy step of pick_v1 episode 0, driven by the scripted expert."""
-    plugins = get_plugins()
+    run = RunContext.build()
+    plugins = run.plugins
     spec = load_benchmark(data_path("benchmarks") / "pick_v1").episodes[0]
     timing = Timing()
     task_type = plugins.task_type(spec.task_name)
     horizon = resolve_horizon(None, spec.task, task_type.default_horizon_sec, timing.policy_dt_ms)
-    env = build_env(spec, timing, plugins)
+    env = build_env(spec, timing, run)
     seed = episode_seed(0, spec.model_dump(mode="json"))
     env.reset(seed)
     task = task_type.create(spec, env)
-    policy = make_policy({"name": "scripted"})
+    policy = make_policy(plugins, {"name": "scripted"})
     policy.reset(EpisodeContext(spec=spec, episode_index=0, seed=seed, prompt=spec.language.task_description,
-                                move_groups=env.move_groups, policy_dt_s=timing.policy_dt_s, env=env))
+                                move_groups=env.move_groups, policy_dt_s=timing.policy_dt_s, env=env, run=run))
     task.setup()
     frames: dict[str, list[np.ndarray]] = {cam: [] for cam in env.camera_names}
     queue: list[dict] = []

@@ -69,9 +69,9 @@ def test_molmo_plugins_lists_it(target):
 def test_code_and_hydra_config_are_discovered(target):
     code = (
         "from molmo_lerobot.config import compose; from molmo_lerobot.runner.policy import make_policy\n"
-        "from omegaconf import OmegaConf\n"
+        "from molmo_lerobot.plugins import Plugins; from omegaconf import OmegaConf\n"
         "cfg = compose(['policy=example_sine', 'policy.amplitude=0.3'])\n"
-        "p = make_policy(OmegaConf.to_container(cfg.policy))\n"
+        "p = make_policy(Plugins(), OmegaConf.to_container(cfg.policy))\n"
         "print(type(p).__module__, type(p).__name__, cfg.policy.amplitude, cfg.policy.period_s)\n"
     )
     proc = subprocess.run([sys.executable, "-c", code], env=env_with(target), capture_output=True, text=True, timeout=120)

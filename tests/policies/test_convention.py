@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.context import RunContext
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.policies.convention import MolmoSpacesConvention, get_convention
 from molmo_lerobot.policies.remote import RemotePolicy
@@ -31,7 +31,7 @@ def episode_env(robot: str, gripper: list[float]):
                                                        "gripper": gripper}}
     raw["task"]["robot_base_pose"] = [0.3, -0.2, 0.1, 0.9238795, 0.0, 0.0, 0.3826834]  # 45 deg about z
     raw["cameras"] = [c for c in raw["cameras"] if c["type"] == "exocentric"]  # the wrist mount differs per robot
-    env = build_env(EpisodeSpec.model_validate(raw), Timing(), get_plugins(), None)
+    env = build_env(EpisodeSpec.model_validate(raw), Timing(), RunContext.build(), None)
     env.reset(0)
     return env
 
@@ -132,16 +132,18 @@ def test_remote_policy_speaks_their_convention_on_the_wire():
 
 def test_any_other_policy_plugin_is_wrapped(tmp_path):
     """policy=replay policy.convention=molmospaces replays MolmoSpaces-unit actions (gripper 0 … 255)."""
+    from molmo_lerobot.plugins import Plugins
     from molmo_lerobot.policies.convention import ConventionAdapter
     from molmo_lerobot.runner.policy import make_policy
 
     np.save(tmp_path / "a.npy", np.array([[0.1] * 7 + [255.0], [0.2] * 7 + [51.0]]))
-    policy = make_policy({"name": "replay", "actions": str(tmp_path / "a.npy"), "convention": "molmospaces"})
+    plugins = Plugins()
+    policy = make_policy(plugins, {"name": "replay", "actions": str(tmp_path / "a.npy"), "convention": "molmospaces"})
     assert isinstance(policy, ConventionAdapter) and policy.needs_images is False
     policy.reset(EpisodeContext(spec=None, episode_index=0, seed=0, prompt="", move_groups={"arm": 7, "gripper": 1},  # type: ignore[arg-type]
                                 policy_dt_s=0.066))
     obs = {"qpos": {"arm": np.zeros(7)}, "joint_qpos": {"arm": np.zeros(7)}, "joint_qvel": {"arm": np.zeros(7)},
            "tcp_pose": np.array([0, 0, 0, 1.0, 0, 0, 0]), "robot_base_pose": np.array([0, 0, 0, 1.0, 0, 0, 0])}
     assert [policy.act(obs)["gripper"][0] for _ in range(2)] == [1.0, 0.2]
-    native = make_policy({"name": "replay", "actions": str(tmp_path / "a.npy"), "convention": "native"})
+    native = make_policy(plugins, {"name": "replay", "actions": str(tmp_path / "a.npy"), "convention": "native"})
     assert not isinstance(native, ConventionAdapter)

@@ -11,7 +11,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
-from molmo_lerobot.plugins import get_plugins  # noqa: E402
+from molmo_lerobot.context import RunContext  # noqa: E402
+from molmo_lerobot.plugins import Plugins  # noqa: E402
 from molmo_lerobot.policies.base import EpisodeContext  # noqa: E402
 from molmo_lerobot.runner.rollout import rollout  # noqa: E402
 from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
@@ -26,16 +27,17 @@ def episodes():
 
 
 def _run(raw, policy_name, horizon=HORIZON, config=None):
-    plugins = get_plugins()
+    run = RunContext.build()
+    plugins = run.plugins
     spec = EpisodeSpec.model_validate(raw)
     timing = Timing()
     policy = plugins.policy(policy_name).factory({"name": policy_name, **(config or {})})
-    env = build_env(spec, timing, plugins)
+    env = build_env(spec, timing, run)
     try:
         env.reset(spec.seed)
         task = plugins.task_type(spec.task.task_cls).create(spec, env)
         ctx = EpisodeContext(spec=spec, episode_index=0, seed=spec.seed, prompt=spec.prompt,
-                             move_groups=env.move_groups, policy_dt_s=timing.policy_dt_s, env=env)
+                             move_groups=env.move_groups, policy_dt_s=timing.policy_dt_s, env=env, run=run)
         outcome = rollout(env, task, policy, ctx, horizon, [], None, policy_name)
         return outcome, env.data.qpos.copy()
     finally:
@@ -49,15 +51,16 @@ def test_scripted_picks_two_episodes(episodes):
 
 
 def test_scripted_returns_chunks_without_images(episodes):
-    plugins = get_plugins()
+    run = RunContext.build()
+    plugins = run.plugins
     spec = EpisodeSpec.model_validate(episodes[0])
     policy = plugins.policy("scripted").factory({"name": "scripted", "chunk": 5})
     assert policy.needs_images is False
-    env = build_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), run)
     try:
         env.reset(0)
         policy.reset(EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=env.move_groups,
-                                    policy_dt_s=0.066, env=env))
+                                    policy_dt_s=0.066, env=env, run=run))
         chunk = policy.act(env.observe(images=False))
         assert chunk["arm"].shape == (5, 7) and chunk["gripper"].shape == (5, 1)
         assert np.all(chunk["gripper"] == 0.0)  # open while approaching
@@ -67,7 +70,7 @@ def test_scripted_returns_chunks_without_images(episodes):
 
 def test_scripted_needs_privileged_env(episodes):
     spec = EpisodeSpec.model_validate(episodes[0])
-    policy = get_plugins().policy("scripted").factory({})
+    policy = Plugins().policy("scripted").factory({})
     with pytest.raises(ValueError, match="privileged"):
         policy.reset(EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups={"arm": 7, "gripper": 1},
                                     policy_dt_s=0.066))
@@ -114,9 +117,9 @@ class _SuccessAt:
 
 
 def _loop(episodes, policy, task, horizon=12, **kw):
-    plugins = get_plugins()
+    run = RunContext.build()
     spec = EpisodeSpec.model_validate(episodes[0])
-    env = build_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), run)
     try:
         env.reset(0)
         ctx = EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=env.move_groups,
@@ -162,7 +165,7 @@ def test_only_privileged_policies_get_the_simulator(tmp_path, episodes):
     from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob, WorkItem
 
     seen = {}
-    plugins = get_plugins()
+    plugins = Plugins()
     for name in ("scripted", "random"):
         job = WorkerJob(policy={"name": name}, timing={"policy_dt_ms": 66.0, "ctrl_dt_ms": 2.0, "sim_dt_ms": 2.0},
                         output_dir=str(tmp_path), benchmark_name="t", benchmark_sha256="0" * 64)

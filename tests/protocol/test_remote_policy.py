@@ -17,6 +17,7 @@ from molmo_lerobot.cli.bench import main as bench_main
 from molmo_lerobot.cli.serve import build_server
 from molmo_lerobot.cli.serve import main as serve_main
 from molmo_lerobot.config import compose
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.random_policy import RandomPolicy
 from molmo_lerobot.policies.remote import RemotePolicy
@@ -35,7 +36,7 @@ def remote(port, **over) -> RemotePolicy:
 
 def test_remote_actions_are_the_in_process_actions():
     rng = np.random.default_rng(0)
-    with serve_in_thread(build_server({"name": "random", "scale": 0.3}, port=0)) as srv:
+    with serve_in_thread(build_server(Plugins(), {"name": "random", "scale": 0.3}, port=0)) as srv:
         far = remote(srv.port)
         assert far.served == "random" and far.needs_images is False
         near = RandomPolicy({"scale": 0.3})
@@ -74,7 +75,7 @@ def outcome(e) -> tuple:
 
 def test_served_random_gives_the_in_process_outcomes(bench_dir, tmp_path):
     local = evaluate(bench_dir, tmp_path / "local", "policy=random", "workers=1")
-    with serve_in_thread(build_server({"name": "random"}, port=0)) as srv:
+    with serve_in_thread(build_server(Plugins(), {"name": "random"}, port=0)) as srv:
         served = evaluate(bench_dir, tmp_path / "served", "policy=remote", f"policy.port={srv.port}", "workers=2")
         assert srv.served == 4 * -(-HORIZON // 8)  # chunks of 8 run open loop: one request per chunk
     assert served.summary["n_errors"] == 0 and len(served.episodes) == 4
@@ -99,7 +100,7 @@ def test_remote_refuses_a_server_that_is_not_molmo_serve():
 
 
 def test_connection_lost_mid_episode_fails_the_episode_then_recovers():
-    with serve_in_thread(build_server({"name": "random"}, port=0, idle_timeout_s=0.3)) as srv:
+    with serve_in_thread(build_server(Plugins(), {"name": "random"}, port=0, idle_timeout_s=0.3)) as srv:
         far = remote(srv.port)
         far.reset(CTX)
         obs = {"qpos": {"arm": np.zeros(7), "gripper": np.zeros(1)}}

@@ -3,8 +3,8 @@
 ``faulty_policy`` writes ``molmo_test_policies`` (module + ``*.dist-info`` with an entry point in
 the ``molmo_lerobot`` group + a Hydra ``policy/faulty.yaml``) into a temp dir, puts it on
 ``sys.path`` and ``PYTHONPATH`` (spawned workers inherit ``sys.path``; Ray workers the
-environment) and clears the plugin cache. ``policy=faulty`` then holds the arm still and
-misbehaves in the episodes named by ``policy.faults={episode_index: kind}``:
+environment), so every run context built afterwards finds it. ``policy=faulty`` then holds the
+arm still and misbehaves in the episodes named by ``policy.faults={episode_index: kind}``:
 
 * ``sigkill`` — the worker SIGKILLs itself at the first ``act`` of that episode, every attempt;
 * ``sigkill_once`` — the same, on the first attempt only (a marker file in ``policy.marker_dir``);
@@ -38,8 +38,6 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
-
-from molmo_lerobot.plugins import get_plugins
 
 MODULE = textwrap.dedent('''
     """Test-only policies that misbehave on purpose (see tests/runner/conftest.py)."""
@@ -210,10 +208,8 @@ def faulty_policy(tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(root))
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join(p for p in (str(root), os.environ.get("PYTHONPATH")) if p))
     sys.modules.pop("molmo_test_policies", None)
-    get_plugins.cache_clear()
     yield SimpleNamespace(marker_dir=markers, site=root)
     sys.modules.pop("molmo_test_policies", None)
-    get_plugins.cache_clear()
 
 
 @pytest.fixture(scope="session")

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.evaluate import _warn_default_horizons
 
 
 def test_default_table_is_molmospaces():
-    plugins = get_plugins()
+    plugins = Plugins()
     table = {name: plugins.task_type(name).default_horizon_sec
              for name in ("pick", "pick_and_place", "pick_and_place_next_to", "pick_and_place_color", "open", "close")}
     assert table == {"pick": 20.0, "pick_and_place": 40.0, "pick_and_place_next_to": 40.0,

@@ -7,7 +7,6 @@ from pathlib import Path
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.config import compose
-from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.runner.evaluate import run_evaluation
 from molmo_lerobot.runner.recorders import Recorder, RecorderFactory
 
@@ -46,10 +45,8 @@ class CounterPlugin:
         return [StepCounterFactory()] if config.get("count_steps") else []
 
 
-def test_plugin_recorder_sees_every_step(tmp_path, monkeypatch):
-    plugins = get_plugins()
-    monkeypatch.setattr(plugins, "records", list(plugins.records))
-    plugins.add(CounterPlugin(), "step_counter")
+def test_plugin_recorder_sees_every_step(tmp_path, in_process_plugins):
+    in_process_plugins(CounterPlugin(), "step_counter")
     out = tmp_path / "run"
     run_evaluation(compose(["policy=random", "workers=2", "limit=3", "horizon=7", "+count_steps=true",
                             f"output_dir={out}", "progress=false"]))

@@ -1,4 +1,4 @@
-"""Fixtures for the simulation tests: small generated pick episodes and a plugin set."""
+"""Fixtures for the simulation tests: small generated pick episodes and a run context (default config)."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 @pytest.fixture(scope="session")
-def plugins():
-    from molmo_lerobot.plugins import get_plugins
+def run():
+    from molmo_lerobot.context import RunContext
 
-    return get_plugins()
+    return RunContext.build()
 
 
 @pytest.fixture(scope="session")

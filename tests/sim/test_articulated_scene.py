@@ -9,23 +9,23 @@ import numpy as np
 import pytest
 
 from molmo_lerobot.assets.articulated import ARTICULATED_OBJECTS, ArticulatedAssetLibrary, handle_grasps
-from molmo_lerobot.assets.catalog import default_catalog
-from molmo_lerobot.assets.grasps import GraspError, get_grasps
+from molmo_lerobot.assets.grasps import GraspError
 from molmo_lerobot.benchmark.generate_articulated import generate_benchmark
+from molmo_lerobot.context import RunContext
 from molmo_lerobot.sim.articulated import ArticulatedTabletop
 
 
 def test_articulated_library_is_in_the_default_catalog_with_per_joint_grasps():
-    cat = default_catalog()
+    cat = RunContext.build().catalog
     doc = cat.annotation("kitchen_microwave")
     assert doc["category"] == "microwave" and doc["joints"]["microwave"]["open"] == pytest.approx(-2.094)
     assert cat.locate_uid("drawer_chest_white").library == "articulated"
     assert cat.grasp_joints("kitchen_hinge_cabinet") == ["left_hinge_cabinet", "right_hinge_cabinet"]
-    g = get_grasps("kitchen_hinge_cabinet", robot="franka", joint="right_hinge_cabinet")
+    g = cat.get_grasps("kitchen_hinge_cabinet", robot="franka", joint="right_hinge_cabinet")
     assert g.ndim == 3 and g.shape[1:] == (4, 4)
     assert cat.count_grasps("kitchen_hinge_cabinet", joint="right_hinge_cabinet") == len(g)
     with pytest.raises(GraspError, match="joint 'nope'"):
-        get_grasps("kitchen_microwave", joint="nope")
+        cat.get_grasps("kitchen_microwave", joint="nope")
 
 
 @pytest.mark.parametrize("uid", sorted(ARTICULATED_OBJECTS))

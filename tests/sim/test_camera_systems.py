@@ -16,8 +16,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
 from molmo_lerobot.cameras.base import choose_camera_system  # noqa: E402
+from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.paths import data_path  # noqa: E402
-from molmo_lerobot.plugins import get_plugins  # noqa: E402
+from molmo_lerobot.plugins import Plugins  # noqa: E402
 from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
 from molmo_lerobot.sim.env import Timing  # noqa: E402
 
@@ -30,7 +31,7 @@ def _pick(k: int = 0) -> dict:
 
 
 def _env(raw: dict, system: str | None = None):
-    env = build_env(EpisodeSpec.model_validate(raw), Timing(), get_plugins(), {"system": system})
+    env = build_env(EpisodeSpec.model_validate(raw), Timing(), RunContext.build(), {"system": system})
     env.reset(0)
     return env
 
@@ -52,7 +53,7 @@ def test_choice_order():
 
 
 def test_plugins_and_aliases():
-    plugins = get_plugins()
+    plugins = Plugins()
     assert plugins.camera_system("droid") is plugins.camera_system("FrankaDroidCameraSystem")
     assert plugins.camera_system("droid_randomized") is plugins.camera_system("FrankaRandomizedDroidCameraSystem")
 

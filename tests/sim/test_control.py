@@ -26,10 +26,10 @@ def _ctrl_per_physics_step(monkeypatch, env, action) -> list[np.ndarray]:
 
 
 @pytest.mark.parametrize("mode", ["hold", "ramp"])
-def test_hold_applies_the_target_at_once_ramp_moves_it_in(monkeypatch, pick_spec, plugins, mode):
+def test_hold_applies_the_target_at_once_ramp_moves_it_in(monkeypatch, pick_spec, run, mode):
     """MolmoSpaces' JointPosController writes the new target and holds it for the whole policy
     step; ``ramp`` interpolates from the previous command over the controller ticks."""
-    env = build_env(pick_spec, Timing(control=mode), plugins)
+    env = build_env(pick_spec, Timing(control=mode), run)
     try:
         env.reset(0)
         start = env.data.ctrl.copy()
@@ -46,12 +46,12 @@ def test_hold_applies_the_target_at_once_ramp_moves_it_in(monkeypatch, pick_spec
         env.close()
 
 
-def test_hold_tracks_a_new_target_faster_than_ramp(pick_spec, plugins):
+def test_hold_tracks_a_new_target_faster_than_ramp(pick_spec, run):
     """After one policy step towards a new target the arm lags less under hold (the issue measured
     ~25 % more lag under ramp)."""
     lag = {}
     for mode in ("hold", "ramp"):
-        env = build_env(pick_spec, Timing(control=mode), plugins)
+        env = build_env(pick_spec, Timing(control=mode), run)
         try:
             env.reset(0)
             goal = env.robot.targets(env.data, "arm") + 0.1
@@ -63,7 +63,7 @@ def test_hold_tracks_a_new_target_faster_than_ramp(pick_spec, plugins):
 
 
 @pytest.mark.skipif(not sleep_supported(), reason="this MuJoCo has no body sleeping (mjENBL_SLEEP)")
-def test_sleep_is_off_by_default_and_drops_settled_contacts_when_on(pick_spec, plugins):
+def test_sleep_is_off_by_default_and_drops_settled_contacts_when_on(pick_spec, run):
     """timing.sleep=true enables MuJoCo sleeping after the reset, as MolmoSpaces' rollouts (tolerance
     1e-3); a settled object then falls asleep and its contacts leave data.contact, which is why the
     contact-based success rules need it off (the default)."""
@@ -71,7 +71,7 @@ def test_sleep_is_off_by_default_and_drops_settled_contacts_when_on(pick_spec, p
     assert Timing().sleep is False
     contacts, asleep = {}, {}
     for sleep in (False, True):
-        env = build_env(pick_spec, Timing(sleep=sleep), plugins)
+        env = build_env(pick_spec, Timing(sleep=sleep), run)
         try:
             env.reset(0)
             assert bool(env.model.opt.enableflags & flag) is sleep

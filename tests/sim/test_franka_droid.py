@@ -15,11 +15,11 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.assets.catalog import default_catalog  # noqa: E402
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
 from molmo_lerobot.config import compose  # noqa: E402
+from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.paths import data_path  # noqa: E402
-from molmo_lerobot.plugins import get_plugins  # noqa: E402
+from molmo_lerobot.plugins import Plugins  # noqa: E402
 from molmo_lerobot.robots import franka_droid  # noqa: E402
 from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
 from molmo_lerobot.runner.evaluate import run_evaluation  # noqa: E402
@@ -49,9 +49,9 @@ def ms_pick_episode(k: int = 0) -> dict:
     return raw
 
 
-def _env(raw: dict, camera_system: str | None = None):
+def _env(raw: dict, camera_system: str | None = None, run: RunContext | None = None):
     spec = EpisodeSpec.model_validate(raw)
-    env = build_env(spec, Timing(), get_plugins(), {"system": camera_system})
+    env = build_env(spec, Timing(), run or RunContext.build(), {"system": camera_system})
     env.reset(0)
     return env
 
@@ -180,7 +180,7 @@ def test_panda_hand_geometry_matches_the_model():
 
 
 def test_franka_keeps_its_panda_hand():
-    plugins = get_plugins()
+    plugins = Plugins()
     assert plugins.robot("franka").name == "franka" and plugins.robot("franka_droid").name == "franka_droid"
     assert "franka_droid" not in plugins.robot("franka").aliases
 
@@ -188,7 +188,7 @@ def test_franka_keeps_its_panda_hand():
 @pytest.mark.parametrize("robot", ["franka", "franka_droid"])
 def test_a_base_pose_without_7_values_is_one_clear_error(robot):
     with pytest.raises(ValueError, match=r"robot_base_pose needs 7 values .* got 3"):
-        get_plugins().robot(robot).add_to(mujoco.MjSpec(), [0.0, 0.0, 0.0])
+        Plugins().robot(robot).add_to(mujoco.MjSpec(), [0.0, 0.0, 0.0])
 
 
 def test_molmospaces_grasp_file_transfers(tmp_path):
@@ -213,19 +213,18 @@ def test_molmospaces_grasp_file_transfers(tmp_path):
     np.savez_compressed(lib / uid / "droid" / "grasps.npz", transforms=T.reshape(1, 4, 4).astype(np.float16))
     (lib / "grasps_index.json").write_text(json.dumps(
         {"grasp_paths": {"droid": {uid: f"{uid}/droid/grasps.npz"}}, "articulated_grasp_paths": {}}))
-    catalog = default_catalog()
-    saved = list(catalog.grasp_libraries)
-    catalog.register_user_grasp_library("tutorial", lib, "builtin")
+    run = RunContext.build()
+    run.catalog.register_user_grasp_library("tutorial", lib, "builtin")
     from molmo_lerobot.policies.base import EpisodeContext
     from molmo_lerobot.policies.scripted import ScriptedPick, object_grasps
     from molmo_lerobot.runner.rollout import rollout
-    env = _env(raw)
+    env = _env(raw, run=run)
     try:
-        assert object_grasps(env, uid) == pytest.approx(T[None])
+        assert object_grasps(env, uid, run.catalog) == pytest.approx(T[None])
         spec = env.spec
-        task = get_plugins().task_type(spec.task_name).create(spec, env)
+        task = run.plugins.task_type(spec.task_name).create(spec, env)
         ctx = EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=dict(env.move_groups),
-                             policy_dt_s=0.066, env=env)
+                             policy_dt_s=0.066, env=env, run=run)
         env.step({g: env.robot.targets(env.data, g) for g in env.move_groups})  # the block settles
         support = env.contact_bodies(env.subtree_bodies(uid)) - env.robot.body_ids  # what it rests on
         assert support
@@ -243,7 +242,6 @@ def test_molmospaces_grasp_file_transfers(tmp_path):
         assert not any(touched)  # the fingers never reach the table: the pads centre on the block
     finally:
         env.close()
-        catalog.grasp_libraries[:] = saved
 
 
 def test_their_model_is_loaded_when_installed(tmp_path, monkeypatch):

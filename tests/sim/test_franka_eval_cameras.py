@@ -24,8 +24,9 @@ from molmo_lerobot.cameras.franka_eval import (  # noqa: E402
     wrist_noise,
 )
 from molmo_lerobot.cameras.options import camera_option_problems, episode_camera_system  # noqa: E402
+from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.paths import data_path  # noqa: E402
-from molmo_lerobot.plugins import get_plugins  # noqa: E402
+from molmo_lerobot.plugins import Plugins  # noqa: E402
 from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
 from molmo_lerobot.sim import env as sim_env  # noqa: E402
 from molmo_lerobot.sim.env import Timing  # noqa: E402
@@ -39,7 +40,7 @@ def _pick(k: int = 0) -> dict:
 
 
 def _env(raw: dict, camera: dict):
-    env = build_env(EpisodeSpec.model_validate(raw), Timing(), get_plugins(), camera)
+    env = build_env(EpisodeSpec.model_validate(raw), Timing(), RunContext.build(), camera)
     env.reset(0)
     return env
 
@@ -70,7 +71,7 @@ def test_ranges_per_level():
 
 
 def test_eval_cameras_replace_recorded_cameras_and_take_the_level():
-    plugins = get_plugins()
+    plugins = Plugins()
     raw = _pick(0)
     recorded = EpisodeSpec.model_validate({**raw, "cameras": json.loads(
         (data_path("benchmarks") / "pick_v1" / "benchmark.json").read_text())[0]["cameras"]})
@@ -200,12 +201,13 @@ def test_a_run_with_eval_cameras(tmp_path):
 
 def test_eval_cameras_render_at_their_resolution():
     """Their eval system renders 640 x 368 whatever the episode says (the camera.eval override)."""
-    plugins = get_plugins()
     spec = EpisodeSpec.model_validate(_pick(0))
     assert list(spec.img_resolution) == [224, 224]
     for camera in ({"eval": True, "rand_level": 30}, {"system": "FrankaEvalCameraSystem"}):
-        assert list(plugins.apply_episode_overrides(spec, {"camera": camera}).img_resolution) == [640, 368]
-    assert plugins.apply_episode_overrides(spec, {"camera": {"system": "droid"}}) == spec
+        run = RunContext.build({"camera": camera})
+        assert list(run.plugins.apply_episode_overrides(spec, run).img_resolution) == [640, 368]
+    run = RunContext.build({"camera": {"system": "droid"}})
+    assert run.plugins.apply_episode_overrides(spec, run) == spec
 
 
 @pytest.mark.slow

@@ -4,11 +4,11 @@
 import numpy as np
 import pytest
 
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.plugins import Plugins
 
 
 def test_franka_droid_reads_driver_radians_open():
-    robot = get_plugins().robot("franka_droid")
+    robot = Plugins().robot("franka_droid")
     assert robot.name == "franka_droid"
     open_ = robot.init_qpos("gripper", [0.00296, 0.00296])
     assert open_[0] < 0.01  # open (the old finger-metre reading made it 93 % closed)
@@ -22,7 +22,7 @@ def test_franka_droid_reads_driver_radians_open():
 
 
 def test_panda_reads_finger_metres_and_is_not_franka_droid():
-    robot = get_plugins().robot("franka")
+    robot = Plugins().robot("franka")
     assert "franka_droid" not in (robot.name, *robot.aliases)
     assert robot.init_qpos("gripper", [0.0]).tolist() == [0.0]
     assert robot.init_qpos("gripper", [0.04, 0.04]).tolist() == pytest.approx([0.0])  # fully open

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from molmo_lerobot.benchmark.schema import EpisodeSpec
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.plugins import Plugins
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "molmospaces"
 
@@ -26,7 +26,7 @@ def ithor_pick(**robot) -> EpisodeSpec:
 
 def placed(spec: EpisodeSpec):
     """The robot alone, placed as the episode says and at its initial joint positions."""
-    robot = get_plugins().robot(spec.robot.robot_name)
+    robot = Plugins().robot(spec.robot.robot_name)
     world = mujoco.MjSpec()
     robot.place(world, spec)
     model = world.compile()
@@ -62,12 +62,14 @@ def test_franka_droid_stands_on_their_pedestal_above_the_object():
 def test_base_size_per_episode_and_per_run():
     tall = placed(ithor_pick(base_size=[0.4, 0.4, 0.75]))
     assert tall[1].xpos[tall[0].body("robot_0/fr3_link0").id][2] == pytest.approx(0.07 + 0.75)
+    from molmo_lerobot.context import RunContext
     from molmo_lerobot.overrides import molmo_episode_overrides
 
-    spec = molmo_episode_overrides(ithor_pick(), {"robot": {"base_size": [0.3, 0.3, 0.2]}})
+    run = RunContext.build()
+    spec = molmo_episode_overrides(ithor_pick(), {"robot": {"base_size": [0.3, 0.3, 0.2]}}, run)
     assert spec.robot.model_extra["base_size"] == [0.3, 0.3, 0.2]
-    assert molmo_episode_overrides(ithor_pick(), {"robot": {"base_size": "default"}}) is None
-    none = molmo_episode_overrides(ithor_pick(base_size=[0.4, 0.4, 0.75]), {"robot": {"base_size": None}})
+    assert molmo_episode_overrides(ithor_pick(), {"robot": {"base_size": "default"}}, run) is None
+    none = molmo_episode_overrides(ithor_pick(base_size=[0.4, 0.4, 0.75]), {"robot": {"base_size": None}}, run)
     model, data, _ = placed(none)
     assert data.xpos[model.body("robot_0/fr3_link0").id][2] == pytest.approx(0.07)
     assert "robot_0/base/pedestal" not in {model.geom(i).name for i in range(model.ngeom)}
@@ -75,7 +77,7 @@ def test_base_size_per_episode_and_per_run():
 
 def test_franka_keeps_no_pedestal_unless_asked():
     """The Panda of the published v1 benchmarks stands at the base pose itself."""
-    franka = get_plugins().robot("franka")
+    franka = Plugins().robot("franka")
     assert franka.default_base_size is None
     world = mujoco.MjSpec()
     franka.add_to(world, [0.1, 0.0, 0.7, 1, 0, 0, 0])
@@ -95,11 +97,13 @@ def test_franka_keeps_no_pedestal_unless_asked():
 def test_a_bad_base_size_is_one_clear_error(bad):
     from molmo_lerobot.benchmark.load import Benchmark, Origin
     from molmo_lerobot.benchmark.validate import validate_benchmark
+    from molmo_lerobot.context import RunContext
 
     spec = ithor_pick(base_size=bad)
     bench = Benchmark("b", [spec], None, "", Path("b.json"), [Origin("b.json")])
-    problems = [p for p in validate_benchmark(bench) if p.field == "robot.base_size"]
+    run = RunContext.build()
+    problems = [p for p in validate_benchmark(bench, run.plugins, run) if p.field == "robot.base_size"]
     assert len(problems) == 1 and not problems[0].warning
     assert str(problems[0]).startswith("b.json: episode 0: field robot.base_size: base_size must be null or three")
     with pytest.raises(ValueError, match="base_size must be null or three positive sizes"):
-        get_plugins().robot("franka_droid").base_size(spec.robot)
+        Plugins().robot("franka_droid").base_size(spec.robot)

@@ -10,8 +10,8 @@ from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim.env import Timing
 
 
-def _rollout_state(spec, plugins, steps=5):
-    env = build_env(spec, Timing(), plugins)
+def _rollout_state(spec, run, steps=5):
+    env = build_env(spec, Timing(), run)
     try:
         env.reset(spec.seed)
         q = env.robot.targets(env.data, "arm")
@@ -22,15 +22,15 @@ def _rollout_state(spec, plugins, steps=5):
         env.close()
 
 
-def test_scene_and_reset_are_deterministic(pick_spec, plugins):
-    qa, obs_a = _rollout_state(pick_spec, plugins)
-    qb, obs_b = _rollout_state(pick_spec, plugins)
+def test_scene_and_reset_are_deterministic(pick_spec, run):
+    qa, obs_a = _rollout_state(pick_spec, run)
+    qb, obs_b = _rollout_state(pick_spec, run)
     assert np.array_equal(qa, qb)
     assert np.array_equal(obs_a["tcp_pose"], obs_b["tcp_pose"])
 
 
-def test_reset_places_robot_and_objects(pick_spec, plugins):
-    env = build_env(pick_spec, Timing(), plugins)
+def test_reset_places_robot_and_objects(pick_spec, run):
+    env = build_env(pick_spec, Timing(), run)
     try:
         env.reset(1)
         assert np.allclose(env.robot.qpos(env.data, "arm"), pick_spec.robot.init_qpos["arm"])
@@ -43,8 +43,8 @@ def test_reset_places_robot_and_objects(pick_spec, plugins):
         env.close()
 
 
-def test_houses_differ_and_rebuild_identically(plugins):
-    scene = plugins.scene_dataset("procedural_tabletop")
+def test_houses_differ_and_rebuild_identically(run):
+    scene = run.plugins.scene_dataset("procedural_tabletop")
     a, b, c = (scene.build(h).compile() for h in (3, 3, 4))
     assert np.array_equal(a.geom_size, b.geom_size) and np.array_equal(a.geom_rgba, b.geom_rgba)
     assert a.geom_size.shape != c.geom_size.shape or not np.array_equal(a.geom_size, c.geom_size)
@@ -52,10 +52,10 @@ def test_houses_differ_and_rebuild_identically(plugins):
         scene.build(-1)
 
 
-def test_cameras_follow_specs(pick_episodes, plugins):
+def test_cameras_follow_specs(pick_episodes, run):
     raw = dict(pick_episodes[0], img_resolution=[64, 48])
     spec = EpisodeSpec.model_validate(raw)
-    env = build_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), run)
     try:
         env.reset(0)
         assert env.camera_names == ["exterior", "wrist"]
@@ -75,11 +75,11 @@ def test_cameras_follow_specs(pick_episodes, plugins):
         env.close()
 
 
-def test_robot_camera_with_unknown_body_is_rejected(pick_episodes, plugins):
+def test_robot_camera_with_unknown_body_is_rejected(pick_episodes, run):
     raw = dict(pick_episodes[0])
     raw["cameras"] = [dict(raw["cameras"][1], reference_body_names=["no_such_body"])]
     with pytest.raises(ValueError, match=r"cameras\[0\] \(wrist\): none of the reference bodies"):
-        build_env(EpisodeSpec.model_validate(raw), Timing(), plugins)
+        build_env(EpisodeSpec.model_validate(raw), Timing(), run)
 
 
 @pytest.mark.parametrize(("action", "message"), [
@@ -89,8 +89,8 @@ def test_robot_camera_with_unknown_body_is_rejected(pick_episodes, plugins):
     ({"arm": np.zeros(7), "gripper": np.array([np.nan])}, r"action\['gripper'\] has non-finite"),
     ({"arm": np.zeros(7), "gripper": np.zeros(1), "base": np.zeros(3)}, "expected"),
 ])
-def test_bad_actions_are_rejected(pick_spec, plugins, action, message):
-    env = build_env(pick_spec, Timing(), plugins)
+def test_bad_actions_are_rejected(pick_spec, run, action, message):
+    env = build_env(pick_spec, Timing(), run)
     try:
         env.reset(0)
         with pytest.raises(ValueError, match=message):
@@ -106,12 +106,12 @@ def test_bad_actions_are_rejected(pick_spec, plugins, action, message):
     (lambda r: r["scene_modifications"]["object_poses"].update(ghost=[0, 0, 1, 1, 0, 0, 0]),
      r"object_poses\['ghost'\]: no body 'ghost'"),
 ])
-def test_bad_episode_fields_are_named(pick_episodes, plugins, edit, message):
+def test_bad_episode_fields_are_named(pick_episodes, run, edit, message):
     import copy
 
     raw = copy.deepcopy(pick_episodes[0])
     edit(raw)
-    env = build_env(EpisodeSpec.model_validate(raw), Timing(), plugins)
+    env = build_env(EpisodeSpec.model_validate(raw), Timing(), run)
     try:
         with pytest.raises(ValueError, match=message):
             env.reset(0)

@@ -27,9 +27,9 @@ def test_bad_timing_is_rejected(policy, ctrl, sim, field):
         Timing(policy, ctrl, sim)
 
 
-def test_timestep_and_substeps_from_timing(pick_spec, plugins):
+def test_timestep_and_substeps_from_timing(pick_spec, run):
     timing = Timing(policy_dt_ms=60.0, ctrl_dt_ms=4.0, sim_dt_ms=1.0)
-    env = build_env(pick_spec, timing, plugins)
+    env = build_env(pick_spec, timing, run)
     try:
         assert env.model.opt.timestep == pytest.approx(0.001)  # not the robot XML's 0.002
         env.reset(0)
@@ -41,8 +41,8 @@ def test_timestep_and_substeps_from_timing(pick_spec, plugins):
         env.close()
 
 
-def test_controller_ticks_interpolate_targets(pick_spec, plugins):
-    env = build_env(pick_spec, Timing(), plugins)
+def test_controller_ticks_interpolate_targets(pick_spec, run):
+    env = build_env(pick_spec, Timing(), run)
     try:
         env.reset(0)
         q0 = env.robot.targets(env.data, "arm")

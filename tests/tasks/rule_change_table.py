@@ -20,7 +20,7 @@ from pathlib import Path
 
 from molmo_lerobot.benchmark.schema import EpisodeSpec
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.context import RunContext
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.scripted import ScriptedExpert
 from molmo_lerobot.runner.episode_env import build_env
@@ -66,7 +66,8 @@ class BothRules:
 
 
 def main(old_dir: str, bench: str, limit: int | None = None) -> dict:
-    plugins = get_plugins()
+    run = RunContext.build()
+    plugins = run.plugins
     olds = old_task_types(Path(old_dir))
     episodes = json.loads((data_path("benchmarks") / bench / "benchmark.json").read_text())[:limit]
     policy = ScriptedExpert({})
@@ -75,14 +76,14 @@ def main(old_dir: str, bench: str, limit: int | None = None) -> dict:
     for i, raw in enumerate(episodes):
         spec = EpisodeSpec.model_validate(raw)
         tt = plugins.task_type(spec.task_name)
-        env = build_env(spec, timing, plugins)
+        env = build_env(spec, timing, run)
         seed = episode_seed(0, raw)  # molmo-eval's seed for this episode with seed=0
         env.reset(seed)
         new = tt.create(spec, env)
         old = olds[tt.name].create(spec, env)
         task = BothRules(new, old)
         ctx = EpisodeContext(spec=spec, episode_index=i, seed=seed, prompt="",
-                             move_groups=dict(env.move_groups), policy_dt_s=timing.policy_dt_s, env=env)
+                             move_groups=dict(env.move_groups), policy_dt_s=timing.policy_dt_s, env=env, run=run)
         horizon = resolve_horizon(None, spec.task, tt.default_horizon_sec, timing.policy_dt_ms)
         try:
             out = rollout(env, task, policy, ctx, horizon, [], None, "scripted")

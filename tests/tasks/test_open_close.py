@@ -11,14 +11,15 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.generate_articulated import generate_benchmark  # noqa: E402
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
-from molmo_lerobot.plugins import get_plugins  # noqa: E402
+from molmo_lerobot.context import RunContext  # noqa: E402
+from molmo_lerobot.plugins import Plugins  # noqa: E402
 from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
 from molmo_lerobot.sim.env import Timing  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def plugins():
-    return get_plugins()
+    return Plugins()
 
 
 @pytest.fixture(scope="module")
@@ -34,7 +35,7 @@ def close_episodes():
 def _setup(plugins, raw: dict, **task_update):
     raw = {**raw, "task": {**raw["task"], **task_update}}
     spec = EpisodeSpec.model_validate(raw)
-    env = build_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), RunContext.build())
     env.reset(0)
     task = plugins.task_type(spec.task_name).create(spec, env)
     task.setup()

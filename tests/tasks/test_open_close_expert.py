@@ -11,7 +11,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.generate_articulated import generate_benchmark  # noqa: E402
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
-from molmo_lerobot.plugins import get_plugins  # noqa: E402
+from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.policies.base import EpisodeContext  # noqa: E402
 from molmo_lerobot.policies.scripted import ScriptedExpert  # noqa: E402
 from molmo_lerobot.runner.rollout import resolve_horizon, rollout  # noqa: E402
@@ -20,16 +20,17 @@ from molmo_lerobot.sim.env import Timing  # noqa: E402
 
 
 def _run(raw: dict, policy, control: str | None = None) -> tuple[bool, float]:
-    plugins = get_plugins()
+    run = RunContext.build()
+    plugins = run.plugins
     timing = Timing() if control is None else Timing(control=control)
     spec = EpisodeSpec.model_validate(raw)
     task_type = plugins.task_type(spec.task_name)
-    env = build_env(spec, timing, plugins)
+    env = build_env(spec, timing, run)
     try:
         env.reset(spec.seed)
         task = task_type.create(spec, env)
         ctx = EpisodeContext(spec=spec, episode_index=0, seed=spec.seed, prompt=spec.prompt,
-                             move_groups=dict(env.move_groups), policy_dt_s=timing.policy_dt_s, env=env)
+                             move_groups=dict(env.move_groups), policy_dt_s=timing.policy_dt_s, env=env, run=run)
         horizon = resolve_horizon(None, spec.task, task_type.default_horizon_sec, timing.policy_dt_ms)
         out = rollout(env, task, policy, ctx, horizon, [], None, "scripted")
         return out.success, task.fraction()

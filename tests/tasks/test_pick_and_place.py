@@ -16,7 +16,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES  # noqa: E402
 from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
-from molmo_lerobot.plugins import get_plugins  # noqa: E402
+from molmo_lerobot.context import RunContext  # noqa: E402
+from molmo_lerobot.plugins import Plugins  # noqa: E402
 from molmo_lerobot.robots.franka import FINGER_TRAVEL  # noqa: E402
 from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
 from molmo_lerobot.sim.env import Timing  # noqa: E402
@@ -186,7 +187,7 @@ def test_next_to_inside_the_receptacle_fails(next_to):
 
 
 def test_thresholds_defaults_and_overrides():
-    plugins = get_plugins()
+    plugins = Plugins()
     raw = _episode("pick_and_place_next_to")
     tt = plugins.task_type("pick_and_place_next_to")
     assert plugins.task_type("molmo_spaces.tasks.pick_and_place_next_to_task.PickAndPlaceNextToTask") is tt
@@ -217,7 +218,7 @@ def test_color_task_paints_and_needs_the_named_receptacle():
             geoms = geometry.body_geoms(m, env.subtree_bodies(name))  # the visible ones
             assert geoms and all(np.allclose(m.geom_rgba[g], rgba) and m.geom_matid[g] == -1 for g in geoms)
         spec = EpisodeSpec.model_validate(raw)
-        fresh = build_env(spec, Timing(), get_plugins())  # same cached model: the paint must not leak
+        fresh = build_env(spec, Timing(), RunContext.build())  # same cached model: the paint must not leak
         g0 = geometry.body_geoms(m, env.subtree_bodies(task.receptacle_name))[0]
         assert not np.allclose(fresh.model.geom_rgba[g0], colors[task.receptacle_name])
         fresh.close()
@@ -234,10 +235,10 @@ def test_bad_receptacle_is_named():
     raw = _episode("pick_and_place")
     raw["task"]["place_receptacle_name"] = "unicorn"
     spec = EpisodeSpec.model_validate(raw)
-    env = build_env(spec, Timing(), get_plugins())
+    env = build_env(spec, Timing(), RunContext.build())
     try:
         env.reset(0)
         with pytest.raises(ValueError, match="task.place_receptacle_name: no body 'unicorn'"):
-            get_plugins().task_type("pick_and_place").create(spec, env)
+            Plugins().task_type("pick_and_place").create(spec, env)
     finally:
         env.close()

@@ -10,7 +10,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
-from molmo_lerobot.plugins import get_plugins  # noqa: E402
+from molmo_lerobot.context import RunContext  # noqa: E402
+from molmo_lerobot.plugins import Plugins  # noqa: E402
 from molmo_lerobot.policies.base import EpisodeContext  # noqa: E402
 from molmo_lerobot.policies.scripted_place import ScriptedPlace  # noqa: E402
 from molmo_lerobot.runner.rollout import rollout  # noqa: E402
@@ -21,16 +22,17 @@ HORIZON = 220  # the script takes about 150 policy steps; the rest checks that t
 
 
 def _run(raw: dict, policy_name: str, horizon: int = HORIZON):
-    plugins = get_plugins()
+    run = RunContext.build()
+    plugins = run.plugins
     spec = EpisodeSpec.model_validate(raw)
     timing = Timing()
     policy = plugins.policy(policy_name).factory({"name": policy_name})
-    env = build_env(spec, timing, plugins)
+    env = build_env(spec, timing, run)
     try:
         env.reset(spec.seed)
         task = plugins.task_type(spec.task_name).create(spec, env)
         ctx = EpisodeContext(spec=spec, episode_index=0, seed=spec.seed, prompt=spec.prompt,
-                             move_groups=env.move_groups, policy_dt_s=timing.policy_dt_s, env=env)
+                             move_groups=env.move_groups, policy_dt_s=timing.policy_dt_s, env=env, run=run)
         return rollout(env, task, policy, ctx, horizon, [], None, policy_name), policy
     finally:
         env.close()
@@ -39,7 +41,7 @@ def _run(raw: dict, policy_name: str, horizon: int = HORIZON):
 @pytest.mark.parametrize("task", ["pick_and_place", "pick_and_place_next_to", "pick_and_place_color"])
 def test_expert_solves_an_episode(task):
     raw = generate_benchmark(task, 1, 1, 5, "test")[0][0]
-    assert get_plugins().expert(get_plugins().task_type(task).name).factory is ScriptedPlace
+    assert Plugins().expert(Plugins().task_type(task).name).factory is ScriptedPlace
     outcome, policy = _run(raw, "scripted")
     assert isinstance(policy.current, ScriptedPlace)
     assert outcome.success, raw["language"]["task_description"]

@@ -14,7 +14,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS  # noqa: E402
 from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
-from molmo_lerobot.plugins import get_plugins  # noqa: E402
+from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.robots.franka import FINGER_TRAVEL  # noqa: E402
 from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
 from molmo_lerobot.sim.env import Timing  # noqa: E402
@@ -27,9 +27,10 @@ def raw_episode():
 
 @pytest.fixture
 def setup(raw_episode):
-    plugins = get_plugins()
+    run = RunContext.build()
+    plugins = run.plugins
     spec = EpisodeSpec.model_validate(raw_episode)
-    env = build_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), run)
     env.reset(0)
     task = plugins.task_type(spec.task.task_cls).create(spec, env)
     task.setup()
@@ -101,7 +102,8 @@ def test_touching_another_object_fails(setup):
 
 
 def test_thresholds_and_horizon(raw_episode):
-    plugins = get_plugins()
+    run = RunContext.build()
+    plugins = run.plugins
     tt = plugins.task_type("pick")
     assert plugins.task_type("molmo_spaces.tasks.pick_task.PickTask") is tt
     assert plugins.task_type("molmo_lerobot.tasks.pick.PickTask") is tt
@@ -113,11 +115,12 @@ def test_thresholds_and_horizon(raw_episode):
 
 
 def test_unknown_pick_object_is_named(raw_episode):
-    plugins = get_plugins()
+    run = RunContext.build()
+    plugins = run.plugins
     raw = copy.deepcopy(raw_episode)
     raw["task"]["pickup_obj_name"] = "unicorn"
     spec = EpisodeSpec.model_validate(raw)
-    env = build_env(spec, Timing(), plugins)
+    env = build_env(spec, Timing(), run)
     try:
         env.reset(0)
         with pytest.raises(ValueError, match="task.pickup_obj_name: no body 'unicorn'"):

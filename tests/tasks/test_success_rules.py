@@ -15,7 +15,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
 from molmo_lerobot.benchmark.generate_articulated import generate_benchmark as generate_articulated  # noqa: E402
 from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
-from molmo_lerobot.plugins import get_plugins  # noqa: E402
+from molmo_lerobot.context import RunContext  # noqa: E402
+from molmo_lerobot.plugins import Plugins  # noqa: E402
 from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
 from molmo_lerobot.sim.env import Timing  # noqa: E402
 from molmo_lerobot.tasks.pick_and_place import tilt  # noqa: E402
@@ -226,11 +227,11 @@ def test_any_inst_of_category_counts_every_articulated_object_of_the_category(ar
     for flag, ok in ((False, False), (True, True)):
         raw2 = {**raw, "task": {**raw["task"], "any_inst_of_category": flag}}
         spec = EpisodeSpec.model_validate(raw2)
-        env = build_env(spec, Timing(), get_plugins())
+        env = build_env(spec, Timing(), RunContext.build())
         env.reset(0)
         meta = env.scene_metadata
         meta["objects"][twin] = {**meta["objects"].get(twin, {}), "category": meta["objects"][name]["category"]}
-        task = get_plugins().task_type("open").create(spec, env)
+        task = Plugins().task_type("open").create(spec, env)
         j = articulated_joints(env, twin)[0]
         lo, hi = env.model.jnt_range[j]
         env.data.qpos[env.model.jnt_qposadr[j]] = 0.5 * (hi if abs(hi) >= abs(lo) else lo)
@@ -244,11 +245,11 @@ def test_any_inst_of_category_needs_a_category(articulated):
     raw = articulated["open"][0]
     raw = {**raw, "task": {**raw["task"], "any_inst_of_category": True}}
     spec = EpisodeSpec.model_validate(raw)
-    env = build_env(spec, Timing(), get_plugins())
+    env = build_env(spec, Timing(), RunContext.build())
     env.reset(0)
     env.scene_metadata["objects"].get(raw["task"]["pickup_obj_name"], {}).pop("category", None)
     try:
         with pytest.raises(ValueError, match="task.any_inst_of_category: no category"):
-            get_plugins().task_type("open").create(spec, env)
+            Plugins().task_type("open").create(spec, env)
     finally:
         env.close()

@@ -5,16 +5,16 @@ priority wins per field); ``locate_uid`` / ``install_uid`` use the first library
 it. Grasp lookups try grasp libraries in priority order — a newly registered one goes first —
 restricted to those mapped to a library holding the UID (or to any library): first those
 made for the requested robot, then (MolmoSpaces' unified TCP convention makes grasps transfer)
-those kept under another robot's name. The default catalog holds our built-in objects, the
-articulated kitchen items and MolmoSpaces' ``thor``/``objaverse`` libraries with their
-``droid``/``droid_objaverse`` grasps; user libraries in MolmoSpaces' format go first.
+those kept under another robot's name. A run's catalog
+(:attr:`molmo_lerobot.context.RunContext.catalog`) holds our built-in objects, the articulated
+kitchen items and MolmoSpaces' ``thor``/``objaverse`` libraries with their
+``droid``/``droid_objaverse`` grasps; the run's user libraries in MolmoSpaces' format go first.
 """
 
 from __future__ import annotations
 
 import difflib
 import os
-from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +27,11 @@ from molmo_lerobot.assets.libraries import (
     ResourceAssetLibrary,
     UidLocation,
 )
-from molmo_lerobot.assets.user import ASSETS_INDEX, UserAssetLibrary, load_user_grasp_libraries
+from molmo_lerobot.assets.user import (
+    ASSETS_INDEX,
+    UserAssetLibrary,
+    load_user_grasp_libraries,
+)
 
 #: Object sources of MolmoSpaces that a user library may not be named after.
 RESERVED_LIBRARY_NAMES = ("thor", "objaverse", "objathor_metadata")
@@ -82,28 +86,6 @@ class AssetCatalog:
         for lib in libraries:
             self.register_grasp_library(lib, asset_library=asset_library_name)
         return libraries  # type: ignore[return-value]
-
-    def ensure_user_asset_library(self, name: str, path: str | os.PathLike, field: str) -> None:
-        """Register unless the same library is registered already (a run config, once per process)."""
-        root = Path(path).expanduser().resolve()
-        for lib in self.libraries:
-            if lib.name == name and isinstance(lib, UserAssetLibrary) and lib.root == root:
-                return
-        try:
-            self.register_user_asset_library(name, root)
-        except AssetError as exc:
-            raise AssetError(f"{field}: {exc}") from None
-
-    def ensure_user_grasp_library(self, name: str, path: str | os.PathLike, asset_library: str, field: str) -> None:
-        root = Path(path).expanduser().resolve()
-        mine = [g for g, mapped in self.grasp_libraries if g.name.startswith(f"{name}/") and mapped == asset_library
-                and Path(g.root) == root]
-        if mine:
-            return
-        try:
-            self.register_user_grasp_library(name, root, asset_library)
-        except (AssetError, GraspError) as exc:
-            raise type(exc)(f"{field}: {exc}") from None
 
     def register_grasp_library(self, library: GraspLibrary | str | os.PathLike, asset_library: str | None = None,
                                first: bool = True) -> GraspLibrary:
@@ -194,45 +176,3 @@ class AssetCatalog:
             if joints:
                 return joints
         return []
-
-
-@cache
-def default_catalog() -> AssetCatalog:
-    """The process-wide catalog: built-in, articulated and MolmoSpaces objects; user libraries join at runtime."""
-    from molmo_lerobot.assets.articulated import ArticulatedAssetLibrary
-    from molmo_lerobot.molmospaces.layout import OBJECT_LIBRARY_TO_GRASP_LIBRARIES
-    from molmo_lerobot.molmospaces.libraries import MolmoSpacesGrasps, MolmoSpacesObjects
-
-    catalog = AssetCatalog()
-    catalog.register_library(ArticulatedAssetLibrary(), first=False)
-    for source, grasp_sources in OBJECT_LIBRARY_TO_GRASP_LIBRARIES.items():
-        catalog.register_library(MolmoSpacesObjects(source), first=False)
-        for grasps in grasp_sources:
-            catalog.register_grasp_library(MolmoSpacesGrasps(grasps), asset_library=source, first=False)
-    return catalog
-
-
-def annotation(uid: str) -> dict:
-    return default_catalog().annotation(uid)
-
-
-def locate_uid(uid: str) -> UidLocation:
-    return default_catalog().locate_uid(uid)
-
-
-def install_uid(uid: str) -> UidLocation:
-    return default_catalog().install_uid(uid)
-
-
-def register_user_asset_library(name: str, path: str | os.PathLike) -> UserAssetLibrary:
-    """MolmoSpaces' ``register_user_asset_library(name, path)`` on the process-wide catalog."""
-    return default_catalog().register_user_asset_library(name, path)
-
-
-def register_user_grasp_library(name: str, path: str | os.PathLike, asset_library_name: str) -> list[GraspLibrary]:
-    """MolmoSpaces' ``register_user_grasp_library(name, path, asset_library_name)`` on the process-wide catalog."""
-    return default_catalog().register_user_grasp_library(name, path, asset_library_name)
-
-
-def register_grasp_library(root: str | os.PathLike | GraspLibrary, asset_library: str | None = None) -> GraspLibrary:
-    return default_catalog().register_grasp_library(root, asset_library)

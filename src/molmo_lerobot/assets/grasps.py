@@ -155,17 +155,3 @@ def generate_builtin_grasps(out: str | os.PathLike | None = None, robot: str = "
     root = Path(out) if out is not None else builtin_grasp_dir()
     return [save_grasp_file(root / robot / f"{uid}.npz", analytic_grasps(obj, HANDS[robot]))
             for uid, obj in sorted(BUILTIN_OBJECTS.items())]
-
-
-def get_grasps(uid: str, robot: str = "franka", joint: str | None = None) -> np.ndarray:
-    """Grasps ``(N, 4, 4)`` for ``uid`` from the default catalog: user libraries first, then built-ins."""
-    from molmo_lerobot.assets.catalog import default_catalog
-
-    return default_catalog().get_grasps(uid, robot, joint)
-
-
-def count_grasps(uid: str, robot: str = "franka", joint: str | None = None) -> int:
-    """How many grasps :func:`get_grasps` would return (NPZ header only where a file exists)."""
-    from molmo_lerobot.assets.catalog import default_catalog
-
-    return default_catalog().count_grasps(uid, robot, joint)

@@ -1,8 +1,8 @@
 """Benchmarks: MolmoSpaces-compatible episode schema, loading with a content hash, validation, generation.
 
 ``load_benchmark(path)`` reads a benchmark directory or file into a :class:`Benchmark`;
-``validate_benchmark(bench, plugins)`` (in :mod:`.validate`) checks it against the
-installed plugins.
+``validate_benchmark(bench, plugins, scenes)`` (in :mod:`.validate`) checks it against the
+installed plugins and the run's scene data.
 """
 
 from molmo_lerobot.benchmark.load import Benchmark, BenchmarkError, Problem, load_benchmark

@@ -22,21 +22,22 @@ from molmo_lerobot.benchmark import molmospaces
 from molmo_lerobot.benchmark.load import Benchmark, Problem
 from molmo_lerobot.benchmark.schema import EpisodeSpec
 from molmo_lerobot.features import image_feature
-from molmo_lerobot.plugins import PluginConflict, PluginError, Plugins, get_plugins
+from molmo_lerobot.plugins import PluginConflict, PluginError, Plugins
+from molmo_lerobot.sim.scenes import SceneContext
 
 
-def validate_benchmark(bench: Benchmark, plugins: Plugins | None = None) -> list[Problem]:
+def validate_benchmark(bench: Benchmark, plugins: Plugins, scenes: SceneContext) -> list[Problem]:
     """All problems of all episodes of ``bench``, in episode order (empty when it can run)."""
-    plugins = plugins if plugins is not None else get_plugins()
     problems: list[Problem] = []
     for index, episode in enumerate(bench.episodes):
         file = bench.origins[index].file if index < len(bench.origins) else str(bench.path)
-        problems.extend(validate_episode(episode, plugins, index=index, file=file))
+        problems.extend(validate_episode(episode, plugins, scenes, index=index, file=file))
     return problems
 
 
-def validate_episode(episode: EpisodeSpec, plugins: Plugins, *, index: int | None = None, file: str = "<episode>") -> list[Problem]:
-    """Problems of one episode; ``index``/``file`` only label them."""
+def validate_episode(episode: EpisodeSpec, plugins: Plugins, scenes: SceneContext, *, index: int | None = None,
+                     file: str = "<episode>") -> list[Problem]:
+    """Problems of one episode (``scenes``: where the run's scene data lives); ``index``/``file`` only label them."""
     out: list[Problem] = []
 
     def problem(field: str, message: str) -> None:
@@ -77,7 +78,7 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, *, index: int | Non
 
     scene = _lookup(plugins, "scene_dataset", episode.scene_dataset, "scene_dataset", problem, "scene dataset")
     missing = getattr(scene, "missing", None)
-    reason = missing(episode) if missing is not None else None
+    reason = missing(episode, scenes) if missing is not None else None
     if reason:
         warning("scene_dataset", reason)
 

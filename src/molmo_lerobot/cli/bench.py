@@ -58,21 +58,19 @@ def _validate(path: Path, *, schema_only: bool, overrides: list[str] | None = No
     except BenchmarkError as exc:
         return _report(exc.problems)
     if not schema_only:
-        from omegaconf import OmegaConf
-
         from molmo_lerobot.benchmark.validate import validate_benchmark
         from molmo_lerobot.config import ConfigError, compose
-        from molmo_lerobot.molmospaces import configure
-        from molmo_lerobot.plugins import PluginConflict, get_plugins
+        from molmo_lerobot.context import RunContext
+        from molmo_lerobot.plugins import PluginConflict
 
         try:  # where MolmoSpaces data lives (assets dir, user scenes and libraries), as a run would see it
-            configure(OmegaConf.to_container(compose(list(overrides or [])), resolve=True))
+            ctx = RunContext.build(compose(list(overrides or [])))
         except (ConfigError, ValueError, LookupError) as exc:
             print(f"molmo-bench: error: {exc}", file=sys.stderr)
             return 2
-        plugins = get_plugins()
+        plugins = ctx.plugins
         try:
-            found = validate_benchmark(bench, plugins)
+            found = validate_benchmark(bench, plugins, ctx)
         except PluginConflict as exc:
             print(f"molmo-bench: error: {exc}", file=sys.stderr)
             return 1

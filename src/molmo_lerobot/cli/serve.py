@@ -24,9 +24,8 @@ import logging
 import sys
 from typing import TYPE_CHECKING, Any
 
-from omegaconf import OmegaConf
-
 if TYPE_CHECKING:
+    from molmo_lerobot.plugins import Plugins
     from molmo_lerobot.protocol.server import PolicyServer
 
 #: ``policy.serve*`` switches of a run (see protocol/run_server.py), not the policy's own options
@@ -68,19 +67,20 @@ def parse_args(argv: list[str]) -> tuple[dict[str, Any], list[str]]:
     return options, overrides
 
 
-def build_server(policy_cfg: dict[str, Any], **options: Any) -> PolicyServer:
-    """The server for the policy plugin ``policy_cfg`` names (built when the server starts)."""
+def build_server(plugins: Plugins, policy_cfg: dict[str, Any], **options: Any) -> PolicyServer:
+    """The server for the policy plugin ``policy_cfg`` names in ``plugins`` (built when the server starts)."""
     from molmo_lerobot import __version__
     from molmo_lerobot.protocol.server import PolicyServer
     from molmo_lerobot.runner.policy import make_policy
 
     cfg = {k: v for k, v in policy_cfg.items() if k not in RUN_SERVING_KEYS}
     metadata = {"server": "molmo-serve", "version": __version__, "policy": cfg.get("name")}
-    return PolicyServer(lambda: make_policy(cfg), metadata=metadata, **options)
+    return PolicyServer(lambda: make_policy(plugins, cfg), metadata=metadata, **options)
 
 
 def main(argv: list[str] | None = None) -> int:
     from molmo_lerobot.config import ConfigError, compose
+    from molmo_lerobot.context import RunContext
     from molmo_lerobot.plugins import PluginError
     from molmo_lerobot.protocol.server import PolicyNotServable
 
@@ -91,11 +91,11 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
-        cfg = compose(overrides)
-        policy_cfg: dict[str, Any] = OmegaConf.to_container(cfg.policy, resolve=True)  # type: ignore[assignment]
+        ctx = RunContext.build(compose(overrides))
+        policy_cfg: dict[str, Any] = ctx.config["policy"]
         name = policy_cfg.get("name")
-        server = build_server(policy_cfg, **options)
-    except (ConfigError, PluginError, ValueError, FileNotFoundError, ImportError) as exc:
+        server = build_server(ctx.plugins, policy_cfg, **options)
+    except (ConfigError, LookupError, ValueError, FileNotFoundError, ImportError) as exc:  # PluginError, AssetError
         print(f"molmo-serve: {exc}", file=sys.stderr)
         return 2
 

@@ -15,13 +15,16 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder, RecorderFactory
 from molmo_lerobot.runner.results import EpisodeResult
+
+if TYPE_CHECKING:
+    from molmo_lerobot.assets.catalog import AssetCatalog
 
 THUMBNAILS_DIR = "thumbnails"
 
@@ -40,14 +43,12 @@ def exterior_camera(names: list[str]) -> str | None:
     return None
 
 
-def object_category(uid: str | None) -> str | None:
-    """The asset library's category of ``uid``; else the uid without a trailing number or hash."""
+def object_category(uid: str | None, catalog: AssetCatalog | None) -> str | None:
+    """The category ``catalog`` gives ``uid``; else the uid without a trailing number or hash."""
     if not uid:
         return None
     try:
-        from molmo_lerobot.assets.catalog import annotation
-
-        category = annotation(uid).get("category")
+        category = catalog.annotation(uid).get("category") if catalog is not None else None
         if category:
             return str(category)
     except Exception:  # an asset no installed library knows: fall back on its name
@@ -100,7 +101,7 @@ class GlanceRecorder(Recorder):
         if info is None:
             return
         result.extra["first_success_step"] = self._first_success
-        result.extra["object_category"] = object_category(info.extra.get("object"))
+        result.extra["object_category"] = object_category(info.extra.get("object"), info.catalog)
         if self._frames:
             result.extra["thumbnail"] = self._save(result.episode_index)
         self._info, self._frames = None, []

@@ -3,6 +3,6 @@ grasps), its scene datasets (iTHOR, ProcTHOR, Holodeck, user scenes) and the run
 point at them (``molmospaces.*``, ``scene_xml_paths``, ``asset_libraries``, ``grasp_libraries``).
 """
 
-from molmo_lerobot.molmospaces.settings import MolmoSpacesSettings, configure, current
+from molmo_lerobot.molmospaces.settings import MolmoSpacesSettings
 
-__all__ = ["MolmoSpacesSettings", "configure", "current"]
+__all__ = ["MolmoSpacesSettings"]

@@ -1,4 +1,4 @@
-"""MolmoSpaces' built-in object and grasp libraries over the configured assets dir.
+"""MolmoSpaces' built-in object and grasp libraries over the run's assets dir.
 
 * ``thor``: every ``objects/thor/**/<uid>.xml`` (MolmoSpaces installs thor in full);
 * ``objaverse``: ``objects/objaverse/**/<uid>.xml`` (installed per UID on demand); where the
@@ -31,7 +31,7 @@ from molmo_lerobot import fileio
 from molmo_lerobot.assets.grasps import GraspLibrary
 from molmo_lerobot.assets.libraries import AssetError, AssetLibrary, MetadataStore, UidLocation
 from molmo_lerobot.molmospaces import layout
-from molmo_lerobot.molmospaces.settings import current
+from molmo_lerobot.molmospaces.settings import MolmoSpacesSettings
 
 _OBJAVERSE_UID = re.compile(r"[0-9a-f]{32}")
 
@@ -137,36 +137,41 @@ def _store_for(source: Path) -> MetadataStore:
 
 @cache
 def metadata_for(assets: str) -> ObjathorMetadata:
+    """The metadata of an assets dir, one per process (its LMDB environment is opened once)."""
     return ObjathorMetadata(Path(assets))
 
 
-@cache
-def _xml_index(root: str) -> dict[str, Path]:
-    """``<uid>.xml`` stem → file, for every MJCF under ``root`` (scanned once per process)."""
-    base = Path(root)
-    return {p.stem: p for p in sorted(base.rglob("*.xml"))} if base.is_dir() else {}
-
-
 class MolmoSpacesObjects(AssetLibrary):
-    """``thor`` or ``objaverse`` objects of the configured MolmoSpaces assets dir."""
+    """``thor`` or ``objaverse`` objects of the run's MolmoSpaces assets dir."""
 
-    def __init__(self, name: str) -> None:
+    def __init__(self, name: str, settings: MolmoSpacesSettings) -> None:
         self.name = name
+        self.settings = settings
+        self._index: dict[str, Path] | None = None
 
     @property
     def root(self) -> Path:
-        return current().assets / "objects" / self.name
+        return self.settings.assets / "objects" / self.name
+
+    def _metadata(self, uid: str) -> dict | None:
+        return metadata_for(self.settings.assets_dir).get(uid)
+
+    def _xml_index(self) -> dict[str, Path]:
+        """``<uid>.xml`` stem → file, for every MJCF under :attr:`root` (scanned once, again after an install)."""
+        if self._index is None:
+            self._index = {p.stem: p for p in sorted(self.root.rglob("*.xml"))} if self.root.is_dir() else {}
+        return self._index
 
     def _file(self, uid: str) -> Path | None:
         direct = self.root / uid / f"{uid}.xml"
         if direct.is_file():
             return direct
-        if self.name == "objaverse" and metadata_for(current().assets_dir).get(uid) is None:
+        if self.name == "objaverse" and self._metadata(uid) is None:
             return None  # not an objaverse UID: never scan the (large) tree for it
-        return _xml_index(str(self.root)).get(uid)
+        return self._xml_index().get(uid)
 
     def uids(self) -> Iterator[str]:
-        return iter(sorted(_xml_index(str(self.root))))
+        return iter(sorted(self._xml_index()))
 
     def __contains__(self, uid: object) -> bool:
         """Installed here, or an objaverse UID (32 hex digits) its metadata knows, to be installed on demand."""
@@ -174,13 +179,12 @@ class MolmoSpacesObjects(AssetLibrary):
             return False
         if self._file(uid) is not None:
             return True
-        return (self.name == "objaverse" and _OBJAVERSE_UID.fullmatch(uid) is not None
-                and metadata_for(current().assets_dir).get(uid) is not None)
+        return self.name == "objaverse" and _OBJAVERSE_UID.fullmatch(uid) is not None and self._metadata(uid) is not None
 
     def metadata(self, uid: str) -> dict:
         if uid not in self:
             raise self._unknown(uid)
-        return metadata_for(current().assets_dir).get(uid) or {"assetId": uid}
+        return self._metadata(uid) or {"assetId": uid}
 
     def locate(self, uid: str) -> UidLocation:
         path = self._file(uid)
@@ -194,7 +198,7 @@ class MolmoSpacesObjects(AssetLibrary):
         path = self._file(uid)
         if path is not None:
             return UidLocation(self.name, None, path)
-        settings = current()
+        settings = self.settings
         spec = f"objects/{self.name}@{layout.OBJECT_VERSIONS[self.name]}"
         if not (settings.cache_dir and settings.remote):
             raise AssetError(f"object {uid!r} is not installed under {self.root}; install it with "
@@ -214,7 +218,7 @@ class MolmoSpacesObjects(AssetLibrary):
                 manager.ensure_uid(gspec, uid)
         except ResourceError as exc:
             raise AssetError(f"object {uid!r}: install from {settings.remote} failed: {exc}") from None
-        _xml_index.cache_clear()
+        self._index = None
         path = self._file(uid)
         if path is None:
             raise AssetError(f"object {uid!r}: installed {spec} but {self.root} has no {uid}.xml")
@@ -230,12 +234,8 @@ class MolmoSpacesGrasps(GraspLibrary):
 
     robot = "droid"
 
-    def __init__(self, name: str) -> None:  # no fixed root: it follows the configured assets dir
-        self.name = name
-
-    @property
-    def root(self) -> Path:  # type: ignore[override]
-        return current().assets / "grasps" / self.name
+    def __init__(self, name: str, settings: MolmoSpacesSettings) -> None:
+        super().__init__(settings.assets / "grasps" / name, name)
 
     def path(self, uid: str, robot: str = "franka", joint: str | None = None) -> Path | None:
         path = self.root / uid / f"{joint or uid}_grasps_filtered.npz"

@@ -1,24 +1,26 @@
 """Before any worker starts: can every episode of this run simulate here?
 
-:func:`preflight` configures the MolmoSpaces settings of the run (assets dir, user scenes and
-libraries), then checks each episode's task type, robot, scene dataset (and its scene file and
-added objects), and camera system (for ``cameras: []``). It returns one line naming what is
-missing, where it looked and how to get it — or ``None`` when the run can go ahead.
+:func:`preflight` checks, under the run's context (its plugins, MolmoSpaces settings and asset
+catalog), each episode's task type, robot, scene dataset (and its scene file and added objects),
+and camera system (for ``cameras: []``). It returns one line naming what is missing, where it
+looked and how to get it — or ``None`` when the run can go ahead. It changes nothing but the
+assets dir (scenes installed on demand are fetched).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
-from typing import Any
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, Any
 
-from molmo_lerobot.assets.grasps import GraspError
-from molmo_lerobot.assets.libraries import AssetError
-from molmo_lerobot.molmospaces.settings import SettingsError, configure
+if TYPE_CHECKING:
+    from molmo_lerobot.context import RunContext
 
 
-def _missing(spec: Any, plugins: Any, camera_system: str | None) -> tuple[str, str] | None:
+def _missing(spec: Any, ctx: RunContext, camera_system: str | None) -> tuple[str, str] | None:
     """(field, what is missing and how to get it) for the first thing ``spec`` lacks here, or ``None``."""
     from molmo_lerobot.plugins import PluginError
+
+    plugins = ctx.plugins
 
     checks = (("task type", "task_type", spec.task_name, "task.task_cls"),
               ("robot", "robot", spec.robot.robot_name, "robot.robot_name"),
@@ -31,8 +33,8 @@ def _missing(spec: Any, plugins: Any, camera_system: str | None) -> tuple[str, s
             return field, f"{what} {name!r}: {str(exc).splitlines()[0]} (install a plugin that provides it)"
     scene = found["scene_dataset"]
     if hasattr(scene, "fetch"):
-        scene.fetch(spec)  # scenes installed on demand arrive now, before any worker starts
-    reason = scene.missing(spec) if hasattr(scene, "missing") else None
+        scene.fetch(spec, ctx)  # scenes installed on demand arrive now, before any worker starts
+    reason = scene.missing(spec, ctx) if hasattr(scene, "missing") else None
     if reason:
         return ("house_index" if "scene_xml_paths" in reason else "scene_dataset"), reason
     if hasattr(scene, "missing") and spec.scene_modifications.added_objects:
@@ -41,7 +43,7 @@ def _missing(spec: Any, plugins: Any, camera_system: str | None) -> tuple[str, s
         for name, rel in spec.scene_modifications.added_objects.items():
             field = f"scene_modifications.added_objects[{name!r}]"
             try:
-                resolve_object_file(rel, field)
+                resolve_object_file(rel, field, ctx)
             except FileNotFoundError as exc:
                 return field, str(exc).removeprefix(f"{field}: ")
     if not spec.cameras:
@@ -57,23 +59,18 @@ def _missing(spec: Any, plugins: Any, camera_system: str | None) -> tuple[str, s
     return None
 
 
-def preflight(bench: Any, plugins: Any, config: Mapping[str, Any], indices: Iterable[int],
-              skip: Iterable[int] = ()) -> str | None:
+def preflight(bench: Any, ctx: RunContext, indices: Iterable[int], skip: Iterable[int] = ()) -> str | None:
     """One line saying why the run cannot simulate (and how to fix it), or ``None``.
 
     ``skip`` are episodes already failed as invalid (they are reported per episode instead).
     """
-    try:
-        configure(config)
-    except (SettingsError, AssetError, GraspError) as exc:
-        return f"cannot set up MolmoSpaces data: {exc}"
-    camera_system = (config.get("camera") or {}).get("system")
+    camera_system = (ctx.config.get("camera") or {}).get("system")
     skipped = set(skip)
     reasons: dict[tuple[str, str, str], list[int]] = {}
     for i in indices:
         if i in skipped:
             continue
-        found = _missing(bench.episodes[i], plugins, camera_system)
+        found = _missing(bench.episodes[i], ctx, camera_system)
         if found:
             file = bench.origins[i].file if i < len(bench.origins) else str(bench.path)
             reasons.setdefault((file, *found), []).append(i)

@@ -21,11 +21,11 @@ import mujoco
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.molmospaces import layout
-from molmo_lerobot.molmospaces.settings import current
-from molmo_lerobot.sim.scenes import SceneDataset
+from molmo_lerobot.sim.scenes import SceneContext, SceneDataset
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
+    from molmo_lerobot.molmospaces.settings import MolmoSpacesSettings
 
 #: Damping MolmoSpaces gives the free joint it adds to an added object that has none.
 ADDED_FREEJOINT_DAMPING = 0.001
@@ -55,7 +55,11 @@ def physics_option_values(options: dict[str, Any]) -> dict[str, Any]:
 
 
 class MolmoSpacesScenes(SceneDataset):
-    """One MolmoSpaces scene dataset over the configured assets dir (see the module docstring)."""
+    """One MolmoSpaces scene dataset over the run's assets dir (see the module docstring).
+
+    Its houses exist only under a run's settings: they are built per episode
+    (:meth:`build_episode`), never by index alone.
+    """
 
     def __init__(self, name: str) -> None:
         self.name = name
@@ -64,25 +68,24 @@ class MolmoSpacesScenes(SceneDataset):
         return None
 
     # Where a house is ---------------------------------------------------------------------------
-    def scene_path(self, house_index: int, data_split: str = "val") -> Path:
+    def scene_path(self, settings: MolmoSpacesSettings, house_index: int, data_split: str = "val") -> Path:
         """The scene XML of a house (raises :class:`~.layout.SceneLookupError` when it has none)."""
-        settings = current()
         return layout.scene_xml(settings.assets, self.name, data_split, house_index, settings.house_variant)
 
-    def missing(self, spec: EpisodeSpec) -> str | None:
+    def missing(self, spec: EpisodeSpec, ctx: SceneContext) -> str | None:
         """Why ``spec``'s scene cannot load here (what, where, how to get it), or ``None``."""
         try:
-            path = self.scene_path(spec.house_index, spec.data_split)
+            path = self.scene_path(ctx.settings, spec.house_index, spec.data_split)
         except layout.SceneLookupError as exc:
             return str(exc)
         if path.is_file():
             return None
-        command = layout.install_command(layout.install_source(self.name, spec.data_split), current().assets)
+        command = layout.install_command(layout.install_source(self.name, spec.data_split), ctx.settings.assets)
         return (f"scene {self.name!r} {spec.data_split} house {spec.house_index}: {path} not found; install it with "
                 f"`{command}` (runs fetch each house) or point MLSPACES_ASSETS_DIR (molmospaces.assets_dir=) at a "
                 "MolmoSpaces assets dir")
 
-    def fetch(self, spec: EpisodeSpec) -> None:
+    def fetch(self, spec: EpisodeSpec, ctx: SceneContext) -> None:
         """Install ``spec``'s scene now if its source was installed on demand (``--preset molmospaces``).
 
         Where the assets dir records the scene source as linked by a resource manager (ours or
@@ -90,8 +93,9 @@ class MolmoSpacesScenes(SceneDataset):
         into the cache and linked, as MolmoSpaces does per house. Failures leave the scene missing
         (:meth:`missing` then says so); nothing is fetched for sources installed otherwise.
         """
+        settings = ctx.settings
         try:
-            path = self.scene_path(spec.house_index, spec.data_split)
+            path = self.scene_path(settings, spec.house_index, spec.data_split)
         except layout.SceneLookupError:
             return
         if path.is_file() or self.name == layout.USER:
@@ -99,7 +103,6 @@ class MolmoSpacesScenes(SceneDataset):
         from molmo_lerobot.resources import ResourceError, ResourceManager
         from molmo_lerobot.resources import molmospaces as ms_resources
 
-        settings = current()
         try:
             manager = ResourceManager(settings.cache_dir or ms_resources.cache_dir(), settings.assets,
                                       settings.remote or ms_resources.BUCKET_URL, progress=False)
@@ -117,19 +120,19 @@ class MolmoSpacesScenes(SceneDataset):
 
     # SceneDataset -------------------------------------------------------------------------------
     def build(self, house_index: int) -> mujoco.MjSpec:
-        return self._load(self.scene_path(house_index))
+        raise ValueError(f"scene dataset {self.name!r}: houses are built per episode, under a run's settings")
 
     def metadata(self, house_index: int) -> dict[str, Any]:
-        return layout.read_scene_metadata(self.scene_path(house_index))
+        raise ValueError(f"scene dataset {self.name!r}: house metadata is read per episode, under a run's settings")
 
-    def build_episode(self, spec: EpisodeSpec) -> mujoco.MjSpec:
-        problem = self.missing(spec)
+    def build_episode(self, spec: EpisodeSpec, ctx: SceneContext) -> mujoco.MjSpec:
+        problem = self.missing(spec, ctx)
         if problem is not None:
             raise FileNotFoundError(problem)
-        return self._load(self.scene_path(spec.house_index, spec.data_split))
+        return self._load(self.scene_path(ctx.settings, spec.house_index, spec.data_split))
 
-    def episode_metadata(self, spec: EpisodeSpec) -> dict[str, Any]:
-        meta = layout.read_scene_metadata(self.scene_path(spec.house_index, spec.data_split))
+    def episode_metadata(self, spec: EpisodeSpec, ctx: SceneContext) -> dict[str, Any]:
+        meta = layout.read_scene_metadata(self.scene_path(ctx.settings, spec.house_index, spec.data_split))
         objects = dict(meta["objects"])
         for name, rel in spec.scene_modifications.added_objects.items():
             objects[name] = {"asset_id": Path(rel).stem, "object_enum": "temp_object", "is_static": False}
@@ -141,18 +144,18 @@ class MolmoSpacesScenes(SceneDataset):
         except Exception as exc:
             raise ValueError(f"{path}: cannot load scene: {str(exc).strip().splitlines()[0]}") from None
 
-    def modify(self, world: mujoco.MjSpec, spec: EpisodeSpec) -> None:
+    def modify(self, world: mujoco.MjSpec, spec: EpisodeSpec, ctx: SceneContext) -> None:
         mods = spec.scene_modifications
         for name in mods.removed_objects:
             body = _find_removed(world, name)
             if body is not None:  # MolmoSpaces skips names the scene does not have
                 world.delete(body)
         for name, rel in mods.added_objects.items():
-            _attach_added(world, name, resolve_object_file(rel, f"scene_modifications.added_objects[{name!r}]"),
+            _attach_added(world, name, resolve_object_file(rel, f"scene_modifications.added_objects[{name!r}]", ctx),
                           mods.object_poses.get(name))
 
-    def physics_options(self, defaults: dict[str, Any]) -> dict[str, Any]:
-        return physics_option_values(current().physics_options)
+    def physics_options(self, defaults: dict[str, Any], ctx: SceneContext) -> dict[str, Any]:
+        return physics_option_values(ctx.settings.physics_options)
 
 
 class UserScenes(MolmoSpacesScenes):
@@ -161,36 +164,32 @@ class UserScenes(MolmoSpacesScenes):
     def __init__(self) -> None:
         super().__init__(layout.USER)
 
-    def n_houses(self) -> int:
-        return len(current().scene_xml_paths)
-
-    def scene_path(self, house_index: int, data_split: str = "val") -> Path:
-        paths = current().scene_xml_paths
+    def scene_path(self, settings: MolmoSpacesSettings, house_index: int, data_split: str = "val") -> Path:
+        paths = settings.scene_xml_paths
         if not 0 <= house_index < len(paths):
             raise layout.SceneLookupError(
                 f"house_index {house_index} is beyond scene_xml_paths ({len(paths)} scene"
                 f"{'s' * (len(paths) != 1)} configured; set scene_xml_paths=[...] in the run config)")
         return Path(paths[house_index])
 
-    def missing(self, spec: EpisodeSpec) -> str | None:
+    def missing(self, spec: EpisodeSpec, ctx: SceneContext) -> str | None:
         try:
-            path = self.scene_path(spec.house_index)
+            path = self.scene_path(ctx.settings, spec.house_index)
         except layout.SceneLookupError as exc:
             return str(exc)
         return None if path.is_file() else f"scene_xml_paths[{spec.house_index}]: {path} not found"
 
 
-def resolve_object_file(rel: str, field: str) -> Path:
+def resolve_object_file(rel: str, field: str, ctx: SceneContext) -> Path:
     """An added object's MJCF: ``rel`` under the assets dir (or absolute), else installed by UID."""
-    path = current().assets / rel
+    path = ctx.settings.assets / rel
     if path.is_file():
         return path
-    from molmo_lerobot.assets.catalog import default_catalog
     from molmo_lerobot.assets.libraries import AssetError
 
     uid = Path(rel).stem
     try:
-        installed = default_catalog().install_uid(uid).mjcf_path
+        installed = ctx.catalog.install_uid(uid).mjcf_path
     except AssetError as exc:
         raise FileNotFoundError(f"{field}: {path} not found and UID {uid!r} cannot be installed ({exc})") from None
     if installed is None or not Path(installed).is_file():

@@ -1,11 +1,9 @@
-"""The run settings for MolmoSpaces data, set once per process (main and every worker).
+"""The run settings for MolmoSpaces data, part of a run's :class:`~molmo_lerobot.context.RunContext`.
 
-``configure(run_config)`` reads ``molmospaces.assets_dir`` (else ``$MLSPACES_ASSETS_DIR``,
-else our install dir), ``molmospaces.house_variant``, ``molmospaces.physics_options``,
-``scene_xml_paths``, ``asset_libraries`` and ``grasp_libraries`` from the run config, resolves
-every path to an absolute one (so workers started elsewhere see the same files) and registers
-the user libraries in the process-wide asset catalog. :func:`current` is what scene datasets
-and libraries read.
+:func:`resolve` reads ``molmospaces.assets_dir`` (else ``$MLSPACES_ASSETS_DIR``, else our
+install dir), ``molmospaces.house_variant``, ``molmospaces.physics_options``,
+``scene_xml_paths``, ``asset_libraries`` and ``grasp_libraries`` from the run config and
+resolves every path to an absolute one (so workers started elsewhere see the same files).
 """
 
 from __future__ import annotations
@@ -51,9 +49,6 @@ class MolmoSpacesSettings:
         }
 
 
-_CURRENT: MolmoSpacesSettings | None = None
-
-
 def _abs(value: Any, key: str) -> str:
     if not isinstance(value, (str, os.PathLike)) or not str(value).strip():
         raise SettingsError(f"{key}: expected a path, got {value!r}")
@@ -95,27 +90,3 @@ def resolve(config: Mapping[str, Any] | None = None) -> MolmoSpacesSettings:
         cache_dir=_abs(ms["cache_dir"], "molmospaces.cache_dir") if ms.get("cache_dir") else None,
         remote=str(ms["remote"]) if ms.get("remote") else None,
     )
-
-
-def configure(config: Mapping[str, Any] | None = None) -> MolmoSpacesSettings:
-    """Make ``config``'s settings this process's, and register its user libraries (idempotent)."""
-    global _CURRENT
-    settings = resolve(config)
-    from molmo_lerobot.assets.catalog import default_catalog
-
-    previous = _CURRENT
-    if previous is not None and not (previous.asset_libraries.items() <= settings.asset_libraries.items()
-                                     and previous.grasp_libraries.items() <= settings.grasp_libraries.items()):
-        default_catalog.cache_clear()  # a library the previous run config registered is gone from this one
-    _CURRENT = settings
-    catalog = default_catalog()
-    for name, path in settings.asset_libraries.items():
-        catalog.ensure_user_asset_library(name, path, field=f"asset_libraries.{name}")
-    for name, entry in settings.grasp_libraries.items():
-        catalog.ensure_user_grasp_library(name, entry["path"], entry["asset_library"], field=f"grasp_libraries.{name}")
-    return settings
-
-
-def current() -> MolmoSpacesSettings:
-    """This process's settings (defaults from the environment until :func:`configure` runs)."""
-    return _CURRENT if _CURRENT is not None else resolve()

@@ -47,6 +47,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
+    from molmo_lerobot.context import RunContext
     from molmo_lerobot.sim.env import Env
 
 Observation = dict[str, Any]
@@ -57,8 +58,9 @@ Action = dict[str, np.ndarray]
 class EpisodeContext:
     """What a policy learns at reset.
 
-    ``env`` gives privileged simulator access. It is set only for policies that declare
-    :attr:`Policy.needs_simulator` (scripted experts); a policy under evaluation gets ``None``.
+    ``env`` gives privileged simulator access and ``run`` the run's context (plugins, asset
+    catalog). Both are set only for policies that declare :attr:`Policy.needs_simulator`
+    (scripted experts); a policy under evaluation gets ``None``.
     """
 
     spec: EpisodeSpec
@@ -68,6 +70,7 @@ class EpisodeContext:
     move_groups: dict[str, int]
     policy_dt_s: float
     env: Env | None = None
+    run: RunContext | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
 

@@ -22,7 +22,6 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.assets.builtin import HANDS, PANDA_HAND
-from molmo_lerobot.assets.grasps import get_grasps
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
 
 PREGRASP_DISTANCE = 0.10
@@ -52,15 +51,15 @@ def _pose_matrix(pose7: np.ndarray) -> np.ndarray:
     return T
 
 
-def object_grasps(env: Any, name: str) -> np.ndarray:
+def object_grasps(env: Any, name: str, catalog: Any) -> np.ndarray:
     """Grasp candidates ``(N, 4, 4)`` in the body frame of scene object ``name``.
 
     The object's asset UID comes from the scene metadata; its grasps from the grasp
-    libraries (user libraries first, then the built-in set's generated grasps).
+    libraries of ``catalog`` (user libraries first, then the built-in set's generated grasps).
     """
     uid = env.scene_metadata.get("objects", {}).get(name, {}).get("asset_id", name)
     try:
-        return robot_grasps(uid, env.robot_type.name)
+        return robot_grasps(catalog, uid, env.robot_type.name)
     except LookupError as exc:
         raise ValueError(f"scripted policy: no grasps for object {name!r} (asset {uid!r}): {exc}") from None
 
@@ -70,24 +69,21 @@ def object_grasps(env: Any, name: str) -> np.ndarray:
 FALLBACK_GRASP_ROBOT = "franka"
 
 
-def robot_grasps(uid: str, robot: str, joint: str | None = None) -> np.ndarray:
-    """Grasps of ``uid`` for ``robot``, else those made for :data:`FALLBACK_GRASP_ROBOT`."""
+def robot_grasps(catalog: Any, uid: str, robot: str, joint: str | None = None) -> np.ndarray:
+    """Grasps of ``uid`` for ``robot`` in ``catalog``, else those made for :data:`FALLBACK_GRASP_ROBOT`."""
     try:
-        return get_grasps(uid, robot=robot, joint=joint)
+        return catalog.get_grasps(uid, robot=robot, joint=joint)
     except LookupError:
         if robot == FALLBACK_GRASP_ROBOT:
             raise
-        return get_grasps(uid, robot=FALLBACK_GRASP_ROBOT, joint=joint)
+        return catalog.get_grasps(uid, robot=FALLBACK_GRASP_ROBOT, joint=joint)
 
 
 @cache
-def _ik_model(robot_name: str, base_pose: tuple[float, ...],
-              base_size: tuple[float, ...] | None = None) -> mujoco.MjModel:
-    """The robot alone at its base pose on its pedestal (world coordinates, no objects) for IK."""
-    from molmo_lerobot.plugins import get_plugins
-
+def _ik_model(robot: Any, base_pose: tuple[float, ...], base_size: tuple[float, ...] | None = None) -> mujoco.MjModel:
+    """The robot (its plugin's :class:`~molmo_lerobot.robots.base.RobotType`) alone at its base pose
+    on its pedestal (world coordinates, no objects) for IK."""
     world = mujoco.MjSpec()
-    robot = get_plugins().robot(robot_name)
     if base_size is None:
         robot.add_to(world, base_pose)
     else:
@@ -98,9 +94,8 @@ def _ik_model(robot_name: str, base_pose: tuple[float, ...],
 class IKSolver:
     """Differential IK with mink on the robot alone, for its TCP site, in world coordinates."""
 
-    def __init__(self, robot: Any, robot_name: str, base_pose: tuple[float, ...],
-                 base_size: tuple[float, ...] | None = None) -> None:
-        self.model = _ik_model(robot_name, base_pose, base_size)
+    def __init__(self, robot: Any, base_pose: tuple[float, ...], base_size: tuple[float, ...] | None = None) -> None:
+        self.model = _ik_model(robot, base_pose, base_size)
         self.handle = robot.bind(self.model)
         self.scratch = mujoco.MjData(self.model)
         self.config = mink.Configuration(self.model)
@@ -148,12 +143,12 @@ class PhasedExpert(Policy):
 
     def _start(self, ctx: EpisodeContext, phases: list[str]) -> Any:
         """Per-episode state every script shares; returns the (privileged) environment."""
-        if ctx.env is None:
-            raise ValueError("scripted policy needs privileged simulator access (ctx.env)")
+        if ctx.env is None or ctx.run is None:
+            raise ValueError("scripted policy needs privileged simulator access (ctx.env) and the run (ctx.run)")
         env = self.env = ctx.env
+        self.catalog = ctx.run.catalog
         self.dt = ctx.policy_dt_s
-        self.ik = IKSolver(env.robot_type, env.spec.robot.robot_name,
-                           tuple(float(v) for v in env.spec.task.robot_base_pose),
+        self.ik = IKSolver(env.robot_type, tuple(float(v) for v in env.spec.task.robot_base_pose),
                            env.robot_type.base_size(env.spec.robot))
         self.phases = list(phases)
         self.queue: list[Action] = []
@@ -242,7 +237,7 @@ class ScriptedPick(PhasedExpert):
         """(grasp pose in object frame, pre-grasp arm q, grasp arm q) for the best feasible candidate."""
         env = self.env
         T_obj = self._object_T()
-        local = object_grasps(env, self.target)
+        local = object_grasps(env, self.target, self.catalog)
         world = T_obj @ local
         approach = world[:, :3, 2]
         down = -approach[:, 2]
@@ -343,9 +338,9 @@ class ScriptedExpert(Policy):
         self.current: Policy | None = None
 
     def reset(self, ctx: EpisodeContext) -> None:
-        from molmo_lerobot.plugins import get_plugins
-
-        plugins = get_plugins()
+        if ctx.run is None:
+            raise ValueError("scripted policy needs privileged simulator access (ctx.env) and the run (ctx.run)")
+        plugins = ctx.run.plugins
         task_type = plugins.task_type(ctx.spec.task_name)
         if task_type.name not in self.experts:
             try:

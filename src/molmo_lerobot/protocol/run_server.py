@@ -37,13 +37,15 @@ def serve_options(policy_cfg: dict[str, Any], workers: int) -> dict[str, Any] | 
             "max_clients": max(8, workers + 2), "first_request_timeout_s": 600.0, "idle_timeout_s": 3600.0}
 
 
-def _serve(policy_cfg: dict[str, Any], options: dict[str, Any], threads: int | None, conn: Connection) -> None:
-    """Server process: build the server, report its port (or the error), serve until SIGTERM."""
+def _serve(config: dict[str, Any], options: dict[str, Any], threads: int | None, conn: Connection) -> None:
+    """Server process: rebuild the run's context from its ``config``, build the server, report its
+    port (or the error), serve until SIGTERM."""
     from molmo_lerobot.cli.serve import build_server
+    from molmo_lerobot.context import RunContext
 
     cap_threads(threads)  # as many as each in-process worker would use: the same rounding
     try:
-        server = build_server(policy_cfg, host="127.0.0.1", port=0, **options)
+        server = build_server(RunContext.build(config).plugins, config["policy"], host="127.0.0.1", port=0, **options)
         server.run(ready=lambda srv: conn.send(("ready", srv.port)))
     except BaseException as exc:  # reported to the run, which fails with this line
         with contextlib.suppress(OSError):
@@ -59,18 +61,20 @@ def fetch_stats(port: int) -> dict[str, Any] | None:
 
 
 @contextlib.contextmanager
-def served_policy(policy_cfg: dict[str, Any], workers: int, output_dir: str | Path | None = None,
+def served_policy(config: dict[str, Any], workers: int, output_dir: str | Path | None = None,
                   start_timeout_s: float = 900.0, threads: int | None = 1) -> Iterator[dict[str, Any]]:
-    """Yield the policy config workers should use: ``policy_cfg`` itself, or (``serve: true``)
-    a ``remote`` config for a server process started here and stopped (and reaped) on exit.
+    """Yield the policy config workers should use: the run ``config``'s ``policy`` itself, or
+    (``serve: true``) a ``remote`` config for a server process started here (with the context
+    rebuilt from ``config``, a portable run config) and stopped (and reaped) on exit.
     The server runs torch/BLAS on ``threads`` CPU threads (the run's ``worker_threads``)."""
+    policy_cfg = config["policy"]
     options = serve_options(policy_cfg, workers)
     if options is None:
         yield policy_cfg
         return
     ctx = mp.get_context("spawn")
     parent, child = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_serve, args=(policy_cfg, options, threads, child), name="molmo-serve", daemon=True)
+    proc = ctx.Process(target=_serve, args=(config, options, threads, child), name="molmo-serve", daemon=True)
     proc.start()
     child.close()
     port = None

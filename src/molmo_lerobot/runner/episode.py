@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
     from molmo_lerobot.benchmark.schema import EpisodeSpec
-    from molmo_lerobot.plugins import Plugins
+    from molmo_lerobot.context import RunContext
     from molmo_lerobot.policies.base import Action
     from molmo_lerobot.sim.env import Env, Timing
     from molmo_lerobot.tasks.base import Task, TaskType
@@ -65,10 +65,11 @@ class EpisodeRunner:
 
     def __init__(self, timing: dict[str, float] | None = None, horizon: int | None = None, run_seed: int = 0,
                  eval_options: dict[str, Any] | None = None, horizons: dict[str, float] | None = None) -> None:
-        from molmo_lerobot.plugins import get_plugins
+        from molmo_lerobot.context import RunContext
         from molmo_lerobot.sim.env import Timing
 
-        self.plugins = get_plugins()
+        self.ctx = RunContext.build(eval_options)
+        self.plugins = self.ctx.plugins
         self.timing = Timing(**(timing or {}))
         self.horizon = horizon
         self.horizons = dict(horizons or {})
@@ -90,18 +91,19 @@ class EpisodeRunner:
         from molmo_lerobot.runner.evaluate import episode_seed
         from molmo_lerobot.runner.rollout import check_divergence
 
-        spec = self.plugins.apply_episode_overrides(bench.episodes[index], self.eval_options)
-        problems = [p for p in validate_episode(spec, self.plugins, index=index, file=bench.origins[index].file)
+        spec = self.plugins.apply_episode_overrides(bench.episodes[index], self.ctx)
+        problems = [p for p in validate_episode(spec, self.plugins, self.ctx, index=index,
+                                                file=bench.origins[index].file)
                     if not p.warning]  # warnings (not runnable here) are the preflight's
         if problems:
             raise EpisodeSetupError("; ".join(str(p) for p in problems))
-        cannot = preflight(bench, self.plugins, self.eval_options, [index])  # also applies MolmoSpaces settings
+        cannot = preflight(bench, self.ctx, [index])
         if cannot:
             raise EpisodeSetupError(cannot)
         seed = episode_seed(self.run_seed, spec.model_dump(mode="json", exclude_unset=False))
         task_type = self.plugins.task_type(spec.task_name)
         horizon = self.horizon_of(spec)
-        env, task = start_episode(spec, seed, task_type, self.plugins, self.timing, self.eval_options.get("camera"))
+        env, task = start_episode(spec, seed, task_type, self.ctx, self.timing, self.eval_options.get("camera"))
         try:
             check_divergence(env.data, "at the initial state")
             task.setup()
@@ -112,13 +114,13 @@ class EpisodeRunner:
         return Episode(index, spec, env, task, task_type, horizon, prompt, seed)
 
 
-def start_episode(spec: EpisodeSpec, seed: int, task_type: TaskType, plugins: Plugins, timing: Timing,
+def start_episode(spec: EpisodeSpec, seed: int, task_type: TaskType, ctx: RunContext, timing: Timing,
                   camera: dict[str, Any] | None) -> tuple[Env, Task]:
-    """The episode's environment reset with ``seed`` and its task (not yet set up). The worker's
-    rollout and :meth:`EpisodeRunner.open` both start episodes here."""
+    """The episode's environment under the run ``ctx``, reset with ``seed``, and its task (not yet
+    set up). The worker's rollout and :meth:`EpisodeRunner.open` both start episodes here."""
     from molmo_lerobot.runner.episode_env import build_env
 
-    env = build_env(spec, timing, plugins, camera)
+    env = build_env(spec, timing, ctx, camera)
     try:
         env.reset(seed)
         return env, task_type.create(spec, env)

@@ -13,12 +13,13 @@ from molmo_lerobot.sim.env import Env, Timing, make_env
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
-    from molmo_lerobot.plugins import Plugins
+    from molmo_lerobot.context import RunContext
 
 
-def build_env(spec: EpisodeSpec, timing: Timing, plugins: Plugins, camera: Mapping[str, Any] | None = None) -> Env:
-    """The episode's environment; ``camera`` is the run's ``camera`` options (see
+def build_env(spec: EpisodeSpec, timing: Timing, ctx: RunContext, camera: Mapping[str, Any] | None = None) -> Env:
+    """The episode's environment under the run ``ctx``; ``camera`` is the run's ``camera`` options (see
     :func:`~molmo_lerobot.cameras.options.episode_camera_system` for the choice of cameras)."""
+    plugins = ctx.plugins
     robot = plugins.robot(spec.robot.robot_name)
     cameras = episode_camera_system(spec, camera, plugins.camera_system, robot.default_camera_system)
-    return make_env(spec, timing, plugins.scene_dataset(spec.scene_dataset), robot, cameras)
+    return make_env(spec, timing, plugins.scene_dataset(spec.scene_dataset), robot, cameras, ctx)

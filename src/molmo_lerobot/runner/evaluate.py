@@ -38,10 +38,12 @@ from molmo_lerobot.export.report import write_report
 from molmo_lerobot.export.wandb_log import log_run
 from molmo_lerobot import fileio
 from molmo_lerobot.fileio import atomic_write
+from molmo_lerobot.assets.grasps import GraspError
+from molmo_lerobot.assets.libraries import AssetError
+from molmo_lerobot.context import RunContext
 from molmo_lerobot.molmospaces.preflight import preflight
-from molmo_lerobot.molmospaces.settings import resolve as molmospaces_settings
+from molmo_lerobot.molmospaces.settings import SettingsError
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.protocol.run_server import ServeError, served_policy
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
 from molmo_lerobot.runner.progress import Progress
@@ -166,15 +168,18 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     if cfg.get("push") and not cfg.get("record"):
         print("molmo-eval: push=true records the dataset it pushes (record=true)", file=sys.stderr)
         cfg["record"] = True
-    plugins = get_plugins()
-    plugins.set_preferences((cfg.get("plugins") or {}).get("prefer"))  # workers apply the same pins
+    try:  # workers rebuild the same context (plugin pins, MolmoSpaces data) from its portable config
+        ctx = RunContext.build(cfg)
+    except (SettingsError, AssetError, GraspError) as exc:
+        raise RunError(f"cannot set up MolmoSpaces data: {exc}") from None
+    plugins = ctx.plugins
     policy_name = str(cfg["policy"]["name"])
     plugins.policy(policy_name)  # unknown or broken policy plugin: fail before any work
     recorders = plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
     executor = _make_executor(cfg)
     bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]))
     problems: dict[int, list[str]] = {}
-    for p in validate_benchmark(bench, plugins):
+    for p in validate_benchmark(bench, plugins, ctx):
         if not p.warning:  # warnings (not runnable here) are the preflight's to report
             problems.setdefault(p.episode_index, []).append(f"{p.field}: {p.message}" if p.field else p.message)
 
@@ -184,7 +189,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     cfg["output_dir"] = str(out)
     limit = cfg.get("limit")
     indices = list(range(len(bench.episodes)))[:limit]
-    cannot = preflight(bench, plugins, cfg, indices, skip=problems)  # before any output or worker
+    cannot = preflight(bench, ctx, indices, skip=problems)  # before any output or worker
     if cannot:
         raise RunError(cannot)
 
@@ -197,7 +202,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     for i in indices:
         original = bench.episodes[i]
         try:
-            spec = plugins.apply_episode_overrides(original, cfg)
+            spec = plugins.apply_episode_overrides(original, ctx)
         except Exception as exc:  # an override that cannot apply to this episode fails it, not the run
             described[i] = _describe(original, plugins, cfg, horizons)
             errors.append(EpisodeResult.failed(i, original.house_index, original.task.task_cls,
@@ -234,7 +239,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
                          "robot": cfg.get("robot"),
                          "end_on_success": bool(cfg.get("end_on_success", False)),
-                         "molmospaces": molmospaces_settings(cfg).to_config(),
+                         "molmospaces": ctx.settings.to_config(),
                          **({"plugins_prefer": plugins.prefer} if plugins.prefer else {})},  # pinned providers
     }
     done = _prepare_output(out, run_info, bool(cfg.get("resume")), recorders)
@@ -271,12 +276,11 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                     record(failed)
             if todo:
                 try:  # policy.serve=true: one local policy server for the run, the workers its clients
-                    with served_policy(cfg["policy"], int(cfg["workers"]), out,
+                    with served_policy(ctx.portable_config(), int(cfg["workers"]), out,
                                        threads=cfg.get("worker_threads", 1)) as worker_policy:
                         job = WorkerJob(policy=worker_policy, timing=cfg["timing"], output_dir=str(out),
                                         benchmark_name=bench.name, benchmark_sha256=bench.sha256,
-                                        recorders=recorders + progress.factories(), prefer=plugins.prefer,
-                                        molmospaces=run_info["eval_options"]["molmospaces"],
+                                        recorders=recorders + progress.factories(), config=ctx.portable_config(),
                                         camera=cfg.get("camera") or {},
                                         end_on_success=bool(cfg.get("end_on_success", False)),
                                         threads=cfg.get("worker_threads", 1))

@@ -4,15 +4,15 @@ from __future__ import annotations
 
 from typing import Any
 
-from molmo_lerobot.plugins import get_plugins
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.policies.base import Policy
 from molmo_lerobot.policies.convention import ConventionAdapter, get_convention
 
 
-def make_policy(policy_cfg: dict[str, Any]) -> Policy:
-    """Look the policy plugin up by ``policy_cfg["name"]`` and call its factory; ``policy.convention``
-    goes to plugins that read it (``PolicyType.conventions``), else wraps the policy."""
-    policy_type = get_plugins().policy(str(policy_cfg["name"]))
+def make_policy(plugins: Plugins, policy_cfg: dict[str, Any]) -> Policy:
+    """Look the policy plugin up in ``plugins`` by ``policy_cfg["name"]`` and call its factory;
+    ``policy.convention`` goes to plugins that read it (``PolicyType.conventions``), else wraps the policy."""
+    policy_type = plugins.policy(str(policy_cfg["name"]))
     cfg = dict(policy_cfg)
     convention = get_convention(str(cfg.get("convention") or "native"))
     if not policy_type.conventions:

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 from molmo_lerobot.errors import describe
 
 if TYPE_CHECKING:
+    from molmo_lerobot.assets.catalog import AssetCatalog
     from molmo_lerobot.policies.base import Action, Observation
     from molmo_lerobot.runner.results import EpisodeResult
 
@@ -45,6 +46,8 @@ class EpisodeInfo:
     #: the policy is a privileged scripted expert (it reads the simulator): its rollouts are demonstrations
     expert: bool = False
     extra: dict[str, Any] = field(default_factory=dict)
+    #: the run's asset catalog (annotations of the scene's objects), where the worker has one
+    catalog: AssetCatalog | None = None
 
 
 class Recorder(ABC):

@@ -52,8 +52,8 @@ class WorkerJob:
     benchmark_name: str
     benchmark_sha256: str
     recorders: list[RecorderFactory] = field(default_factory=list)
-    molmospaces: dict[str, Any] = field(default_factory=dict)  # MolmoSpaces data settings, user libraries
-    prefer: dict[str, dict[str, str]] = field(default_factory=dict)  # the run's plugins.prefer pins
+    #: the run config the worker rebuilds its RunContext from (data paths absolute, plugins.prefer pins)
+    config: dict[str, Any] = field(default_factory=dict)
     camera: dict[str, Any] = field(default_factory=dict)  # the run's camera options (camera.system, camera.eval, ...)
     end_on_success: bool = False
     threads: int | None = 1  # CPU threads for torch/BLAS in this worker (None: the libraries' default)
@@ -64,23 +64,21 @@ class WorkerStop(BaseException):
 
 
 class EpisodeWorker:
-    """Loads plugins and the policy once, then runs episodes in sequence."""
+    """Builds the run's context and the policy once, then runs episodes in sequence."""
 
     def __init__(self, job: WorkerJob, worker_id: str) -> None:
-        from molmo_lerobot.molmospaces import configure
-        from molmo_lerobot.plugins import get_plugins
+        from molmo_lerobot.context import RunContext
         from molmo_lerobot.runner.policy import make_policy
         from molmo_lerobot.sim.env import Timing
 
         self.job = job
         self.worker_id = worker_id
         cap_threads(job.threads)
-        configure(job.molmospaces)
-        self.plugins = get_plugins()
-        self.plugins.set_preferences(job.prefer)
+        self.ctx = RunContext.build(job.config)
+        self.plugins = self.ctx.plugins
         self.timing = Timing(**job.timing)
         self.policy_name = str(job.policy["name"])
-        self.policy = make_policy(job.policy)
+        self.policy = make_policy(self.plugins, job.policy)
         cap_threads(job.threads)  # a policy that imported torch reads the cap now
         self.recorders = RecorderGroup([f.make(worker_id, Path(job.output_dir)) for f in job.recorders])
         self.stopping = False
@@ -110,12 +108,13 @@ class EpisodeWorker:
             task_type = self.plugins.task_type(item.task_type)
             horizon = item.horizon
             prompt = spec.language.task_description if spec.language else ""
-            env, task = start_episode(spec, item.seed, task_type, self.plugins, self.timing, self.job.camera)
+            env, task = start_episode(spec, item.seed, task_type, self.ctx, self.timing, self.job.camera)
             try:
+                privileged = self.policy.needs_simulator
                 ctx = EpisodeContext(
                     spec=spec, episode_index=item.episode_index, seed=item.seed, prompt=prompt,
                     move_groups=dict(env.move_groups), policy_dt_s=self.timing.policy_dt_ms / 1000.0,
-                    env=env if self.policy.needs_simulator else None,
+                    env=env if privileged else None, run=self.ctx if privileged else None,
                 )
                 info = EpisodeInfo(
                     episode_index=item.episode_index, house_index=house, seed=item.seed, prompt=prompt,
@@ -126,6 +125,7 @@ class EpisodeWorker:
                     extra={"task_cls": task_cls, "policy": self.policy_name, "robot": spec.robot.robot_name,
                            "object": getattr(spec.task, "pickup_obj_name", None),
                            "benchmark": self.job.benchmark_name, "benchmark_sha256": self.job.benchmark_sha256},
+                    catalog=self.ctx.catalog,
                 )
                 if self.stopping:
                     raise WorkerStop

@@ -42,7 +42,7 @@ if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.cameras.base import CameraSystem
     from molmo_lerobot.robots.base import RobotType
-    from molmo_lerobot.sim.scenes import SceneDataset
+    from molmo_lerobot.sim.scenes import SceneContext, SceneDataset
 
 PHYSICS_OPTIONS = {"integrator": mujoco.mjtIntegrator.mjINT_IMPLICITFAST, "cone": mujoco.mjtCone.mjCONE_ELLIPTIC,
                    "impratio": 10.0}
@@ -146,11 +146,11 @@ def _add_primitive(world: mujoco.MjSpec, name: str, prim: Any) -> None:
 
 
 def _build_model(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: RobotType,
-                 camera_system: CameraSystem) -> tuple[mujoco.MjModel, list[str]]:
-    world = scene.build_episode(spec)
+                 camera_system: CameraSystem, ctx: SceneContext) -> tuple[mujoco.MjModel, list[str]]:
+    world = scene.build_episode(spec, ctx)
     robot.place(world, spec)
     mods = spec.scene_modifications
-    scene.modify(world, spec)
+    scene.modify(world, spec, ctx)
     for name, prim in mods.primitive_objects.items():
         _add_primitive(world, name, prim)
     body_names = [b.name for b in world.bodies]
@@ -166,7 +166,7 @@ def _build_model(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: 
     world.visual.global_.offwidth = max(world.visual.global_.offwidth, int(width))
     world.visual.global_.offheight = max(world.visual.global_.offheight, int(height))
     world.option.timestep = timing.sim_dt_s
-    for option, value in scene.physics_options(PHYSICS_OPTIONS).items():
+    for option, value in scene.physics_options(PHYSICS_OPTIONS, ctx).items():
         setattr(world.option, option, value)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
@@ -194,17 +194,18 @@ def _place_cameras(spec: EpisodeSpec, timing: Timing, model: mujoco.MjModel, rob
 
 
 def make_env(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: RobotType,
-             camera_system: CameraSystem) -> Env:
+             camera_system: CameraSystem, ctx: SceneContext) -> Env:
     """Assemble, compile (cached per scene content) and wrap one episode's simulation.
 
     ``scene``, ``robot`` and ``camera_system`` are the plugin objects for the episode's
-    ``scene_dataset``, ``robot.robot_name`` and chosen camera system, resolved by the caller.
+    ``scene_dataset``, ``robot.robot_name`` and chosen camera system, resolved by the caller;
+    ``ctx`` is what the scene dataset reads of the run.
     """
     key = _model_key(spec, timing, scene, robot, camera_system)
     if key in _MODEL_CACHE:
         _MODEL_CACHE.move_to_end(key)
     else:
-        model, cams = _build_model(spec, timing, scene, robot, camera_system)
+        model, cams = _build_model(spec, timing, scene, robot, camera_system, ctx)
         if camera_system.places_in_scene:
             _place_cameras(spec, timing, model, robot, cams, camera_system)
         _MODEL_CACHE[key] = model, cams
@@ -213,7 +214,7 @@ def make_env(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: Robo
     model, cams = _MODEL_CACHE[key]
     env = Env(spec, timing, copy.copy(model), robot, list(cams))
     env.camera_system = camera_system.name
-    env._scene = scene
+    env._scene, env._scene_ctx = scene, ctx
     return env
 
 
@@ -246,6 +247,7 @@ class Env:
         #: name of the camera system that built the cameras
         self.camera_system = ""
         self._scene: SceneDataset | None = None
+        self._scene_ctx: SceneContext | None = None
         self._scene_metadata: dict[str, Any] | None = None
         self._depth_cameras = [c.name for c in spec.cameras if c.record_depth]
         self._renderer: mujoco.Renderer | None = None
@@ -414,7 +416,8 @@ class Env:
     def scene_metadata(self) -> dict[str, Any]:
         """The episode's scene metadata from its scene dataset (``objects``: body -> asset_id, category, …)."""
         if self._scene_metadata is None:
-            self._scene_metadata = self._scene.episode_metadata(self.spec) if self._scene else {"objects": {}}
+            self._scene_metadata = (self._scene.episode_metadata(self.spec, self._scene_ctx) if self._scene
+                                    else {"objects": {}})
         return self._scene_metadata
 
     def body_id(self, name: str, field: str = "body") -> int:

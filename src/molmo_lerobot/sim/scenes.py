@@ -4,18 +4,33 @@ A :class:`SceneDataset` is what a scene plugin returns from ``molmo_scene_datase
 ``build(house_index)`` returns a fresh world spec (no robot, no cameras); ``metadata``
 describes the house: which bodies are objects and which asset each one is (MolmoSpaces'
 scene metadata), where the robot stands, and the region where objects may be placed.
+The per-episode methods also get the run's :class:`SceneContext` (where its data lives).
 """
 
 from __future__ import annotations
 
 import warnings
 from abc import ABC, abstractmethod
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import mujoco
 
 if TYPE_CHECKING:
+    from molmo_lerobot.assets.catalog import AssetCatalog
     from molmo_lerobot.benchmark.schema import EpisodeSpec
+    from molmo_lerobot.molmospaces.settings import MolmoSpacesSettings
+
+
+class SceneContext(Protocol):
+    """What a scene dataset may read of the run (a :class:`~molmo_lerobot.context.RunContext` is one)."""
+
+    @property
+    def settings(self) -> MolmoSpacesSettings:
+        """Where MolmoSpaces data lives and how its scenes load (assets dir, user scenes, physics options)."""
+
+    @property
+    def catalog(self) -> AssetCatalog:
+        """The run's asset libraries (objects added by UID are installed through them)."""
 
 
 class SceneDataset(ABC):
@@ -37,15 +52,15 @@ class SceneDataset(ABC):
         """House description, JSON-ready. At least ``objects``: ``{body_name: {"asset_id": uid, ...}}``."""
 
     # Per episode (datasets whose houses depend on more than the index override these) ----------
-    def build_episode(self, spec: EpisodeSpec) -> mujoco.MjSpec:
+    def build_episode(self, spec: EpisodeSpec, ctx: SceneContext) -> mujoco.MjSpec:
         """The world spec of ``spec``'s house (default: :meth:`build` of its ``house_index``)."""
         return self.build(spec.house_index)
 
-    def episode_metadata(self, spec: EpisodeSpec) -> dict[str, Any]:
+    def episode_metadata(self, spec: EpisodeSpec, ctx: SceneContext) -> dict[str, Any]:
         """The metadata of ``spec``'s house (default: :meth:`metadata` of its ``house_index``)."""
         return self.metadata(spec.house_index)
 
-    def modify(self, world: mujoco.MjSpec, spec: EpisodeSpec) -> None:
+    def modify(self, world: mujoco.MjSpec, spec: EpisodeSpec, ctx: SceneContext) -> None:
         """Apply ``scene_modifications``: remove bodies (exact names), attach added MJCF files."""
         mods = spec.scene_modifications
         for name in mods.removed_objects:
@@ -56,7 +71,7 @@ class SceneDataset(ABC):
         for name, xml in mods.added_objects.items():
             attach_mjcf(world, xml, name, source=f"scene_modifications.added_objects[{name!r}]")
 
-    def physics_options(self, defaults: dict[str, Any]) -> dict[str, Any]:
+    def physics_options(self, defaults: dict[str, Any], ctx: SceneContext) -> dict[str, Any]:
         """Solver options to set on the compiled model (default: ``defaults``, the shared ones)."""
         return defaults
 
