@@ -11,12 +11,13 @@ import sys
 import pytest
 
 from molmo_lerobot.benchmark.load import MAX_JSON_DEPTH, BenchmarkError, load_benchmark
+from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.cli.bench import main
 
 
 def _problems(path) -> list[str]:
     with pytest.raises(BenchmarkError) as info:
-        load_benchmark(path)
+        load_benchmark(path, get_plugins())
     return [str(p) for p in info.value.problems]
 
 

@@ -7,6 +7,7 @@ import json
 import pytest
 
 from molmo_lerobot.benchmark.load import load_benchmark
+from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.benchmark.validate import validate_benchmark
 
 
@@ -16,7 +17,7 @@ def _load_edited(data, tmp_path, edit):
     d = tmp_path / "b"
     d.mkdir()
     (d / "benchmark.json").write_text(json.dumps(episodes))
-    return load_benchmark(d)
+    return load_benchmark(d, get_plugins())
 
 
 def _texts(bench, plugins):
@@ -25,7 +26,7 @@ def _texts(bench, plugins):
 
 def test_molmospaces_files_in_both_layouts_validate(data, fake_plugins):
     for layout in ("pick_list", "pick_legacy"):
-        assert validate_benchmark(load_benchmark(data / layout), fake_plugins) == []
+        assert validate_benchmark(load_benchmark(data / layout, get_plugins()), fake_plugins) == []
 
 
 def test_unknown_task_class_suggests_the_close_one(data, tmp_path, fake_plugins):
@@ -37,7 +38,7 @@ def test_unknown_task_class_suggests_the_close_one(data, tmp_path, fake_plugins)
 
 
 def test_mobile_robot_episodes_fail_cleanly(data, fake_plugins):
-    problems = validate_benchmark(load_benchmark(data / "mixed_tasks"), fake_plugins)
+    problems = validate_benchmark(load_benchmark(data / "mixed_tasks", get_plugins()), fake_plugins)
     robot = [p for p in problems if p.field == "robot.robot_name"]
     assert [(p.episode_index, p.message.split(" (")[0]) for p in robot] == [
         (6, "no robot plugin provides 'rby1'"), (7, "no robot plugin provides 'rby1'")]
@@ -99,4 +100,4 @@ def test_installed_plugins_accept_the_molmospaces_pick_files(data):
     if any(r.status != "ok" for r in plugins.records if r.name in ("pick", "franka", "tabletop")):
         pytest.fail("built-in plugins failed to load: " + "; ".join(f"{r.name}: {r.error}" for r in plugins.broken()))
     for layout in ("pick_list", "pick_legacy"):
-        assert [str(p) for p in validate_benchmark(load_benchmark(data / layout), plugins)] == []
+        assert [str(p) for p in validate_benchmark(load_benchmark(data / layout, get_plugins()), plugins)] == []

@@ -45,7 +45,7 @@ def test_every_shipped_v1_benchmark_is_pinned():
 @pytest.mark.parametrize("name", sorted(PINNED))
 def test_v1_trials_are_unchanged(name):
     sha, horizons, thresholds = PINNED[name]
-    bench = load_benchmark(data_path("benchmarks") / name)
+    bench = load_benchmark(data_path("benchmarks") / name, get_plugins())
     plugins = get_plugins()
     resolved, rules = Counter(), {}
     for spec in bench.episodes:

@@ -27,6 +27,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.robots.base import RobotType
 from molmo_lerobot.sim.env import Env, Timing
@@ -543,11 +544,11 @@ FAMILIES = {
 
 def episode_spec(task: dict) -> EpisodeSpec:
     fields = {k: v for k, v in task.items() if v is not None}
-    return EpisodeSpec.model_validate({
+    return parse_episode({
         "house_index": 0, "scene_dataset": "parity_scene", "seed": 0, "img_resolution": [64, 64],
         "language": {"task_description": "parity"},
         "robot": {"robot_name": "parity_gripper", "init_qpos": {}},
-        "task": {"task_cls": TASK_CLS[task["task_type"]], "robot_base_pose": [0, 0, 0, 1, 0, 0, 0], **fields}})
+        "task": {"task_cls": TASK_CLS[task["task_type"]], "robot_base_pose": [0, 0, 0, 1, 0, 0, 0], **fields}}, get_plugins())
 
 
 def opening_task(mode: str, obj: str, joint: str, **fields) -> dict:

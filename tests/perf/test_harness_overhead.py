@@ -91,7 +91,7 @@ RAW = textwrap.dedent('''
 
     args = json.loads(sys.argv[1])
     plugins = get_plugins()
-    bench = load_benchmark(data_path("benchmarks") / args["benchmark"])
+    bench = load_benchmark(data_path("benchmarks") / args["benchmark"], plugins)
     timing = Timing()
     policy = ImageScripted({"name": "image_scripted", "chunk": args["chunk"]})
     out = []

@@ -25,7 +25,7 @@ CHUNK = 4
 
 
 def episode(resolution=None):
-    spec = load_benchmark(data_path("benchmarks") / "pick_v1").episodes[0]
+    spec = load_benchmark(data_path("benchmarks") / "pick_v1", get_plugins()).episodes[0]
     if resolution is not None:
         spec = spec.model_copy(update={"img_resolution": resolution})
     env = build_env(spec, Timing(), get_plugins())

@@ -11,8 +11,7 @@ import json
 import mujoco
 import numpy as np
 import pytest
-
-from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.policies.base import EpisodeContext, Policy
@@ -31,7 +30,7 @@ def episode_env(robot: str, gripper: list[float]):
                                                        "gripper": gripper}}
     raw["task"]["robot_base_pose"] = [0.3, -0.2, 0.1, 0.9238795, 0.0, 0.0, 0.3826834]  # 45 deg about z
     raw["cameras"] = [c for c in raw["cameras"] if c["type"] == "exocentric"]  # the wrist mount differs per robot
-    env = build_env(EpisodeSpec.model_validate(raw), Timing(), get_plugins(), None)
+    env = build_env(parse_episode(raw, get_plugins()), Timing(), get_plugins(), None)
     env.reset(0)
     return env
 

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.plugins import get_plugins
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "molmospaces"
@@ -21,7 +22,7 @@ def ithor_pick(**robot) -> EpisodeSpec:
     raw = next(e for e in json.loads((DATA / "mixed_tasks" / "benchmark.json").read_text())
                if e["task"]["task_cls"].endswith("PickTask"))
     raw["robot"].update(robot)
-    return EpisodeSpec.model_validate(raw)
+    return parse_episode(raw, get_plugins())
 
 
 def placed(spec: EpisodeSpec):
@@ -98,7 +99,7 @@ def test_a_bad_base_size_is_one_clear_error(bad):
 
     spec = ithor_pick(base_size=bad)
     bench = Benchmark("b", [spec], None, "", Path("b.json"), [Origin("b.json")])
-    problems = [p for p in validate_benchmark(bench) if p.field == "robot.base_size"]
+    problems = [p for p in validate_benchmark(bench, get_plugins()) if p.field == "robot.base_size"]
     assert len(problems) == 1 and not problems[0].warning
     assert str(problems[0]).startswith("b.json: episode 0: field robot.base_size: base_size must be null or three")
     with pytest.raises(ValueError, match="base_size must be null or three positive sizes"):

@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES
-from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.plugins import get_plugins
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim.env import Timing
@@ -18,7 +18,7 @@ from molmo_lerobot.sim.env import Timing
 def make_task_env(raw: dict):
     """The reset environment of episode ``raw`` and its task, set up."""
     plugins = get_plugins()
-    spec = EpisodeSpec.model_validate(raw)
+    spec = parse_episode(raw, plugins)
     env = build_env(spec, Timing(), plugins)
     env.reset(0)
     task = plugins.task_type(spec.task_name).create(spec, env)

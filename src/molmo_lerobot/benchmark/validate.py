@@ -22,12 +22,11 @@ from molmo_lerobot.benchmark import molmospaces
 from molmo_lerobot.benchmark.load import Benchmark, Problem
 from molmo_lerobot.benchmark.schema import EpisodeSpec
 from molmo_lerobot.export.frames import image_feature
-from molmo_lerobot.plugins import PluginConflict, PluginError, Plugins, get_plugins
+from molmo_lerobot.plugins import PluginConflict, PluginError, Plugins
 
 
-def validate_benchmark(bench: Benchmark, plugins: Plugins | None = None) -> list[Problem]:
+def validate_benchmark(bench: Benchmark, plugins: Plugins) -> list[Problem]:
     """All problems of all episodes of ``bench``, in episode order (empty when it can run)."""
-    plugins = plugins if plugins is not None else get_plugins()
     problems: list[Problem] = []
     for index, episode in enumerate(bench.episodes):
         file = bench.origins[index].file if index < len(bench.origins) else str(bench.path)

@@ -27,7 +27,9 @@ from pydantic import ValidationError
 
 from molmo_lerobot.benchmark.load import Benchmark, BenchmarkError, Problem, load_benchmark, validation_messages
 from molmo_lerobot.benchmark.molmospaces import known_task_name
-from molmo_lerobot.benchmark.schema import NATIVE_TASK_CLS, EpisodeSpec
+from molmo_lerobot.benchmark.schema import NATIVE_TASK_CLS
+from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.plugins import PluginConflict, get_plugins
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -53,24 +55,26 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _validate(path: Path, *, schema_only: bool, overrides: list[str] | None = None) -> int:
+    plugins = get_plugins()
     try:
-        bench = load_benchmark(path)
+        bench = load_benchmark(path, plugins)
     except BenchmarkError as exc:
         return _report(exc.problems)
+    except PluginConflict as exc:
+        print(f"molmo-bench: error: {exc}", file=sys.stderr)
+        return 1
     if not schema_only:
         from omegaconf import OmegaConf
 
         from molmo_lerobot.benchmark.validate import validate_benchmark
         from molmo_lerobot.config import ConfigError, compose
         from molmo_lerobot.molmospaces import configure
-        from molmo_lerobot.plugins import PluginConflict, get_plugins
 
         try:  # where MolmoSpaces data lives (assets dir, user scenes and libraries), as a run would see it
             configure(OmegaConf.to_container(compose(list(overrides or [])), resolve=True))
         except (ConfigError, ValueError, LookupError) as exc:
             print(f"molmo-bench: error: {exc}", file=sys.stderr)
             return 2
-        plugins = get_plugins()
         try:
             found = validate_benchmark(bench, plugins)
         except PluginConflict as exc:
@@ -159,7 +163,7 @@ def _generate(args: argparse.Namespace) -> int:
     bad = []
     for i, ep in enumerate(episodes):
         try:
-            EpisodeSpec.model_validate(ep)
+            parse_episode(ep, get_plugins())
         except ValidationError as exc:  # a generator bug, reported per field
             bad.extend(Problem("<generated>", msg, i, loc) for loc, msg in validation_messages(exc))
     if bad:
@@ -172,7 +176,7 @@ def _generate(args: argparse.Namespace) -> int:
     tmp.chmod(0o777 & ~umask)  # mkdtemp makes it private; the result is an ordinary directory
     try:
         write_benchmark(tmp, episodes, metadata)
-        bench = load_benchmark(tmp)
+        bench = load_benchmark(tmp, get_plugins())
         if out.exists():
             shutil.rmtree(out)
         os.replace(tmp, out)
