@@ -1,8 +1,9 @@
 """Benchmarks: MolmoSpaces-compatible episode schema, loading with a content hash, validation, generation.
 
-``load_benchmark(path)`` reads a benchmark directory or file into a :class:`Benchmark`;
-``validate_benchmark(bench, plugins)`` (in :mod:`.validate`) checks it against the
-installed plugins.
+``load_benchmark(path, plugins)`` reads a benchmark directory or file into a :class:`Benchmark`
+(each task validated with its plugin's spec model, see :mod:`.task_specs`);
+``validate_benchmark(bench, plugins)`` (in :mod:`.validate`) checks it against the installed
+plugins.
 """
 
 from molmo_lerobot.benchmark.load import Benchmark, BenchmarkError, Problem, load_benchmark

@@ -202,7 +202,7 @@ class BaseTaskSpec(_Model):
 
 
 class GenericTaskSpec(BaseTaskSpec):
-    """A task whose class this schema does not know; its fields stay as given."""
+    """A task no installed plugin gives a spec model (or parsed without plugins); its fields stay as given."""
 
 
 #: Our own task classes (benchmarks made by ``molmo-bench generate``) -> task type name.
