@@ -27,7 +27,7 @@ CUSTOM_MJCF = """<mujoco><worldbody><body name="thing"><freejoint/>
 
 @pytest.fixture(scope="module")
 def episode():
-    return load_benchmark(data_path("benchmarks") / "pick_v1").episodes[0]
+    return load_benchmark(data_path("benchmarks") / "pick_v1", Plugins()).episodes[0]
 
 
 @pytest.fixture

@@ -85,7 +85,7 @@ def test_asking_for_the_broken_plugin_names_it(broken_dist, monkeypatch, name, n
 
 
 def test_validation_is_unaffected_by_broken_plugins(broken_dist, monkeypatch):
-    bench = load_benchmark(DATA / "pick_list")
+    bench = load_benchmark(DATA / "pick_list", Plugins())
     clean = [str(p) for p in validate_benchmark(bench, Plugins(), RunContext.build())]
     assert [str(p) for p in validate_benchmark(bench, _with_broken(broken_dist, monkeypatch), RunContext.build())] == clean == []
 
@@ -98,7 +98,7 @@ def test_validation_names_the_broken_plugin_a_benchmark_needs(broken_dist, monke
     d = tmp_path / "b"
     d.mkdir()
     (d / "benchmark.json").write_text(json.dumps(episodes))
-    (problem,) = validate_benchmark(load_benchmark(d), _with_broken(broken_dist, monkeypatch), RunContext.build())
+    (problem,) = validate_benchmark(load_benchmark(d, Plugins()), _with_broken(broken_dist, monkeypatch), RunContext.build())
     assert (problem.episode_index, problem.field) == (0, "robot.robot_name")
     assert problem.message.startswith("no robot plugin provides 'ur5'")
     assert problem.message.endswith("; plugin 'ur5' from brokenbots failed to load: RuntimeError: ur5 driver missing")

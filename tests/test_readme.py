@@ -83,9 +83,10 @@ def test_policy_interface_facts_match_the_code():
     timing = Timing()
     assert f"`timing.policy_dt_ms` = {timing.policy_dt_ms:g} ms" in text
     assert f"= {timing.ctrl_ticks} ticks" in text and f"= {dataset_fps(timing.policy_dt_ms)};" in text
-    franka = Plugins().robot("franka")
+    plugins = Plugins()
+    franka = plugins.robot("franka")
     assert dict(franka.move_groups) == {"arm": 7, "gripper": 1}
     assert franka.joint_names["arm"][0] == "panda_joint1" and franka.joint_names["gripper"] == ["panda_gripper"]
     for name in ("pick_v1", "open_v1"):
-        spec = load_benchmark(data_path("benchmarks") / name).episodes[0]
+        spec = load_benchmark(data_path("benchmarks") / name, plugins).episodes[0]
         assert [c.name for c in spec.cameras] == ["exterior", "wrist"] and list(spec.img_resolution) == [224, 224]

@@ -59,8 +59,8 @@ class MolmoEnv(gym.Env):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         self.render_mode = render_mode
-        self.bench = load_run_benchmark(benchmark)
         self.runner = EpisodeRunner(timing=timing, horizon=horizon, run_seed=run_seed, eval_options=eval_options)
+        self.bench = load_run_benchmark(benchmark, self.runner.plugins)
         self.end_on_success = bool(end_on_success)
         self._n = len(self.bench.episodes)
         self._pinned = None if episode_index is None else self._check_index(episode_index)

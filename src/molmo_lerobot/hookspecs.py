@@ -50,7 +50,9 @@ def molmo_task_types() -> list[TaskType]:
 
     Each :class:`~molmo_lerobot.tasks.base.TaskType` has a short ``name`` (``"pick"``) and
     ``aliases`` (e.g. MolmoSpaces' dotted ``task_cls`` paths) so that benchmark files
-    written for MolmoSpaces resolve to it unchanged.
+    written for MolmoSpaces resolve to it unchanged, and its ``spec_model``: the pydantic
+    model (a :class:`~molmo_lerobot.benchmark.schema.BaseTaskSpec` subclass) that loading a
+    benchmark validates its episodes' ``task`` with, so a new task type brings its own fields.
     """
 
 

@@ -75,7 +75,7 @@ def molmo_episode_overrides(episode: EpisodeSpec, config: Any, context: Any) -> 
             raise OverrideError(f"camera.randomization must be 0-3, got {level}")
         _jitter_cameras(data["cameras"], level, np.random.default_rng(list(identity[:16])))
         changed = True
-    return EpisodeSpec.model_validate(data) if changed else None
+    return episode.edited(data) if changed else None
 
 
 @cache

@@ -18,8 +18,9 @@ def test_validate_prints_a_summary(data, capsys):
     assert "pick_legacy" in out and "4 over 2 houses" in out
     assert "tasks      pick (4)" in out and "wrist_camera (4)" in out
     from molmo_lerobot.benchmark.load import load_benchmark
+    from molmo_lerobot.plugins import Plugins
 
-    assert f"sha256     {load_benchmark(data / 'pick_list').sha256}" in out
+    assert f"sha256     {load_benchmark(data / 'pick_list', Plugins()).sha256}" in out
 
 
 def test_validate_reports_every_problem(tmp_path, data, capsys):
@@ -105,14 +106,15 @@ def test_generate_with_the_real_generator_is_deterministic(tmp_path, capsys):
     from molmo_lerobot.benchmark.validate import validate_benchmark
     from molmo_lerobot.context import RunContext
 
+    ctx = RunContext.build()
+
     def run(name, seed):
         args = ["generate", "--task", "pick", "--houses", "2", "--episodes-per-house", "2", "--seed", str(seed),
                 "--name", "tiny", "--out", str(tmp_path / name)]
         assert main(args) == 0, capsys.readouterr().err
-        return load_benchmark(tmp_path / name)
+        return load_benchmark(tmp_path / name, ctx.plugins)
 
     a, b, c = run("a", 0), run("b", 0), run("c", 1)
     assert a.sha256 == b.sha256 != c.sha256
     assert a.name == "tiny" and len(a) == 4 and len({ep.house_index for ep in a.episodes}) == 2
-    run = RunContext.build()
-    assert validate_benchmark(a, run.plugins, run) == []
+    assert validate_benchmark(a, ctx.plugins, ctx) == []

@@ -12,11 +12,15 @@ import pytest
 
 from molmo_lerobot.benchmark.load import MAX_JSON_DEPTH, BenchmarkError, load_benchmark
 from molmo_lerobot.cli.bench import main
+from molmo_lerobot.plugins import Plugins
+
+#: the installed plugins, whose spec models type each episode's task
+PLUGINS = Plugins()
 
 
 def _problems(path) -> list[str]:
     with pytest.raises(BenchmarkError) as info:
-        load_benchmark(path)
+        load_benchmark(path, PLUGINS)
     return [str(p) for p in info.value.problems]
 
 

@@ -9,11 +9,15 @@ import shutil
 import pytest
 
 from molmo_lerobot.benchmark.load import BenchmarkError, load_benchmark
+from molmo_lerobot.plugins import Plugins
+
+#: the installed plugins, whose spec models type each episode's task
+PLUGINS = Plugins()
 
 
 def _problems(path) -> list[str]:
     with pytest.raises(BenchmarkError) as info:
-        load_benchmark(path)
+        load_benchmark(path, PLUGINS)
     return [str(p) for p in info.value.problems]
 
 
@@ -30,8 +34,8 @@ def episodes(data):
 
 
 def test_both_layouts_load_to_the_same_benchmark(data):
-    listed = load_benchmark(data / "pick_list")
-    legacy = load_benchmark(data / "pick_legacy")
+    listed = load_benchmark(data / "pick_list", PLUGINS)
+    legacy = load_benchmark(data / "pick_legacy", PLUGINS)
     assert len(listed) == len(legacy) == 4
     assert listed.episodes == legacy.episodes
     assert listed.sha256 == legacy.sha256 and len(listed.sha256) == 64
@@ -43,21 +47,21 @@ def test_both_layouts_load_to_the_same_benchmark(data):
 
 
 def test_single_files_load(data, tmp_path):
-    single = load_benchmark(data / "pick_list" / "benchmark.json")
+    single = load_benchmark(data / "pick_list" / "benchmark.json", PLUGINS)
     assert single.name == "pick_list" and single.metadata.num_houses == 2
-    one = load_benchmark(data / "pick_legacy" / "house_3" / "episode_00000001.json")
+    one = load_benchmark(data / "pick_legacy" / "house_3" / "episode_00000001.json", PLUGINS)
     assert len(one) == 1 and one.episodes[0].task.pickup_obj_name == "builtin_red_block"
 
 
 def test_hash_ignores_key_order_whitespace_and_defaults(episodes, tmp_path):
-    base = load_benchmark(_write_list(tmp_path, episodes, "a")).sha256
+    base = load_benchmark(_write_list(tmp_path, episodes, "a"), PLUGINS).sha256
     (tmp_path / "c").mkdir()
     (tmp_path / "c" / "benchmark.json").write_text(json.dumps(episodes, sort_keys=True, separators=(",", ":")))
-    assert load_benchmark(tmp_path / "c").sha256 == base
+    assert load_benchmark(tmp_path / "c", PLUGINS).sha256 == base
     no_default = copy.deepcopy(episodes)
     del no_default[0]["task"]["succ_pos_threshold"]  # 0.01 is the default
     no_default[0]["img_resolution"] = [224.0, 224]
-    assert load_benchmark(_write_list(tmp_path, no_default, "d")).sha256 == base
+    assert load_benchmark(_write_list(tmp_path, no_default, "d"), PLUGINS).sha256 == base
 
 
 @pytest.mark.parametrize(
@@ -70,10 +74,10 @@ def test_hash_ignores_key_order_whitespace_and_defaults(episodes, tmp_path):
     ],
 )
 def test_hash_changes_with_content(episodes, tmp_path, edit):
-    base = load_benchmark(_write_list(tmp_path, episodes, "a")).sha256
+    base = load_benchmark(_write_list(tmp_path, episodes, "a"), PLUGINS).sha256
     changed = copy.deepcopy(episodes)
     edit(changed)
-    assert load_benchmark(_write_list(tmp_path, changed, "b")).sha256 != base
+    assert load_benchmark(_write_list(tmp_path, changed, "b"), PLUGINS).sha256 != base
 
 
 def test_malformed_json_reports_line_and_column(tmp_path):

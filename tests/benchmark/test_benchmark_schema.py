@@ -11,6 +11,20 @@ from pydantic import ValidationError
 
 from molmo_lerobot.benchmark import molmospaces, schema
 from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import DoorOpeningTaskSpec, NavToObjTaskSpec, parse_episode, task_spec_model
+from molmo_lerobot.plugins import Plugins
+from molmo_lerobot.tasks.open_close import OpenCloseTaskSpec
+from molmo_lerobot.tasks.pick import PickTaskSpec
+from molmo_lerobot.tasks.pick_and_place import (
+    PickAndPlaceColorTaskSpec,
+    PickAndPlaceNextToTaskSpec,
+    PickAndPlaceTaskSpec,
+)
+
+
+@pytest.fixture(scope="module")
+def plugins():
+    return Plugins()
 
 
 @pytest.fixture
@@ -18,12 +32,12 @@ def mixed(data):
     return json.loads((data / "mixed_tasks" / "benchmark.json").read_text())
 
 
-def test_every_molmospaces_task_type_gets_its_typed_spec(mixed):
-    eps = [EpisodeSpec.model_validate(e) for e in mixed]
+def test_every_molmospaces_task_type_gets_its_typed_spec(mixed, plugins):
+    eps = [parse_episode(e, plugins) for e in mixed]
     assert [type(e.task) for e in eps] == [
-        schema.PickTaskSpec, schema.PickAndPlaceTaskSpec, schema.PickAndPlaceNextToTaskSpec,
-        schema.PickAndPlaceColorTaskSpec, schema.OpenCloseTaskSpec, schema.OpenCloseTaskSpec,
-        schema.DoorOpeningTaskSpec, schema.NavToObjTaskSpec,
+        PickTaskSpec, PickAndPlaceTaskSpec, PickAndPlaceNextToTaskSpec,
+        PickAndPlaceColorTaskSpec, OpenCloseTaskSpec, OpenCloseTaskSpec,
+        DoorOpeningTaskSpec, NavToObjTaskSpec,
     ]
     pick, pnp, next_to, color, opening, closing, door, nav = eps
     # schema defaults are MolmoSpaces' eval defaults
@@ -54,30 +68,30 @@ def test_camera_kinds_and_inferred_type(mixed):
         pick.camera("left")
 
 
-def test_extra_fields_survive_and_dump_round_trips(mixed):
+def test_extra_fields_survive_and_dump_round_trips(mixed, plugins):
     raw = copy.deepcopy(mixed[0])
     raw["custom_note"] = {"by": "me"}
     raw["task"]["carry_forward_rel_pos_threshold"] = 0.005
-    ep = EpisodeSpec.model_validate(raw)
+    ep = parse_episode(raw, plugins)
     assert ep.custom_note == {"by": "me"} and ep.task.carry_forward_rel_pos_threshold == 0.005
     dumped = ep.model_dump(mode="json")
-    assert EpisodeSpec.model_validate(json.loads(json.dumps(dumped))) == ep
+    assert parse_episode(json.loads(json.dumps(dumped)), plugins) == ep
     assert dumped["img_resolution"] == [624, 352] and ep.img_resolution == (624, 352)
 
 
-def test_unknown_task_class_parses_generically(mixed):
+def test_unknown_task_class_parses_generically(mixed, plugins):
     raw = copy.deepcopy(mixed[0])
     raw["task"]["task_cls"] = "acme.tasks.StackTask"
     raw["task"].pop("task_type", None)
-    ep = EpisodeSpec.model_validate(raw)
+    ep = parse_episode(raw, plugins)
     assert type(ep.task) is schema.GenericTaskSpec and ep.task.pickup_obj_name.startswith("bowl_")
     raw["task"]["task_type"] = "pick"  # an unknown class that declares a known type is typed by it
-    assert type(EpisodeSpec.model_validate(raw).task) is schema.PickTaskSpec
+    assert type(parse_episode(raw, plugins).task) is PickTaskSpec
 
 
 def _errors(raw):
     with pytest.raises(ValidationError) as info:
-        EpisodeSpec.model_validate(raw)
+        parse_episode(raw, Plugins())
     return {tuple(e["loc"]): e["msg"] for e in info.value.errors()}
 
 
@@ -112,5 +126,7 @@ def test_molmospaces_names():
     assert molmospaces.task_name_for("molmo_spaces.tasks.opening_tasks.OpeningTask", "close") == "close"
     assert molmospaces.task_name_for("molmo_spaces.tasks.opening_tasks.OpeningTask") == "open"
     assert molmospaces.known_task_name("mujoco_thor.tasks.nav_task.NavToObjTask") == "nav_to_obj"
-    assert set(molmospaces.TASK_CLS) == set(schema.TASK_SPECS)
+    typed = {name for name in molmospaces.TASK_CLS
+             if task_spec_model(Plugins(), {"task_cls": name})[1] is not schema.GenericTaskSpec}
+    assert set(molmospaces.TASK_CLS) == typed  # every MolmoSpaces task type has its spec model
     assert "franka_droid" in molmospaces.FRANKA_ROBOT_NAMES

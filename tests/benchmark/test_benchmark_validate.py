@@ -9,6 +9,7 @@ import pytest
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.benchmark.validate import validate_benchmark
 from molmo_lerobot.context import RunContext
+from molmo_lerobot.plugins import Plugins
 
 
 def _load_edited(data, tmp_path, edit):
@@ -17,7 +18,7 @@ def _load_edited(data, tmp_path, edit):
     d = tmp_path / "b"
     d.mkdir()
     (d / "benchmark.json").write_text(json.dumps(episodes))
-    return load_benchmark(d)
+    return load_benchmark(d, Plugins())
 
 
 def _texts(bench, plugins):
@@ -26,7 +27,7 @@ def _texts(bench, plugins):
 
 def test_molmospaces_files_in_both_layouts_validate(data, fake_plugins):
     for layout in ("pick_list", "pick_legacy"):
-        assert validate_benchmark(load_benchmark(data / layout), fake_plugins, RunContext.build()) == []
+        assert validate_benchmark(load_benchmark(data / layout, Plugins()), fake_plugins, RunContext.build()) == []
 
 
 def test_unknown_task_class_suggests_the_close_one(data, tmp_path, fake_plugins):
@@ -38,7 +39,7 @@ def test_unknown_task_class_suggests_the_close_one(data, tmp_path, fake_plugins)
 
 
 def test_mobile_robot_episodes_fail_cleanly(data, fake_plugins):
-    problems = validate_benchmark(load_benchmark(data / "mixed_tasks"), fake_plugins, RunContext.build())
+    problems = validate_benchmark(load_benchmark(data / "mixed_tasks", Plugins()), fake_plugins, RunContext.build())
     robot = [p for p in problems if p.field == "robot.robot_name"]
     assert [(p.episode_index, p.message.split(" (")[0]) for p in robot] == [
         (6, "no robot plugin provides 'rby1'"), (7, "no robot plugin provides 'rby1'")]
@@ -94,10 +95,8 @@ def test_all_episodes_are_checked(data, tmp_path, fake_plugins):
 
 
 def test_installed_plugins_accept_the_molmospaces_pick_files(data):
-    from molmo_lerobot.plugins import Plugins
-
     plugins = Plugins()
     if any(r.status != "ok" for r in plugins.records if r.name in ("pick", "franka", "tabletop")):
         pytest.fail("built-in plugins failed to load: " + "; ".join(f"{r.name}: {r.error}" for r in plugins.broken()))
     for layout in ("pick_list", "pick_legacy"):
-        assert [str(p) for p in validate_benchmark(load_benchmark(data / layout), plugins, RunContext.build())] == []
+        assert [str(p) for p in validate_benchmark(load_benchmark(data / layout, plugins), plugins, RunContext.build())] == []

@@ -45,8 +45,8 @@ def test_every_shipped_v1_benchmark_is_pinned():
 @pytest.mark.parametrize("name", sorted(PINNED))
 def test_v1_trials_are_unchanged(name):
     sha, horizons, thresholds = PINNED[name]
-    bench = load_benchmark(data_path("benchmarks") / name)
     plugins = Plugins()
+    bench = load_benchmark(data_path("benchmarks") / name, plugins)
     resolved, rules = Counter(), {}
     for spec in bench.episodes:
         task_type = plugins.task_type(spec.task_name)

@@ -18,6 +18,7 @@ from molmo_lerobot.cli import bench as bench_cli
 from molmo_lerobot.config import compose
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.molmospaces import layout
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.evaluate import RunError, run_evaluation
 
 
@@ -57,7 +58,7 @@ def test_scene_loads_with_its_physics_metadata_and_modifications(assets, tmp_pat
     root, houses = assets
     from molmo_lerobot.runner.episode_env import build_env
     from molmo_lerobot.sim.env import PHYSICS_OPTIONS, Timing
-    from molmo_lerobot.benchmark.schema import EpisodeSpec
+    from molmo_lerobot.benchmark.task_specs import parse_episode
 
     house = houses[0]  # iTHOR FloorPlan15
     ep = pick_episode(house)
@@ -67,9 +68,9 @@ def test_scene_loads_with_its_physics_metadata_and_modifications(assets, tmp_pat
     ep["scene_modifications"]["removed_objects"] = ["not_in_this_scene", "Mug_1_15_0_0"]
     del ep["scene_modifications"]["object_poses"]["Mug_1_15_0_0"]
     ep["task"]["pickup_obj_name"] = "place_receptacle/0/Bowl_27"
-    spec = EpisodeSpec.model_validate(ep)
     run = RunContext.build()
     plugins = run.plugins
+    spec = parse_episode(ep, plugins)
     env = build_env(spec, Timing(), run)
     m = env.model
     names = {m.body(i).name for i in range(m.nbody)}
@@ -83,7 +84,7 @@ def test_scene_loads_with_its_physics_metadata_and_modifications(assets, tmp_pat
     write_user_library(tmp_path)
     run = RunContext.build({"scene_xml_paths": [str(tmp_path / "scene.xml")],
                             "molmospaces": {"physics_options": {"integrator": "rk4", "cone": "pyramidal"}}})
-    env = build_env(EpisodeSpec.model_validate(user_pick_episode()), Timing(), run)
+    env = build_env(parse_episode(user_pick_episode(), run.plugins), Timing(), run)
     assert env.model.opt.timestep == 0.002 and env.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
     assert env.model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL and PHYSICS_OPTIONS["cone"] != env.model.opt.cone
 
@@ -298,7 +299,7 @@ def test_every_task_type_in_both_layouts_is_valid(assets, tmp_path, capsys):
         out = capsys.readouterr()
         assert f"episodes   {len(episodes)} over 1 houses" in out.out
         assert "problem" not in out.err
-    assert len(load_benchmark(legacy).episodes) == len(episodes)
+    assert len(load_benchmark(legacy, Plugins()).episodes) == len(episodes)
 
 
 def test_install_uid_fetches_objaverse_objects_and_grasps_through_the_resource_manager(tmp_path):
@@ -374,8 +375,9 @@ def test_scenes_installed_on_demand_are_fetched_per_house_before_the_run(assets,
     xml = fresh / "scenes" / "procthor-10k-val" / "val_3_ceiling.xml"
     assert not xml.exists()
     cfg = {"molmospaces": {"assets_dir": str(fresh), "cache_dir": str(cache), "remote": str(remote)}}
-    bench = load_benchmark(_write_bench(tmp_path / "b", [pick_episode(house)]))
-    assert preflight(bench, RunContext.build(cfg), [0]) is None
+    run = RunContext.build(cfg)
+    bench = load_benchmark(_write_bench(tmp_path / "b", [pick_episode(house)]), run.plugins)
+    assert preflight(bench, run, [0]) is None
     assert xml.is_file() and (fresh / "scenes" / "procthor-10k-val" / "val_3_metadata.json").is_file()
     assert not (fresh / "scenes" / "procthor-10k-val" / "val_7_ceiling.xml").exists()  # only the house asked for
     res = _run(tmp_path, tmp_path / "b", f"molmospaces.assets_dir={fresh}")

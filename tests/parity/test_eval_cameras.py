@@ -17,11 +17,12 @@ import mujoco
 import numpy as np
 import pytest
 
-from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.cameras import droid
 from molmo_lerobot.cameras.franka_eval import episode_camera_seed, exo_ranges, workspace_centre, wrist_noise
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.context import RunContext
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim import env as sim_env
 from molmo_lerobot.sim.env import Timing
@@ -92,7 +93,8 @@ def _build(raw: dict, camera: dict | None, monkeypatch, oracle: dict | None = No
     seen = _Visibility(oracle or {**ORACLES[0], "centre": [0.0, 0.0, 0.0]})  # sees everything
     monkeypatch.setattr(sim_env.Env, "visible_fractions", lambda env, cam, bodies: seen(env, cam, bodies))
     try:
-        env = build_env(EpisodeSpec.model_validate(raw), Timing(), RunContext.build(), camera)
+        run = RunContext.build()
+        env = build_env(parse_episode(raw, run.plugins), Timing(), run, camera)
     except ValueError as exc:
         return None, seen.checks, str(exc)
     env.reset(0)
@@ -121,7 +123,8 @@ def scenes():
     """Each episode's reset scene (the fixed system: cameras do not move the robot or objects)."""
     out = []
     for raw in _episodes():
-        env = build_env(EpisodeSpec.model_validate(raw), Timing(), RunContext.build(), None)
+        run = RunContext.build()
+        env = build_env(parse_episode(raw, run.plugins), Timing(), run, None)
         env.reset(0)
         out.append((raw, _scene(env), env))
     yield out
@@ -147,8 +150,9 @@ def test_eval_ranges_at_every_level_equal_theirs(theirs):
 def test_eval_system_places_the_cameras_theirs_does(theirs, scenes, monkeypatch):
     DEVIATION.update(dict.fromkeys(DEVIATION, 0.0))
     cases, ours = [], []
+    plugins = Plugins()
     for i, (raw, scene, _) in enumerate(scenes):
-        spec = EpisodeSpec.model_validate(raw)
+        spec = parse_episode(raw, plugins)
         for level in LEVELS:
             oracle = ORACLES[(i + level) % len(ORACLES)]
             centre = workspace_centre(spec, scene["tcp"]).tolist()

@@ -27,6 +27,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.robots.base import RobotType
 from molmo_lerobot.sim.env import Env, Timing
@@ -541,13 +542,13 @@ FAMILIES = {
 # Both sides --------------------------------------------------------------------------------------
 
 
-def episode_spec(task: dict) -> EpisodeSpec:
+def episode_spec(task: dict, plugins: Plugins) -> EpisodeSpec:
     fields = {k: v for k, v in task.items() if v is not None}
-    return EpisodeSpec.model_validate({
+    return parse_episode({
         "house_index": 0, "scene_dataset": "parity_scene", "seed": 0, "img_resolution": [64, 64],
         "language": {"task_description": "parity"},
         "robot": {"robot_name": "parity_gripper", "init_qpos": {}},
-        "task": {"task_cls": TASK_CLS[task["task_type"]], "robot_base_pose": [0, 0, 0, 1, 0, 0, 0], **fields}})
+        "task": {"task_cls": TASK_CLS[task["task_type"]], "robot_base_pose": [0, 0, 0, 1, 0, 0, 0], **fields}}, plugins)
 
 
 def opening_task(mode: str, obj: str, joint: str, **fields) -> dict:
@@ -565,7 +566,7 @@ def ours(cases: list) -> tuple[list[bool], list[np.ndarray]]:
     plugins = Plugins()
     verdicts, contacts = [], []
     for c in cases:
-        spec = episode_spec(c["task"])
+        spec = episode_spec(c["task"], plugins)
         env = Env(spec, Timing(), copy.copy(MODEL), GRIPPER, [])
         env._scene_metadata = METADATA  # what our scene datasets give an episode
         task = plugins.task_type(spec.task_name).create(spec, env)
@@ -683,7 +684,7 @@ def test_colours_are_painted_as_molmospaces_paints_them(theirs):
     agreed = 0
     for colors, rgba, matid in zip(colorings, got["rgba"], got["matid"], strict=True):
         task = place_task("pick_and_place_color", "apple", "tray", rng, object_colors=colors)
-        spec = episode_spec(task)
+        spec = episode_spec(task, plugins)
         env = Env(spec, Timing(), copy.copy(MODEL), GRIPPER, [])
         plugins.task_type(spec.task_name).create(spec, env)
         agreed += bool(np.array_equal(env.model.geom_rgba, rgba) and np.array_equal(env.model.geom_matid, matid))

@@ -26,10 +26,11 @@ CHUNK = 4
 
 
 def episode(resolution=None):
-    spec = load_benchmark(data_path("benchmarks") / "pick_v1").episodes[0]
+    run = RunContext.build()
+    spec = load_benchmark(data_path("benchmarks") / "pick_v1", run.plugins).episodes[0]
     if resolution is not None:
         spec = spec.model_copy(update={"img_resolution": resolution})
-    env = build_env(spec, Timing(), RunContext.build())
+    env = build_env(spec, Timing(), run)
     env.reset(0)
     return spec, env
 

@@ -40,7 +40,7 @@ def _render_episode() -> dict[str, np.ndarray]:
     """Both cameras at every policy step of pick_v1 episode 0, driven by the scripted expert."""
     run = RunContext.build()
     plugins = run.plugins
-    spec = load_benchmark(data_path("benchmarks") / "pick_v1").episodes[0]
+    spec = load_benchmark(data_path("benchmarks") / "pick_v1", plugins).episodes[0]
     timing = Timing()
     task_type = plugins.task_type(spec.task_name)
     horizon = resolve_horizon(None, spec.task, task_type.default_horizon_sec, timing.policy_dt_ms)

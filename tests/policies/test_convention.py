@@ -12,7 +12,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.policies.base import EpisodeContext, Policy
@@ -31,7 +31,8 @@ def episode_env(robot: str, gripper: list[float]):
                                                        "gripper": gripper}}
     raw["task"]["robot_base_pose"] = [0.3, -0.2, 0.1, 0.9238795, 0.0, 0.0, 0.3826834]  # 45 deg about z
     raw["cameras"] = [c for c in raw["cameras"] if c["type"] == "exocentric"]  # the wrist mount differs per robot
-    env = build_env(EpisodeSpec.model_validate(raw), Timing(), RunContext.build(), None)
+    run = RunContext.build()
+    env = build_env(parse_episode(raw, run.plugins), Timing(), run, None)
     env.reset(0)
     return env
 

@@ -10,7 +10,7 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
-from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
+from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
 from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.plugins import Plugins  # noqa: E402
 from molmo_lerobot.policies.base import EpisodeContext  # noqa: E402
@@ -29,7 +29,7 @@ def episodes():
 def _run(raw, policy_name, horizon=HORIZON, config=None):
     run = RunContext.build()
     plugins = run.plugins
-    spec = EpisodeSpec.model_validate(raw)
+    spec = parse_episode(raw, plugins)
     timing = Timing()
     policy = plugins.policy(policy_name).factory({"name": policy_name, **(config or {})})
     env = build_env(spec, timing, run)
@@ -53,7 +53,7 @@ def test_scripted_picks_two_episodes(episodes):
 def test_scripted_returns_chunks_without_images(episodes):
     run = RunContext.build()
     plugins = run.plugins
-    spec = EpisodeSpec.model_validate(episodes[0])
+    spec = parse_episode(episodes[0], plugins)
     policy = plugins.policy("scripted").factory({"name": "scripted", "chunk": 5})
     assert policy.needs_images is False
     env = build_env(spec, Timing(), run)
@@ -69,8 +69,9 @@ def test_scripted_returns_chunks_without_images(episodes):
 
 
 def test_scripted_needs_privileged_env(episodes):
-    spec = EpisodeSpec.model_validate(episodes[0])
-    policy = Plugins().policy("scripted").factory({})
+    plugins = Plugins()
+    spec = parse_episode(episodes[0], plugins)
+    policy = plugins.policy("scripted").factory({})
     with pytest.raises(ValueError, match="privileged"):
         policy.reset(EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups={"arm": 7, "gripper": 1},
                                     policy_dt_s=0.066))
@@ -118,7 +119,7 @@ class _SuccessAt:
 
 def _loop(episodes, policy, task, horizon=12, **kw):
     run = RunContext.build()
-    spec = EpisodeSpec.model_validate(episodes[0])
+    spec = parse_episode(episodes[0], run.plugins)
     env = build_env(spec, Timing(), run)
     try:
         env.reset(0)
@@ -130,7 +131,7 @@ def _loop(episodes, policy, task, horizon=12, **kw):
 
 
 def test_left_out_move_group_holds_its_target(episodes):
-    start = EpisodeSpec.model_validate(episodes[0]).robot.init_qpos["arm"]
+    start = parse_episode(episodes[0], Plugins()).robot.init_qpos["arm"]
     out, arm, _ = _loop(episodes, _Scripted([{"gripper": np.ones((4, 1))}]), _SuccessAt([]), horizon=8)
     assert out.steps == 8 and np.allclose(arm, start)
 

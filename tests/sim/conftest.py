@@ -24,7 +24,7 @@ def pick_episodes():
 
 
 @pytest.fixture
-def pick_spec(pick_episodes):
-    from molmo_lerobot.benchmark.schema import EpisodeSpec
+def pick_spec(pick_episodes, run):
+    from molmo_lerobot.benchmark.task_specs import parse_episode
 
-    return EpisodeSpec.model_validate(pick_episodes[0])
+    return parse_episode(pick_episodes[0], run.plugins)

@@ -14,7 +14,7 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
+from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
 from molmo_lerobot.cameras.base import choose_camera_system  # noqa: E402
 from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.paths import data_path  # noqa: E402
@@ -31,7 +31,8 @@ def _pick(k: int = 0) -> dict:
 
 
 def _env(raw: dict, system: str | None = None):
-    env = build_env(EpisodeSpec.model_validate(raw), Timing(), RunContext.build(), {"system": system})
+    run = RunContext.build()
+    env = build_env(parse_episode(raw, run.plugins), Timing(), run, {"system": system})
     env.reset(0)
     return env
 
@@ -42,13 +43,14 @@ def _cam_pose(env, name: str) -> np.ndarray:
 
 
 def test_choice_order():
-    spec = EpisodeSpec.model_validate(droid_episode(_pick()))
+    plugins = Plugins()
+    spec = parse_episode(droid_episode(_pick()), plugins)
     assert choose_camera_system(spec, None, "FrankaDroidCameraSystem") == "FrankaDroidCameraSystem"
-    with_source = EpisodeSpec.model_validate({**droid_episode(_pick()), "source": {
-        "h5_file": "x", "traj_key": "t", "camera_system_class": "FrankaRandomizedDroidCameraSystem"}})
+    with_source = parse_episode({**droid_episode(_pick()), "source": {
+        "h5_file": "x", "traj_key": "t", "camera_system_class": "FrankaRandomizedDroidCameraSystem"}}, plugins)
     assert choose_camera_system(with_source, None, "FrankaDroidCameraSystem") == "FrankaRandomizedDroidCameraSystem"
     assert choose_camera_system(with_source, "droid", "FrankaDroidCameraSystem") == "droid"
-    own = EpisodeSpec.model_validate(_pick())
+    own = parse_episode(_pick(), plugins)
     assert choose_camera_system(own, "droid", None) == "standard"  # the episode's cameras come first
 
 

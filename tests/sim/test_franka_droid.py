@@ -15,7 +15,7 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
+from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
 from molmo_lerobot.config import compose  # noqa: E402
 from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.paths import data_path  # noqa: E402
@@ -50,8 +50,9 @@ def ms_pick_episode(k: int = 0) -> dict:
 
 
 def _env(raw: dict, camera_system: str | None = None, run: RunContext | None = None):
-    spec = EpisodeSpec.model_validate(raw)
-    env = build_env(spec, Timing(), run or RunContext.build(), {"system": camera_system})
+    run = run or RunContext.build()
+    spec = parse_episode(raw, run.plugins)
+    env = build_env(spec, Timing(), run, {"system": camera_system})
     env.reset(0)
     return env
 
@@ -216,7 +217,8 @@ def test_molmospaces_grasp_file_transfers(tmp_path):
     run = RunContext.build()
     run.catalog.register_user_grasp_library("tutorial", lib, "builtin")
     from molmo_lerobot.policies.base import EpisodeContext
-    from molmo_lerobot.policies.scripted import ScriptedPick, object_grasps
+    from molmo_lerobot.policies.expert_motion import object_grasps
+    from molmo_lerobot.policies.scripted_pick import ScriptedPick
     from molmo_lerobot.runner.rollout import rollout
     env = _env(raw, run=run)
     try:

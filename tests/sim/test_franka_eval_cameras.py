@@ -16,7 +16,7 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
+from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
 from molmo_lerobot.cameras.franka_eval import (  # noqa: E402
     FrankaEvalCameraSystem,
     episode_camera_seed,
@@ -40,7 +40,8 @@ def _pick(k: int = 0) -> dict:
 
 
 def _env(raw: dict, camera: dict):
-    env = build_env(EpisodeSpec.model_validate(raw), Timing(), RunContext.build(), camera)
+    run = RunContext.build()
+    env = build_env(parse_episode(raw, run.plugins), Timing(), run, camera)
     env.reset(0)
     return env
 
@@ -73,8 +74,8 @@ def test_ranges_per_level():
 def test_eval_cameras_replace_recorded_cameras_and_take_the_level():
     plugins = Plugins()
     raw = _pick(0)
-    recorded = EpisodeSpec.model_validate({**raw, "cameras": json.loads(
-        (data_path("benchmarks") / "pick_v1" / "benchmark.json").read_text())[0]["cameras"]})
+    recorded = parse_episode({**raw, "cameras": json.loads(
+        (data_path("benchmarks") / "pick_v1" / "benchmark.json").read_text())[0]["cameras"]}, plugins)
     assert recorded.cameras
     assert episode_camera_system(recorded, {"system": "droid"}, plugins.camera_system).name == "standard"
     for options in ({"eval": True, "rand_level": 50}, {"system": "FrankaEvalCameraSystem", "rand_level": 50},
@@ -122,11 +123,12 @@ def test_same_episode_same_cameras_in_any_order_and_the_seed_is_theirs():
     finally:
         for env in (first, other, again):
             env.close()
-    spec = EpisodeSpec.model_validate(a)
+    plugins = Plugins()
+    spec = parse_episode(a, plugins)
     # MolmoSpaces' derive_episode_camera_seed: sha256("scene|split|house[|h5|traj][|seed]")[:8 hex digits]
     assert episode_camera_seed(spec) == int(__import__("hashlib").sha256(
         f"procedural_tabletop|val|{a['house_index']}|{a['seed']}".encode()).hexdigest()[:8], 16)
-    moved = EpisodeSpec.model_validate({**a, "language": {"task_description": "something else"}})
+    moved = parse_episode({**a, "language": {"task_description": "something else"}}, plugins)
     assert episode_camera_seed(moved) == episode_camera_seed(spec)  # identity only, as theirs
 
 
@@ -201,7 +203,7 @@ def test_a_run_with_eval_cameras(tmp_path):
 
 def test_eval_cameras_render_at_their_resolution():
     """Their eval system renders 640 x 368 whatever the episode says (the camera.eval override)."""
-    spec = EpisodeSpec.model_validate(_pick(0))
+    spec = parse_episode(_pick(0), Plugins())
     assert list(spec.img_resolution) == [224, 224]
     for camera in ({"eval": True, "rand_level": 30}, {"system": "FrankaEvalCameraSystem"}):
         run = RunContext.build({"camera": camera})

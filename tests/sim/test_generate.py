@@ -9,8 +9,10 @@ import pytest
 
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
 from molmo_lerobot.benchmark.generate import generate_benchmark, write_benchmark
-from molmo_lerobot.benchmark.schema import BenchmarkMetadata, EpisodeSpec
+from molmo_lerobot.benchmark.schema import BenchmarkMetadata
+from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.paths import data_path
+from molmo_lerobot.plugins import Plugins
 
 
 def test_generation_is_deterministic_and_valid():
@@ -20,8 +22,9 @@ def test_generation_is_deterministic_and_valid():
     assert a != generate_benchmark("pick", 3, 2, 8, "x")
     episodes, meta = a
     BenchmarkMetadata.model_validate(meta)
+    plugins = Plugins()
     for e in episodes:
-        spec = EpisodeSpec.model_validate(e)
+        spec = parse_episode(e, plugins)
         target = spec.task.pickup_obj_name
         assert target in spec.scene_modifications.object_poses and spec.task_relevant_objects == [target]
         obj = BUILTIN_OBJECTS[target]

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.plugins import Plugins
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "molmospaces"
@@ -21,7 +22,7 @@ def ithor_pick(**robot) -> EpisodeSpec:
     raw = next(e for e in json.loads((DATA / "mixed_tasks" / "benchmark.json").read_text())
                if e["task"]["task_cls"].endswith("PickTask"))
     raw["robot"].update(robot)
-    return EpisodeSpec.model_validate(raw)
+    return parse_episode(raw, Plugins())
 
 
 def placed(spec: EpisodeSpec):

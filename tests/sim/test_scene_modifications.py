@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
-from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim.env import Timing
 
@@ -27,7 +27,7 @@ def test_add_remove_and_place(pick_episodes, run, tmp_path):
         {"name_suffix": "_box", "geom_type": "box", "size": [0.03, 0.03, 0.03], "rgba": [0.5, 0.3, 0.1, 1]}]}}
     mods["object_poses"]["extra_mug"] = [0.5, 0.3, 1.2, 1, 0, 0, 0]
     mods["object_poses"]["crate"] = [0.3, -0.3, 1.3, 1, 0, 0, 0]
-    env = build_env(EpisodeSpec.model_validate(raw), Timing(), run)
+    env = build_env(parse_episode(raw, run.plugins), Timing(), run)
     try:
         env.reset(0)
         with pytest.raises(ValueError, match=f"no body '{removed}'"):
@@ -42,10 +42,10 @@ def test_bad_modifications_are_named(pick_episodes, run, tmp_path):
     raw = copy.deepcopy(pick_episodes[0])
     raw["scene_modifications"]["removed_objects"] = ["nothing_here"]
     with pytest.raises(ValueError, match=r"removed_objects: no body 'nothing_here'"):
-        build_env(EpisodeSpec.model_validate(raw), Timing(), run)
+        build_env(parse_episode(raw, run.plugins), Timing(), run)
     raw = copy.deepcopy(pick_episodes[0])
     bad = tmp_path / "bad.xml"
     bad.write_text("<mujoco><worldbody><body name='x'>")
     raw["scene_modifications"]["added_objects"] = {"junk": str(bad)}
     with pytest.raises(ValueError, match=r"added_objects\['junk'\]: cannot parse MJCF"):
-        build_env(EpisodeSpec.model_validate(raw), Timing(), run)
+        build_env(parse_episode(raw, run.plugins), Timing(), run)

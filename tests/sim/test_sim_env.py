@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim.env import Timing
 
@@ -54,7 +54,7 @@ def test_houses_differ_and_rebuild_identically(run):
 
 def test_cameras_follow_specs(pick_episodes, run):
     raw = dict(pick_episodes[0], img_resolution=[64, 48])
-    spec = EpisodeSpec.model_validate(raw)
+    spec = parse_episode(raw, run.plugins)
     env = build_env(spec, Timing(), run)
     try:
         env.reset(0)
@@ -79,7 +79,7 @@ def test_robot_camera_with_unknown_body_is_rejected(pick_episodes, run):
     raw = dict(pick_episodes[0])
     raw["cameras"] = [dict(raw["cameras"][1], reference_body_names=["no_such_body"])]
     with pytest.raises(ValueError, match=r"cameras\[0\] \(wrist\): none of the reference bodies"):
-        build_env(EpisodeSpec.model_validate(raw), Timing(), run)
+        build_env(parse_episode(raw, run.plugins), Timing(), run)
 
 
 @pytest.mark.parametrize(("action", "message"), [
@@ -111,7 +111,7 @@ def test_bad_episode_fields_are_named(pick_episodes, run, edit, message):
 
     raw = copy.deepcopy(pick_episodes[0])
     edit(raw)
-    env = build_env(EpisodeSpec.model_validate(raw), Timing(), run)
+    env = build_env(parse_episode(raw, run.plugins), Timing(), run)
     try:
         with pytest.raises(ValueError, match=message):
             env.reset(0)

@@ -18,7 +18,7 @@ import json
 import sys
 from pathlib import Path
 
-from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.policies.base import EpisodeContext
@@ -74,7 +74,7 @@ def main(old_dir: str, bench: str, limit: int | None = None) -> dict:
     timing = Timing()
     rows = []
     for i, raw in enumerate(episodes):
-        spec = EpisodeSpec.model_validate(raw)
+        spec = parse_episode(raw, plugins)
         tt = plugins.task_type(spec.task_name)
         env = build_env(spec, timing, run)
         seed = episode_seed(0, raw)  # molmo-eval's seed for this episode with seed=0

@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES
-from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim.env import Timing
@@ -19,7 +19,7 @@ def make_task_env(raw: dict):
     """The reset environment of episode ``raw`` and its task, set up."""
     run = RunContext.build()
     plugins = run.plugins
-    spec = EpisodeSpec.model_validate(raw)
+    spec = parse_episode(raw, plugins)
     env = build_env(spec, Timing(), run)
     env.reset(0)
     task = plugins.task_type(spec.task_name).create(spec, env)

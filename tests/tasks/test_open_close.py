@@ -10,7 +10,7 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.generate_articulated import generate_benchmark  # noqa: E402
-from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
+from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
 from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.plugins import Plugins  # noqa: E402
 from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
@@ -34,7 +34,7 @@ def close_episodes():
 
 def _setup(plugins, raw: dict, **task_update):
     raw = {**raw, "task": {**raw["task"], **task_update}}
-    spec = EpisodeSpec.model_validate(raw)
+    spec = parse_episode(raw, plugins)
     env = build_env(spec, Timing(), RunContext.build())
     env.reset(0)
     task = plugins.task_type(spec.task_name).create(spec, env)
@@ -51,8 +51,8 @@ def _set_fraction(env, joint_name: str, fraction: float) -> None:
 
 
 def test_open_and_close_resolve_from_molmospaces_opening_task(plugins, open_episodes, close_episodes):
-    o = EpisodeSpec.model_validate(open_episodes[0])
-    c = EpisodeSpec.model_validate(close_episodes[0])
+    o = parse_episode(open_episodes[0], plugins)
+    c = parse_episode(close_episodes[0], plugins)
     assert o.task.task_cls == c.task.task_cls == "molmo_spaces.tasks.opening_tasks.OpeningTask"
     assert plugins.task_type(o.task_name).name == "open" and plugins.task_type(c.task_name).name == "close"
     assert plugins.task_type("close").thresholds(c) == {"task_success_threshold": 0.2}

@@ -10,7 +10,7 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.generate_articulated import generate_benchmark  # noqa: E402
-from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
+from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
 from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.policies.base import EpisodeContext  # noqa: E402
 from molmo_lerobot.policies.scripted import ScriptedExpert  # noqa: E402
@@ -23,7 +23,7 @@ def _run(raw: dict, policy, control: str | None = None) -> tuple[bool, float]:
     run = RunContext.build()
     plugins = run.plugins
     timing = Timing() if control is None else Timing(control=control)
-    spec = EpisodeSpec.model_validate(raw)
+    spec = parse_episode(raw, plugins)
     task_type = plugins.task_type(spec.task_name)
     env = build_env(spec, timing, run)
     try:
@@ -76,7 +76,7 @@ def test_expert_on_every_object_kind(task):
 def test_moves_in_contact_keep_each_step_within_what_the_arm_follows():
     """A path in contact (``gentle``) is one move through its via-points, no joint target changing
     by more than CONTACT_STEP a step; a free move may take larger steps."""
-    from molmo_lerobot.policies.scripted import CONTACT_STEP
+    from molmo_lerobot.policies.expert_motion import CONTACT_STEP
     from molmo_lerobot.policies.scripted_articulated import ScriptedArticulated
 
     def queued(gentle: bool) -> np.ndarray:

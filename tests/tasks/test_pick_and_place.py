@@ -15,7 +15,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES  # noqa: E402
 from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
-from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
+from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
 from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.plugins import Plugins  # noqa: E402
 from molmo_lerobot.robots.franka import FINGER_TRAVEL  # noqa: E402
@@ -197,12 +197,12 @@ def test_thresholds_defaults_and_overrides():
                   "max_place_receptacle_rot_displacement", "min_surface_to_surface_gap"):
         del stripped["task"][field]
     stripped["task"]["max_surface_to_surface_gap"] = None  # null means the default
-    assert tt.thresholds(EpisodeSpec.model_validate(stripped)) == {
+    assert tt.thresholds(parse_episode(stripped, plugins)) == {
         "receptacle_supported_weight_frac": 0.5, "max_place_receptacle_pos_displacement": 0.15,
         "max_place_receptacle_rot_displacement": pytest.approx(math.radians(60)),
         "min_surface_to_surface_gap": 0.0, "max_surface_to_surface_gap": 0.05, "surface_gap_tolerance": 0.01}
     raw["task"]["receptacle_supported_weight_frac"] = 0.8
-    assert tt.thresholds(EpisodeSpec.model_validate(raw))["receptacle_supported_weight_frac"] == 0.8
+    assert tt.thresholds(parse_episode(raw, plugins))["receptacle_supported_weight_frac"] == 0.8
     for name in ("pick_and_place", "pick_and_place_color"):
         assert plugins.task_type(name).default_horizon_sec == 40.0
 
@@ -217,8 +217,9 @@ def test_color_task_paints_and_needs_the_named_receptacle():
         for name, rgba in colors.items():
             geoms = geometry.body_geoms(m, env.subtree_bodies(name))  # the visible ones
             assert geoms and all(np.allclose(m.geom_rgba[g], rgba) and m.geom_matid[g] == -1 for g in geoms)
-        spec = EpisodeSpec.model_validate(raw)
-        fresh = build_env(spec, Timing(), RunContext.build())  # same cached model: the paint must not leak
+        run = RunContext.build()
+        spec = parse_episode(raw, run.plugins)
+        fresh = build_env(spec, Timing(), run)  # same cached model: the paint must not leak
         g0 = geometry.body_geoms(m, env.subtree_bodies(task.receptacle_name))[0]
         assert not np.allclose(fresh.model.geom_rgba[g0], colors[task.receptacle_name])
         fresh.close()
@@ -234,8 +235,9 @@ def test_color_task_paints_and_needs_the_named_receptacle():
 def test_bad_receptacle_is_named():
     raw = _episode("pick_and_place")
     raw["task"]["place_receptacle_name"] = "unicorn"
-    spec = EpisodeSpec.model_validate(raw)
-    env = build_env(spec, Timing(), RunContext.build())
+    run = RunContext.build()
+    spec = parse_episode(raw, run.plugins)
+    env = build_env(spec, Timing(), run)
     try:
         env.reset(0)
         with pytest.raises(ValueError, match="task.place_receptacle_name: no body 'unicorn'"):

@@ -10,8 +10,9 @@ import pytest
 
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES, PAINT_COLORS
 from molmo_lerobot.benchmark.generate import NEXT_TO_START_GAP, _receptacle_footprint, _resting, generate_benchmark
-from molmo_lerobot.benchmark.schema import EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.paths import data_path
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.sim.tabletop import ProceduralTabletop, ProceduralTabletopReceptacles
 
 SHIPPED = {"pick_and_place_v1": "pick_and_place", "next_to_v1": "pick_and_place_next_to",
@@ -55,8 +56,9 @@ def test_houses_hold_receptacles_outside_the_workspace():
 def test_generation_is_deterministic_and_valid(task):
     a = generate_benchmark(task, 2, 3, 4, "x")
     assert json.dumps(a) == json.dumps(generate_benchmark(task, 2, 3, 4, "x"))
+    plugins = Plugins()
     for raw in a[0]:
-        spec = EpisodeSpec.model_validate(raw)
+        spec = parse_episode(raw, plugins)
         t = spec.task
         poses = spec.scene_modifications.object_poses
         assert t.pickup_obj_name in poses and t.place_receptacle_name in poses

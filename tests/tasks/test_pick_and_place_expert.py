@@ -9,7 +9,7 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
-from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
+from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
 from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.plugins import Plugins  # noqa: E402
 from molmo_lerobot.policies.base import EpisodeContext  # noqa: E402
@@ -24,7 +24,7 @@ HORIZON = 220  # the script takes about 150 policy steps; the rest checks that t
 def _run(raw: dict, policy_name: str, horizon: int = HORIZON):
     run = RunContext.build()
     plugins = run.plugins
-    spec = EpisodeSpec.model_validate(raw)
+    spec = parse_episode(raw, plugins)
     timing = Timing()
     policy = plugins.policy(policy_name).factory({"name": policy_name})
     env = build_env(spec, timing, run)

@@ -13,7 +13,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS  # noqa: E402
 from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
-from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
+from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
 from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.robots.franka import FINGER_TRAVEL  # noqa: E402
 from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
@@ -29,7 +29,7 @@ def raw_episode():
 def setup(raw_episode):
     run = RunContext.build()
     plugins = run.plugins
-    spec = EpisodeSpec.model_validate(raw_episode)
+    spec = parse_episode(raw_episode, plugins)
     env = build_env(spec, Timing(), run)
     env.reset(0)
     task = plugins.task_type(spec.task.task_cls).create(spec, env)
@@ -109,9 +109,9 @@ def test_thresholds_and_horizon(raw_episode):
     assert plugins.task_type("molmo_lerobot.tasks.pick.PickTask") is tt
     assert tt.default_horizon_sec == 20.0
     raw = copy.deepcopy(raw_episode)
-    assert tt.thresholds(EpisodeSpec.model_validate(raw)) == {"succ_pos_threshold": 0.01}
+    assert tt.thresholds(parse_episode(raw, plugins)) == {"succ_pos_threshold": 0.01}
     raw["task"]["succ_pos_threshold"] = 0.05
-    assert tt.thresholds(EpisodeSpec.model_validate(raw)) == {"succ_pos_threshold": 0.05}
+    assert tt.thresholds(parse_episode(raw, plugins)) == {"succ_pos_threshold": 0.05}
 
 
 def test_unknown_pick_object_is_named(raw_episode):
@@ -119,7 +119,7 @@ def test_unknown_pick_object_is_named(raw_episode):
     plugins = run.plugins
     raw = copy.deepcopy(raw_episode)
     raw["task"]["pickup_obj_name"] = "unicorn"
-    spec = EpisodeSpec.model_validate(raw)
+    spec = parse_episode(raw, plugins)
     env = build_env(spec, Timing(), run)
     try:
         env.reset(0)

@@ -14,7 +14,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
 from molmo_lerobot.benchmark.generate_articulated import generate_benchmark as generate_articulated  # noqa: E402
-from molmo_lerobot.benchmark.schema import EpisodeSpec  # noqa: E402
+from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
 from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.plugins import Plugins  # noqa: E402
 from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
@@ -226,8 +226,9 @@ def test_any_inst_of_category_counts_every_articulated_object_of_the_category(ar
     assert twin, "no generated house has two articulated objects"
     for flag, ok in ((False, False), (True, True)):
         raw2 = {**raw, "task": {**raw["task"], "any_inst_of_category": flag}}
-        spec = EpisodeSpec.model_validate(raw2)
-        env = build_env(spec, Timing(), RunContext.build())
+        run = RunContext.build()
+        spec = parse_episode(raw2, run.plugins)
+        env = build_env(spec, Timing(), run)
         env.reset(0)
         meta = env.scene_metadata
         meta["objects"][twin] = {**meta["objects"].get(twin, {}), "category": meta["objects"][name]["category"]}
@@ -244,8 +245,9 @@ def test_any_inst_of_category_counts_every_articulated_object_of_the_category(ar
 def test_any_inst_of_category_needs_a_category(articulated):
     raw = articulated["open"][0]
     raw = {**raw, "task": {**raw["task"], "any_inst_of_category": True}}
-    spec = EpisodeSpec.model_validate(raw)
-    env = build_env(spec, Timing(), RunContext.build())
+    run = RunContext.build()
+    spec = parse_episode(raw, run.plugins)
+    env = build_env(spec, Timing(), run)
     env.reset(0)
     env.scene_metadata["objects"].get(raw["task"]["pickup_obj_name"], {}).pop("category", None)
     try:

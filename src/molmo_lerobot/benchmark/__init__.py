@@ -1,6 +1,7 @@
 """Benchmarks: MolmoSpaces-compatible episode schema, loading with a content hash, validation, generation.
 
-``load_benchmark(path)`` reads a benchmark directory or file into a :class:`Benchmark`;
+``load_benchmark(path, plugins)`` reads a benchmark directory or file into a :class:`Benchmark`
+(each task validated with its plugin's spec model, see :mod:`.task_specs`);
 ``validate_benchmark(bench, plugins, scenes)`` (in :mod:`.validate`) checks it against the
 installed plugins and the run's scene data.
 """

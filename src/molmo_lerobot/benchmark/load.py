@@ -25,11 +25,15 @@ import re
 import stat
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel, ValidationError
 
-from molmo_lerobot.benchmark.schema import UNION_TAGS, BenchmarkMetadata, EpisodeSpec
+from molmo_lerobot.benchmark.schema import BenchmarkMetadata, EpisodeSpec
+from molmo_lerobot.benchmark.task_specs import parse_episode
+
+if TYPE_CHECKING:
+    from molmo_lerobot.plugins import Plugins
 
 BENCHMARK_FILE = "benchmark.json"
 METADATA_FILE = "benchmark_metadata.json"
@@ -38,6 +42,8 @@ _EPISODE_FILE = re.compile(r"episode_-?\d+\.json")
 _UNREADABLE = object()  # stands for a file already reported as unreadable
 #: Deepest JSON nesting accepted (MolmoSpaces episodes nest about 6 levels).
 MAX_JSON_DEPTH = 64
+#: Tags the camera union inserts into error locations.
+_CAMERA_TAGS = frozenset({"robot_mounted", "exocentric"})
 
 
 @dataclass(frozen=True)
@@ -118,8 +124,12 @@ def benchmark_sha256(episodes: list[EpisodeSpec]) -> str:
 # Loading -----------------------------------------------------------------------------------
 
 
-def load_benchmark(path: str | Path) -> Benchmark:
-    """Load and schema-validate a benchmark directory or JSON file; raise :class:`BenchmarkError`."""
+def load_benchmark(path: str | Path, plugins: Plugins) -> Benchmark:
+    """Load and schema-validate a benchmark directory or JSON file; raise :class:`BenchmarkError`.
+
+    Each task is validated with the spec model of the plugin that owns it (see
+    :mod:`.task_specs`).
+    """
     path = Path(path)
     problems: list[Problem] = []
     raw: list[tuple[Origin, Any]] = []
@@ -165,7 +175,7 @@ def load_benchmark(path: str | Path) -> Benchmark:
             problems.append(Problem(origin.file, f"expected an episode object, got {_json_type(data)}", index))
             continue
         try:
-            episodes.append(EpisodeSpec.model_validate(data))
+            episodes.append(parse_episode(data, plugins))
             origins.append(origin)
             positions.append(index)
         except ValidationError as exc:
@@ -319,14 +329,12 @@ def validation_messages(exc: ValidationError) -> list[tuple[str, str]]:
 
 
 def _strip_tags(loc: tuple) -> tuple:
-    out: list = []
-    for part in loc:
-        in_task = tuple(out) == ("task",)
-        in_camera = len(out) == 2 and out[0] == "cameras" and isinstance(out[1], int)
-        if isinstance(part, str) and part in UNION_TAGS and (in_task or in_camera):
-            continue
-        out.append(part)
-    return tuple(out)
+    """``loc`` without the tags that task and camera validation insert after ``task`` / ``cameras[i]``."""
+    if len(loc) > 1 and loc[0] == "task":
+        return (loc[0], *loc[2:])
+    if len(loc) > 2 and loc[0] == "cameras" and isinstance(loc[1], int) and loc[2] in _CAMERA_TAGS:
+        return (*loc[:2], *loc[3:])
+    return loc
 
 
 def format_loc(loc: tuple) -> str:

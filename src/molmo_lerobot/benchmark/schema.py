@@ -4,10 +4,12 @@ A MolmoSpaces benchmark file validates here unchanged: field names, types and de
 match theirs, and every model keeps unknown fields (``extra="allow"``). Poses are
 ``[x, y, z, qw, qx, qy, qz]``; vectors have fixed lengths and must be finite.
 
-``EpisodeSpec.task`` is a typed task spec chosen from ``task_cls`` (``task_type`` tells
-open from close, which share one class, and types a task whose class is not known here).
-A task known by neither parses as :class:`GenericTaskSpec`, so that validation against the
-installed task plugins, not parsing, reports it (with a "did you mean").
+Task specs belong to the task plugins: each task type names its model (a subclass of
+:class:`BaseTaskSpec`, built from the field types here). ``EpisodeSpec.task`` is validated
+with the model that the validation context's :data:`TASK_MODEL` picks, which
+:func:`molmo_lerobot.benchmark.task_specs.parse_episode` looks up in the plugin registry;
+without it (or for a task no plugin knows) the task is a :class:`GenericTaskSpec`, so that
+validation against the installed plugins, not parsing, reports it (with a "did you mean").
 """
 
 from __future__ import annotations
@@ -20,12 +22,15 @@ from typing import Annotated, Any, Literal, Union
 from pydantic import (
     AfterValidator,
     BaseModel,
-    BeforeValidator,
     ConfigDict,
     Discriminator,
     Field,
+    PlainValidator,
+    SerializeAsAny,
     Strict,
     Tag,
+    TypeAdapter,
+    ValidationInfo,
 )
 from pydantic_core import PydanticCustomError
 
@@ -197,94 +202,7 @@ class BaseTaskSpec(_Model):
 
 
 class GenericTaskSpec(BaseTaskSpec):
-    """A task whose class this schema does not know; its fields stay as given."""
-
-
-class PickTaskSpec(BaseTaskSpec):
-    """Pick: lift the object at least ``succ_pos_threshold`` metres, touching only the robot."""
-
-    pickup_obj_name: str
-    pickup_obj_start_pose: Pose7
-    pickup_obj_goal_pose: Pose7 | None = None
-    receptacle_name: str | None = None
-    succ_pos_threshold: float = Field(default=0.01, ge=0)  # metres
-
-
-class PickAndPlaceTaskSpec(PickTaskSpec):
-    """Pick and place: the receptacle carries the object, the robot let go, the receptacle stayed put."""
-
-    place_receptacle_name: str
-    place_receptacle_start_pose: Pose7
-    receptacle_supported_weight_frac: float = Field(default=0.5, ge=0, le=1)
-    max_place_receptacle_pos_displacement: float = Field(default=0.15, ge=0)  # metres
-    max_place_receptacle_rot_displacement: float = Field(default=math.radians(60), ge=0)  # radians, yaw ignored
-
-
-def _gap_default(default: float) -> Any:
-    """A surface gap in metres; ``null`` in a file means the task's default."""
-    return Annotated[float, BeforeValidator(lambda v: default if v is None else v)]
-
-
-class PickAndPlaceNextToTaskSpec(PickAndPlaceTaskSpec):
-    """Next to: the object ends beside the receptacle, XY surface gap within [min, max]."""
-
-    min_surface_to_surface_gap: _gap_default(0.0) = 0.0
-    max_surface_to_surface_gap: _gap_default(0.05) = 0.05
-
-
-class PickAndPlaceColorTaskSpec(PickAndPlaceTaskSpec):
-    """Pick and place where receptacles are told apart by colour (rgba per object)."""
-
-    object_colors: dict[str, Vec4] | None = None
-    other_receptacle_names: list[str] | None = None
-    other_receptacle_start_poses: dict[str, Pose7] | None = None
-
-
-class OpenCloseTaskSpec(BaseTaskSpec):
-    """Open / close an articulated object; success on the opening fraction of its joint."""
-
-    pickup_obj_name: str
-    pickup_obj_start_pose: Pose7
-    articulation_object_name: str | None = None
-    joint_name: str
-    joint_index: int = 0
-    joint_start_position: float | list[float]
-    joint_goal_position: float | None = None
-    task_success_threshold: float = Field(default=0.20, ge=0, le=1)  # opening fraction
-    any_inst_of_category: bool = False
-
-
-class DoorOpeningTaskSpec(BaseTaskSpec):
-    """Open a door to at least ``door_openness_threshold`` of its joint range."""
-
-    door_body_name: str
-    articulated_joint_range: FiniteList | None = None
-    articulated_joint_reset_state: FiniteList | None = None
-    door_openness_threshold: float = Field(default=0.67, ge=0, le=1)  # opening fraction
-
-
-class NavToObjTaskSpec(BaseTaskSpec):
-    """Navigate to within ``succ_pos_threshold`` metres of a visible candidate object."""
-
-    pickup_obj_name: str
-    pickup_obj_candidates: list[str] | None = None
-    pickup_obj_start_pose: Pose7 | None = None
-    receptacle_name: str | None = None
-    succ_pos_threshold: float = Field(default=1.5, ge=0)  # metres
-
-
-#: Task type name -> its spec model (every MolmoSpaces task).
-TASK_SPECS: dict[str, type[BaseTaskSpec]] = {
-    "pick": PickTaskSpec,
-    "pick_and_place": PickAndPlaceTaskSpec,
-    "pick_and_place_next_to": PickAndPlaceNextToTaskSpec,
-    "pick_and_place_color": PickAndPlaceColorTaskSpec,
-    "open": OpenCloseTaskSpec,
-    "close": OpenCloseTaskSpec,
-    "door_opening": DoorOpeningTaskSpec,
-    "nav_to_obj": NavToObjTaskSpec,
-}
-_SPEC_TAGS = {cls: name for name, cls in reversed(TASK_SPECS.items())}
+    """A task no installed plugin gives a spec model (or parsed without plugins); its fields stay as given."""
 
 
 #: Our own task classes (benchmarks made by ``molmo-bench generate``) -> task type name.
@@ -297,7 +215,8 @@ NATIVE_TASK_CLS: dict[str, str] = {
 
 
 def known_task_type(task_cls: Any, task_type: Any = None) -> str | None:
-    """Our task type name for a task dict: by a known ``task_cls``, else by a known ``task_type``."""
+    """Our task type name for a task dict (a label for episodes no plugin resolves): by a known
+    ``task_cls``, else by a known ``task_type``."""
     task_type = task_type if isinstance(task_type, str) else None
     name = None
     if isinstance(task_cls, str):
@@ -307,36 +226,24 @@ def known_task_type(task_cls: Any, task_type: Any = None) -> str | None:
     return name
 
 
-def task_spec_model(task_cls: Any, task_type: Any = None) -> type[BaseTaskSpec]:
-    """The spec model for a task dict: by a known ``task_cls``, else by a known ``task_type``."""
-    return TASK_SPECS.get(known_task_type(task_cls, task_type), GenericTaskSpec)
+#: Validation-context key of the function that picks the spec model of ``EpisodeSpec.task``:
+#: ``task dict -> (tag, model)``; the tag (the task type's name) prefixes error locations.
+TASK_MODEL = "task_model"
 
 
-def _task_tag(v: Any) -> str:
-    if isinstance(v, BaseModel):
-        return _SPEC_TAGS.get(type(v), "generic")
-    if not isinstance(v, dict):
-        return "generic"
-    model = task_spec_model(v.get("task_cls"), v.get("task_type"))
-    return _SPEC_TAGS.get(model, "generic")
+def _typed_task(value: Any, info: ValidationInfo) -> BaseTaskSpec:
+    """``value`` validated with the spec model the context picks for it (else GenericTaskSpec);
+    a spec model instance is kept as it is."""
+    if isinstance(value, BaseTaskSpec):
+        return value
+    pick = (info.context or {}).get(TASK_MODEL)
+    tag, model = pick(value) if pick is not None and isinstance(value, dict) else ("generic", GenericTaskSpec)
+    # Validated as {tag: value}, so that errors name the tag, as a discriminated union's do.
+    return TypeAdapter(dict[str, model]).validate_python({tag: value}, context=info.context)[tag]
 
 
-#: Tags inserted into validation error locations by the discriminated unions.
-UNION_TAGS = frozenset({"generic", "robot_mounted", "exocentric", *(_SPEC_TAGS.values())})
-
-TaskSpec = Annotated[
-    Union[
-        Annotated[PickAndPlaceNextToTaskSpec, Tag("pick_and_place_next_to")],
-        Annotated[PickAndPlaceColorTaskSpec, Tag("pick_and_place_color")],
-        Annotated[PickAndPlaceTaskSpec, Tag("pick_and_place")],
-        Annotated[PickTaskSpec, Tag("pick")],
-        Annotated[OpenCloseTaskSpec, Tag("open")],
-        Annotated[DoorOpeningTaskSpec, Tag("door_opening")],
-        Annotated[NavToObjTaskSpec, Tag("nav_to_obj")],
-        Annotated[GenericTaskSpec, Tag("generic")],
-    ],
-    Discriminator(_task_tag),
-]
+#: A task spec: the model of the task's plugin (see :data:`TASK_MODEL`), dumped as that model.
+TaskSpec = Annotated[SerializeAsAny[BaseTaskSpec], PlainValidator(_typed_task)]
 
 
 # Language, provenance, episode -----------------------------------------------------------
@@ -390,6 +297,11 @@ class EpisodeSpec(_Model):
     @property
     def prompt(self) -> str:
         return self.language.task_description
+
+    def edited(self, data: dict[str, Any]) -> EpisodeSpec:
+        """``data`` (this episode's dump, edited) validated, its task with this episode's task model."""
+        tag, model = self.task_name, type(self.task)
+        return EpisodeSpec.model_validate(data, context={TASK_MODEL: lambda _task: (tag, model)})
 
     def camera(self, name: str) -> RobotMountedCameraSpec | ExocentricCameraSpec:
         for cam in self.cameras:

@@ -27,7 +27,9 @@ from pydantic import ValidationError
 
 from molmo_lerobot.benchmark.load import Benchmark, BenchmarkError, Problem, load_benchmark, validation_messages
 from molmo_lerobot.benchmark.molmospaces import known_task_name
-from molmo_lerobot.benchmark.schema import NATIVE_TASK_CLS, EpisodeSpec
+from molmo_lerobot.benchmark.schema import NATIVE_TASK_CLS
+from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.plugins import PluginConflict, Plugins
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -53,22 +55,27 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _validate(path: Path, *, schema_only: bool, overrides: list[str] | None = None) -> int:
-    try:
-        bench = load_benchmark(path)
-    except BenchmarkError as exc:
-        return _report(exc.problems)
+    plugins, ctx = Plugins(), None
     if not schema_only:
-        from molmo_lerobot.benchmark.validate import validate_benchmark
         from molmo_lerobot.config import ConfigError, compose
         from molmo_lerobot.context import RunContext
-        from molmo_lerobot.plugins import PluginConflict
 
-        try:  # where MolmoSpaces data lives (assets dir, user scenes and libraries), as a run would see it
+        try:  # the run's plugins (with its pins) and where MolmoSpaces data lives, as a run would see them
             ctx = RunContext.build(compose(list(overrides or [])))
         except (ConfigError, ValueError, LookupError) as exc:
             print(f"molmo-bench: error: {exc}", file=sys.stderr)
             return 2
         plugins = ctx.plugins
+    try:
+        bench = load_benchmark(path, plugins)
+    except BenchmarkError as exc:
+        return _report(exc.problems)
+    except PluginConflict as exc:
+        print(f"molmo-bench: error: {exc}", file=sys.stderr)
+        return 1
+    if ctx is not None:
+        from molmo_lerobot.benchmark.validate import validate_benchmark
+
         try:
             found = validate_benchmark(bench, plugins, ctx)
         except PluginConflict as exc:
@@ -154,10 +161,11 @@ def _generate(args: argparse.Namespace) -> int:
     except (ValueError, LookupError) as exc:
         print(f"molmo-bench: error: {exc}", file=sys.stderr)
         return 2
+    plugins = Plugins()
     bad = []
     for i, ep in enumerate(episodes):
         try:
-            EpisodeSpec.model_validate(ep)
+            parse_episode(ep, plugins)
         except ValidationError as exc:  # a generator bug, reported per field
             bad.extend(Problem("<generated>", msg, i, loc) for loc, msg in validation_messages(exc))
     if bad:
@@ -170,7 +178,7 @@ def _generate(args: argparse.Namespace) -> int:
     tmp.chmod(0o777 & ~umask)  # mkdtemp makes it private; the result is an ordinary directory
     try:
         write_benchmark(tmp, episodes, metadata)
-        bench = load_benchmark(tmp)
+        bench = load_benchmark(tmp, plugins)
         if out.exists():
             shutil.rmtree(out)
         os.replace(tmp, out)

@@ -19,7 +19,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.policies.base import EpisodeContext
-from molmo_lerobot.policies.scripted import PhasedExpert, robot_grasps
+from molmo_lerobot.policies.expert_motion import PhasedExpert, robot_grasps
 
 PREGRASP_DISTANCE = 0.10
 #: opening fraction the expert drives to when opening (the success threshold is 0.2 by default)

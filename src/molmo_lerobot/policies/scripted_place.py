@@ -1,6 +1,6 @@
 """The scripted place expert for the pick-and-place family (privileged, IK + grasp library).
 
-It picks exactly as :class:`~molmo_lerobot.policies.scripted.ScriptedPick` (grasp choice,
+It picks exactly as :class:`~molmo_lerobot.policies.scripted_pick.ScriptedPick` (grasp choice,
 approach, descend, close, lift), then carries the object with the hand's orientation
 fixed: up to a height that clears every object on the table, straight across to above
 the goal, straight down, opens the gripper, and retreats upwards. Each phase is planned
@@ -21,10 +21,10 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from molmo_lerobot.benchmark.schema import PickAndPlaceNextToTaskSpec
 from molmo_lerobot.policies.base import EpisodeContext
-from molmo_lerobot.policies.scripted import ScriptedPick
+from molmo_lerobot.policies.scripted_pick import ScriptedPick
 from molmo_lerobot.sim import geometry
+from molmo_lerobot.tasks.pick_and_place import PickAndPlaceNextToTaskSpec
 
 DROP_CLEARANCE = 0.02
 SET_DOWN_CLEARANCE = 0.006

@@ -13,6 +13,7 @@ if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.context import RunContext
+    from molmo_lerobot.plugins import Plugins
     from molmo_lerobot.policies.base import Action
     from molmo_lerobot.sim.env import Env, Timing
     from molmo_lerobot.tasks.base import Task, TaskType
@@ -22,7 +23,7 @@ class EpisodeSetupError(ValueError):
     """An episode that cannot be set up; the message names the file, episode and field."""
 
 
-def load_run_benchmark(benchmark: str | Path):
+def load_run_benchmark(benchmark: str | Path, plugins: Plugins):
     """A benchmark by shipped name or by directory/file path; one clear error otherwise."""
     from molmo_lerobot.benchmark.load import load_benchmark
     from molmo_lerobot.paths import data_path
@@ -35,7 +36,7 @@ def load_run_benchmark(benchmark: str | Path):
             raise EpisodeSetupError(f"unknown benchmark {str(benchmark)!r}: neither a path nor a shipped "
                                     f"benchmark ({names})")
         path = shipped / str(benchmark)
-    return load_benchmark(path)
+    return load_benchmark(path, plugins)
 
 
 @dataclass

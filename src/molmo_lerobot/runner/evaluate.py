@@ -177,7 +177,7 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     plugins.policy(policy_name)  # unknown or broken policy plugin: fail before any work
     recorders = plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
     executor = _make_executor(cfg)
-    bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]))
+    bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]), plugins)
     problems: dict[int, list[str]] = {}
     for p in validate_benchmark(bench, plugins, ctx):
         if not p.warning:  # warnings (not runnable here) are the preflight's to report

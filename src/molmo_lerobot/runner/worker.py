@@ -95,7 +95,7 @@ class EpisodeWorker:
         """Run one episode; any exception (a policy's ``KeyboardInterrupt`` or ``SystemExit``
         too) becomes this episode's recorded error, with its ``error_kind``. A recorder that fails
         changes only ``output_errors``, never the outcome. :class:`WorkerStop` propagates."""
-        from molmo_lerobot.benchmark.schema import EpisodeSpec
+        from molmo_lerobot.benchmark.task_specs import parse_episode
         from molmo_lerobot.runner.episode import start_episode
 
         t0 = time.perf_counter()
@@ -104,7 +104,7 @@ class EpisodeWorker:
         task_cls = raw_task.get("task_cls") if isinstance(raw_task, dict) else None
         result: EpisodeResult
         try:
-            spec = EpisodeSpec.model_validate(item.spec)
+            spec = parse_episode(item.spec, self.plugins)
             task_type = self.plugins.task_type(item.task_type)
             horizon = item.horizon
             prompt = spec.language.task_description if spec.language else ""

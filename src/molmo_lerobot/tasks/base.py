@@ -1,8 +1,9 @@
 """Task types: the success rule (and reward) of an episode, evaluated every policy step.
 
 A :class:`TaskType` is what a task plugin returns from ``molmo_task_types()``; it is keyed
-by ``name`` and ``aliases`` (MolmoSpaces' dotted ``task_cls`` paths). ``create(spec, env)``
-returns a :class:`Task` bound to one episode's environment. A task never imports its scripted
+by ``name`` and ``aliases`` (MolmoSpaces' dotted ``task_cls`` paths) and owns ``spec_model``,
+the pydantic model its episodes' ``task`` is validated with. ``create(spec, env)`` returns a
+:class:`Task` bound to one episode's environment. A task never imports its scripted
 expert: experts register for the task types they serve (hook ``molmo_experts``).
 """
 
@@ -10,6 +11,8 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from typing import TYPE_CHECKING, Any
+
+from molmo_lerobot.benchmark.schema import BaseTaskSpec, GenericTaskSpec
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
@@ -37,6 +40,8 @@ class TaskType(ABC):
 
     name: str
     aliases: tuple[str, ...] = ()
+    #: the model of ``EpisodeSpec.task`` (a :class:`BaseTaskSpec` subclass with this task's fields)
+    spec_model: type[BaseTaskSpec] = GenericTaskSpec
     #: horizon used when neither the CLI nor the episode (``task_horizon_sec``) gives one
     default_horizon_sec: float
 

@@ -23,9 +23,11 @@ import math
 from typing import TYPE_CHECKING, Any
 
 import mujoco
+from pydantic import Field
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.molmospaces import task_aliases
+from molmo_lerobot.benchmark.schema import BaseTaskSpec, Pose7
 from molmo_lerobot.tasks.base import Task, TaskType
 
 if TYPE_CHECKING:
@@ -34,6 +36,20 @@ if TYPE_CHECKING:
 
 DEFAULT_THRESHOLD = 0.20
 _ARTICULATED = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+
+
+class OpenCloseTaskSpec(BaseTaskSpec):
+    """Open / close an articulated object; success on the opening fraction of its joint."""
+
+    pickup_obj_name: str
+    pickup_obj_start_pose: Pose7
+    articulation_object_name: str | None = None
+    joint_name: str
+    joint_index: int = 0
+    joint_start_position: float | list[float]
+    joint_goal_position: float | None = None
+    task_success_threshold: float = Field(default=DEFAULT_THRESHOLD, ge=0, le=1)  # opening fraction
+    any_inst_of_category: bool = False
 
 
 def opening_fraction(model: mujoco.MjModel, data: mujoco.MjData, joint: int) -> float:
@@ -140,6 +156,7 @@ class OpenCloseTask(Task):
 
 class _OpenCloseType(TaskType):
     mode: str
+    spec_model = OpenCloseTaskSpec
     default_horizon_sec = 30.0  # MolmoSpaces' table; the open/close v1 files carry 15 s
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:

@@ -10,8 +10,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from pydantic import Field
+
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.molmospaces import task_aliases
+from molmo_lerobot.benchmark.schema import BaseTaskSpec, Pose7
 from molmo_lerobot.tasks.base import Task, TaskType
 
 if TYPE_CHECKING:
@@ -19,6 +22,16 @@ if TYPE_CHECKING:
     from molmo_lerobot.sim.env import Env
 
 DEFAULT_SUCC_POS_THRESHOLD = 0.01
+
+
+class PickTaskSpec(BaseTaskSpec):
+    """Pick: lift the object at least ``succ_pos_threshold`` metres, touching only the robot."""
+
+    pickup_obj_name: str
+    pickup_obj_start_pose: Pose7
+    pickup_obj_goal_pose: Pose7 | None = None
+    receptacle_name: str | None = None
+    succ_pos_threshold: float = Field(default=DEFAULT_SUCC_POS_THRESHOLD, ge=0)  # metres
 
 
 class PickTask(Task):
@@ -58,6 +71,7 @@ class PickTask(Task):
 class PickTaskType(TaskType):
     name = "pick"
     aliases = ("molmo_lerobot.tasks.pick.PickTask", *task_aliases("pick"))
+    spec_model = PickTaskSpec
     default_horizon_sec = 20.0
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:

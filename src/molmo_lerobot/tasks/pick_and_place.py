@@ -2,7 +2,7 @@
 
 Success rules: MolmoSpaces' (``molmo_spaces/tasks/pick_and_place*_task.py``), evaluated after
 every policy step; docs/success_rules.md puts theirs and ours side by side. Thresholds are the
-task spec's fields with the defaults of :mod:`molmo_lerobot.benchmark.schema`.
+task spec's fields with the defaults of the spec models below (MolmoSpaces' eval defaults).
 
 ``pick_and_place``
     **supported**: the net contact force the receptacle (its whole top-level body) exerts on
@@ -32,17 +32,19 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
+from pydantic import BeforeValidator, Field
 from scipy.spatial.transform import Rotation
 from shapely.geometry import Point
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.molmospaces import task_aliases
-from molmo_lerobot.benchmark.schema import PickAndPlaceNextToTaskSpec, PickAndPlaceTaskSpec
+from molmo_lerobot.benchmark.schema import Pose7, Vec4
 from molmo_lerobot.sim import geometry
 from molmo_lerobot.tasks.base import Task, TaskType
+from molmo_lerobot.tasks.pick import PickTaskSpec
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
@@ -61,13 +63,50 @@ APPROX_SUPPORT_DZ = 0.02
 #: carry-forward tolerances (MolmoSpaces' defaults; an episode may set its own)
 CARRY_FORWARD_POS, CARRY_FORWARD_ROT = 0.005, math.radians(10)
 
+
+# Spec models ------------------------------------------------------------------------------------
+
+
+class PickAndPlaceTaskSpec(PickTaskSpec):
+    """Pick and place: the receptacle carries the object, the robot let go, the receptacle stayed put."""
+
+    place_receptacle_name: str
+    place_receptacle_start_pose: Pose7
+    receptacle_supported_weight_frac: float = Field(default=0.5, ge=0, le=1)
+    max_place_receptacle_pos_displacement: float = Field(default=0.15, ge=0)  # metres
+    max_place_receptacle_rot_displacement: float = Field(default=math.radians(60), ge=0)  # radians, yaw ignored
+
+
+def _gap_default(default: float) -> Any:
+    """A surface gap in metres; ``null`` in a file means the task's default."""
+    return Annotated[float, BeforeValidator(lambda v: default if v is None else v)]
+
+
+class PickAndPlaceNextToTaskSpec(PickAndPlaceTaskSpec):
+    """Next to: the object ends beside the receptacle, XY surface gap within [min, max]."""
+
+    min_surface_to_surface_gap: _gap_default(0.0) = 0.0
+    max_surface_to_surface_gap: _gap_default(0.05) = 0.05
+
+
+class PickAndPlaceColorTaskSpec(PickAndPlaceTaskSpec):
+    """Pick and place where receptacles are told apart by colour (rgba per object)."""
+
+    object_colors: dict[str, Vec4] | None = None
+    other_receptacle_names: list[str] | None = None
+    other_receptacle_start_poses: dict[str, Pose7] | None = None
+
+
+# Helpers -----------------------------------------------------------------------------------------
+
+
 _PLACE_FIELDS = ("receptacle_supported_weight_frac", "max_place_receptacle_pos_displacement",
                  "max_place_receptacle_rot_displacement")
 _GAP_FIELDS = ("min_surface_to_surface_gap", "max_surface_to_surface_gap")
 
 
 def _resolved(spec: EpisodeSpec, fields: tuple[str, ...], model: type) -> dict[str, float]:
-    """Each field from the episode's task, else the schema's default."""
+    """Each field from the episode's task, else ``model``'s default."""
     out = {}
     for name in fields:
         value = getattr(spec.task, name, None)
@@ -336,7 +375,7 @@ class PickAndPlaceColorTask(PickAndPlaceTask):
 class _PlaceFamily(TaskType):
     default_horizon_sec = 40.0
     task_class: type[PickAndPlaceTask]
-    spec_model: type = PickAndPlaceTaskSpec
+    spec_model = PickAndPlaceTaskSpec
     fields: tuple[str, ...] = _PLACE_FIELDS
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
@@ -367,6 +406,7 @@ class PickAndPlaceColorTaskType(_PlaceFamily):
     name = "pick_and_place_color"
     aliases = ("molmo_lerobot.tasks.pick_and_place.PickAndPlaceColorTask", *task_aliases("pick_and_place_color"))
     task_class = PickAndPlaceColorTask
+    spec_model = PickAndPlaceColorTaskSpec
 
 
 @hookimpl
