@@ -13,13 +13,16 @@ import copy
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.assets.catalog import AssetCatalog
 from molmo_lerobot.assets.grasps import GraspError
 from molmo_lerobot.assets.libraries import AssetError
 from molmo_lerobot.molmospaces.settings import MolmoSpacesSettings, resolve
 from molmo_lerobot.plugins import Plugins
+
+if TYPE_CHECKING:
+    from molmo_lerobot.sim.env import Timing
 
 
 @dataclass(frozen=True)
@@ -44,6 +47,13 @@ class RunContext:
         plugins.set_preferences((cfg.get("plugins") or {}).get("prefer"))
         settings = resolve(cfg)
         return cls(cfg, plugins, settings, build_catalog(settings))
+
+    @property
+    def timing(self) -> Timing:
+        """The run's ``timing`` (defaults for the keys it leaves out)."""
+        from molmo_lerobot.sim.env import Timing
+
+        return Timing(**(self.config.get("timing") or {}))
 
     def portable_config(self) -> dict[str, Any]:
         """The config with every data path absolute: what a worker rebuilds this context from."""

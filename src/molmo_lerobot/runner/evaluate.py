@@ -17,7 +17,6 @@ here in the main process from the episode's spec.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import platform
@@ -34,24 +33,24 @@ from typing import Any
 import mujoco
 from omegaconf import DictConfig, OmegaConf
 
-from molmo_lerobot.export.report import write_report
-from molmo_lerobot.export.wandb_log import log_run
 from molmo_lerobot import fileio
-from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.assets.grasps import GraspError
 from molmo_lerobot.assets.libraries import AssetError
 from molmo_lerobot.context import RunContext
+from molmo_lerobot.export.report import write_report
+from molmo_lerobot.export.wandb_log import log_run
+from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import SettingsError
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.protocol.run_server import ServeError, served_policy
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
+from molmo_lerobot.runner.plan import EpisodePlan, EpisodePlanner
 from molmo_lerobot.runner.progress import Progress
 from molmo_lerobot.runner.results import EpisodeResult, summarize
-from molmo_lerobot.runner.rollout import horizon_with_source
 from molmo_lerobot.runner.run_config import check_run_config, episode_work_problem
 from molmo_lerobot.runner.supervisor import RunInterrupted
-from molmo_lerobot.runner.worker import WorkerJob, WorkItem
+from molmo_lerobot.runner.worker import WorkerJob
 
 RUN_FILE = "run.json"
 EPISODES_FILE = "episodes.jsonl"
@@ -78,13 +77,6 @@ class EvalResults:
     def success_rate(self) -> float | None:
         """Success at the final step; ``None`` when no episode simulated (every one errored)."""
         return self.summary["success_rate"]
-
-
-def episode_seed(run_seed: int, spec: dict[str, Any]) -> int:
-    """Seed from the run seed and the episode's identity (its canonical content)."""
-    canonical = json.dumps(spec, sort_keys=True, separators=(",", ":"), default=str)
-    digest = hashlib.sha256(f"{int(run_seed)}\n{canonical}".encode()).digest()
-    return int.from_bytes(digest[:4], "little") & 0x7FFFFFFF
 
 
 def _versions() -> dict[str, str]:
@@ -161,7 +153,6 @@ def _make_executor(cfg: dict[str, Any]) -> Any:
 def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     """Evaluate ``config.policy`` on ``config.benchmark``; see ``conf/eval.yaml`` for every option."""
     from molmo_lerobot.benchmark.load import load_benchmark
-    from molmo_lerobot.benchmark.validate import validate_benchmark
 
     cfg = OmegaConf.to_container(config, resolve=True) if isinstance(config, DictConfig) else dict(config)
     check_run_config(cfg)  # nonsense options stop here, before any work or output
@@ -178,57 +169,14 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     recorders = plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
     executor = _make_executor(cfg)
     bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]))
-    problems: dict[int, list[str]] = {}
-    for p in validate_benchmark(bench, plugins, ctx):
-        if not p.warning:  # warnings (not runnable here) are the preflight's to report
-            problems.setdefault(p.episode_index, []).append(f"{p.field}: {p.message}" if p.field else p.message)
-
     started = datetime.now(UTC)
     out = Path(cfg.get("output_dir") or Path("runs") / f"{safe_name(bench.name)}-{safe_name(policy_name)}-"
                                                         f"{started:%Y%m%d-%H%M%S}")
     cfg["output_dir"] = str(out)
     limit = cfg.get("limit")
     indices = list(range(len(bench.episodes)))[:limit]
-    cannot = preflight(bench, ctx, indices, skip=problems)  # before any output or worker
-    if cannot:
-        raise RunError(cannot)
-
-    horizons = {str(task): float(sec) for task, sec in (cfg.get("horizons") or {}).items()}
-    items: list[WorkItem] = []
-    errors: list[EpisodeResult] = []
-    described: dict[int, dict[str, Any]] = {}
-    thresholds: dict[str, dict[str, Any]] = {}
-    too_long: list[tuple[int, str]] = []
-    for i in indices:
-        original = bench.episodes[i]
-        try:
-            spec = plugins.apply_episode_overrides(original, ctx)
-        except Exception as exc:  # an override that cannot apply to this episode fails it, not the run
-            described[i] = _describe(original, plugins, cfg, horizons)
-            errors.append(EpisodeResult.failed(i, original.house_index, original.task.task_cls,
-                                               episode_seed(cfg["seed"], original.model_dump(mode="json")),
-                                               f"episode override failed: {type(exc).__name__}: {exc}"))
-            continue
-        described[i] = _describe(spec, plugins, cfg, horizons)
-        raw = spec.model_dump(mode="json", exclude_unset=False)
-        seed = episode_seed(cfg["seed"], raw)
-        if i in problems:
-            errors.append(EpisodeResult.failed(i, spec.house_index, spec.task.task_cls, seed,
-                                               "invalid episode: " + "; ".join(problems[i])))
-            continue
-        task_type = plugins.task_type(spec.task_name)
-        horizon = described[i]["horizon"]
-        work = episode_work_problem(horizon, cfg["timing"], f"{bench.where(i)} ({described[i]['horizon_source']})")
-        if work:
-            too_long.append((i, work))
-        entry = thresholds.setdefault(task_type.name, {**task_type.thresholds(spec), "horizon_steps": []})
-        if horizon not in entry["horizon_steps"]:
-            entry["horizon_steps"].append(horizon)
-        items.append(WorkItem(i, raw, seed, task_type.name, horizon))
-    if too_long:
-        more = f" (and {len(too_long) - 1} more episodes)" if len(too_long) > 1 else ""
-        raise RunError(too_long[0][1] + more)
-    _warn_default_horizons(bench.path, [described[i] for i in indices], cfg["timing"]["policy_dt_ms"])
+    planner = EpisodePlanner(ctx, bench)
+    plans, thresholds = _plan_run(planner, indices)
 
     run_info = {
         "benchmark": {"name": bench.name, "sha256": bench.sha256, "n_episodes": len(bench.episodes),
@@ -236,27 +184,27 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         "policy": cfg["policy"], "policy_checkpoint": policy_checkpoints(cfg["policy"]), "seed": cfg["seed"],
         "limit": limit, "horizon": cfg.get("horizon"),
         "timing": cfg["timing"], "mujoco": mujoco.__version__,
-        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
+        "eval_options": {"horizons": planner.horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
                          "robot": cfg.get("robot"),
                          "end_on_success": bool(cfg.get("end_on_success", False)),
                          "molmospaces": ctx.settings.to_config(),
                          **({"plugins_prefer": plugins.prefer} if plugins.prefer else {})},  # pinned providers
     }
     done = _prepare_output(out, run_info, bool(cfg.get("resume")), recorders)
-    outside = sorted(r.episode_index for r in done if r.episode_index not in described)
+    outside = sorted(r.episode_index for r in done if r.episode_index not in plans)
     if outside:  # cannot happen with an unchanged benchmark and limit check; never drop them silently
         raise RunError(f"cannot resume {out}: it records episodes {outside[:10]} that this run would not evaluate")
 
     def complete(result: EpisodeResult) -> EpisodeResult:
         """Fill what the main process knows of every attempted episode (task type, prompt, horizon)."""
-        for key, value in described[result.episode_index].items():
+        for key, value in plans[result.episode_index].described().items():
             if getattr(result, key) is None:
                 setattr(result, key, value)
         return result
 
     results: dict[int, EpisodeResult] = {r.episode_index: complete(r) for r in done}
     episodes_path = out / EPISODES_FILE
-    todo = [it for it in items if it.episode_index not in results]
+    todo = [p for p in plans.values() if p.error is None and p.episode_index not in results]
     t0 = time.perf_counter()
     progress = Progress(len(indices), len(results), f"{bench.name} · {policy_name}", out,
                         enabled=bool(cfg.get("progress", True)),
@@ -271,19 +219,16 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
                 results[result.episode_index] = result
                 progress.episode_done(result.success, result.error is not None)
 
-            for failed in errors:
-                if failed.episode_index not in results:
-                    record(failed)
+            for plan in plans.values():
+                if plan.error is not None and plan.episode_index not in results:
+                    record(plan.failed(plan.error))
             if todo:
                 try:  # policy.serve=true: one local policy server for the run, the workers its clients
                     with served_policy(ctx.portable_config(), int(cfg["workers"]), out,
                                        threads=cfg.get("worker_threads", 1)) as worker_policy:
-                        job = WorkerJob(policy=worker_policy, timing=cfg["timing"], output_dir=str(out),
+                        job = WorkerJob(config=ctx.portable_config(), policy=worker_policy, output_dir=str(out),
                                         benchmark_name=bench.name, benchmark_sha256=bench.sha256,
-                                        recorders=recorders + progress.factories(), config=ctx.portable_config(),
-                                        camera=cfg.get("camera") or {},
-                                        end_on_success=bool(cfg.get("end_on_success", False)),
-                                        threads=cfg.get("worker_threads", 1))
+                                        recorders=recorders + progress.factories())
                         executor.run(job, todo, record)
                 except ServeError as exc:
                     raise RunError(str(exc)) from None
@@ -326,6 +271,34 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     return EvalResults(summary=summary, episodes=ordered, output_dir=out)
 
 
+def _plan_run(planner: EpisodePlanner, indices: list[int]) -> tuple[dict[int, EpisodePlan], dict[str, Any]]:
+    """Every episode of the run planned, the run checked to simulate here (one :class:`RunError`
+    line otherwise, before any output or worker), and each task type's thresholds and horizons."""
+    ctx, bench = planner.ctx, planner.bench
+    plans = {i: planner.plan(i) for i in indices}
+    cannot = preflight(bench, ctx, indices, skip=[i for i, plan in plans.items() if plan.problems])
+    if cannot:
+        raise RunError(cannot)
+    timing = ctx.config["timing"]
+    thresholds: dict[str, dict[str, Any]] = {}
+    too_long: list[str] = []
+    for i, plan in plans.items():
+        if plan.error is not None:  # recorded as such, never simulated
+            continue
+        work = episode_work_problem(plan.horizon, timing, f"{bench.where(i)} ({plan.horizon_source})")
+        if work:
+            too_long.append(work)
+        task_type = ctx.plugins.task_type(plan.task_type)
+        entry = thresholds.setdefault(task_type.name, {**task_type.thresholds(plan.episode()), "horizon_steps": []})
+        if plan.horizon not in entry["horizon_steps"]:
+            entry["horizon_steps"].append(plan.horizon)
+    if too_long:
+        more = f" (and {len(too_long) - 1} more episodes)" if len(too_long) > 1 else ""
+        raise RunError(too_long[0] + more)
+    _warn_default_horizons(bench.path, [plan.described() for plan in plans.values()], timing["policy_dt_ms"])
+    return plans, thresholds
+
+
 def _warn_default_horizons(path: Path, described: list[dict[str, Any]], policy_dt_ms: float) -> None:
     """One stderr line when episodes run the task types' default horizons (MolmoSpaces' table:
     pick 20 s, pick-and-place 40 s, open/close 30 s): MolmoSpaces refuses a file without
@@ -343,25 +316,6 @@ def _warn_default_horizons(path: Path, described: list[dict[str, Any]], policy_d
         print(f"molmo-eval: warning: {path}: {count} episode{'s' * (count != 1)} carry no task.task_horizon_sec; "
               f"running MolmoSpaces' default horizons ({table}); MolmoSpaces refuses such a file without a "
               "horizon: pass horizon=<steps> or horizons.<task>=<seconds> to choose", file=sys.stderr)
-
-
-def _describe(spec: Any, plugins: Any, cfg: dict[str, Any], horizons: dict[str, float]) -> dict[str, Any]:
-    """Task type, prompt, horizon and its source of one episode, from its spec alone (never raises)."""
-    from molmo_lerobot.benchmark.schema import known_task_type
-    from molmo_lerobot.plugins import PluginError
-
-    try:
-        task_type = plugins.task_type(spec.task_name)
-        name, default_sec = task_type.name, task_type.default_horizon_sec
-    except PluginError:  # no plugin for it: the episode is invalid, but it still belongs to its task
-        name = known_task_type(spec.task.task_cls, spec.task.task_type) or spec.task_name
-        default_sec = None
-    horizon = source = None
-    if cfg.get("horizon") is not None or horizons.get(name) or spec.task.task_horizon_sec or default_sec:
-        horizon, source = horizon_with_source(cfg.get("horizon"), spec.task, default_sec,
-                                              cfg["timing"]["policy_dt_ms"], horizons.get(name))
-    return {"task_type": name, "prompt": spec.language.task_description, "horizon": horizon,
-            "horizon_source": source}
 
 
 def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool,
