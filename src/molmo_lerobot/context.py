@@ -73,10 +73,7 @@ def build_catalog(settings: MolmoSpacesSettings) -> AssetCatalog:
     (over ``settings.assets_dir``), and ahead of them the user libraries ``settings`` names."""
     from molmo_lerobot.assets.articulated import ArticulatedAssetLibrary
     from molmo_lerobot.molmospaces.layout import OBJECT_LIBRARY_TO_GRASP_LIBRARIES
-    from molmo_lerobot.molmospaces.libraries import (
-        MolmoSpacesGrasps,
-        MolmoSpacesObjects,
-    )
+    from molmo_lerobot.molmospaces.libraries import MolmoSpacesGrasps, MolmoSpacesObjects
 
     catalog = AssetCatalog()
     catalog.register_library(ArticulatedAssetLibrary(), first=False)
