@@ -13,13 +13,16 @@ import copy
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.assets.catalog import AssetCatalog
 from molmo_lerobot.assets.grasps import GraspError
 from molmo_lerobot.assets.libraries import AssetError
 from molmo_lerobot.molmospaces.settings import MolmoSpacesSettings, resolve
 from molmo_lerobot.plugins import Plugins
+
+if TYPE_CHECKING:
+    from molmo_lerobot.sim.env import Timing
 
 
 @dataclass(frozen=True)
@@ -45,6 +48,13 @@ class RunContext:
         settings = resolve(cfg)
         return cls(cfg, plugins, settings, build_catalog(settings))
 
+    @property
+    def timing(self) -> Timing:
+        """The run's ``timing`` (defaults for the keys it leaves out)."""
+        from molmo_lerobot.sim.env import Timing
+
+        return Timing(**(self.config.get("timing") or {}))
+
     def portable_config(self) -> dict[str, Any]:
         """The config with every data path absolute: what a worker rebuilds this context from."""
         return {**self.config, **self.settings.to_config()}
@@ -63,10 +73,7 @@ def build_catalog(settings: MolmoSpacesSettings) -> AssetCatalog:
     (over ``settings.assets_dir``), and ahead of them the user libraries ``settings`` names."""
     from molmo_lerobot.assets.articulated import ArticulatedAssetLibrary
     from molmo_lerobot.molmospaces.layout import OBJECT_LIBRARY_TO_GRASP_LIBRARIES
-    from molmo_lerobot.molmospaces.libraries import (
-        MolmoSpacesGrasps,
-        MolmoSpacesObjects,
-    )
+    from molmo_lerobot.molmospaces.libraries import MolmoSpacesGrasps, MolmoSpacesObjects
 
     catalog = AssetCatalog()
     catalog.register_library(ArticulatedAssetLibrary(), first=False)

@@ -38,8 +38,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from molmo_lerobot.context import RunContext
 from molmo_lerobot.features import FeatureMap, is_wrist
-from molmo_lerobot.runner.episode import EpisodeRunner, load_run_benchmark
+from molmo_lerobot.runner.episode import Episode, load_run_benchmark, open_episode
+from molmo_lerobot.runner.plan import EpisodePlanner
 
 NAMESPACE = "molmo_lerobot"
 
@@ -59,16 +61,20 @@ class MolmoEnv(gym.Env):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         self.render_mode = render_mode
-        self.runner = EpisodeRunner(timing=timing, horizon=horizon, run_seed=run_seed, eval_options=eval_options)
-        self.bench = load_run_benchmark(benchmark, self.runner.plugins)
+        #: this env's run: molmo-eval's options (``eval_options``), seed, horizon and timing
+        self.context = RunContext.build({**(eval_options or {}), "seed": run_seed, "horizon": horizon,
+                                         "timing": timing or {}})
+        self.bench = load_run_benchmark(benchmark, self.context.plugins)
         self.end_on_success = bool(end_on_success)
         self._n = len(self.bench.episodes)
         self._pinned = None if episode_index is None else self._check_index(episode_index)
+        planner = EpisodePlanner(self.context, self.bench)
+        self._plans = [planner.plan(i) for i in range(self._n)]  # episode i is the same trial on every reset
         self._next = 0
-        self.metadata = {**self.metadata, "render_fps": round(1000.0 / self.runner.timing.policy_dt_ms)}
+        self.metadata = {**self.metadata, "render_fps": round(1000.0 / self.context.timing.policy_dt_ms)}
         #: the longest horizon of the benchmark (LeRobot's rollout loop bound)
-        self._max_episode_steps = max(self.runner.horizon_of(e) for e in self.bench.episodes)
-        self._episode = self.runner.open(self.bench, self._pinned or 0)  # spaces come from a real episode
+        self._max_episode_steps = max(plan.horizon or 0 for plan in self._plans)
+        self._episode = self._open(self._pinned or 0)  # spaces come from a real episode
         self.observation_space, self.action_space = self._spaces()
         self._steps = 0
         self._success_once = False
@@ -84,7 +90,7 @@ class MolmoEnv(gym.Env):
             index = self._next
         self._next = (index + 1) % self._n
         self._close_episode()
-        self._episode = self.runner.open(self.bench, index)  # compiled models are cached: reopening is cheap
+        self._episode = self._open(index)  # compiled models are cached: reopening is cheap
         self._steps, self._success_once = 0, False
         obs = self._episode.env.observe(images=True)
         self._check_layout(obs)
@@ -126,6 +132,9 @@ class MolmoEnv(gym.Env):
         return self._episode.task_type.name if self._episode else ""
 
     # Internals --------------------------------------------------------------------------------
+    def _open(self, index: int) -> Episode:
+        return open_episode(self._plans[index], self.bench, self.context)
+
     def _check_index(self, index: int) -> int:
         if isinstance(index, bool) or not isinstance(index, int | np.integer) or not 0 <= index < self._n:
             raise EpisodeIndexError(f"episode_index {index!r} is outside benchmark {self.bench.name!r} "

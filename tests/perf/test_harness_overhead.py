@@ -84,7 +84,7 @@ RAW = textwrap.dedent('''
     from molmo_lerobot.paths import data_path
     from molmo_lerobot.context import RunContext
     from molmo_lerobot.policies.base import EpisodeContext
-    from molmo_lerobot.runner.evaluate import episode_seed
+    from molmo_lerobot.runner.plan import episode_seed
     from molmo_lerobot.runner.episode_env import build_env
     from molmo_lerobot.sim.env import Timing
     from molmo_perf_policies import ImageScripted

@@ -161,19 +161,22 @@ def test_success_once_is_sampled_at_chunk_ends(episodes):
 
 def test_only_privileged_policies_get_the_simulator(tmp_path, episodes):
     """Through the worker: scripted experts see ctx.env, a policy under evaluation gets None."""
-    import json
-
-    from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob, WorkItem
+    from molmo_lerobot.benchmark.load import Benchmark, Origin
+    from molmo_lerobot.runner.plan import EpisodePlanner
+    from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob
 
     seen = {}
     plugins = Plugins()
+    config = {"timing": {"policy_dt_ms": 66.0, "ctrl_dt_ms": 2.0, "sim_dt_ms": 2.0}, "horizon": 2}
+    bench = Benchmark("t", [EpisodeSpec.model_validate(episodes[0])], None, "", tmp_path, [Origin("t.json")])
+    plan = EpisodePlanner(RunContext.build(config), bench).plan(0)
     for name in ("scripted", "random"):
-        job = WorkerJob(policy={"name": name}, timing={"policy_dt_ms": 66.0, "ctrl_dt_ms": 2.0, "sim_dt_ms": 2.0},
-                        output_dir=str(tmp_path), benchmark_name="t", benchmark_sha256="0" * 64)
+        job = WorkerJob(config=config, policy={"name": name}, output_dir=str(tmp_path), benchmark_name="t",
+                        benchmark_sha256="0" * 64)
         worker = EpisodeWorker(job, "w0")
         original = worker.policy.reset
         worker.policy.reset = lambda ctx, _o=original, _n=name: (seen.__setitem__(_n, ctx.env), _o(ctx))
-        result = worker.run(WorkItem(0, json.loads(json.dumps(episodes[0])), 0, task_type="pick", horizon=2))
+        result = worker.run(plan)
         assert result.error is None and result.extra["ended_by"] == "horizon"
         worker.close()
     assert seen["scripted"] is not None and seen["random"] is None

@@ -285,10 +285,11 @@ class _ScriptedTransport:
 
 def _supervise(transport, n, **options):
     from molmo_lerobot.runner.supervisor import Supervisor
-    from molmo_lerobot.runner.worker import WorkItem
+    from molmo_lerobot.runner.plan import EpisodePlan
 
     results = []
-    items = [WorkItem(i, {"house_index": i, "task": {"task_cls": "x"}}, 100 + i, "pick", 5) for i in range(n)]
+    items = [EpisodePlan(i, {"house_index": i, "task": {"task_cls": "x"}}, 100 + i, "pick", "", 5, "cli", "")
+             for i in range(n)]
     Supervisor(transport, workers=2, **options).run(None, items, results.append)
     return {r.episode_index: r for r in results}, len(results)
 

@@ -25,7 +25,7 @@ from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.scripted import ScriptedExpert
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.runner.rollout import resolve_horizon, rollout
-from molmo_lerobot.runner.evaluate import episode_seed
+from molmo_lerobot.runner.plan import episode_seed
 from molmo_lerobot.sim.env import Timing
 
 

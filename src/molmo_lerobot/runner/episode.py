@@ -1,13 +1,14 @@
-"""One benchmark episode set up for stepping: overrides applied, seed derived, env built and
-reset, task ready. ``molmo-eval``'s workers and the Gymnasium env both start episodes with
-:func:`start_episode` and step them with :func:`~molmo_lerobot.runner.rollout.advance`, so
-episode ``i`` with run seed ``s`` is the same trial wherever it runs."""
+"""A planned episode set up for stepping: env built and reset, task ready. ``molmo-eval``'s
+workers and the Gymnasium env both start episodes with :func:`start_episode` from an
+:class:`~molmo_lerobot.runner.plan.EpisodePlan` and step them with
+:func:`~molmo_lerobot.runner.rollout.advance`, so episode ``i`` with run seed ``s`` is the same
+trial wherever it runs."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
@@ -15,7 +16,8 @@ if TYPE_CHECKING:
     from molmo_lerobot.context import RunContext
     from molmo_lerobot.plugins import Plugins
     from molmo_lerobot.policies.base import Action
-    from molmo_lerobot.sim.env import Env, Timing
+    from molmo_lerobot.runner.plan import EpisodePlan
+    from molmo_lerobot.sim.env import Env
     from molmo_lerobot.tasks.base import Task, TaskType
 
 
@@ -23,7 +25,7 @@ class EpisodeSetupError(ValueError):
     """An episode that cannot be set up; the message names the file, episode and field."""
 
 
-def load_run_benchmark(benchmark: str | Path, plugins: Plugins):
+def load_run_benchmark(benchmark: str | Path, plugins: Plugins) -> Benchmark:
     """A benchmark by shipped name or by directory/file path; one clear error otherwise."""
     from molmo_lerobot.benchmark.load import load_benchmark
     from molmo_lerobot.paths import data_path
@@ -43,14 +45,27 @@ def load_run_benchmark(benchmark: str | Path, plugins: Plugins):
 class Episode:
     """A set-up episode. :meth:`step` is one policy step and returns success in the new state."""
 
-    index: int
+    plan: EpisodePlan
     spec: EpisodeSpec
     env: Env
     task: Task
     task_type: TaskType
-    horizon: int
-    prompt: str
-    seed: int
+
+    @property
+    def index(self) -> int:
+        return self.plan.episode_index
+
+    @property
+    def horizon(self) -> int:
+        return self.plan.horizon
+
+    @property
+    def prompt(self) -> str:
+        return self.plan.prompt
+
+    @property
+    def seed(self) -> int:
+        return self.plan.seed
 
     def step(self, action: Action) -> bool:
         from molmo_lerobot.runner.rollout import advance
@@ -61,67 +76,35 @@ class Episode:
         self.env.close()
 
 
-class EpisodeRunner:
-    """Sets up episodes of any benchmark with one run's timing, horizon, seed and eval options."""
+def open_episode(plan: EpisodePlan, bench: Benchmark, ctx: RunContext) -> Episode:
+    """The planned episode of ``bench``, checked to simulate here, reset and ready for its first step."""
+    from molmo_lerobot.molmospaces.preflight import preflight
+    from molmo_lerobot.runner.rollout import check_divergence
 
-    def __init__(self, timing: dict[str, float] | None = None, horizon: int | None = None, run_seed: int = 0,
-                 eval_options: dict[str, Any] | None = None, horizons: dict[str, float] | None = None) -> None:
-        from molmo_lerobot.context import RunContext
-        from molmo_lerobot.sim.env import Timing
-
-        self.ctx = RunContext.build(eval_options)
-        self.plugins = self.ctx.plugins
-        self.timing = Timing(**(timing or {}))
-        self.horizon = horizon
-        self.horizons = dict(horizons or {})
-        self.run_seed = int(run_seed)
-        self.eval_options = dict(eval_options or {})
-
-    def horizon_of(self, spec: EpisodeSpec) -> int:
-        """Policy steps of ``spec`` under this run's horizon options (as ``molmo-eval`` resolves them)."""
-        from molmo_lerobot.runner.rollout import resolve_horizon
-
-        task_type = self.plugins.task_type(spec.task_name)
-        return resolve_horizon(self.horizon, spec.task, task_type.default_horizon_sec, self.timing.policy_dt_ms,
-                               self.horizons.get(task_type.name))
-
-    def open(self, bench: Benchmark, index: int) -> Episode:
-        """Episode ``index`` of ``bench``, reset and ready for its first step."""
-        from molmo_lerobot.benchmark.validate import validate_episode
-        from molmo_lerobot.molmospaces.preflight import preflight
-        from molmo_lerobot.runner.evaluate import episode_seed
-        from molmo_lerobot.runner.rollout import check_divergence
-
-        spec = self.plugins.apply_episode_overrides(bench.episodes[index], self.ctx)
-        problems = [p for p in validate_episode(spec, self.plugins, self.ctx, index=index,
-                                                file=bench.origins[index].file)
-                    if not p.warning]  # warnings (not runnable here) are the preflight's
-        if problems:
-            raise EpisodeSetupError("; ".join(str(p) for p in problems))
-        cannot = preflight(bench, self.ctx, [index])
-        if cannot:
-            raise EpisodeSetupError(cannot)
-        seed = episode_seed(self.run_seed, spec.model_dump(mode="json", exclude_unset=False))
-        task_type = self.plugins.task_type(spec.task_name)
-        horizon = self.horizon_of(spec)
-        env, task = start_episode(spec, seed, task_type, self.ctx, self.timing, self.eval_options.get("camera"))
-        try:
-            check_divergence(env.data, "at the initial state")
-            task.setup()
-        except Exception:
-            env.close()
-            raise
-        prompt = spec.language.task_description if spec.language else ""
-        return Episode(index, spec, env, task, task_type, horizon, prompt, seed)
+    if plan.error:
+        raise EpisodeSetupError(f"{bench.where(plan.episode_index)}: {plan.error}")
+    cannot = preflight(bench, ctx, [plan.episode_index])
+    if cannot:
+        raise EpisodeSetupError(cannot)
+    spec = plan.episode(ctx.plugins)
+    task_type = ctx.plugins.task_type(plan.task_type)
+    env, task = start_episode(spec, plan.seed, task_type, ctx)
+    try:
+        check_divergence(env.data, "at the initial state")
+        task.setup()
+    except Exception:
+        env.close()
+        raise
+    return Episode(plan, spec, env, task, task_type)
 
 
-def start_episode(spec: EpisodeSpec, seed: int, task_type: TaskType, ctx: RunContext, timing: Timing,
-                  camera: dict[str, Any] | None) -> tuple[Env, Task]:
-    """The episode's environment under the run ``ctx``, reset with ``seed``, and its task (not yet
-    set up). The worker's rollout and :meth:`EpisodeRunner.open` both start episodes here."""
+def start_episode(spec: EpisodeSpec, seed: int, task_type: TaskType, ctx: RunContext) -> tuple[Env, Task]:
+    """The episode's environment under the run ``ctx`` (its timing and camera options), reset with
+    ``seed``, and its task (not yet set up). The worker's rollout and :func:`open_episode` both
+    start episodes here."""
     from molmo_lerobot.runner.episode_env import build_env
 
-    env = build_env(spec, timing, ctx, camera)
+    env = build_env(spec, ctx.timing, ctx, ctx.config.get("camera"))
     try:
         env.reset(seed)
         return env, task_type.create(spec, env)

@@ -1,43 +1,29 @@
 """``run_evaluation``: benchmark in, honest results out (``results.json``, ``episodes.jsonl``).
 
-Progress is durable: each finished episode is appended to ``episodes.jsonl`` (flushed and
-fsynced) as it completes, and ``results.json`` is written atomically only when every
-episode is accounted for, so an interrupted run never looks complete. A write that fails
-(full disk) is rolled back to the last whole record. ``resume=true`` on the same
-``output_dir`` runs the episodes that are missing or incomplete: not recorded, recorded
-with an infrastructure error (worker died, full disk, policy server gone), with an output
-that was not written, or absent from a recorder's output (the dataset of a killed run).
-It never drops a recorded episode (a larger ``limit`` extends the run, a smaller one is
-refused).
-
-Every attempted episode, even one that errors before it simulates, is recorded with its task
-type, prompt, horizon and where that horizon came from (``horizon_source``), all resolved
-here in the main process from the episode's spec.
+It only orchestrates: the run's :class:`~molmo_lerobot.context.RunContext`, one
+:class:`~molmo_lerobot.runner.plan.EpisodePlan` per episode (planned here, in the main process),
+the executor that runs the plans on workers, the :class:`~molmo_lerobot.runner.run_directory.RunDirectory`
+that owns the run's files (durable progress, resume), and the finalizers that run once the run
+is scored (datasets, report, W&B). Every attempted episode, even one that errors before it
+simulates, is recorded with its task type, prompt, horizon and where that horizon came from
+(``horizon_source``), all from its plan.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
-import os
 import platform
 import re
 import sys
 import time
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from functools import partial
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import mujoco
 from omegaconf import DictConfig, OmegaConf
 
-from molmo_lerobot.export.report import write_report
-from molmo_lerobot.export.wandb_log import log_run
-from molmo_lerobot import fileio
-from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.assets.grasps import GraspError
 from molmo_lerobot.assets.libraries import AssetError
 from molmo_lerobot.context import RunContext
@@ -45,21 +31,18 @@ from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import SettingsError
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.protocol.run_server import ServeError, served_policy
+from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
+from molmo_lerobot.runner.plan import EpisodePlan, EpisodePlanner
 from molmo_lerobot.runner.progress import Progress
 from molmo_lerobot.runner.results import EpisodeResult, summarize
-from molmo_lerobot.runner.rollout import horizon_with_source
 from molmo_lerobot.runner.run_config import check_run_config, episode_work_problem
+from molmo_lerobot.runner.run_directory import RunDirectory, RunError
 from molmo_lerobot.runner.supervisor import RunInterrupted
-from molmo_lerobot.runner.worker import WorkerJob, WorkItem
+from molmo_lerobot.runner.worker import WorkerJob
 
-RUN_FILE = "run.json"
-EPISODES_FILE = "episodes.jsonl"
-RESULTS_FILE = "results.json"
-
-
-class RunError(RuntimeError):
-    """The run cannot start or continue; the message says why and what to do."""
+if TYPE_CHECKING:
+    from molmo_lerobot.benchmark.load import Benchmark
 
 
 class ExportError(RunError):
@@ -80,13 +63,6 @@ class EvalResults:
         return self.summary["success_rate"]
 
 
-def episode_seed(run_seed: int, spec: dict[str, Any]) -> int:
-    """Seed from the run seed and the episode's identity (its canonical content)."""
-    canonical = json.dumps(spec, sort_keys=True, separators=(",", ":"), default=str)
-    digest = hashlib.sha256(f"{int(run_seed)}\n{canonical}".encode()).digest()
-    return int.from_bytes(digest[:4], "little") & 0x7FFFFFFF
-
-
 def _versions() -> dict[str, str]:
     out = {"python": platform.python_version()}
     for dist in ("molmo-lerobot", "mujoco", "lerobot", "torch", "numpy", "gymnasium-robotics", "mink"):
@@ -100,38 +76,6 @@ def _versions() -> dict[str, str]:
 def safe_name(name: str) -> str:
     """``name`` as one harmless path component (no separators, no leading dot)."""
     return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._-")[:100] or "unnamed"
-
-
-def _write_error(out: Path, what: str, exc: OSError) -> RunError:
-    return RunError(f"cannot write {what} in output_dir {out}: {exc.strerror or exc}; finished episodes are kept in "
-                    f"{EPISODES_FILE} (fix it, then rerun with resume=true)")
-
-
-class _EpisodeLog:
-    """``episodes.jsonl`` opened for appending whole records: a failed write (full disk) is cut
-    back to the last whole record, so the file always parses for resume."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.fd = fileio.open_fd(path, os.O_WRONLY | os.O_APPEND, root=path.parent)
-
-    def append(self, result: EpisodeResult) -> None:
-        data = (json.dumps(result.to_dict()) + "\n").encode()
-        start = os.fstat(self.fd).st_size
-        try:
-            view = memoryview(data)
-            while view:
-                view = view[os.write(self.fd, view):]
-            os.fsync(self.fd)
-        except OSError as exc:
-            try:
-                os.ftruncate(self.fd, start)
-            except OSError:
-                pass
-            raise _write_error(self.path.parent, f"episode {result.episode_index}", exc) from None
-
-    def close(self) -> None:
-        os.close(self.fd)
 
 
 def resolve_benchmark_path(bench_cfg: dict[str, Any]) -> Path:
@@ -161,7 +105,6 @@ def _make_executor(cfg: dict[str, Any]) -> Any:
 def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
     """Evaluate ``config.policy`` on ``config.benchmark``; see ``conf/eval.yaml`` for every option."""
     from molmo_lerobot.benchmark.load import load_benchmark
-    from molmo_lerobot.benchmark.validate import validate_benchmark
 
     cfg = OmegaConf.to_container(config, resolve=True) if isinstance(config, DictConfig) else dict(config)
     check_run_config(cfg)  # nonsense options stop here, before any work or output
@@ -172,158 +115,138 @@ def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
         ctx = RunContext.build(cfg)
     except (SettingsError, AssetError, GraspError) as exc:
         raise RunError(f"cannot set up MolmoSpaces data: {exc}") from None
-    plugins = ctx.plugins
     policy_name = str(cfg["policy"]["name"])
-    plugins.policy(policy_name)  # unknown or broken policy plugin: fail before any work
-    recorders = plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
+    ctx.plugins.policy(policy_name)  # unknown or broken policy plugin: fail before any work
+    recorders = ctx.plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
     executor = _make_executor(cfg)
-    bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]), plugins)
-    problems: dict[int, list[str]] = {}
-    for p in validate_benchmark(bench, plugins, ctx):
-        if not p.warning:  # warnings (not runnable here) are the preflight's to report
-            problems.setdefault(p.episode_index, []).append(f"{p.field}: {p.message}" if p.field else p.message)
-
+    bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]), ctx.plugins)
     started = datetime.now(UTC)
-    out = Path(cfg.get("output_dir") or Path("runs") / f"{safe_name(bench.name)}-{safe_name(policy_name)}-"
-                                                        f"{started:%Y%m%d-%H%M%S}")
-    cfg["output_dir"] = str(out)
-    limit = cfg.get("limit")
-    indices = list(range(len(bench.episodes)))[:limit]
-    cannot = preflight(bench, ctx, indices, skip=problems)  # before any output or worker
+    run_dir = RunDirectory(Path(cfg.get("output_dir") or Path("runs") / f"{safe_name(bench.name)}-"
+                                f"{safe_name(policy_name)}-{started:%Y%m%d-%H%M%S}"))
+    cfg["output_dir"] = str(run_dir.path)
+    planner = EpisodePlanner(ctx, bench)
+    plans, thresholds = _plan_run(planner, list(range(len(bench.episodes)))[:cfg.get("limit")])
+    run_info = _run_info(cfg, ctx, planner)
+    done = run_dir.open(run_info, bool(cfg.get("resume")), recorders)
+    outside = sorted(r.episode_index for r in done if r.episode_index not in plans)
+    if outside:  # cannot happen with an unchanged benchmark and limit check; never drop them silently
+        raise RunError(f"cannot resume {run_dir.path}: it records episodes {outside[:10]} that this run would not "
+                       "evaluate")
+
+    t0 = time.perf_counter()
+    results = _run_plans(cfg, ctx, bench, plans, {r.episode_index: _complete(r, plans) for r in done}, run_dir,
+                         executor, recorders)
+    ordered = [results[i] for i in sorted(results)]
+    summary = summarize(
+        ordered, **run_info, thresholds=thresholds, versions=_versions(), workers=cfg["workers"],
+        executor=(cfg.get("executor") or {}).get("name", "local"), output_dir=str(run_dir.path),
+        started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=cfg,
+    )
+    scored = run_dir.write_scored(ordered, summary)  # the score, before any export
+    failed = finalize_run(run_dir.path, ordered, summary, recorders, run_finalizers(cfg))
+    if failed:
+        summary["export_errors"] = failed
+    run_dir.update_results(summary, scored)
+    if failed:
+        raise ExportError(f"export failed after the run was scored ({'; '.join(failed)}); the score stands: "
+                          f"{summary['n_success']}/{summary['n_episodes']} successes in {run_dir.results_file}")
+    return EvalResults(summary=summary, episodes=ordered, output_dir=run_dir.path)
+
+
+def _plan_run(planner: EpisodePlanner, indices: list[int]) -> tuple[dict[int, EpisodePlan], dict[str, Any]]:
+    """Every episode of the run planned, the run checked to simulate here (one :class:`RunError`
+    line otherwise, before any output or worker), and each task type's thresholds and horizons."""
+    ctx, bench = planner.ctx, planner.bench
+    plans = {i: planner.plan(i) for i in indices}
+    cannot = preflight(bench, ctx, indices, skip=[i for i, plan in plans.items() if plan.problems])
     if cannot:
         raise RunError(cannot)
-
-    horizons = {str(task): float(sec) for task, sec in (cfg.get("horizons") or {}).items()}
-    items: list[WorkItem] = []
-    errors: list[EpisodeResult] = []
-    described: dict[int, dict[str, Any]] = {}
+    timing = ctx.config["timing"]
     thresholds: dict[str, dict[str, Any]] = {}
-    too_long: list[tuple[int, str]] = []
-    for i in indices:
-        original = bench.episodes[i]
-        try:
-            spec = plugins.apply_episode_overrides(original, ctx)
-        except Exception as exc:  # an override that cannot apply to this episode fails it, not the run
-            described[i] = _describe(original, plugins, cfg, horizons)
-            errors.append(EpisodeResult.failed(i, original.house_index, original.task.task_cls,
-                                               episode_seed(cfg["seed"], original.model_dump(mode="json")),
-                                               f"episode override failed: {type(exc).__name__}: {exc}"))
+    too_long: list[str] = []
+    for i, plan in plans.items():
+        if plan.error is not None:  # recorded as such, never simulated
             continue
-        described[i] = _describe(spec, plugins, cfg, horizons)
-        raw = spec.model_dump(mode="json", exclude_unset=False)
-        seed = episode_seed(cfg["seed"], raw)
-        if i in problems:
-            errors.append(EpisodeResult.failed(i, spec.house_index, spec.task.task_cls, seed,
-                                               "invalid episode: " + "; ".join(problems[i])))
-            continue
-        task_type = plugins.task_type(spec.task_name)
-        horizon = described[i]["horizon"]
-        work = episode_work_problem(horizon, cfg["timing"], f"{bench.where(i)} ({described[i]['horizon_source']})")
+        work = episode_work_problem(plan.horizon, timing, f"{bench.where(i)} ({plan.horizon_source})")
         if work:
-            too_long.append((i, work))
-        entry = thresholds.setdefault(task_type.name, {**task_type.thresholds(spec), "horizon_steps": []})
-        if horizon not in entry["horizon_steps"]:
-            entry["horizon_steps"].append(horizon)
-        items.append(WorkItem(i, raw, seed, task_type.name, horizon))
+            too_long.append(work)
+        task_type = ctx.plugins.task_type(plan.task_type)
+        entry = thresholds.setdefault(task_type.name, {**task_type.thresholds(plan.episode(ctx.plugins)), "horizon_steps": []})
+        if plan.horizon not in entry["horizon_steps"]:
+            entry["horizon_steps"].append(plan.horizon)
     if too_long:
         more = f" (and {len(too_long) - 1} more episodes)" if len(too_long) > 1 else ""
-        raise RunError(too_long[0][1] + more)
-    _warn_default_horizons(bench.path, [described[i] for i in indices], cfg["timing"]["policy_dt_ms"])
+        raise RunError(too_long[0] + more)
+    _warn_default_horizons(bench.path, [plan.described() for plan in plans.values()], timing["policy_dt_ms"])
+    return plans, thresholds
 
-    run_info = {
+
+def _run_info(cfg: dict[str, Any], ctx: RunContext, planner: EpisodePlanner) -> dict[str, Any]:
+    """What the run is (``run.json``; a resume must match it)."""
+    bench, prefer = planner.bench, ctx.plugins.prefer
+    return {
         "benchmark": {"name": bench.name, "sha256": bench.sha256, "n_episodes": len(bench.episodes),
                       "path": str(bench.path)},
         "policy": cfg["policy"], "policy_checkpoint": policy_checkpoints(cfg["policy"]), "seed": cfg["seed"],
-        "limit": limit, "horizon": cfg.get("horizon"),
+        "limit": cfg.get("limit"), "horizon": cfg.get("horizon"),
         "timing": cfg["timing"], "mujoco": mujoco.__version__,
-        "eval_options": {"horizons": horizons, "custom_object": cfg.get("custom_object"), "camera": cfg.get("camera"),
-                         "robot": cfg.get("robot"),
+        "eval_options": {"horizons": planner.horizons, "custom_object": cfg.get("custom_object"),
+                         "camera": cfg.get("camera"), "robot": cfg.get("robot"),
                          "end_on_success": bool(cfg.get("end_on_success", False)),
                          "molmospaces": ctx.settings.to_config(),
-                         **({"plugins_prefer": plugins.prefer} if plugins.prefer else {})},  # pinned providers
+                         **({"plugins_prefer": prefer} if prefer else {})},  # pinned providers
     }
-    done = _prepare_output(out, run_info, bool(cfg.get("resume")), recorders)
-    outside = sorted(r.episode_index for r in done if r.episode_index not in described)
-    if outside:  # cannot happen with an unchanged benchmark and limit check; never drop them silently
-        raise RunError(f"cannot resume {out}: it records episodes {outside[:10]} that this run would not evaluate")
 
-    def complete(result: EpisodeResult) -> EpisodeResult:
-        """Fill what the main process knows of every attempted episode (task type, prompt, horizon)."""
-        for key, value in described[result.episode_index].items():
-            if getattr(result, key) is None:
-                setattr(result, key, value)
-        return result
 
-    results: dict[int, EpisodeResult] = {r.episode_index: complete(r) for r in done}
-    episodes_path = out / EPISODES_FILE
-    todo = [it for it in items if it.episode_index not in results]
-    t0 = time.perf_counter()
-    progress = Progress(len(indices), len(results), f"{bench.name} · {policy_name}", out,
-                        enabled=bool(cfg.get("progress", True)),
-                        heartbeat_s=float(cfg.get("progress_interval_s") or 30.0))
+def _complete(result: EpisodeResult, plans: dict[int, EpisodePlan]) -> EpisodeResult:
+    """Fill what the main process knows of every attempted episode (task type, prompt, horizon)."""
+    for key, value in plans[result.episode_index].described().items():
+        if getattr(result, key) is None:
+            setattr(result, key, value)
+    return result
+
+
+def _run_plans(cfg: dict[str, Any], ctx: RunContext, bench: Benchmark, plans: dict[int, EpisodePlan],
+               results: dict[int, EpisodeResult], run_dir: RunDirectory, executor: Any,
+               recorders: list[Any]) -> dict[int, EpisodeResult]:
+    """Record the plans that cannot run and run the others on ``executor``, each result appended to
+    ``episodes.jsonl`` as it comes; ``results`` (those done before a resume) gains every episode."""
+    todo = [p for p in plans.values() if p.error is None and p.episode_index not in results]
+    progress = Progress(len(plans), len(results), f"{bench.name} · {cfg['policy']['name']}", run_dir.path,
+                        enabled=bool(cfg.get("progress", True)), heartbeat_s=float(cfg.get("progress_interval_s") or 30.0))
     progress.success = sum(r.success for r in results.values())
     progress.errors = sum(r.error is not None for r in results.values())
-    log = _EpisodeLog(episodes_path)
+    log = run_dir.episode_log()
     try:
         with progress:
             def record(result: EpisodeResult) -> None:
-                log.append(complete(result))
+                log.append(_complete(result, plans))
                 results[result.episode_index] = result
                 progress.episode_done(result.success, result.error is not None)
 
-            for failed in errors:
-                if failed.episode_index not in results:
-                    record(failed)
+            for plan in plans.values():
+                if plan.error is not None and plan.episode_index not in results:
+                    record(plan.failed(plan.error))
             if todo:
                 try:  # policy.serve=true: one local policy server for the run, the workers its clients
-                    with served_policy(ctx.portable_config(), int(cfg["workers"]), out,
+                    with served_policy(ctx.portable_config(), int(cfg["workers"]), run_dir.path,
                                        threads=cfg.get("worker_threads", 1)) as worker_policy:
-                        job = WorkerJob(policy=worker_policy, timing=cfg["timing"], output_dir=str(out),
-                                        benchmark_name=bench.name, benchmark_sha256=bench.sha256,
-                                        recorders=recorders + progress.factories(), config=ctx.portable_config(),
-                                        camera=cfg.get("camera") or {},
-                                        end_on_success=bool(cfg.get("end_on_success", False)),
-                                        threads=cfg.get("worker_threads", 1))
+                        job = WorkerJob(config=ctx.portable_config(), policy=worker_policy,
+                                        output_dir=str(run_dir.path), benchmark_name=bench.name,
+                                        benchmark_sha256=bench.sha256, recorders=recorders + progress.factories())
                         executor.run(job, todo, record)
                 except ServeError as exc:
                     raise RunError(str(exc)) from None
                 except RunInterrupted as exc:
-                    raise RunInterrupted(exc.signum, f"{exc}: {len(results)} of {len(indices)} episodes finished "
-                                         f"and kept in {episodes_path}; to continue, rerun with output_dir={out} "
-                                         "resume=true") from None
+                    raise RunInterrupted(exc.signum, f"{exc}: {len(results)} of {len(plans)} episodes finished "
+                                         f"and kept in {run_dir.episodes_file}; to continue, rerun with "
+                                         f"output_dir={run_dir.path} resume=true") from None
     finally:
         log.close()
-    ordered = [results[i] for i in sorted(results)]
-    missing = sorted(set(indices) - set(results))
+    missing = sorted(set(plans) - set(results))
     if missing:
         raise RunError(f"run ended with {len(missing)} episodes unaccounted for: {missing[:10]}")
-    summary = summarize(
-        ordered, **run_info, thresholds=thresholds, versions=_versions(), workers=cfg["workers"],
-        executor=(cfg.get("executor") or {}).get("name", "local"), output_dir=str(out),
-        started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=cfg,
-    )
-    scored = json.dumps(summary, indent=2) + "\n"
-    try:
-        atomic_write(episodes_path, "".join(json.dumps(r.to_dict()) + "\n" for r in ordered), root=out)
-        atomic_write(out / RESULTS_FILE, scored, root=out)  # the score, before any export
-    except OSError as exc:
-        raise _write_error(out, "the run's outputs", exc) from None
-    failed = []
-    for name, step in [*((f"export {type(f).__name__}", partial(f.finalize, out, ordered, summary)) for f in recorders),
-                       ("report", partial(write_report, out, summary, ordered)),
-                       ("W&B log", partial(log_run, out, summary, ordered))]:
-        try:
-            step()
-        except Exception as exc:
-            failed.append(f"{name}: {type(exc).__name__}: {exc}".splitlines()[0])
-    if failed:
-        summary["export_errors"] = failed
-    if json.dumps(summary, indent=2) + "\n" != scored:  # what the export did (push status, failures); same score
-        atomic_write(out / RESULTS_FILE, json.dumps(summary, indent=2) + "\n", root=out)
-    if failed:
-        raise ExportError(f"export failed after the run was scored ({'; '.join(failed)}); the score stands: "
-                          f"{summary['n_success']}/{summary['n_episodes']} successes in {out / RESULTS_FILE}")
-    return EvalResults(summary=summary, episodes=ordered, output_dir=out)
+    return results
 
 
 def _warn_default_horizons(path: Path, described: list[dict[str, Any]], policy_dt_ms: float) -> None:
@@ -343,138 +266,3 @@ def _warn_default_horizons(path: Path, described: list[dict[str, Any]], policy_d
         print(f"molmo-eval: warning: {path}: {count} episode{'s' * (count != 1)} carry no task.task_horizon_sec; "
               f"running MolmoSpaces' default horizons ({table}); MolmoSpaces refuses such a file without a "
               "horizon: pass horizon=<steps> or horizons.<task>=<seconds> to choose", file=sys.stderr)
-
-
-def _describe(spec: Any, plugins: Any, cfg: dict[str, Any], horizons: dict[str, float]) -> dict[str, Any]:
-    """Task type, prompt, horizon and its source of one episode, from its spec alone (never raises)."""
-    from molmo_lerobot.benchmark.schema import known_task_type
-    from molmo_lerobot.plugins import PluginError
-
-    try:
-        task_type = plugins.task_type(spec.task_name)
-        name, default_sec = task_type.name, task_type.default_horizon_sec
-    except PluginError:  # no plugin for it: the episode is invalid, but it still belongs to its task
-        name = known_task_type(spec.task.task_cls, spec.task.task_type) or spec.task_name
-        default_sec = None
-    horizon = source = None
-    if cfg.get("horizon") is not None or horizons.get(name) or spec.task.task_horizon_sec or default_sec:
-        horizon, source = horizon_with_source(cfg.get("horizon"), spec.task, default_sec,
-                                              cfg["timing"]["policy_dt_ms"], horizons.get(name))
-    return {"task_type": name, "prompt": spec.language.task_description, "horizon": horizon,
-            "horizon_source": source}
-
-
-def _prepare_output(out: Path, run_info: dict[str, Any], resume: bool,
-                    recorders: list[Any]) -> list[EpisodeResult]:
-    """Create ``out`` (or reopen it on resume) and return the episodes already done."""
-    run_file = out / RUN_FILE
-    if out.exists() and not out.is_dir():
-        raise RunError(f"output_dir {out} is a file, not a directory; choose another output_dir")
-    try:
-        if out.exists() and any(out.iterdir()):
-            if not resume:
-                raise RunError(f"output_dir {out} already holds a run; pass resume=true to continue it "
-                               "or choose another output_dir")
-            return _reopen(out, run_info, recorders)
-        atomic_write(run_file, json.dumps(run_info, indent=2) + "\n", root=out)  # makes ``out`` too
-        os.close(fileio.open_fd(out / EPISODES_FILE, os.O_WRONLY | os.O_CREAT, root=out))
-    except OSError as exc:
-        raise RunError(f"cannot write output_dir {out}: {exc.strerror or exc}") from None
-    return []
-
-
-def _reopen(out: Path, run_info: dict[str, Any], recorders: list[Any]) -> list[EpisodeResult]:
-    """Check that ``out`` holds this same run and return its recorded episodes that stand (resume);
-    the others (:func:`_incomplete`) are dropped from ``episodes.jsonl`` and run again."""
-    run_file = out / RUN_FILE
-    if not run_file.exists():
-        raise RunError(f"cannot resume: {run_file} is missing")
-    try:
-        previous = json.loads(run_file.read_text())
-    except (json.JSONDecodeError, RecursionError, UnicodeDecodeError):
-        previous = None
-    if not isinstance(previous, dict):
-        raise RunError(f"cannot resume: {run_file} is not a run description (not a JSON object)")
-    current = json.loads(json.dumps(run_info))  # compare as stored (JSON turns int keys into strings)
-    for key in ("benchmark", "policy", "policy_checkpoint", "seed", "horizon", "timing", "mujoco", "eval_options"):
-        if previous.get(key) != current.get(key):
-            raise RunError(f"cannot resume {out}: its {key} differs from this run's "
-                           f"({previous.get(key)!r} vs {current.get(key)!r})")
-    done = _read_episodes(out / EPISODES_FILE)
-    old, new = previous.get("limit"), current["limit"]
-    if new is not None and (old is None or new < old):
-        recorded, shown = len(done), "null" if old is None else old
-        raise RunError(f"cannot resume {out} with limit={new}: it was started with limit={shown} "
-                       f"({recorded} episode{'s' * (recorded != 1)} recorded) and a resume never drops recorded "
-                       + ("episodes; use limit=null" if old is None else
-                          f"episodes; use limit={old} or larger (or limit=null)"))
-    rerun = _incomplete(out, done, recorders)
-    if rerun:
-        print(f"molmo-eval: resume runs {len(rerun)} recorded episodes again ({sorted(rerun)[:10]}"
-              f"{' …' if len(rerun) > 10 else ''}): infrastructure errors, outputs not written or not in the "
-              "dataset", file=sys.stderr)
-        done = [r for r in done if r.episode_index not in rerun]
-    fileio.remove(out / RESULTS_FILE, root=out)
-    atomic_write(out / EPISODES_FILE, "".join(json.dumps(r.to_dict()) + "\n" for r in done), root=out)
-    if new != old:  # a larger limit extends the run
-        atomic_write(run_file, json.dumps({**previous, "limit": new}, indent=2) + "\n", root=out)
-    return done
-
-
-def _incomplete(out: Path, done: list[EpisodeResult], recorders: list[Any]) -> set[int]:
-    """Recorded episodes a resume runs again: infrastructure failures, episodes with an output not
-    written, and those a recorder's output lacks (``RecorderFactory.missing``)."""
-    rerun = {r.episode_index for r in done if r.rerun_on_resume or r.output_errors}
-    standing = [r for r in done if r.episode_index not in rerun]
-    for factory in recorders:
-        try:
-            rerun |= set(factory.missing(out, standing))
-        except Exception as exc:
-            raise RunError(f"cannot resume {out}: {type(factory).__name__} cannot tell which episodes its output "
-                           f"lacks: {type(exc).__name__}: {exc}".splitlines()[0]) from None
-    return rerun
-
-
-#: ``episodes.jsonl`` fields a record must have, with their JSON types.
-_RECORD_TYPES: dict[str, tuple[type, ...]] = {
-    "episode_index": (int,), "house_index": (int, type(None)), "task_cls": (str, type(None)), "success": (bool,),
-    "success_once": (bool,), "steps": (int,), "seed": (int,), "error": (str, type(None)),
-}
-
-
-def _read_episodes(path: Path) -> list[EpisodeResult]:
-    """Episodes persisted so far. A torn last line (killed mid-write) is dropped, its episode
-    rerun; any other unreadable record stops the resume with its line number."""
-    done: dict[int, EpisodeResult] = {}
-    if not path.exists():
-        return []
-    text = path.read_text(errors="replace")
-    lines = text.splitlines()
-    for lineno, line in enumerate(lines, 1):
-        if not line.strip():
-            continue
-        try:
-            data = json.loads(line)
-            why = _record_problem(data)
-        except (json.JSONDecodeError, RecursionError) as exc:
-            if lineno == len(lines) and not text.endswith("\n"):
-                continue  # torn by a kill mid-write
-            why = "not valid JSON" if isinstance(exc, json.JSONDecodeError) else "JSON nested too deeply"
-        if why:
-            raise RunError(f"cannot resume: {path}:{lineno}: corrupt episode record ({why}); "
-                           "delete that line to rerun its episode")
-        r = EpisodeResult.from_dict(data)
-        done[r.episode_index] = r
-    return list(done.values())
-
-
-def _record_problem(data: Any) -> str | None:
-    if not isinstance(data, dict):
-        return "not a JSON object"
-    for key, types in _RECORD_TYPES.items():
-        if key not in data:
-            return f"field {key!r} is missing"
-        value = data[key]
-        if not isinstance(value, types) or (isinstance(value, bool) and bool not in types):
-            return f"field {key!r} is {json.dumps(value)[:40]}"
-    return None

@@ -17,9 +17,10 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
+from molmo_lerobot.runner.plan import EpisodePlan
 from molmo_lerobot.runner.progress import redirect_worker_output
 from molmo_lerobot.runner.supervisor import DEAD, INIT_ERROR, READY, RESULT, Event, Supervisor, Transport, exit_reason
-from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob, WorkerStop, WorkItem
+from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob, WorkerStop
 
 #: Seconds an orphaned worker has to stop gracefully before it exits regardless.
 ORPHAN_GRACE_S = 10.0
@@ -81,7 +82,7 @@ class ProcessTransport(Transport):
         child.close()
         return _Worker(proc, parent)
 
-    def submit(self, handle: _Worker, item: WorkItem) -> None:
+    def submit(self, handle: _Worker, item: EpisodePlan) -> None:
         try:
             handle.conn.send(item)
         except (BrokenPipeError, ConnectionResetError, OSError):

@@ -16,10 +16,11 @@ import os
 from dataclasses import dataclass
 from typing import Any
 
+from molmo_lerobot.runner.plan import EpisodePlan
 from molmo_lerobot.runner.progress import redirect_worker_output
 from molmo_lerobot.runner.supervisor import (DEAD, INIT_ERROR, READY, RESULT, Event, Supervisor, Transport,
                                              WorkerStartError)
-from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob, WorkItem
+from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob
 
 
 class SimulatorActor:
@@ -40,7 +41,7 @@ class SimulatorActor:
             return INIT_ERROR, self.init_error
         return READY, os.getpid()
 
-    def run(self, item: WorkItem) -> dict[str, Any]:
+    def run(self, item: EpisodePlan) -> dict[str, Any]:
         if self.worker is None:
             raise RuntimeError(f"worker could not start: {self.init_error}")
         return self.worker.run(item).to_dict()
@@ -102,7 +103,7 @@ class RayTransport(Transport):
                                         num_gpus=self.num_gpus_per_worker).remote(job, worker_id)
         return _Actor(actor, actor.ready.remote())
 
-    def submit(self, handle: _Actor, item: WorkItem) -> None:
+    def submit(self, handle: _Actor, item: EpisodePlan) -> None:
         handle.ref = handle.actor.run.remote(item)
 
     def wait(self, handles: list[_Actor], timeout: float) -> None:

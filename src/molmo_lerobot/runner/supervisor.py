@@ -1,6 +1,6 @@
 """The one episode supervisor: slots, dispatch, bounded retry, watchdog, graceful stop.
 
-A :class:`Supervisor` runs work items on ``workers`` slots. A slot holds one worker at a time,
+A :class:`Supervisor` runs work items (episode plans) on ``workers`` slots. A slot holds one worker at a time,
 started by a :class:`Transport` (worker processes in ``runner/local.py``, Ray actors in
 ``runner/ray_executor.py``) only when it has an episode to run; each start is charged to that
 episode. For every slot the supervisor waits on the transport and reacts:
@@ -40,8 +40,9 @@ from pathlib import Path
 from typing import Any
 
 from molmo_lerobot.errors import INFRASTRUCTURE
+from molmo_lerobot.runner.plan import EpisodePlan
 from molmo_lerobot.runner.results import EpisodeResult
-from molmo_lerobot.runner.worker import WorkerJob, WorkItem
+from molmo_lerobot.runner.worker import WorkerJob
 
 log = logging.getLogger(__name__)
 
@@ -76,7 +77,7 @@ class Transport(ABC):
         """Start one worker (non-blocking); it reports ``READY`` or ``INIT_ERROR`` when done."""
 
     @abstractmethod
-    def submit(self, handle: Any, item: WorkItem) -> None:
+    def submit(self, handle: Any, item: EpisodePlan) -> None:
         """Hand ``item`` to the worker (it runs once the worker is ready)."""
 
     @abstractmethod
@@ -106,7 +107,7 @@ class _Slot:
     generation: int = -1  # counts the workers this slot started
     handle: Any = None
     ready: bool = False
-    item: WorkItem | None = None
+    item: EpisodePlan | None = None
     last: int | None = None  # run-order position of the last item this slot was given
     since: float = 0.0  # start of the worker (not ready yet) or of the episode (ready)
 
@@ -115,7 +116,7 @@ class _Slot:
         return f"w{self.index}g{self.generation}"
 
 
-def take_next(pending: dict[int, WorkItem], last: int | None, others: list[int | None]) -> int:
+def take_next(pending: dict[int, EpisodePlan], last: int | None, others: list[int | None]) -> int:
     """The run-order position a free slot takes next: the one after its ``last``; else the start
     of the longest run of consecutive pending positions, or its middle when another slot's next
     item starts it (``others``: the other slots' last positions)."""
@@ -147,13 +148,13 @@ class Supervisor:
         self.stop_timeout_s = stop_timeout_s
         self.close_timeout_s = close_timeout_s
 
-    def run(self, job: WorkerJob, items: list[WorkItem], on_result: Callable[[EpisodeResult], None]) -> None:
+    def run(self, job: WorkerJob, items: list[EpisodePlan], on_result: Callable[[EpisodeResult], None]) -> None:
         """Run every item; each ends in exactly one ``on_result`` call unless the run is interrupted."""
         if not items:
             return
         self._job, self._on_result = job, on_result
         self._position = {item.episode_index: k for k, item in enumerate(items)}
-        self._pending: dict[int, WorkItem] = dict(enumerate(items))  # by run-order position
+        self._pending: dict[int, EpisodePlan] = dict(enumerate(items))  # by run-order position
         self._attempts: dict[int, int] = {}
         self._retiring: list[tuple[Any, float]] = []  # stopped workers and when to kill them
         self._any_ready = False

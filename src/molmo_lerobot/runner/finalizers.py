@@ -1,0 +1,62 @@
+"""What runs once a run is scored (``results.json`` written), in order: every recorder factory's
+``finalize`` (the dataset, the Hub push), then the run's finalizers chosen from its config: the
+report (every run) and the W&B log (``wandb.enable=true``).
+
+A finalizer is an object with a ``label`` and ``finalize(output_dir, results, summary)``, the
+recorder factories' own run-level step. One that fails never changes the score: its one-line
+failure goes to ``results.json`` (``export_errors``) and the run then fails with it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Protocol
+
+from molmo_lerobot.runner.results import EpisodeResult
+
+
+class Finalizer(Protocol):
+    label: str
+
+    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any]) -> None: ...
+
+
+class ReportFinalizer:
+    """``report.html``."""
+
+    label = "report"
+
+    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any]) -> None:
+        from molmo_lerobot.export.report import write_report
+
+        write_report(output_dir, summary, results)
+
+
+class WandbFinalizer:
+    """The run logged to Weights & Biases (after the report, which it uploads)."""
+
+    label = "W&B log"
+
+    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any]) -> None:
+        from molmo_lerobot.export.wandb_log import log_run
+
+        log_run(output_dir, summary, results)
+
+
+def run_finalizers(config: dict[str, Any]) -> list[Finalizer]:
+    """The finalizers ``config`` asks for, in the order they run."""
+    wandb = bool((config.get("wandb") or {}).get("enable"))
+    return [ReportFinalizer(), *([WandbFinalizer()] if wandb else [])]
+
+
+def finalize_run(output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any], recorders: list[Any],
+                 finalizers: list[Finalizer]) -> list[str]:
+    """Run the recorder factories' ``finalize`` and then ``finalizers``; one line per failure."""
+    steps = [*((f"export {type(f).__name__}", f) for f in recorders), *((f.label, f) for f in finalizers)]
+    failed = []
+    for label, step in steps:
+        try:
+            step.finalize(output_dir, results, summary)
+        except Exception as exc:
+            failed.append(f"{label}: {type(exc).__name__}: {exc}".splitlines()[0])
+    return failed

@@ -1,0 +1,134 @@
+"""One episode planned for a run: benchmark episode + run context → a frozen :class:`EpisodePlan`.
+
+Planning checks the benchmark's episode against the run's plugins, applies the run's episode
+overrides, derives the episode's seed from the run seed and the content it runs with, and
+resolves its task type, prompt and horizon (with where that horizon came from). ``molmo-eval``
+plans every episode in the main process and hands the plans to its workers; the Gymnasium env
+plans the episodes it opens; so episode ``i`` with run seed ``s`` is the same trial wherever it
+runs. An episode that cannot run still gets a plan, saying why (:attr:`EpisodePlan.error`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from molmo_lerobot.errors import EPISODE
+from molmo_lerobot.runner.results import EpisodeResult
+from molmo_lerobot.runner.rollout import horizon_with_source
+
+if TYPE_CHECKING:
+    from molmo_lerobot.benchmark.load import Benchmark
+    from molmo_lerobot.benchmark.schema import EpisodeSpec
+    from molmo_lerobot.context import RunContext
+    from molmo_lerobot.plugins import Plugins
+
+
+def _canonical(spec: dict[str, Any]) -> str:
+    return json.dumps(spec, sort_keys=True, separators=(",", ":"), default=str)
+
+
+def episode_seed(run_seed: int, spec: dict[str, Any]) -> int:
+    """Seed from the run seed and the episode's identity (its canonical content)."""
+    digest = hashlib.sha256(f"{int(run_seed)}\n{_canonical(spec)}".encode()).digest()
+    return int.from_bytes(digest[:4], "little") & 0x7FFFFFFF
+
+
+@dataclass(frozen=True)
+class EpisodePlan:
+    """One episode as a run plays it. Plain data: it travels to workers as it is."""
+
+    episode_index: int
+    #: the episode as it runs (overrides applied) as JSON; what its seed and digest derive from
+    spec: dict[str, Any]
+    seed: int
+    #: the task type's name (the known name when no installed plugin provides it)
+    task_type: str
+    prompt: str
+    #: policy steps and where they came from (``cli``, ``task_horizons``, ``task_horizon_sec``,
+    #: ``default``); ``None`` only for an episode whose task type no plugin provides
+    horizon: int | None
+    horizon_source: str | None
+    #: SHA-256 of :attr:`spec`'s canonical JSON: the episode's identity
+    digest: str
+    #: problems of the benchmark's episode (``field: message``), as ``molmo-bench validate`` finds them
+    problems: tuple[str, ...] = ()
+    #: why it cannot run (an override failed, or it is invalid); it is then recorded, never simulated
+    error: str | None = None
+
+    @property
+    def house_index(self) -> int | None:
+        return self.spec.get("house_index")
+
+    @property
+    def task_cls(self) -> str | None:
+        task = self.spec.get("task")
+        return task.get("task_cls") if isinstance(task, dict) else None
+
+    def episode(self, plugins: Plugins) -> EpisodeSpec:
+        """:attr:`spec` validated, its task by the model of the plugin that owns it (what a worker or
+        the Gymnasium env builds the episode from)."""
+        from molmo_lerobot.benchmark.task_specs import parse_episode
+
+        return parse_episode(self.spec, plugins)
+
+    def described(self) -> dict[str, Any]:
+        """What a result records of every attempted episode: task type, prompt, horizon and its source."""
+        return {"task_type": self.task_type, "prompt": self.prompt, "horizon": self.horizon,
+                "horizon_source": self.horizon_source}
+
+    def failed(self, error: str, kind: str = EPISODE, **kw: Any) -> EpisodeResult:
+        """This episode as an error record."""
+        return EpisodeResult.failed(self.episode_index, self.house_index, self.task_cls, self.seed, error, kind,
+                                    **self.described(), **kw)
+
+
+class EpisodePlanner:
+    """Plans the episodes of one benchmark under one run (its seed, horizon options and timing)."""
+
+    def __init__(self, ctx: RunContext, bench: Benchmark) -> None:
+        cfg = ctx.config
+        self.ctx = ctx
+        self.bench = bench
+        self.run_seed = int(cfg.get("seed", 0))
+        self.horizon = cfg.get("horizon")
+        self.horizons = {str(task): float(sec) for task, sec in (cfg.get("horizons") or {}).items()}
+        self.policy_dt_ms = ctx.timing.policy_dt_ms
+
+    def plan(self, index: int) -> EpisodePlan:
+        """Episode ``index`` of the benchmark, planned (never raises for the episode's own faults)."""
+        from molmo_lerobot.benchmark.validate import validate_episode
+
+        original = self.bench.episodes[index]
+        problems = tuple(f"{p.field}: {p.message}" if p.field else p.message
+                         for p in validate_episode(original, self.ctx.plugins, self.ctx, index=index,
+                                                   file=self.bench.origins[index].file)
+                         if not p.warning)  # warnings (not runnable here) are the preflight's
+        try:
+            spec = self.ctx.plugins.apply_episode_overrides(original, self.ctx)
+        except Exception as exc:  # an override that cannot apply to this episode fails it, not the run
+            return self._plan(index, original, problems, f"episode override failed: {type(exc).__name__}: {exc}")
+        return self._plan(index, spec, problems, "invalid episode: " + "; ".join(problems) if problems else None)
+
+    def _plan(self, index: int, spec: EpisodeSpec, problems: tuple[str, ...], error: str | None) -> EpisodePlan:
+        raw = spec.model_dump(mode="json", exclude_unset=False)
+        task_type, default_sec = self._task_type(spec)
+        horizon = source = None
+        if self.horizon is not None or self.horizons.get(task_type) or spec.task.task_horizon_sec or default_sec:
+            horizon, source = horizon_with_source(self.horizon, spec.task, default_sec, self.policy_dt_ms,
+                                                  self.horizons.get(task_type))
+        return EpisodePlan(index, raw, episode_seed(self.run_seed, raw), task_type, spec.language.task_description,
+                           horizon, source, hashlib.sha256(_canonical(raw).encode()).hexdigest(), problems, error)
+
+    def _task_type(self, spec: EpisodeSpec) -> tuple[str, float | None]:
+        """The task type's name and default horizon (seconds); without a plugin, the known name and none."""
+        from molmo_lerobot.benchmark.schema import known_task_type
+        from molmo_lerobot.plugins import PluginError
+
+        try:
+            task_type = self.ctx.plugins.task_type(spec.task_name)
+        except PluginError:  # no plugin for it: the episode cannot run, but it still belongs to its task
+            return known_task_type(spec.task.task_cls, spec.task.task_type) or spec.task_name, None
+        return task_type.name, task_type.default_horizon_sec

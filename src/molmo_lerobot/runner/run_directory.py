@@ -1,0 +1,222 @@
+"""A run's output directory: the files the runner owns there, and how a resume reads them back.
+
+``run.json`` says what the run is (benchmark, policy, seed, timing, options); a resume must
+match it. ``episodes.jsonl`` gets each finished episode appended durably (flushed and fsynced)
+as it completes; a write that fails (full disk) is cut back to the last whole record, so the
+file always parses. ``results.json``, the score, is written atomically only once every episode
+is accounted for: a directory without it holds a partial run, and a resume removes it before
+running anything. ``resume=true`` on the same directory runs again the episodes that are not
+recorded, recorded with an infrastructure error (worker died, full disk, policy server gone),
+with an output that was not written, or absent from a recorder's output (the dataset of a
+killed run); it never drops a recorded episode (a larger ``limit`` extends the run, a smaller
+one is refused). What the finalizers write (``dataset/``, ``report.html``) is theirs.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+from molmo_lerobot import fileio
+from molmo_lerobot.fileio import atomic_write
+from molmo_lerobot.runner.results import EpisodeResult
+
+RUN_FILE = "run.json"
+EPISODES_FILE = "episodes.jsonl"
+RESULTS_FILE = "results.json"
+
+#: ``run.json`` fields a resume must find unchanged
+RUN_IDENTITY = ("benchmark", "policy", "policy_checkpoint", "seed", "horizon", "timing", "mujoco", "eval_options")
+#: ``episodes.jsonl`` fields a record must have, with their JSON types
+_RECORD_TYPES: dict[str, tuple[type, ...]] = {
+    "episode_index": (int,), "house_index": (int, type(None)), "task_cls": (str, type(None)), "success": (bool,),
+    "success_once": (bool,), "steps": (int,), "seed": (int,), "error": (str, type(None)),
+}
+
+
+class RunError(RuntimeError):
+    """The run cannot start or continue; the message says why and what to do."""
+
+
+class RunDirectory:
+    """The files of one run under :attr:`path` (see the module docstring)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    @property
+    def run_file(self) -> Path:
+        return self.path / RUN_FILE
+
+    @property
+    def episodes_file(self) -> Path:
+        return self.path / EPISODES_FILE
+
+    @property
+    def results_file(self) -> Path:
+        return self.path / RESULTS_FILE
+
+    def write_error(self, what: str, exc: OSError) -> RunError:
+        """The :class:`RunError` for a write of ``what`` that failed."""
+        return RunError(f"cannot write {what} in output_dir {self.path}: {exc.strerror or exc}; finished episodes are "
+                        f"kept in {EPISODES_FILE} (fix it, then rerun with resume=true)")
+
+    # Starting -------------------------------------------------------------------------------
+    def open(self, run_info: dict[str, Any], resume: bool, recorders: list[Any]) -> list[EpisodeResult]:
+        """Create the directory for the run ``run_info`` describes (or reopen it on ``resume``) and
+        return the episodes already done that stand."""
+        out = self.path
+        if out.exists() and not out.is_dir():
+            raise RunError(f"output_dir {out} is a file, not a directory; choose another output_dir")
+        try:
+            if out.exists() and any(out.iterdir()):
+                if not resume:
+                    raise RunError(f"output_dir {out} already holds a run; pass resume=true to continue it "
+                                   "or choose another output_dir")
+                return self._reopen(run_info, recorders)
+            atomic_write(self.run_file, json.dumps(run_info, indent=2) + "\n", root=out)  # makes ``out`` too
+            os.close(fileio.open_fd(self.episodes_file, os.O_WRONLY | os.O_CREAT, root=out))
+        except OSError as exc:
+            raise RunError(f"cannot write output_dir {out}: {exc.strerror or exc}") from None
+        return []
+
+    def _reopen(self, run_info: dict[str, Any], recorders: list[Any]) -> list[EpisodeResult]:
+        """Check that the directory holds this same run and return its recorded episodes that stand;
+        the others (:meth:`_incomplete`) are dropped from ``episodes.jsonl`` and run again."""
+        out, run_file = self.path, self.run_file
+        if not run_file.exists():
+            raise RunError(f"cannot resume: {run_file} is missing")
+        try:
+            previous = json.loads(run_file.read_text())
+        except (json.JSONDecodeError, RecursionError, UnicodeDecodeError):
+            previous = None
+        if not isinstance(previous, dict):
+            raise RunError(f"cannot resume: {run_file} is not a run description (not a JSON object)")
+        current = json.loads(json.dumps(run_info))  # compare as stored (JSON turns int keys into strings)
+        for key in RUN_IDENTITY:
+            if previous.get(key) != current.get(key):
+                raise RunError(f"cannot resume {out}: its {key} differs from this run's "
+                               f"({previous.get(key)!r} vs {current.get(key)!r})")
+        done = _read_episodes(self.episodes_file)
+        old, new = previous.get("limit"), current["limit"]
+        if new is not None and (old is None or new < old):
+            recorded, shown = len(done), "null" if old is None else old
+            raise RunError(f"cannot resume {out} with limit={new}: it was started with limit={shown} "
+                           f"({recorded} episode{'s' * (recorded != 1)} recorded) and a resume never drops recorded "
+                           + ("episodes; use limit=null" if old is None else
+                              f"episodes; use limit={old} or larger (or limit=null)"))
+        rerun = self._incomplete(done, recorders)
+        if rerun:
+            print(f"molmo-eval: resume runs {len(rerun)} recorded episodes again ({sorted(rerun)[:10]}"
+                  f"{' …' if len(rerun) > 10 else ''}): infrastructure errors, outputs not written or not in the "
+                  "dataset", file=sys.stderr)
+            done = [r for r in done if r.episode_index not in rerun]
+        fileio.remove(self.results_file, root=out)  # partial again until every episode is accounted for
+        atomic_write(self.episodes_file, "".join(json.dumps(r.to_dict()) + "\n" for r in done), root=out)
+        if new != old:  # a larger limit extends the run
+            atomic_write(run_file, json.dumps({**previous, "limit": new}, indent=2) + "\n", root=out)
+        return done
+
+    def _incomplete(self, done: list[EpisodeResult], recorders: list[Any]) -> set[int]:
+        """Recorded episodes a resume runs again: infrastructure failures, episodes with an output not
+        written, and those a recorder's output lacks (``RecorderFactory.missing``)."""
+        rerun = {r.episode_index for r in done if r.rerun_on_resume or r.output_errors}
+        standing = [r for r in done if r.episode_index not in rerun]
+        for factory in recorders:
+            try:
+                rerun |= set(factory.missing(self.path, standing))
+            except Exception as exc:
+                raise RunError(f"cannot resume {self.path}: {type(factory).__name__} cannot tell which episodes its "
+                               f"output lacks: {type(exc).__name__}: {exc}".splitlines()[0]) from None
+        return rerun
+
+    # Running and scoring --------------------------------------------------------------------
+    def episode_log(self) -> EpisodeLog:
+        """``episodes.jsonl`` opened for appending (close it when the run ends)."""
+        return EpisodeLog(self)
+
+    def write_scored(self, results: list[EpisodeResult], summary: dict[str, Any]) -> str:
+        """``episodes.jsonl`` in episode order and then ``results.json`` (the score, before any export);
+        returns the ``results.json`` text written."""
+        scored = json.dumps(summary, indent=2) + "\n"
+        try:
+            atomic_write(self.episodes_file, "".join(json.dumps(r.to_dict()) + "\n" for r in results), root=self.path)
+            atomic_write(self.results_file, scored, root=self.path)
+        except OSError as exc:
+            raise self.write_error("the run's outputs", exc) from None
+        return scored
+
+    def update_results(self, summary: dict[str, Any], scored: str) -> None:
+        """Rewrite ``results.json`` if ``summary`` changed since ``scored`` (what the export did: push
+        status, failures; the score is the same)."""
+        text = json.dumps(summary, indent=2) + "\n"
+        if text != scored:
+            atomic_write(self.results_file, text, root=self.path)
+
+
+class EpisodeLog:
+    """``episodes.jsonl`` opened for appending whole records: a failed write (full disk) is cut
+    back to the last whole record, so the file always parses for resume."""
+
+    def __init__(self, run_dir: RunDirectory) -> None:
+        self.run_dir = run_dir
+        self.fd = fileio.open_fd(run_dir.episodes_file, os.O_WRONLY | os.O_APPEND, root=run_dir.path)
+
+    def append(self, result: EpisodeResult) -> None:
+        data = (json.dumps(result.to_dict()) + "\n").encode()
+        start = os.fstat(self.fd).st_size
+        try:
+            view = memoryview(data)
+            while view:
+                view = view[os.write(self.fd, view):]
+            os.fsync(self.fd)
+        except OSError as exc:
+            try:
+                os.ftruncate(self.fd, start)
+            except OSError:
+                pass
+            raise self.run_dir.write_error(f"episode {result.episode_index}", exc) from None
+
+    def close(self) -> None:
+        os.close(self.fd)
+
+
+def _read_episodes(path: Path) -> list[EpisodeResult]:
+    """Episodes persisted in ``episodes.jsonl`` so far. A torn last line (killed mid-write) is dropped,
+    its episode rerun; any other unreadable record stops the resume with its line number."""
+    done: dict[int, EpisodeResult] = {}
+    if not path.exists():
+        return []
+    text = path.read_text(errors="replace")
+    lines = text.splitlines()
+    for lineno, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            data = json.loads(line)
+            why = _record_problem(data)
+        except (json.JSONDecodeError, RecursionError) as exc:
+            if lineno == len(lines) and not text.endswith("\n"):
+                continue  # torn by a kill mid-write
+            why = "not valid JSON" if isinstance(exc, json.JSONDecodeError) else "JSON nested too deeply"
+        if why:
+            raise RunError(f"cannot resume: {path}:{lineno}: corrupt episode record ({why}); "
+                           "delete that line to rerun its episode")
+        r = EpisodeResult.from_dict(data)
+        done[r.episode_index] = r
+    return list(done.values())
+
+
+def _record_problem(data: Any) -> str | None:
+    if not isinstance(data, dict):
+        return "not a JSON object"
+    for key, types in _RECORD_TYPES.items():
+        if key not in data:
+            return f"field {key!r} is missing"
+        value = data[key]
+        if not isinstance(value, types) or (isinstance(value, bool) and bool not in types):
+            return f"field {key!r} is {json.dumps(value)[:40]}"
+    return None
