@@ -13,6 +13,7 @@ from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.paths import data_path
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.plan import EpisodePlanner, episode_seed
 
 TIMING = {"policy_dt_ms": 66.0, "ctrl_dt_ms": 2.0, "sim_dt_ms": 2.0}
@@ -20,7 +21,7 @@ TIMING = {"policy_dt_ms": 66.0, "ctrl_dt_ms": 2.0, "sim_dt_ms": 2.0}
 
 @pytest.fixture(scope="module")
 def bench():
-    return load_benchmark(data_path("benchmarks") / "pick_v1")
+    return load_benchmark(data_path("benchmarks") / "pick_v1", Plugins())
 
 
 def test_a_plan_is_frozen_plain_data_seeded_by_its_content(bench):
@@ -67,6 +68,6 @@ def test_an_invalid_episode_is_planned_with_its_problems(bench, tmp_path):
     episodes = json.loads((data_path("benchmarks") / "pick_v1" / "benchmark.json").read_text())[:2]
     episodes[1]["language"]["task_description"] = " "
     (tmp_path / "benchmark.json").write_text(json.dumps(episodes))
-    plan = EpisodePlanner(RunContext.build({"timing": TIMING}), load_benchmark(tmp_path)).plan(1)
+    plan = EpisodePlanner(RunContext.build({"timing": TIMING}), load_benchmark(tmp_path, Plugins())).plan(1)
     assert plan.problems == ("language.task_description: empty task description",)
     assert plan.error == "invalid episode: language.task_description: empty task description"
