@@ -2,9 +2,9 @@
 
 :meth:`RunContext.build` loads the plugins (with the run's ``plugins.prefer`` pins), resolves
 the MolmoSpaces settings and composes the asset catalog from the asset and grasp library types
-the plugins provide (the run's user libraries among them). The main
-process builds one per run and hands it down; a worker, the run's policy server and the
-Gymnasium env rebuild theirs from the config they receive (:meth:`RunContext.portable_config`).
+the plugins provide (the run's user libraries among them). The main process builds one per run
+and hands it down; a worker, the run's policy server and the Gymnasium env rebuild theirs from
+the config they receive (:meth:`RunContext.portable_config`).
 No module keeps run state of its own.
 """
 
