@@ -20,7 +20,10 @@ from molmo_lerobot.assets.grasps import (
     generate_builtin_grasps,
     save_grasp_file,
 )
-from molmo_lerobot.molmospaces.user import register_user_asset_library, register_user_grasp_library
+from molmo_lerobot.molmospaces.user import (
+    register_user_asset_library,
+    register_user_grasp_library,
+)
 from molmo_lerobot.resources import ResourceManager, pack
 
 UID = "builtin_red_can"

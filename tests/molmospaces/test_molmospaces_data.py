@@ -12,13 +12,21 @@ import pytest
 from standin import OBJAVERSE_UID, pick_episode, top_down_grasps
 from user_library import UID, user_pick_episode, write_user_library
 
-from molmo_lerobot.assets import AssetCatalog, AssetError, BuiltinAssetLibrary, GraspError
+from molmo_lerobot.assets import (
+    AssetCatalog,
+    AssetError,
+    BuiltinAssetLibrary,
+    GraspError,
+)
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.cli import bench as bench_cli
 from molmo_lerobot.config import compose
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.molmospaces import layout
-from molmo_lerobot.molmospaces.user import register_user_asset_library, register_user_grasp_library
+from molmo_lerobot.molmospaces.user import (
+    register_user_asset_library,
+    register_user_grasp_library,
+)
 from molmo_lerobot.runner.evaluate import RunError, run_evaluation
 
 
