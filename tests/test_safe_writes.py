@@ -218,9 +218,6 @@ _SHUTIL = {"copy", "copy2", "copyfile", "copytree", "move", "rmtree"}
 ALLOWED = {
     ("assets/grasps.py", "path.parent.mkdir("): "save_grasp_file writes where its caller names (a grasp "
                                                 "package being built), not below a run/cache/install root",
-    ("assets/namespaces.py", "directory.mkdir("): "user asset namespaces: a datasets root the user chose",
-    ("assets/namespaces.py", "pdir.mkdir("): "user asset namespaces: a datasets root the user chose",
-    ("assets/namespaces.py", "shutil.rmtree(directory)"): "deleting an empty user namespace it checked",
     ("benchmark/generate.py", "out.mkdir("): "a benchmark directory the user names, not a run dir",
     ("cli/bench.py", "out.parent.mkdir("): "molmo-bench's output: a benchmark directory the user names",
     ("cli/bench.py", "shutil.rmtree(out)"): "molmo-bench replaces the benchmark directory the user named",

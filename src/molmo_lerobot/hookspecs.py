@@ -2,8 +2,8 @@
 
 A plugin is a module (or object) named by an entry point in the group ``molmo_lerobot``.
 It implements any subset of these hooks with ``@molmo_lerobot.hookimpl``. Our built-in
-task types, robots, camera systems, scene datasets and policies are plugins too and
-register through the very same entry points (see ``pyproject.toml``).
+task types, robots, camera systems, scene datasets, asset and grasp libraries and policies
+are plugins too and register through the very same entry points (see ``pyproject.toml``).
 
 Each ``molmo_*`` provider hook returns a list of descriptors; the registries in
 :mod:`molmo_lerobot.plugins` index them by name (and alias). Two plugins providing one name
@@ -25,6 +25,8 @@ from typing import TYPE_CHECKING, Any
 import pluggy
 
 if TYPE_CHECKING:
+    from molmo_lerobot.assets.grasps import GraspLibraryType
+    from molmo_lerobot.assets.libraries import AssetLibraryType
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.cameras.base import CameraSystem
     from molmo_lerobot.policies.base import PolicyType
@@ -69,6 +71,26 @@ def molmo_camera_systems() -> list[CameraSystem]:
 @hookspec
 def molmo_scene_datasets() -> list[SceneDataset]:
     """Scene datasets: what an episode's ``scene_dataset`` + ``house_index`` build with MjSpec."""
+
+
+@hookspec
+def molmo_asset_libraries() -> list[AssetLibraryType]:
+    """Asset library types: every run's asset catalog holds the libraries of each.
+
+    An :class:`~molmo_lerobot.assets.libraries.AssetLibraryType` has a ``name`` (``aliases``),
+    a lookup ``priority`` and ``make(settings, catalog)``: its libraries for a run, made from
+    the run's MolmoSpaces settings (e.g. MolmoSpaces' ``thor`` over its assets dir, or one
+    library per ``asset_libraries`` entry of the config).
+    """
+
+
+@hookspec
+def molmo_grasp_libraries() -> list[GraspLibraryType]:
+    """Grasp library types beyond the grasps an asset library ships with (MolmoSpaces' ``droid``).
+
+    A :class:`~molmo_lerobot.assets.grasps.GraspLibraryType` is an asset library type's
+    counterpart; ``make(settings, catalog)`` gives ``(grasp library, asset library name)`` pairs.
+    """
 
 
 @hookspec

@@ -37,6 +37,8 @@ KIND_HOOKS = {
     "molmo_robots": "robot",
     "molmo_camera_systems": "camera",
     "molmo_scene_datasets": "scene",
+    "molmo_asset_libraries": "asset_library",
+    "molmo_grasp_libraries": "grasp_library",
     "molmo_policies": "policy",
     "molmo_experts": "expert",
     "molmo_config_dirs": "config",
@@ -45,7 +47,7 @@ KIND_HOOKS = {
 }
 #: kinds whose items are looked up by name (``plugins.prefer.<kind>``) → their hook
 PROVIDER_HOOKS = {kind: hook for hook, kind in KIND_HOOKS.items()
-                  if kind in ("task", "robot", "camera", "scene", "policy", "expert")}
+                  if kind in ("task", "robot", "camera", "scene", "asset_library", "grasp_library", "policy", "expert")}
 
 
 class PluginError(LookupError):

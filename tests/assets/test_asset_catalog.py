@@ -10,6 +10,7 @@ import pytest
 from molmo_lerobot.assets import (
     AssetCatalog,
     AssetError,
+    BuiltinAssetLibrary,
     GraspError,
     ResourceAssetLibrary,
 )
@@ -18,6 +19,10 @@ from molmo_lerobot.assets.grasps import (
     count_grasp_file,
     generate_builtin_grasps,
     save_grasp_file,
+)
+from molmo_lerobot.molmospaces.user import (
+    register_user_asset_library,
+    register_user_grasp_library,
 )
 from molmo_lerobot.resources import ResourceManager, pack
 
@@ -59,14 +64,20 @@ def user_lib(tmp_path):
     return root
 
 
+def _builtin_catalog():
+    cat = AssetCatalog()
+    cat.register_library(BuiltinAssetLibrary())
+    return cat
+
+
 def _register(cat, root, name="mine"):
-    lib = cat.register_user_asset_library(name, root)
-    cat.register_user_grasp_library(f"{name}_grasps", root, name)
+    lib = register_user_asset_library(cat, name, root)
+    register_user_grasp_library(cat, f"{name}_grasps", root, name)
     return lib
 
 
 def test_builtin_set_is_an_asset_library():
-    cat = AssetCatalog()
+    cat = _builtin_catalog()
     for uid, obj in BUILTIN_OBJECTS.items():
         assert cat.annotation(uid) == obj.metadata()
         assert cat.locate_uid(uid).library == "builtin"
@@ -80,13 +91,13 @@ def test_builtin_set_is_an_asset_library():
 
 def test_builtin_grasps_fall_back_then_use_generated_files(tmp_path, monkeypatch):
     monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(tmp_path / "home"))
-    cat = AssetCatalog()
+    cat = _builtin_catalog()
     fresh = cat.get_grasps(UID)  # no NPZ generated yet: analytic grasps
     np.testing.assert_allclose(fresh, analytic_grasps(BUILTIN_OBJECTS[UID]))
     files = generate_builtin_grasps()
     assert len(files) == len(BUILTIN_OBJECTS) and files[0].parent == tmp_path / "home" / "grasps" / "builtin" / "franka"
     save_grasp_file(files[0].parent / f"{UID}.npz", fresh[:5])  # the generated file is what is read
-    cat = AssetCatalog()
+    cat = _builtin_catalog()
     assert cat.get_grasps(UID).shape == (5, 4, 4) and cat.count_grasps(UID) == 5
     with pytest.raises(GraspError, match="no grasps for 'builtin_red_can' and robot 'ur5'"):
         cat.get_grasps(UID, robot="ur5")
@@ -94,13 +105,13 @@ def test_builtin_grasps_fall_back_then_use_generated_files(tmp_path, monkeypatch
 
 def test_get_grasps_works_on_fresh_clone(tmp_path, monkeypatch):
     monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(tmp_path / "empty"))
-    g = AssetCatalog().get_grasps("builtin_red_block")
+    g = _builtin_catalog().get_grasps("builtin_red_block")
     assert g.ndim == 3 and g.shape[1:] == (4, 4) and len(g) > 0
 
 
 def test_user_library_registered_at_runtime(user_lib, tmp_path, monkeypatch):
     monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(tmp_path / "home"))
-    cat = AssetCatalog()
+    cat = _builtin_catalog()
     lib = _register(cat, user_lib)
     assert lib.name == "mine" and [l.name for l in cat.libraries] == ["mine", "builtin"]
     loc = cat.locate_uid("my_cabinet")
@@ -121,11 +132,11 @@ def test_user_library_registered_at_runtime(user_lib, tmp_path, monkeypatch):
     with pytest.raises(GraspError, match="joint 'lid'"):
         cat.get_grasps("my_cabinet", joint="lid")
     with pytest.raises(AssetError, match="already registered"):
-        cat.register_user_asset_library("mine", user_lib)
+        register_user_asset_library(cat, "mine", user_lib)
 
 
 def test_newest_grasp_library_goes_first(user_lib, tmp_path):
-    cat = AssetCatalog()
+    cat = _builtin_catalog()
     _register(cat, user_lib)
     extra = tmp_path / "extra_grasps"
     save_grasp_file(extra / "franka" / f"{UID}.npz", np.stack([_pose(0.9)]))
@@ -140,18 +151,18 @@ def test_newest_grasp_library_goes_first(user_lib, tmp_path):
 def test_malformed_user_libraries_name_the_file(tmp_path):
     root = tmp_path / "bad"
     root.mkdir()
-    cat = AssetCatalog()
+    cat = _builtin_catalog()
     with pytest.raises(AssetError, match=r"bad/assets_index.json: file not found"):
-        cat.register_user_asset_library("bad", root)
+        register_user_asset_library(cat, "bad", root)
     (root / "assets_index.json").write_text("{not json")
     with pytest.raises(AssetError, match="assets_index.json: invalid JSON"):
-        cat.register_user_asset_library("bad", root)
+        register_user_asset_library(cat, "bad", root)
     (root / "assets_index.json").write_text(json.dumps({"x": {"uid": "x", "object_path": "x.xml"}}))
     with pytest.raises(AssetError, match=r"assets_index.json: field x.object_path: .*x.xml not found"):
-        cat.register_user_asset_library("bad", root)
+        register_user_asset_library(cat, "bad", root)
     (root / "x.xml").write_text("<mujoco/>")
     with pytest.raises(AssetError, match=r"assets_index.json: field x.metadata_path: missing"):
-        cat.register_user_asset_library("bad", root)
+        register_user_asset_library(cat, "bad", root)
     save_bad = tmp_path / "g" / "franka" / "x.npz"
     save_bad.parent.mkdir(parents=True)
     np.savez(save_bad, transforms=np.zeros((3, 3, 3)))
@@ -181,7 +192,7 @@ def test_packed_library_metadata_in_lmdb_and_install_uid(tmp_path, user_lib):
     mgr = ResourceManager(tmp_path / "cache", tmp_path / "install", remote, progress=False)
     mgr.install("objects/packed@1", on_demand=True)
     mgr.install("grasps/packed@1", on_demand=True)
-    cat = AssetCatalog()
+    cat = _builtin_catalog()
     cat.register_library(ResourceAssetLibrary(mgr, "objects/packed@1", "grasps/packed@1"))
     _register(cat, user_lib)  # registered later: first in priority
     assert cat.annotation("lamp_02")["category"] == "lamp"

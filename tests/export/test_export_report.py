@@ -8,6 +8,7 @@ import re
 
 import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
 from molmo_lerobot.assets.catalog import AssetCatalog
+from molmo_lerobot.assets.libraries import BuiltinAssetLibrary
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 from molmo_lerobot.export.glance import GlanceRecorderFactory, exterior_camera, object_category
 from molmo_lerobot.export.report import render_report, task_label, write_report
@@ -126,6 +127,7 @@ def test_glance_recorder_saves_first_and_last_frame_and_first_success(tmp_path):
     info = S.info(4, 10)
     info.extra["object"] = "builtin_grey_can"
     info.catalog = AssetCatalog()  # the run's catalog: the built-in library knows the can
+    info.catalog.register_library(BuiltinAssetLibrary())
     assert [s for s in range(10) if rec.wants_images_at(s, 10)] == [0, 9]
     rec.start_episode(info)
     for t in range(10):

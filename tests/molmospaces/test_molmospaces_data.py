@@ -12,12 +12,21 @@ import pytest
 from standin import OBJAVERSE_UID, pick_episode, top_down_grasps
 from user_library import UID, user_pick_episode, write_user_library
 
-from molmo_lerobot.assets import AssetCatalog, AssetError, GraspError
+from molmo_lerobot.assets import (
+    AssetCatalog,
+    AssetError,
+    BuiltinAssetLibrary,
+    GraspError,
+)
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.cli import bench as bench_cli
 from molmo_lerobot.config import compose
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.molmospaces import layout
+from molmo_lerobot.molmospaces.user import (
+    register_user_asset_library,
+    register_user_grasp_library,
+)
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.evaluate import RunError, run_evaluation
 
@@ -110,7 +119,7 @@ def test_thor_and_objaverse_libraries_and_droid_grasps(assets, tmp_path):
     (mine / "Mug_1").mkdir(parents=True)
     np.savez(mine / "Mug_1" / "g.npz", transforms=top_down_grasps()[:1])
     (mine / "grasps_index.json").write_text(json.dumps({"grasp_paths": {"droid": {"Mug_1": "Mug_1/g.npz"}}}))
-    cat.register_user_grasp_library("better", mine, "thor")
+    register_user_grasp_library(cat, "better", mine, "thor")
     assert [g.name for g in cat._grasp_sources("Mug_1", "franka_droid")] == ["better/droid", "droid"]
     assert cat.count_grasps("Mug_1", robot="franka_droid") == 1
     with pytest.raises(AssetError, match="not installed under .*objaverse.*molmo-resources install objects/objaverse@"):
@@ -130,18 +139,19 @@ def test_metadata_from_the_json_source_when_no_lmdb(assets, tmp_path, monkeypatc
 def test_user_libraries_in_molmospaces_format(assets, tmp_path):
     lib = write_user_library(tmp_path)
     cat = AssetCatalog()
-    cat.register_user_asset_library("custom_assets", lib)
-    (g,) = cat.register_user_grasp_library("custom_grasps", lib, "custom_assets")
+    cat.register_library(BuiltinAssetLibrary())
+    register_user_asset_library(cat, "custom_assets", lib)
+    (g,) = register_user_grasp_library(cat, "custom_grasps", lib, "custom_assets")
     assert g.name == "custom_grasps/droid" and cat.grasp_libraries[0][0] is g
     assert cat.locate_uid(UID).mjcf_path == lib / UID / f"{UID}.xml"
     assert cat.annotation(UID)["boundingBox"]["z"] == pytest.approx(0.06)
     np.testing.assert_allclose(cat.get_grasps(UID, robot="franka"), top_down_grasps())  # droid grasps serve franka
     with pytest.raises(AssetError, match="already registered"):
-        cat.register_user_asset_library("custom_assets", lib)
+        register_user_asset_library(cat, "custom_assets", lib)
     with pytest.raises(AssetError, match="name of a MolmoSpaces object source"):
-        cat.register_user_asset_library("thor", lib)
+        register_user_asset_library(cat, "thor", lib)
     with pytest.raises(AssetError, match="no asset library named 'nope'"):
-        cat.register_user_grasp_library("g2", lib, "nope")
+        register_user_grasp_library(cat, "g2", lib, "nope")
 
 
 @pytest.mark.parametrize(("edit", "error", "message"), [
@@ -163,8 +173,8 @@ def test_bad_library_indexes_name_file_and_field(assets, tmp_path, edit, error, 
     (lib / "grasps_index.json").write_text(json.dumps(g))
     cat = AssetCatalog()
     with pytest.raises(error, match=message):
-        cat.register_user_asset_library("custom_assets", lib)
-        cat.register_user_grasp_library("custom_grasps", lib, "custom_assets")
+        register_user_asset_library(cat, "custom_assets", lib)
+        register_user_grasp_library(cat, "custom_grasps", lib, "custom_assets")
 
 
 def test_malformed_grasps_index_in_a_run_is_one_line(assets, tmp_path, capsys):

@@ -18,6 +18,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
 from molmo_lerobot.config import compose  # noqa: E402
 from molmo_lerobot.context import RunContext  # noqa: E402
+from molmo_lerobot.molmospaces.user import register_user_grasp_library  # noqa: E402
 from molmo_lerobot.paths import data_path  # noqa: E402
 from molmo_lerobot.plugins import Plugins  # noqa: E402
 from molmo_lerobot.robots import franka_droid  # noqa: E402
@@ -215,7 +216,7 @@ def test_molmospaces_grasp_file_transfers(tmp_path):
     (lib / "grasps_index.json").write_text(json.dumps(
         {"grasp_paths": {"droid": {uid: f"{uid}/droid/grasps.npz"}}, "articulated_grasp_paths": {}}))
     run = RunContext.build()
-    run.catalog.register_user_grasp_library("tutorial", lib, "builtin")
+    register_user_grasp_library(run.catalog, "tutorial", lib, "builtin")
     from molmo_lerobot.policies.base import EpisodeContext
     from molmo_lerobot.policies.expert_motion import object_grasps
     from molmo_lerobot.policies.scripted_pick import ScriptedPick

@@ -1,17 +1,17 @@
-"""Asset libraries (UID → MJCF + metadata), grasp libraries and dataset namespaces."""
+"""Asset libraries (UID → MJCF + metadata), grasp libraries, their plugin kinds, and dataset ids."""
 
 from molmo_lerobot.assets.catalog import AssetCatalog
-from molmo_lerobot.assets.grasps import GraspError, GraspLibrary
+from molmo_lerobot.assets.grasps import GraspError, GraspLibrary, GraspLibraryType
 from molmo_lerobot.assets.libraries import (
     AssetError,
     AssetLibrary,
+    AssetLibraryType,
     BuiltinAssetLibrary,
     ResourceAssetLibrary,
     UidLocation,
 )
-from molmo_lerobot.assets.user import UserAssetLibrary, UserGraspLibrary
 
 __all__ = [
-    "AssetCatalog", "AssetError", "AssetLibrary", "BuiltinAssetLibrary", "GraspError", "GraspLibrary",
-    "ResourceAssetLibrary", "UidLocation", "UserAssetLibrary", "UserGraspLibrary",
+    "AssetCatalog", "AssetError", "AssetLibrary", "AssetLibraryType", "BuiltinAssetLibrary", "GraspError",
+    "GraspLibrary", "GraspLibraryType", "ResourceAssetLibrary", "UidLocation",
 ]

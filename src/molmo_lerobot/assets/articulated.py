@@ -28,7 +28,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.assets.grasps import GraspLibrary
-from molmo_lerobot.assets.libraries import ObjectTableLibrary
+from molmo_lerobot.assets.libraries import AssetLibraryType, ObjectTableLibrary
 from molmo_lerobot.paths import package_asset_dir
 
 ROBOT = "franka"  # the analytic handle grasps are sized for the Franka hand
@@ -278,3 +278,8 @@ class ArticulatedAssetLibrary(ObjectTableLibrary):
 
     def __init__(self) -> None:
         super().__init__("articulated", ARTICULATED_OBJECTS, ArticulatedGraspLibrary())
+
+
+#: The articulated objects as a library type (the ``articulated`` plugin provides it).
+ARTICULATED_LIBRARY_TYPE = AssetLibraryType("articulated", lambda settings, catalog: [ArticulatedAssetLibrary()],
+                                            priority=200)

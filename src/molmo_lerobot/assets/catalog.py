@@ -6,35 +6,28 @@ it. Grasp lookups try grasp libraries in priority order — a newly registered o
 restricted to those mapped to a library holding the UID (or to any library): first those
 made for the requested robot, then (MolmoSpaces' unified TCP convention makes grasps transfer)
 those kept under another robot's name. A run's catalog
-(:attr:`molmo_lerobot.context.RunContext.catalog`) holds our built-in objects, the articulated
-kitchen items and MolmoSpaces' ``thor``/``objaverse`` libraries with their
-``droid``/``droid_objaverse`` grasps; the run's user libraries in MolmoSpaces' format go first.
+(:attr:`molmo_lerobot.context.RunContext.catalog`) is :meth:`AssetCatalog.compose` d from the
+asset and grasp library types its plugins provide; this module names no library of its own.
 """
 
 from __future__ import annotations
 
 import difflib
 import os
+from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from molmo_lerobot.assets.grasps import GraspError, GraspLibrary
+from molmo_lerobot.assets.grasps import GraspError, GraspLibrary, GraspLibraryType
 from molmo_lerobot.assets.libraries import (
     AssetError,
     AssetLibrary,
-    BuiltinAssetLibrary,
-    ResourceAssetLibrary,
+    AssetLibraryType,
     UidLocation,
 )
-from molmo_lerobot.assets.user import (
-    ASSETS_INDEX,
-    UserAssetLibrary,
-    load_user_grasp_libraries,
-)
 
-#: Object sources of MolmoSpaces that a user library may not be named after.
-RESERVED_LIBRARY_NAMES = ("thor", "objaverse", "objathor_metadata")
 #: A grasp-library robot name → our robots its grasps were made for (beyond the same name).
 GRASP_ROBOT_NAMES = {"droid": ("franka_droid",)}
 
@@ -45,58 +38,54 @@ def _serves(library: GraspLibrary, robot: str) -> bool:
 
 
 class AssetCatalog:
-    """Asset and grasp libraries in priority order (first registered last, user ones first)."""
+    """Asset and grasp libraries in priority order (the one registered last goes first)."""
 
-    def __init__(self, with_builtin: bool = True) -> None:
+    def __init__(self) -> None:
         self.libraries: list[AssetLibrary] = []
         self.grasp_libraries: list[tuple[GraspLibrary, str | None]] = []  # (library, asset library name or None)
-        if with_builtin:
-            self.register_library(BuiltinAssetLibrary())
+
+    @classmethod
+    def compose(cls, asset_types: Iterable[AssetLibraryType], grasp_types: Iterable[GraspLibraryType],
+                settings: Any) -> AssetCatalog:
+        """A run's catalog: the libraries of every type, made from the run's ``settings``.
+
+        Types are made and registered from the lowest ``priority`` up (asset library types
+        before grasp library types of equal priority, then by name), each library ahead of
+        those before it: a higher priority is looked up first, and a grasp library type's
+        libraries go ahead of those shipped with asset libraries of its priority.
+        """
+        steps = sorted([(t.priority, 0, t.name, t) for t in asset_types] +
+                       [(t.priority, 1, t.name, t) for t in grasp_types], key=lambda step: step[:3])
+        catalog = cls()
+        for _, is_grasps, _, kind in steps:
+            if is_grasps:
+                for grasps, asset_library in kind.make(settings, catalog):
+                    catalog.register_grasp_library(grasps, asset_library=asset_library)
+            else:
+                for library in kind.make(settings, catalog):
+                    catalog.register_library(library)
+        return catalog
 
     # -- registration ------------------------------------------------------------------
-    def register_library(self, library: AssetLibrary, first: bool = True) -> AssetLibrary:
+    def register_library(self, library: AssetLibrary) -> AssetLibrary:
         """Add an asset library (and the grasp library it ships with), ahead of the others."""
         if any(lib.name == library.name for lib in self.libraries):
             raise AssetError(f"an asset library named {library.name!r} is already registered")
-        self.libraries.insert(0 if first else len(self.libraries), library)
+        self.libraries.insert(0, library)
         grasps = library.grasp_library()
         if grasps is not None:
-            self.register_grasp_library(grasps, asset_library=library.name, first=first)
+            self.register_grasp_library(grasps, asset_library=library.name)
         return library
 
-    def register_user_asset_library(self, name: str, path: str | os.PathLike) -> UserAssetLibrary:
-        """Register a MolmoSpaces user asset library (``path/assets_index.json``), first in priority."""
-        if not isinstance(name, str) or not name or "/" in name:
-            raise AssetError(f"user asset library name {name!r} must be non-empty and contain no '/'")
-        if name in RESERVED_LIBRARY_NAMES:
-            raise AssetError(f"user asset library {name!r}: the name of a MolmoSpaces object source")
-        if not (Path(path) / ASSETS_INDEX).is_file():
-            raise AssetError(f"user asset library {name!r}: {Path(path) / ASSETS_INDEX}: file not found")
-        return self.register_library(UserAssetLibrary(name, path))  # type: ignore[return-value]
-
-    def register_user_grasp_library(self, name: str, path: str | os.PathLike,
-                                    asset_library_name: str) -> list[GraspLibrary]:
-        """Register a MolmoSpaces user grasp library as ``name/<robot>`` entries for one asset library."""
-        self.library(asset_library_name)  # must already be registered
-        libraries = load_user_grasp_libraries(name, path)
-        taken = {g.name for g, _ in self.grasp_libraries}
-        for lib in libraries:
-            if lib.name in taken:
-                raise GraspError(f"a grasp library named {lib.name!r} is already registered")
-        for lib in libraries:
-            self.register_grasp_library(lib, asset_library=asset_library_name)
-        return libraries  # type: ignore[return-value]
-
-    def register_grasp_library(self, library: GraspLibrary | str | os.PathLike, asset_library: str | None = None,
-                               first: bool = True) -> GraspLibrary:
+    def register_grasp_library(self, library: GraspLibrary | str | os.PathLike,
+                               asset_library: str | None = None) -> GraspLibrary:
         """Add a grasp library; ``asset_library`` restricts it to that library's UIDs."""
         if not isinstance(library, GraspLibrary):
             root = Path(library)
             if not root.is_dir():
                 raise GraspError(f"grasp library {root}: not a directory")
             library = GraspLibrary(root)
-        entry = (library, asset_library)
-        self.grasp_libraries.insert(0 if first else len(self.grasp_libraries), entry)
+        self.grasp_libraries.insert(0, (library, asset_library))
         return library
 
     def library(self, name: str) -> AssetLibrary:
@@ -116,8 +105,7 @@ class AssetCatalog:
         return owners[0]
 
     def _unknown(self, uid: str) -> AssetError:
-        known = [u for lib in self.libraries if getattr(lib, "enumerable", not isinstance(lib, ResourceAssetLibrary))
-                 for u in lib.uids()]
+        known = [u for lib in self.libraries if lib.enumerable for u in lib.uids()]
         close = difflib.get_close_matches(uid, known, n=3)
         hint = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
         return AssetError(f"unknown asset UID {uid!r} in libraries {[l.name for l in self.libraries]}{hint}")
@@ -147,8 +135,7 @@ class AssetCatalog:
         owners = self.owners(uid)
         names = {lib.name for lib in owners}
         for lib in owners:
-            if isinstance(lib, ResourceAssetLibrary) and lib.grasps is not None:
-                lib.install(uid)  # grasp files of packed libraries arrive with the object's archive
+            lib.fetch_grasps(uid)
         mapped = [g for g, owner in self.grasp_libraries if owner is None or owner in names]
         return [g for g in mapped if _serves(g, robot)] + [g for g in mapped if not _serves(g, robot)]
 

@@ -1,15 +1,15 @@
-"""Asset libraries: UID → MJCF + metadata document (MolmoSpaces' fields).
+"""Asset libraries: UID → MJCF + metadata document (MolmoSpaces' fields), and their plugin kind.
 
-Kinds sharing one interface:
+A plugin provides asset libraries as :class:`AssetLibraryType` s (hook ``molmo_asset_libraries``);
+a run's catalog holds the libraries every type makes from the run's settings. Kinds here:
 
 - :class:`BuiltinAssetLibrary` — the primitive objects of the procedural scenes;
-- :class:`~molmo_lerobot.assets.user.UserAssetLibrary` — a user library in MolmoSpaces' own
-  format (``assets_index.json``), registered at runtime;
-- :class:`~molmo_lerobot.molmospaces.libraries.MolmoSpacesObjects` — MolmoSpaces' ``thor`` and
-  ``objaverse`` libraries in its assets dir;
+- :class:`ObjectTableLibrary` — any in-memory table of objects (the articulated kitchen items);
 - :class:`ResourceAssetLibrary` — a big library installed through the resource manager
   (``objects/<source>@<version>``: ``<uid>/<uid>.xml`` per object and one ``metadata.jsonl``),
   whose metadata is kept in LMDB; ``install`` fetches the object's archive and its grasps.
+
+MolmoSpaces' formats (``thor``/``objaverse``, user libraries) are the ``molmospaces`` plugin's.
 """
 
 from __future__ import annotations
@@ -18,16 +18,19 @@ import json
 import os
 import uuid
 from abc import ABC, abstractmethod
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import lmdb
 import zstandard
 
 from molmo_lerobot import fileio
 from molmo_lerobot.assets.grasps import BuiltinGraspLibrary, GraspLibrary
+
+if TYPE_CHECKING:
+    from molmo_lerobot.assets.catalog import AssetCatalog
 
 METADATA_FIELDS = ("assetId", "category", "description", "description_long", "description_short", "synset",
                    "mass", "boundingBox")
@@ -53,6 +56,8 @@ class AssetLibrary(ABC):
     """A named collection of objects keyed by globally unique UIDs."""
 
     name: str
+    #: whether :meth:`uids` is cheap enough to offer its UIDs as "did you mean" hints
+    enumerable: bool = True
 
     @abstractmethod
     def uids(self) -> Iterator[str]: ...
@@ -82,8 +87,28 @@ class AssetLibrary(ABC):
         """The grasp library that ships with this asset library, if any."""
         return None
 
+    def fetch_grasps(self, uid: str) -> None:
+        """Make ``uid``'s grasp files local before a grasp lookup (nothing to do unless they are packed)."""
+
     def _unknown(self, uid: str) -> AssetError:
         return AssetError(f"library {self.name!r} has no UID {uid!r}")
+
+
+@dataclass(frozen=True)
+class AssetLibraryType:
+    """Asset libraries a plugin provides (``molmo_asset_libraries``), made per run.
+
+    ``make(settings, catalog)`` returns this type's libraries for a run, from its
+    :class:`~molmo_lerobot.molmospaces.settings.MolmoSpacesSettings`; ``catalog`` holds the
+    libraries of lower priority, already registered (to check names against). Higher
+    ``priority`` is looked up first: the run's user libraries 1000, built-in objects 300,
+    articulated objects 200, MolmoSpaces' ``thor`` 100 and ``objaverse`` 50.
+    """
+
+    name: str
+    make: Callable[[Any, AssetCatalog], list[AssetLibrary]]
+    priority: int = 0
+    aliases: tuple[str, ...] = ()
 
 
 class ObjectTableLibrary(AssetLibrary):
@@ -126,6 +151,10 @@ class BuiltinAssetLibrary(ObjectTableLibrary):
         from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES
 
         super().__init__("builtin", {**BUILTIN_OBJECTS, **BUILTIN_RECEPTACLES}, BuiltinGraspLibrary())
+
+
+#: The built-in objects as a library type (the ``tabletop`` plugin provides it).
+BUILTIN_LIBRARY_TYPE = AssetLibraryType("builtin", lambda settings, catalog: [BuiltinAssetLibrary()], priority=300)
 
 
 class MetadataStore:
@@ -217,6 +246,7 @@ class ResourceAssetLibrary(AssetLibrary):
     """
 
     METADATA = "metadata.jsonl"
+    enumerable = False
 
     def __init__(self, manager, objects: str, grasps: str | None = None, name: str | None = None) -> None:
         from molmo_lerobot.resources.manager import ResourceSpec
@@ -265,6 +295,11 @@ class ResourceAssetLibrary(AssetLibrary):
         if self.grasps is not None and self.manager.index(self.grasps).archives_for_uid(uid):
             self.manager.ensure_uid(self.grasps, uid)
         return location
+
+    def fetch_grasps(self, uid: str) -> None:
+        """Grasp files of a packed library arrive with the object's archive."""
+        if self.grasps is not None:
+            self.install(uid)
 
     def _root(self, spec) -> Path:
         linked = self.manager.linked().get(spec.data_type, {}).get(spec.source)

@@ -9,6 +9,9 @@
   ``objects/objathor_metadata/objects_metadata.json.gz`` loaded once into our LMDB store;
 * grasp libraries ``droid`` (thor) and ``droid_objaverse`` (objaverse):
   ``grasps/<lib>/<uid>/<uid>_grasps_filtered.npz``, per joint ``<joint>_grasps_filtered.npz``.
+
+Each is a library type of the ``molmospaces`` plugin (:func:`asset_library_types`,
+:func:`grasp_library_types`), made per run over its settings' assets dir.
 """
 
 from __future__ import annotations
@@ -21,15 +24,16 @@ import os
 import pickle
 import re
 from collections.abc import Iterator
-from functools import cache
+from functools import cache, partial
 from pathlib import Path
 
 import lmdb
 import zstandard
 
 from molmo_lerobot import fileio
-from molmo_lerobot.assets.grasps import GraspLibrary
-from molmo_lerobot.assets.libraries import AssetError, AssetLibrary, MetadataStore, UidLocation
+from molmo_lerobot.assets.catalog import AssetCatalog
+from molmo_lerobot.assets.grasps import GraspLibrary, GraspLibraryType
+from molmo_lerobot.assets.libraries import AssetError, AssetLibrary, AssetLibraryType, MetadataStore, UidLocation
 from molmo_lerobot.molmospaces import layout
 from molmo_lerobot.molmospaces.settings import MolmoSpacesSettings
 
@@ -247,3 +251,28 @@ class MolmoSpacesGrasps(GraspLibrary):
             return []
         names = (p.name.removesuffix("_grasps_filtered.npz") for p in d.glob("*_grasps_filtered.npz"))
         return sorted(n for n in names if n != uid)
+
+
+#: Lookup priority of each object library and of its grasp libraries (thor before objaverse).
+PRIORITY = {"thor": 100, "objaverse": 50}
+
+
+def _objects(source: str, settings: MolmoSpacesSettings, catalog: AssetCatalog) -> list[AssetLibrary]:
+    return [MolmoSpacesObjects(source, settings)]
+
+
+def _grasps(name: str, source: str, settings: MolmoSpacesSettings,
+            catalog: AssetCatalog) -> list[tuple[GraspLibrary, str | None]]:
+    return [(MolmoSpacesGrasps(name, settings), source)]
+
+
+def asset_library_types() -> list[AssetLibraryType]:
+    """``thor`` and ``objaverse``."""
+    return [AssetLibraryType(source, partial(_objects, source), PRIORITY[source])
+            for source in layout.OBJECT_LIBRARY_TO_GRASP_LIBRARIES]
+
+
+def grasp_library_types() -> list[GraspLibraryType]:
+    """``droid`` for ``thor``, ``droid_objaverse`` for ``objaverse``."""
+    return [GraspLibraryType(name, partial(_grasps, name, source), PRIORITY[source])
+            for source, names in layout.OBJECT_LIBRARY_TO_GRASP_LIBRARIES.items() for name in names]

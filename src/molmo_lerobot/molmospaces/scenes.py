@@ -1,5 +1,8 @@
-"""MolmoSpaces' scene datasets as scene plugins: ``ithor``, ``procthor-10k``, ``procthor-objaverse``,
-``holodeck-objaverse``, their debug variants, and ``user`` (the run's ``scene_xml_paths``).
+"""The ``molmospaces`` plugin: MolmoSpaces' scene datasets ``ithor``, ``procthor-10k``,
+``procthor-objaverse``, ``holodeck-objaverse``, their debug variants and ``user`` (the run's
+``scene_xml_paths``), and its library types: ``thor``/``objaverse`` objects with their
+``droid``/``droid_objaverse`` grasps (:mod:`.libraries`) and ``user``, the run's
+``asset_libraries``/``grasp_libraries`` in MolmoSpaces' format (:mod:`.user`).
 
 A house is the scene XML that :mod:`.layout` names, loaded with ``MjSpec.from_file`` so its
 relative mesh/texture/``<attach>`` paths resolve, keeping the scene's own ``<option>`` (all but
@@ -20,7 +23,9 @@ from typing import TYPE_CHECKING, Any
 import mujoco
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.molmospaces import layout
+from molmo_lerobot.assets.grasps import GraspLibraryType
+from molmo_lerobot.assets.libraries import AssetError, AssetLibraryType
+from molmo_lerobot.molmospaces import layout, libraries, user
 from molmo_lerobot.sim.scenes import SceneContext, SceneDataset
 
 if TYPE_CHECKING:
@@ -185,8 +190,6 @@ def resolve_object_file(rel: str, field: str, ctx: SceneContext) -> Path:
     path = ctx.settings.assets / rel
     if path.is_file():
         return path
-    from molmo_lerobot.assets.libraries import AssetError
-
     uid = Path(rel).stem
     try:
         installed = ctx.catalog.install_uid(uid).mjcf_path
@@ -238,3 +241,17 @@ SCENE_DATASET_NAMES = (*layout.SCENE_DIRS, layout.USER)
 @hookimpl
 def molmo_scene_datasets() -> list[SceneDataset]:
     return [*(MolmoSpacesScenes(name) for name in layout.SCENE_DIRS), UserScenes()]
+
+
+#: The run's user libraries go ahead of every other library.
+USER_PRIORITY = 1000
+
+
+@hookimpl
+def molmo_asset_libraries() -> list[AssetLibraryType]:
+    return [*libraries.asset_library_types(), AssetLibraryType("user", user.run_asset_libraries, USER_PRIORITY)]
+
+
+@hookimpl
+def molmo_grasp_libraries() -> list[GraspLibraryType]:
+    return [*libraries.grasp_library_types(), GraspLibraryType("user", user.run_grasp_libraries, USER_PRIORITY)]

@@ -5,6 +5,9 @@ read-only; bookkeeping lives beside it in ``<cache>/.molmo/`` (manifests, LMDB i
 per-archive completion flags, locks, temporary extraction dirs). The install dir holds
 ``<install>/<data_type>/<source>`` — one link to the version dir (``link="dir"``) or a tree
 of per-file links (``link="file"``, so relative MJCF paths resolve). Upgrades re-point links.
+What a version's format keeps beyond that (its metadata source, done marks, archive checks, the
+locks and records of another tool sharing the cache) is its :class:`~.layout.Layout`, chosen by
+the manifest's ``format`` from :data:`LAYOUTS`.
 
 Nothing is ever written through a link below the cache or install dir (either may itself be a
 link): every write, new directory, rename and removal walks its path from that root with
@@ -19,7 +22,6 @@ import gzip
 import json
 import os
 import re
-import shutil
 import socket
 import stat
 import tempfile
@@ -35,29 +37,20 @@ from filelock import FileLock, Timeout
 
 from molmo_lerobot import fileio
 from molmo_lerobot.fileio import UnsafePathError, atomic_open, atomic_write
-from molmo_lerobot.resources import molmospaces as ms
-from molmo_lerobot.resources.archive import (
-    extract_limit,
-    pack_archive,
-    safe_extract,
-    sha256_file,
-    tree_entries,
-    verify_archive,
-)
-from molmo_lerobot.resources.errors import (
-    CorruptArchiveError,
-    RemoteNotFoundError,
-    ResourceError,
-    StaleLockError,
-    UnsafeArchiveError,
-)
+from molmo_lerobot.resources.archive import pack_archive, safe_extract, sha256_file, tree_entries
+from molmo_lerobot.resources.errors import CorruptArchiveError, ResourceError, StaleLockError, UnsafeArchiveError
 from molmo_lerobot.resources.index import PathIndex, uid_of
+from molmo_lerobot.resources.layout import Layout, OwnLayout
 from molmo_lerobot.resources.manifests import check_index, check_local, parse_manifest, read_json
-from molmo_lerobot.resources.remotes import MOLMOSPACES, Remote, open_remote
+from molmo_lerobot.resources.molmospaces import MolmoSpacesLayout
+from molmo_lerobot.resources.remotes import Remote, open_remote
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 LINK_MODES = ("dir", "file")
 META = ".molmo"
+#: Every layout, in the order a remote is probed for a version's metadata; a manifest's ``format``
+#: picks one (ours have an integer format).
+LAYOUTS: tuple[type[Layout], ...] = (OwnLayout, MolmoSpacesLayout)
 
 
 @dataclass(frozen=True)
@@ -105,17 +98,14 @@ PostSetup = Callable[["ResourceManager", ResourceSpec, Path], None]
 class ResourceManager:
     """Installs resource versions from a remote into a cache and links them into an install dir.
 
-    Versions in MolmoSpaces' layout (see :mod:`~molmo_lerobot.resources.molmospaces`) keep
-    molmospaces-resources' flags, local manifests, links and locks, so either tool can use
+    Versions in MolmoSpaces' layout (:class:`~molmo_lerobot.resources.molmospaces.MolmoSpacesLayout`)
+    keep molmospaces-resources' flags, local manifests, links and locks, so either tool can use
     what the other installed.
 
     ``use_lock=False`` is for workers reading a cache that a leader has filled: nothing is
     locked or written, and anything missing is an error instead of an install.
     ``post_setup`` callables run after every install as ``hook(manager, spec, path)``.
     """
-
-    #: MolmoSpaces' archives have no checksum or exact size: refuse one unpacking to more than this ratio.
-    max_inflate_ratio = 64
 
     def __init__(self, cache_dir: str | os.PathLike, install_dir: str | os.PathLike | None = None,
                  remote: Remote | str | os.PathLike | None = None, *, use_lock: bool = True, workers: int = 4,
@@ -167,7 +157,7 @@ class ResourceManager:
 
     # -- locks -------------------------------------------------------------------------
     @contextlib.contextmanager
-    def _lock(self, path: Path) -> Iterator[None]:
+    def lock(self, path: Path) -> Iterator[None]:
         """An inter-process file lock, reentrant within a thread (one FileLock object per path)."""
         if not self.use_lock:
             yield
@@ -192,11 +182,11 @@ class ResourceManager:
             lock.release()
 
     def _version_lock(self, spec: ResourceSpec):
-        return self._lock(self.cache_dir / META / "locks" / f"{spec.data_type}+{spec.source}+{spec.version}.lock")
+        return self.lock(self.cache_dir / META / "locks" / f"{spec.data_type}+{spec.source}+{spec.version}.lock")
 
     def _install_lock(self):
         assert self.install_dir is not None
-        return self._lock(self.install_dir / META / "install.lock")
+        return self.lock(self.install_dir / META / "install.lock")
 
     # -- metadata ----------------------------------------------------------------------
     def manifest(self, spec: ResourceSpec | str) -> dict:
@@ -215,40 +205,19 @@ class ResourceManager:
         return self._manifests[spec]
 
     def _fetch_meta(self, spec: ResourceSpec) -> None:
-        """Fetch and check the version's metadata into ``meta_dir`` (our layout first, then MolmoSpaces').
+        """Fetch and check the version's metadata into ``meta_dir``, probing :data:`LAYOUTS` in order.
 
-        A version dir molmospaces-resources filled (their metadata files inside) is adopted
-        without asking the remote.
+        A version dir another tool filled (its metadata files inside) is adopted without asking the remote.
         """
-        meta = self.meta_dir(spec)
-        if (meta / "manifest.json").is_file():
+        if (self.meta_dir(spec) / "manifest.json").is_file():
             return
-        tmp = fileio.make_dirs(meta / "tmp", root=self.cache_dir)
-        vdir = self.version_dir(spec)
-        if (vdir / ms.REMOTE_MANIFEST).is_file() and (vdir / ms.TRIES).is_file():
-            return self._convert_ms_meta(spec, vdir, f"{spec}: cache {vdir}")
+        tmp = fileio.make_dirs(self.meta_dir(spec) / "tmp", root=self.cache_dir)
+        if any(layout.adopt(self, spec) for layout in LAYOUTS):
+            return
         if self.remote is None:
             raise ResourceError(f"{spec} is not in cache {self.cache_dir} and no remote was given")
-        try:
-            self.remote.download(f"{spec.rel}/manifest.json", tmp / "manifest.json")
-        except RemoteNotFoundError:
-            try:
-                for name in (ms.REMOTE_MANIFEST, ms.TRIES):
-                    self.remote.download(f"{spec.rel}/{name}", tmp / name)
-            except RemoteNotFoundError:
-                raise ResourceError(f"remote {self.remote.url} has no {spec} ({self._remote_versions(spec)})") from None
-            return self._convert_ms_meta(spec, tmp, f"{spec}: remote {self.remote.url} {spec.rel}")
-        self.remote.download(f"{spec.rel}/index.json.gz", tmp / "index.json.gz")
-        where = f"{spec}: remote {self.remote.url} {spec.rel}/manifest.json"
-        manifest = parse_manifest(read_json(tmp / "manifest.json", where), where)
-        if (manifest["data_type"], manifest["source"], manifest["version"]) != (
-                spec.data_type, spec.source, spec.version):
-            raise ResourceError(f"{where} describes another resource")
-        check_index(read_json(tmp / "index.json.gz", f"{spec}: remote index.json.gz"), manifest["archives"],
-                    f"{spec}: remote {self.remote.url} {spec.rel}/index.json.gz")
-        fileio.replace(tmp / "index.json.gz", meta / "index.json.gz", root=self.cache_dir)
-        # last: its presence means meta is complete
-        fileio.replace(tmp / "manifest.json", meta / "manifest.json", root=self.cache_dir)
+        if not any(layout.fetch_meta(self, spec, tmp) for layout in LAYOUTS):
+            raise ResourceError(f"remote {self.remote.url} has no {spec} ({self._remote_versions(spec)})")
 
     def _remote_versions(self, spec: ResourceSpec) -> str:
         try:
@@ -258,39 +227,11 @@ class ResourceManager:
         versions = sorted({p.split("/")[2] for p in files if p.count("/") >= 3})
         return f"versions there: {', '.join(versions) or 'none'}"
 
-    def _convert_ms_meta(self, spec: ResourceSpec, src: Path, where: str) -> None:
-        """Our manifest and index from MolmoSpaces' two metadata files in ``src`` (kept beside them)."""
-        meta = self.meta_dir(spec)
-        sizes = read_json(src / ms.REMOTE_MANIFEST, f"{where}/{ms.REMOTE_MANIFEST}")
-        tries = read_json(src / ms.TRIES, f"{where}/{ms.TRIES}")
-        manifest, index = ms.convert(spec.data_type, spec.source, spec.version, sizes, tries, where)
-        manifest = parse_manifest(manifest, where)
-        check_index(index, manifest["archives"], f"{where}/{ms.TRIES}")
-        for name in (ms.REMOTE_MANIFEST, ms.TRIES):
-            if src != meta / "raw":
-                with open(src / name, "rb") as fsrc, atomic_open(meta / "raw" / name, "wb", root=self.cache_dir) as dst:
-                    shutil.copyfileobj(fsrc, dst)
-        with atomic_open(meta / "index.json.gz", "wb", root=self.cache_dir) as raw, \
-                gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as fh:
-            fh.write(json.dumps(index).encode())
-        atomic_write(meta / "manifest.json", json.dumps(manifest, indent=1, sort_keys=True), root=self.cache_dir)
-
-    def is_molmospaces(self, spec: ResourceSpec | str) -> bool:
-        """Whether the version has MolmoSpaces' layout (their flags, manifests and locks are kept)."""
-        return self.manifest(spec).get("format") == MOLMOSPACES
-
-    def _ms_cache_lock(self, spec: ResourceSpec):
-        """molmospaces-resources' cache lock, held while a version of their layout changes."""
-        return self._lock(self.cache_dir / ms.LOCK) if self.is_molmospaces(spec) else contextlib.nullcontext()
-
-    def _ms_prepare(self, spec: ResourceSpec) -> None:
-        """Their metadata files inside the version dir, as molmospaces-resources keeps them."""
-        vdir = fileio.make_dirs(self.version_dir(spec), root=self.cache_dir)
-        for name in (ms.REMOTE_MANIFEST, ms.TRIES):
-            if not (vdir / name).is_file():
-                with open(self.meta_dir(spec) / "raw" / name, "rb") as src, \
-                        atomic_open(vdir / name, "wb", root=self.cache_dir) as dst:
-                    shutil.copyfileobj(src, dst)
+    def layout(self, spec: ResourceSpec | str) -> Layout:
+        """The layout of a version, by its manifest's ``format``."""
+        spec = ResourceSpec.parse(spec)
+        fmt = self.manifest(spec).get("format")
+        return next((layout for layout in LAYOUTS if layout.format == fmt), OwnLayout)(self, spec)
 
     def index(self, spec: ResourceSpec | str) -> PathIndex:
         """The version's LMDB index (built from ``index.json.gz`` on first use)."""
@@ -318,24 +259,13 @@ class ResourceManager:
         return idx
 
     def _done(self, spec: ResourceSpec) -> set[str]:
-        if self.is_molmospaces(spec):
-            vdir = self.version_dir(spec)
-            return {a for a in self.manifest(spec)["archives"] if ms.extract_flag(vdir, a).exists()}
-        done = self.meta_dir(spec) / "done"
-        return {p.name[:-3] for p in done.glob("*.ok")} if done.is_dir() else set()
-
-    def _mark_done(self, spec: ResourceSpec, name: str, entry: dict) -> None:
-        if self.is_molmospaces(spec):
-            atomic_write(ms.extract_flag(self.version_dir(spec), name), "", root=self.cache_dir)
-        else:
-            atomic_write(self.meta_dir(spec) / "done" / f"{name}.ok", entry["sha256"], root=self.cache_dir)
+        return self.layout(spec).done()
 
     def is_complete(self, spec: ResourceSpec | str) -> bool:
         spec = ResourceSpec.parse(spec)
         if (self.meta_dir(spec) / "complete").is_file():
             return True
-        return (self.meta_dir(spec) / "manifest.json").is_file() and self.is_molmospaces(spec) and \
-            set(self.manifest(spec)["archives"]) <= self._done(spec)
+        return (self.meta_dir(spec) / "manifest.json").is_file() and self.layout(spec).complete()
 
     # -- install -----------------------------------------------------------------------
     def install(self, spec: ResourceSpec | str, on_demand: bool = False) -> InstallResult:
@@ -355,10 +285,10 @@ class ResourceManager:
             self._fetch_meta(spec)
             manifest = self.manifest(spec)
             self.index(spec)
-            with self._ms_cache_lock(spec):
-                if self.is_molmospaces(spec):
-                    self._ms_prepare(spec)
-                done = self._done(spec)
+            layout = self.layout(spec)
+            with layout.lock():
+                layout.prepare()
+                done = layout.done()
                 todo = [] if on_demand else [a for a in manifest["archives"] if a not in done]
                 self._extract(spec, todo)
                 self._mark_complete(spec)
@@ -383,7 +313,7 @@ class ResourceManager:
         if not self.use_lock:
             raise ResourceError(f"{spec}: archive {wanted[0]} is not in cache {self.cache_dir}; "
                                 "no-lock mode never installs")
-        with self._version_lock(spec), self._ms_cache_lock(spec):
+        with self._version_lock(spec), self.layout(spec).lock():
             todo = [a for a in wanted if a not in self._done(spec)]
             self._clean_tmp(spec)
             self._extract(spec, todo)
@@ -472,22 +402,17 @@ class ResourceManager:
         tmp = fileio.make_dirs(self.meta_dir(spec) / "tmp", root=self.cache_dir)
         token = uuid.uuid4().hex
         part, xdir = tmp / f"{token}.part", tmp / f"x-{token}"
+        layout = self.layout(spec)
         try:
-            layout = self.manifest(spec).get("format", 1)
-            inflated = self.remote.fetch_archive(spec.rel, name, part, layout)
-            if layout == MOLMOSPACES:  # sizes in MB and no checksum: bound the unpacked size instead
-                limit = extract_limit(files) + (inflated if inflated is not None
-                                                else self.max_inflate_ratio * part.stat().st_size)
-            else:
-                verify_archive(part, name, entry["size"], entry["sha256"])
-                limit = extract_limit(files)
+            inflated = self.remote.fetch_archive(spec.rel, name, part, layout.format)
+            limit = layout.check_download(part, name, entry, files, inflated)
             try:
                 safe_extract(part, xdir, name, files, limit, root=self.cache_dir)
                 self._place(spec, name, xdir, files)
             except ResourceError as exc:
                 exc.retryable = False
                 raise
-            self._mark_done(spec, name, entry)
+            layout.mark_done(name, entry)
         finally:
             fileio.remove(part, root=self.cache_dir)
             fileio.rmtree(xdir, root=self.cache_dir, onexc=_force_remove)
@@ -551,10 +476,9 @@ class ResourceManager:
         link = self.link_path(spec)
         target = self.version_dir(spec)
         mode = self.manifest(spec)["link"]
-        theirs = self.is_molmospaces(spec)
-        their_lock = self._lock(self.install_dir / ms.LOCK) if theirs else contextlib.nullcontext()
+        layout = self.layout(spec)
         install = self.install_dir
-        with self._install_lock(), their_lock:
+        with self._install_lock(), layout.link_lock():
             fileio.make_dirs(link.parent, root=install)
             current = self.linked().get(spec.data_type, {}).get(spec.source)
             token = uuid.uuid4().hex
@@ -568,18 +492,14 @@ class ResourceManager:
                     fileio.replace(tmp, link, root=install)
             else:
                 index, done = self.index(spec), sorted(self._done(spec) & set(self.manifest(spec)["archives"]))
-                files = [rel for a in done for rel in index.files(a)]
-                if theirs:  # their metadata files are linked too, and each linked archive flagged
-                    files += [ms.REMOTE_MANIFEST, ms.TRIES]
+                files = [rel for a in done for rel in index.files(a)] + layout.link_files()
                 if current == spec.version and link.is_dir() and not link.is_symlink():
                     _make_links(link, target, files, install)  # same version: add what on-demand installs brought
-                    if theirs:
-                        _flag_links(link, done, install)
+                    layout.flag_links(link, done)
                 else:
                     new = link.parent / f".{link.name}.{token}.new"
                     _make_links(new, target, files, install)
-                    if theirs:
-                        _flag_links(new, done, install)
+                    layout.flag_links(new, done)
                     if link.is_symlink():
                         fileio.remove(link, root=install)
                     elif link.exists():
@@ -592,11 +512,8 @@ class ResourceManager:
             def point(d: dict) -> None:
                 d.setdefault(spec.data_type, {})[spec.source] = spec.version
 
-            self._update_json(self.install_dir / META / "installed.json", point, "str")
-            if theirs:
-                if current is not None and current != spec.version:  # their cached tries index is per version
-                    fileio.rmtree(install / ".lmdb" / spec.data_type / spec.source, root=install, ignore_errors=True)
-                self._update_json(self.install_dir / ms.LOCAL_MANIFEST, point, "str", indent=2)
+            self.update_json(self.install_dir / META / "installed.json", point, "str")
+            layout.record_link(point, current)
         return link
 
     # -- local manifests ---------------------------------------------------------------
@@ -607,20 +524,26 @@ class ResourceManager:
                 versions.append(spec.version)
                 versions.sort()
 
-        with self._lock(self.cache_dir / META / "locks" / "manifest.lock"):
-            self._update_json(self.cache_dir / META / "installed.json", add, "list")
-            if self.is_molmospaces(spec):  # under their cache lock (held by the caller)
-                self._update_json(self.cache_dir / ms.LOCAL_MANIFEST, add, "list", indent=2)
+        with self.lock(self.cache_dir / META / "locks" / "manifest.lock"):
+            self.update_json(self.cache_dir / META / "installed.json", add, "list")
+            self.layout(spec).record_cache(add)  # under the layout's lock (held by the caller)
 
-    def _update_json(self, path: Path, edit: Callable[[dict], None], values: str, indent: int = 1) -> None:
+    def update_json(self, path: Path, edit: Callable[[dict], None], values: str, indent: int = 1) -> None:
+        """Edit a version record ``{type: {source: values}}`` (``values``: ``"list"`` or ``"str"``) in place;
+        ours sorted with ``indent`` 1, another tool's as it writes them."""
         data = check_local(read_json(path), path, values) if path.is_file() else {}
         edit(data)
         atomic_write(path, json.dumps(data, indent=indent, sort_keys=indent == 1), root=self._root(path))
 
+    @staticmethod
+    def _records(root: Path) -> list[Path]:
+        """Ours and every layout's version records at the root of the cache or install dir (later ones win)."""
+        return [root / META / "installed.json", *(path for layout in LAYOUTS for path in layout.records(root))]
+
     def installed(self) -> dict[str, dict[str, list[str]]]:
         """``{data_type: {source: [versions]}}`` present in the cache (ours and molmospaces-resources')."""
         out: dict[str, dict[str, list[str]]] = {}
-        for path in (self.cache_dir / META / "installed.json", self.cache_dir / ms.LOCAL_MANIFEST):
+        for path in self._records(self.cache_dir):
             if path.is_file():
                 for data_type, sources in check_local(read_json(path), path, "list").items():
                     for source, versions in sources.items():
@@ -633,7 +556,7 @@ class ResourceManager:
         if self.install_dir is None:
             return {}
         out: dict[str, dict[str, str]] = {}
-        for path in (self.install_dir / META / "installed.json", self.install_dir / ms.LOCAL_MANIFEST):
+        for path in self._records(self.install_dir):
             if path.is_file():
                 for data_type, sources in check_local(read_json(path), path, "str").items():
                     out.setdefault(data_type, {}).update({s: v for s, v in sources.items() if v is not None})
@@ -665,7 +588,8 @@ class ResourceManager:
             manifest, index = self.manifest(spec), self.index(spec)
         except ResourceError as exc:
             return [f"{spec}: {exc}"]
-        done = self._done(spec)
+        layout = self.layout(spec)
+        done = layout.done()
         problems = []
         if self.is_complete(spec) and not set(manifest["archives"]) <= done:
             problems.append(f"{spec}: marked complete but archives are missing")
@@ -692,16 +616,12 @@ class ResourceManager:
             elif (vdir / rel).stat().st_mode & 0o222:
                 problems.append(f"{what} is writable")
         for rel, got in sorted(tree.items()):
-            if rel not in expected and not (got == ("d",) and PurePosixPath(rel) in dirs) and not self._own_file(spec, rel):
+            if rel not in expected and not (got == ("d",) and PurePosixPath(rel) in dirs) and not layout.own_file(rel):
                 problems.append(f"{spec}: {rel} is not in the index of any installed archive")
             if got[0] == "l" and not fileio.resolves_inside(vdir, rel):
                 problems.append(f"{spec}: link {rel} -> {got[1]!r} resolves to {os.path.realpath(vdir / rel)}, "
                                 f"outside {vdir}")
         return problems
-
-    def _own_file(self, spec: ResourceSpec, rel: str) -> bool:
-        """Bookkeeping a layout keeps inside the version dir (MolmoSpaces' metadata and flags; none in ours)."""
-        return self.is_molmospaces(spec) and ms.is_own_file(rel)
 
 
 # -- packing -------------------------------------------------------------------------------
@@ -791,17 +711,11 @@ def _make_links(root: Path, target: Path, files: Iterable[str], install: Path) -
                     os.symlink(target / rel, leaf, dir_fd=fd)
 
 
-def _flag_links(root: Path, archives: Iterable[str], install: Path) -> None:
-    """molmospaces-resources' per-archive "links made" flags in a per-file link dir."""
-    for archive in archives:
-        atomic_write(ms.link_flag(root, archive), "", root=install)
-
-
 def _remove_link_tree(path: Path, install: Path) -> None:
-    """Delete a tree of links made by :func:`_make_links` (and their flags), refusing one that holds real files."""
+    """Delete a tree of links made by :func:`_make_links` (and a layout's flags), refusing one that holds real files."""
     for dirpath, dirnames, filenames in os.walk(path):
         for name in filenames:
-            if dirpath == str(path) and name.startswith(".") and name.endswith("_complete_links"):
+            if dirpath == str(path) and any(layout.own_link_file(name) for layout in LAYOUTS):
                 continue
             if not os.path.islink(os.path.join(dirpath, name)):
                 raise ResourceError(f"{path} holds real files ({name}); refusing to replace it with links")

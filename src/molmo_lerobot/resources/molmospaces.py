@@ -1,5 +1,6 @@
-"""MolmoSpaces' resource layout: file names, per-data-type behaviour, pinned versions, and the
-conversion of their metadata into our manifest and index.
+"""MolmoSpaces' resource layout: file names, per-data-type behaviour, pinned versions, the
+conversion of their metadata into our manifest and index, and :class:`MolmoSpacesLayout`, the
+resource manager's layout for versions in their format.
 
 What molmospaces-resources writes, and we read and write the same way:
 
@@ -17,12 +18,26 @@ What molmospaces-resources writes, and we read and write the same way:
 
 from __future__ import annotations
 
+import gzip
+import json
 import os
 import re
+import shutil
 from pathlib import Path
 
-from molmo_lerobot.resources.errors import ResourceError
-from molmo_lerobot.resources.manifests import ARCHIVE_NAME, clean_rel
+from molmo_lerobot import fileio
+from molmo_lerobot.fileio import atomic_open, atomic_write
+from molmo_lerobot.resources.archive import extract_limit
+from molmo_lerobot.resources.errors import RemoteNotFoundError, ResourceError
+from molmo_lerobot.resources.layout import Edit, Layout
+from molmo_lerobot.resources.manifests import (
+    ARCHIVE_NAME,
+    check_index,
+    clean_rel,
+    parse_manifest,
+    read_json,
+)
+from molmo_lerobot.resources.remotes import MOLMOSPACES
 
 REMOTE_MANIFEST = "mjthor_resource_file_to_size_mb.json"
 TRIES = "mjthor_resources_combined_meta.json.gz"
@@ -140,8 +155,6 @@ def trie_leaves(trie: object, where: str) -> list[str]:
 
 def read_versions_file(path: Path) -> dict[str, dict[str, str]]:
     """A version table file ``{data_type: {source: version}}`` (their pinned-assets file format)."""
-    from molmo_lerobot.resources.manifests import read_json
-
     data = read_json(Path(path), f"version table {path}")
     if not isinstance(data, dict) or not all(
             isinstance(s, dict) and all(isinstance(k, str) and isinstance(v, str) for k, v in s.items())
@@ -153,3 +166,111 @@ def read_versions_file(path: Path) -> dict[str, dict[str, str]]:
 def cache_dir() -> Path:
     """MolmoSpaces' cache dir: ``$MLSPACES_CACHE_DIR`` or theirs by default (so both tools share it)."""
     return Path(os.environ.get("MLSPACES_CACHE_DIR", "~/.cache/molmo-spaces-resources")).expanduser()
+
+
+class MolmoSpacesLayout(Layout):
+    """A version in molmospaces-resources' layout (see the module docstring), kept as their tool does.
+
+    Their two metadata files stay beside ours (``<meta>/raw/``) and inside the version dir, an
+    archive is done when their ``_complete_extract`` flag exists, and every change takes their
+    ``.lock`` of the cache or install dir and updates their ``LOCAL_MANIFEST`` records.
+    """
+
+    format = MOLMOSPACES
+    #: Their archives have no checksum or exact size: refuse one unpacking to more than this ratio.
+    max_inflate_ratio = 64
+
+    @classmethod
+    def adopt(cls, manager, spec) -> bool:
+        vdir = manager.version_dir(spec)
+        if not ((vdir / REMOTE_MANIFEST).is_file() and (vdir / TRIES).is_file()):
+            return False
+        cls._convert(manager, spec, vdir, f"{spec}: cache {vdir}")
+        return True
+
+    @classmethod
+    def fetch_meta(cls, manager, spec, tmp: Path) -> bool:
+        try:
+            for name in (REMOTE_MANIFEST, TRIES):
+                manager.remote.download(f"{spec.rel}/{name}", tmp / name)
+        except RemoteNotFoundError:
+            return False
+        cls._convert(manager, spec, tmp, f"{spec}: remote {manager.remote.url} {spec.rel}")
+        return True
+
+    @classmethod
+    def _convert(cls, manager, spec, src: Path, where: str) -> None:
+        """The manager's manifest and index from their two metadata files in ``src`` (kept beside them)."""
+        meta, root = manager.meta_dir(spec), manager.cache_dir
+        sizes = read_json(src / REMOTE_MANIFEST, f"{where}/{REMOTE_MANIFEST}")
+        tries = read_json(src / TRIES, f"{where}/{TRIES}")
+        manifest, index = convert(spec.data_type, spec.source, spec.version, sizes, tries, where)
+        manifest = parse_manifest(manifest, where)
+        check_index(index, manifest["archives"], f"{where}/{TRIES}")
+        for name in (REMOTE_MANIFEST, TRIES):
+            if src != meta / "raw":
+                with open(src / name, "rb") as fsrc, atomic_open(meta / "raw" / name, "wb", root=root) as dst:
+                    shutil.copyfileobj(fsrc, dst)
+        with atomic_open(meta / "index.json.gz", "wb", root=root) as raw, \
+                gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as fh:
+            fh.write(json.dumps(index).encode())
+        atomic_write(meta / "manifest.json", json.dumps(manifest, indent=1, sort_keys=True), root=root)
+
+    @classmethod
+    def records(cls, root: Path) -> list[Path]:
+        return [root / LOCAL_MANIFEST]
+
+    @classmethod
+    def own_link_file(cls, name: str) -> bool:
+        return name.startswith(".") and name.endswith("_complete_links")
+
+    def done(self) -> set[str]:
+        vdir = self.manager.version_dir(self.spec)
+        return {a for a in self.manager.manifest(self.spec)["archives"] if extract_flag(vdir, a).exists()}
+
+    def mark_done(self, archive: str, entry: dict) -> None:
+        atomic_write(extract_flag(self.manager.version_dir(self.spec), archive), "", root=self.manager.cache_dir)
+
+    def complete(self) -> bool:
+        return set(self.manager.manifest(self.spec)["archives"]) <= self.done()
+
+    def check_download(self, part: Path, archive: str, entry: dict, files: dict[str, list],
+                       inflated: int | None) -> int:
+        """No checksum and sizes in MB only: bound the unpacked size instead."""
+        return extract_limit(files) + (inflated if inflated is not None
+                                       else self.max_inflate_ratio * part.stat().st_size)
+
+    def own_file(self, rel: str) -> bool:
+        return is_own_file(rel)
+
+    def lock(self):
+        return self.manager.lock(self.manager.cache_dir / LOCK)
+
+    def prepare(self) -> None:
+        """Their metadata files inside the version dir, as molmospaces-resources keeps them."""
+        root = self.manager.cache_dir
+        vdir = fileio.make_dirs(self.manager.version_dir(self.spec), root=root)
+        for name in (REMOTE_MANIFEST, TRIES):
+            if not (vdir / name).is_file():
+                with open(self.manager.meta_dir(self.spec) / "raw" / name, "rb") as src, \
+                        atomic_open(vdir / name, "wb", root=root) as dst:
+                    shutil.copyfileobj(src, dst)
+
+    def record_cache(self, add: Edit) -> None:
+        self.manager.update_json(self.manager.cache_dir / LOCAL_MANIFEST, add, "list", indent=2)
+
+    def link_lock(self):
+        return self.manager.lock(self.manager.install_dir / LOCK)
+
+    def link_files(self) -> list[str]:
+        return [REMOTE_MANIFEST, TRIES]
+
+    def flag_links(self, link_dir: Path, archives: list[str]) -> None:
+        for archive in archives:
+            atomic_write(link_flag(link_dir, archive), "", root=self.manager.install_dir)
+
+    def record_link(self, point: Edit, previous: str | None) -> None:
+        install, spec = self.manager.install_dir, self.spec
+        if previous is not None and previous != spec.version:  # their cached tries index is per version
+            fileio.rmtree(install / ".lmdb" / spec.data_type / spec.source, root=install, ignore_errors=True)
+        self.manager.update_json(install / LOCAL_MANIFEST, point, "str", indent=2)

@@ -1,4 +1,5 @@
-"""The articulated tabletop scene dataset (``articulated_tabletop``), a scene plugin.
+"""The articulated tabletop scene dataset (``articulated_tabletop``), a scene plugin that also
+provides the library of its articulated objects (``articulated``).
 
 House ``i`` is drawn from a random stream seeded by ``i`` alone: table height and colours,
 one main articulated object (microwave, sliding cabinet, hinged cabinet or drawer chest from
@@ -22,8 +23,13 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.assets.articulated import ARTICULATED_OBJECTS, ArticulatedObject
+from molmo_lerobot.assets.articulated import (
+    ARTICULATED_LIBRARY_TYPE,
+    ARTICULATED_OBJECTS,
+    ArticulatedObject,
+)
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
+from molmo_lerobot.assets.libraries import AssetLibraryType
 from molmo_lerobot.sim.scenes import SceneDataset, attach_mjcf, room_spec
 
 _SALT = 0xA471C
@@ -139,3 +145,8 @@ class ArticulatedTabletop(SceneDataset):
 @hookimpl
 def molmo_scene_datasets() -> list[SceneDataset]:
     return [ArticulatedTabletop()]
+
+
+@hookimpl
+def molmo_asset_libraries() -> list[AssetLibraryType]:
+    return [ARTICULATED_LIBRARY_TYPE]

@@ -1,4 +1,5 @@
-"""The procedural tabletop scene dataset (``procedural_tabletop``), a scene plugin.
+"""The procedural tabletop scene dataset (``procedural_tabletop``), a scene plugin that also
+provides the library of its built-in objects (``builtin``).
 
 House ``i`` is generated from a random stream seeded by ``i`` alone: floor and table
 colours, table size and height, light directions, 4–6 objects from the built-in set
@@ -21,6 +22,7 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES, BuiltinObject, BuiltinReceptacle
+from molmo_lerobot.assets.libraries import BUILTIN_LIBRARY_TYPE, AssetLibraryType
 from molmo_lerobot.sim.scenes import SceneDataset, attach_mjcf, room_spec
 
 #: salt that keeps house streams apart from every other use of the house index
@@ -167,3 +169,8 @@ class ProceduralTabletopReceptacles(ProceduralTabletop):
 @hookimpl
 def molmo_scene_datasets() -> list[SceneDataset]:
     return [ProceduralTabletop(), ProceduralTabletopReceptacles()]
+
+
+@hookimpl
+def molmo_asset_libraries() -> list[AssetLibraryType]:
+    return [BUILTIN_LIBRARY_TYPE]

@@ -1,5 +1,9 @@
 """User asset and grasp libraries in MolmoSpaces' own on-disk format, loaded unchanged.
 
+A run's ``asset_libraries`` / ``grasp_libraries`` (its settings) become the ``user`` library
+types' libraries, first in priority; :func:`register_user_asset_library` and
+:func:`register_user_grasp_library` are MolmoSpaces' API of the same names, on a catalog.
+
 Asset library (a directory with ``assets_index.json``)::
 
     {"<uid>": {"uid": "<uid>", "object_path": "<uid>/<uid>.xml",
@@ -29,11 +33,15 @@ from typing import Any
 
 import numpy as np
 
+from molmo_lerobot.assets.catalog import AssetCatalog
 from molmo_lerobot.assets.grasps import GraspError, GraspLibrary
 from molmo_lerobot.assets.libraries import AssetError, AssetLibrary, UidLocation
+from molmo_lerobot.molmospaces.settings import MolmoSpacesSettings
 
 ASSETS_INDEX = "assets_index.json"
 GRASPS_INDEX = "grasps_index.json"
+#: Object sources of MolmoSpaces that a user library may not be named after.
+RESERVED_LIBRARY_NAMES = ("thor", "objaverse", "objathor_metadata")
 
 
 def _read_index(path: Path, error: type[LookupError]) -> dict:
@@ -158,4 +166,67 @@ def load_user_grasp_libraries(name: str, root: str | os.PathLike) -> list[UserGr
             articulated[uid] = {j: _inside(root, rel, index_path, f"articulated_grasp_paths.{robot}.{uid}.{j}",
                                            GraspError) for j, rel in joints.items()}
         out.append(UserGraspLibrary(name, root, robot, rigid, articulated))
+    return out
+
+
+def user_asset_library(catalog: AssetCatalog, name: str, path: str | os.PathLike) -> UserAssetLibrary:
+    """The user asset library at ``path`` (``path/assets_index.json``), checked to be new in ``catalog``."""
+    if not isinstance(name, str) or not name or "/" in name:
+        raise AssetError(f"user asset library name {name!r} must be non-empty and contain no '/'")
+    if name in RESERVED_LIBRARY_NAMES:
+        raise AssetError(f"user asset library {name!r}: the name of a MolmoSpaces object source")
+    if not (Path(path) / ASSETS_INDEX).is_file():
+        raise AssetError(f"user asset library {name!r}: {Path(path) / ASSETS_INDEX}: file not found")
+    library = UserAssetLibrary(name, path)
+    if any(lib.name == name for lib in catalog.libraries):
+        raise AssetError(f"an asset library named {name!r} is already registered")
+    return library
+
+
+def user_grasp_libraries(catalog: AssetCatalog, name: str, path: str | os.PathLike,
+                         asset_library: str) -> list[UserGraspLibrary]:
+    """The user grasp library at ``path`` as ``name/<robot>`` libraries for ``asset_library`` of ``catalog``."""
+    catalog.library(asset_library)  # must already be registered
+    libraries = load_user_grasp_libraries(name, path)
+    taken = {g.name for g, _ in catalog.grasp_libraries}
+    for lib in libraries:
+        if lib.name in taken:
+            raise GraspError(f"a grasp library named {lib.name!r} is already registered")
+    return libraries
+
+
+def register_user_asset_library(catalog: AssetCatalog, name: str, path: str | os.PathLike) -> UserAssetLibrary:
+    """Register a user asset library in ``catalog``, first in priority."""
+    return catalog.register_library(user_asset_library(catalog, name, path))  # type: ignore[return-value]
+
+
+def register_user_grasp_library(catalog: AssetCatalog, name: str, path: str | os.PathLike,
+                                asset_library: str) -> list[UserGraspLibrary]:
+    """Register a user grasp library in ``catalog`` for ``asset_library`` (registered already), first in priority."""
+    libraries = user_grasp_libraries(catalog, name, path, asset_library)
+    for lib in libraries:
+        catalog.register_grasp_library(lib, asset_library=asset_library)
+    return libraries
+
+
+def run_asset_libraries(settings: MolmoSpacesSettings, catalog: AssetCatalog) -> list[AssetLibrary]:
+    """The ``user`` asset library type: one library per ``asset_libraries`` entry of the run."""
+    out = []
+    for name, path in settings.asset_libraries.items():
+        try:
+            out.append(user_asset_library(catalog, name, Path(path).resolve()))
+        except AssetError as exc:
+            raise AssetError(f"asset_libraries.{name}: {exc}") from None
+    return out
+
+
+def run_grasp_libraries(settings: MolmoSpacesSettings, catalog: AssetCatalog) -> list[tuple[GraspLibrary, str]]:
+    """The ``user`` grasp library type: the libraries of every ``grasp_libraries`` entry of the run."""
+    out: list[tuple[GraspLibrary, str]] = []
+    for name, entry in settings.grasp_libraries.items():
+        try:
+            libraries = user_grasp_libraries(catalog, name, Path(entry["path"]).resolve(), entry["asset_library"])
+        except (AssetError, GraspError) as exc:
+            raise type(exc)(f"grasp_libraries.{name}: {exc}") from None
+        out += [(lib, entry["asset_library"]) for lib in libraries]
     return out
