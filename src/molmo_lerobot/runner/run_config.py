@@ -203,13 +203,14 @@ class VideoConfig(_Section):
 
 
 class BenchmarkConfig(_OpenSection):
-    name: str = "pick_v1"
-    path: str | None = None
+    name: str
+    path: str | None = None  # null: the shipped benchmark of this name
 
 
 class ExecutorConfig(_OpenSection):
-    name: str = "local"
-    start_method: str = "spawn"  # local; ray's options are checked by its executor
+    """``conf/executor/<name>.yaml``; its executor checks the other options."""
+
+    name: str
 
 
 def _policy(value: Any) -> Any:
@@ -227,8 +228,8 @@ class RunConfig(BaseModel):
     model_config = ConfigDict(strict=True, extra="allow", frozen=True)
 
     policy: Annotated[dict[str, Any], BeforeValidator(_policy)] = {"name": "scripted"}
-    benchmark: BenchmarkConfig = BenchmarkConfig()
-    executor: ExecutorConfig = ExecutorConfig()
+    benchmark: BenchmarkConfig = BenchmarkConfig(name="pick_v1")
+    executor: ExecutorConfig = ExecutorConfig(name="local", start_method="spawn")
     horizons: Annotated[dict[str, TaskSeconds], _rule(
         lambda v: isinstance(v, Mapping), "{key}: expected a mapping of task type to seconds, got {got}")] = {}
     camera: CameraConfig = CameraConfig()
@@ -315,6 +316,8 @@ def _lines(exc: ValidationError) -> list[str]:
         key = ".".join(str(p) for p in error["loc"])
         if error["type"] == "run_config":
             out.extend(error["msg"].replace("{key}", key).splitlines())
+        elif error["type"] == "missing":
+            out.append(f"{key}: missing (it has no default)")
         elif error["type"] == "extra_forbidden":
             section, _, name = key.rpartition(".")
             unknown.setdefault(section, []).append(name)
