@@ -219,13 +219,11 @@ def _policy(value: Any) -> Any:
     return value
 
 
-class RunConfig(BaseModel):
+class RunConfig(_OpenSection):
     """``conf/eval.yaml``, typed; fields in the composed config's order (its defaults list first).
 
     Keys plugins add at the top level (``+trace_dir=...``) are kept as given.
     """
-
-    model_config = ConfigDict(strict=True, extra="allow", frozen=True)
 
     policy: Annotated[dict[str, Any], BeforeValidator(_policy)] = {"name": "scripted"}
     benchmark: BenchmarkConfig = BenchmarkConfig(name="pick_v1")
