@@ -94,8 +94,12 @@ def compose(overrides: list[str], config_name: str = "eval") -> DictConfig:
 
 def config_message(exc: BaseException) -> str:
     """Hydra's message for a bad override or config: a did-you-mean for an unknown group
-    option, otherwise Hydra's full text (with its ``+key=value`` hint and the cause)."""
+    option, one line for an unknown key of the run config's schema, otherwise Hydra's full
+    text (with its ``+key=value`` hint and the cause)."""
     text = str(exc).strip()
+    unknown = re.fullmatch(r"Could not override '([^']+)'\.\nTo append to your config use (\S+)", text)
+    if unknown and "is not in struct" in str(exc.__cause__):
+        return _unknown_key_message(*unknown.groups()) or text
     missing = re.search(r"Could not find '([\w-]+)/([^']+)'", text)
     if missing:
         group, name = missing.groups()
@@ -113,3 +117,20 @@ def config_message(exc: BaseException) -> str:
     if isinstance(cause, OmegaConfBaseException) and str(cause).strip() and str(cause).strip() not in text:
         text += "\n" + str(cause).strip()
     return text or type(exc).__name__
+
+
+def _unknown_key_message(key: str, append: str) -> str | None:
+    """One line for ``key`` the run config's schema does not know; ``None`` inside a section
+    a plugin's config defines (Hydra's ``+key=value`` hint is the answer there)."""
+    from molmo_lerobot.runner.run_config import section_keys
+
+    section, _, name = key.rpartition(".")
+    known = section_keys(section)
+    if known is None:
+        return None
+    keys, closed = known
+    close = difflib.get_close_matches(name, keys, n=3)
+    hint = f"; did you mean {', '.join(repr('.'.join(filter(None, (section, c)))) for c in close)}?" if close else ""
+    if closed:
+        return f"Could not override {key!r}: {section} has no key {name!r}" + (hint or f" (known: {', '.join(keys)})")
+    return f"Could not override {key!r}: no such key{hint} (a plugin's own key is added with {append})"

@@ -67,7 +67,8 @@ def _plain(config: Mapping[str, Any] | None) -> dict[str, Any]:
     return copy.deepcopy(dict(config or {}))
 
 
-from typing import TYPE_CHECKING, Any
+def build_catalog(plugins: Plugins, settings: MolmoSpacesSettings) -> AssetCatalog:
+    """The libraries of every asset and grasp library type ``plugins`` provide, made for ``settings``.
 
     A type name two plugins provide fails with :class:`~molmo_lerobot.plugins.PluginConflict`
     unless the run pins one (``plugins.prefer.asset_library.<name>=<plugin>``).

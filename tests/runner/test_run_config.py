@@ -59,3 +59,50 @@ def test_episode_work_bound():
     timing = {"policy_dt_ms": 66.0, "ctrl_dt_ms": 2.0, "sim_dt_ms": 2.0}
     assert episode_work_problem(600, timing, "x") is None  # pick_and_place at 40 s
     assert episode_work_problem(MAX_PHYSICS_STEPS // 33 + 1, timing, "x") is not None
+
+
+def test_the_schema_defaults_are_eval_yaml_and_validation_keeps_a_composed_config_as_it_is():
+    from omegaconf import OmegaConf
+
+    from molmo_lerobot.config import compose
+    from molmo_lerobot.runner.run_config import RunConfig
+
+    composed = OmegaConf.to_container(compose([]), resolve=True)
+    assert RunConfig().plain() == composed and list(RunConfig().plain()) == list(composed)
+    tuned = compose(["policy=lerobot", "policy.path=x", "timing.ctrl_dt_ms=6", "+horizons.pick=15", "+trace_dir=t"])
+    assert RunConfig.of(tuned).plain() == OmegaConf.to_container(tuned, resolve=True)
+
+
+@pytest.mark.parametrize(
+    ("args", "line"),
+    [
+        (["foo=1"], "Could not override 'foo': no such key (a plugin's own key is added with +foo=1)"),
+        (["timing.sleeep=true"], ("Could not override 'timing.sleeep': timing has no key 'sleeep'; "
+                                  "did you mean 'timing.sleep'?")),
+        (["+camera.evl=true"], ("camera: unknown keys ['evl'] (known: overrides, system, eval, rand_level, "
+                                "randomization)")),
+        (["workers=abc"], "workers: expected a positive integer, got 'abc'"),
+        (["end_on_success=yes"], "end_on_success: expected true or false, got 'yes'"),
+        (["custom_object.name=5"], "custom_object.name: input should be a valid string, got 5"),
+    ],
+)
+def test_an_unknown_key_or_a_wrongly_typed_value_is_one_line_naming_the_key(args, line, capsys, tmp_path):
+    assert main([*args, f"output_dir={tmp_path / 'out'}"]) == 2
+    assert capsys.readouterr().err == f"molmo-eval: error: {line}\n"
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_plugins_own_top_level_key_is_kept():
+    from molmo_lerobot.runner.run_config import RunConfig
+
+    run = RunConfig.of({"trace_dir": "/tmp/t", "policy": {"name": "sine", "amplitude": 0.3}})
+    assert run.plain()["trace_dir"] == "/tmp/t" and run.policy == {"name": "sine", "amplitude": 0.3}
+    assert RunConfig.of(run) is run  # validated once
+
+
+def test_the_cli_is_a_public_hydra_app():
+    import inspect
+
+    import molmo_lerobot.cli.eval as cli
+
+    assert "hydra._internal" not in inspect.getsource(cli) and "hydra.main(" in inspect.getsource(cli)

@@ -1,9 +1,10 @@
 """``molmo-eval policy=P benchmark=B workers=N [key=value ...]``: evaluate a policy.
 
-A Hydra app over ``conf/eval.yaml`` (plus the config dirs plugins add): ``-m`` sweeps
+A Hydra app (``@hydra.main``) over ``conf/eval.yaml`` (plus the config dirs plugins add): ``-m`` sweeps
 (``molmo-eval -m policy=random,scripted limit=2`` writes one complete run per job under
 ``hydra.sweep.dir/hydra.sweep.subdir``), ``--cfg job|hydra|all``, ``--help``, ``--info``.
-Bad overrides and run errors print one ``molmo-eval: error:`` message and exit 2.
+Each job validates its config (:class:`~molmo_lerobot.runner.run_config.RunConfig`) before any
+work. Bad overrides, config and run errors print one ``molmo-eval: error:`` message and exit 2.
 """
 
 from __future__ import annotations
@@ -29,9 +30,7 @@ def _main(argv: list[str] | None = None) -> int:
             args.insert(i + 1, "job")
             break
     os.environ.setdefault("MUJOCO_GL", "egl")
-    from hydra import version
-    from hydra._internal.hydra import Hydra
-    from hydra._internal.utils import create_config_search_path, get_args_parser
+    import hydra
     from hydra.core.global_hydra import GlobalHydra
     from hydra.errors import HydraException, OverrideParseException
     from omegaconf.errors import OmegaConfBaseException
@@ -40,32 +39,16 @@ def _main(argv: list[str] | None = None) -> int:
     from molmo_lerobot.plugins import PluginError
     from molmo_lerobot.runner.supervisor import RunInterrupted
 
-    parser = get_args_parser()
-    parser.prog = "molmo-eval"
-    ns = parser.parse_args(args)
-    version.setbase("1.3")
     codes: list[int] = []
-    GlobalHydra.instance().clear()
+    app = hydra.main(version_base="1.3", config_path=str(primary_config_dir()), config_name="eval")(
+        lambda cfg: codes.append(_job(cfg)))
+    saved_argv, saved_full_error = sys.argv, os.environ.get("HYDRA_FULL_ERROR")
+    sys.argv = ["molmo-eval", *args]  # hydra.main parses sys.argv
+    os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors to us instead of printing them and exiting 1
     try:
-        search_path = create_config_search_path(f"file://{primary_config_dir()}")
-        hydra = Hydra.create_main_hydra2(task_name="molmo_eval", config_search_path=search_path)
-        if ns.help:
-            hydra.app_help(config_name="eval", args_parser=parser, args=ns)
-        elif ns.hydra_help:
-            hydra.hydra_help(config_name="eval", args_parser=parser, args=ns)
-        elif ns.cfg:
-            hydra.show_cfg(config_name="eval", overrides=ns.overrides, cfg_type=ns.cfg, package=ns.package,
-                           resolve=ns.resolve)
-        elif ns.shell_completion:
-            hydra.shell_completion(config_name="eval", overrides=ns.overrides)
-        elif ns.info:
-            hydra.show_info(ns.info, config_name="eval", overrides=ns.overrides)
-        elif ns.multirun:
-            hydra.multirun(config_name="eval", task_function=lambda cfg: codes.append(_job(cfg, sweep=True)),
-                           overrides=[*ns.overrides, "hydra.mode=MULTIRUN"])
-        else:
-            hydra.run(config_name="eval", task_function=lambda cfg: codes.append(_job(cfg, sweep=False)),
-                      overrides=[*ns.overrides, "hydra.mode=RUN"])
+        app()
+    except SystemExit as exc:  # --help, --hydra-help; a bad flag (argparse's usage message)
+        return 0 if exc.code is None else exc.code if isinstance(exc.code, int) else 1
     except OverrideParseException as exc:
         print(f"molmo-eval: error: {_override_message(exc.override, exc.message)}", file=sys.stderr)
         return 2
@@ -80,6 +63,11 @@ def _main(argv: list[str] | None = None) -> int:
               "(rerun with resume=true to continue)", file=sys.stderr)
         return 130
     finally:
+        sys.argv = saved_argv
+        if saved_full_error is None:
+            os.environ.pop("HYDRA_FULL_ERROR", None)
+        else:
+            os.environ["HYDRA_FULL_ERROR"] = saved_full_error
         GlobalHydra.instance().clear()
     return max(codes, default=0)
 
@@ -98,15 +86,16 @@ def _override_message(override: str, message: str) -> str:
     return f"cannot parse override {override!r}: {detail} (grammar: https://hydra.cc/docs/advanced/override_grammar/basic)"
 
 
-def _job(cfg: Any, *, sweep: bool) -> int:
-    """One run (a sweep job writes to its sweep subdir unless ``output_dir`` is set)."""
+def _job(cfg: Any) -> int:
+    """One run, validated here (a sweep job writes to its sweep subdir unless ``output_dir`` is set)."""
     from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
 
     from molmo_lerobot.config import ConfigError
     from molmo_lerobot.plugins import PluginError
     from molmo_lerobot.runner.evaluate import RunError, run_evaluation
     from molmo_lerobot.runner.results import summary_lines
-    from molmo_lerobot.runner.run_config import RunConfigError
+    from molmo_lerobot.runner.run_config import RunConfig, RunConfigError
     from molmo_lerobot.runner.supervisor import WorkerStartError
 
     expected: tuple[type[BaseException], ...] = (ConfigError, PluginError, RunError, WorkerStartError,
@@ -115,9 +104,9 @@ def _job(cfg: Any, *, sweep: bool) -> int:
         from molmo_lerobot.benchmark.load import BenchmarkError
 
         expected += (BenchmarkError,)
-        if sweep and cfg.get("output_dir") is None:
+        if HydraConfig.get().mode == RunMode.MULTIRUN and cfg.get("output_dir") is None:
             cfg.output_dir = HydraConfig.get().runtime.output_dir
-        res = run_evaluation(cfg)
+        res = run_evaluation(RunConfig.of(cfg))
     except expected as exc:
         for line in str(exc).splitlines() or [type(exc).__name__]:  # one line per problem
             print(f"molmo-eval: error: {line}", file=sys.stderr)

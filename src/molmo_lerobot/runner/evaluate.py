@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import mujoco
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from molmo_lerobot.assets.grasps import GraspError
 from molmo_lerobot.assets.libraries import AssetError
@@ -36,7 +36,7 @@ from molmo_lerobot.runner.fingerprint import policy_checkpoints
 from molmo_lerobot.runner.plan import EpisodePlan, EpisodePlanner
 from molmo_lerobot.runner.progress import Progress
 from molmo_lerobot.runner.results import EpisodeResult, summarize
-from molmo_lerobot.runner.run_config import check_run_config, episode_work_problem
+from molmo_lerobot.runner.run_config import RunConfig, episode_work_problem
 from molmo_lerobot.runner.run_directory import RunDirectory, RunError
 from molmo_lerobot.runner.supervisor import RunInterrupted
 from molmo_lerobot.runner.worker import WorkerJob
@@ -102,12 +102,11 @@ def _make_executor(cfg: dict[str, Any]) -> Any:
     raise RunError(f"unknown executor {ex['name']!r} (available: local, ray)")
 
 
-def run_evaluation(config: DictConfig | dict[str, Any]) -> EvalResults:
+def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResults:
     """Evaluate ``config.policy`` on ``config.benchmark``; see ``conf/eval.yaml`` for every option."""
     from molmo_lerobot.benchmark.load import load_benchmark
 
-    cfg = OmegaConf.to_container(config, resolve=True) if isinstance(config, DictConfig) else dict(config)
-    check_run_config(cfg)  # nonsense options stop here, before any work or output
+    cfg = RunConfig.of(config).plain()  # validated once (unless given a RunConfig): nonsense stops here
     if cfg.get("push") and not cfg.get("record"):
         print("molmo-eval: push=true records the dataset it pushes (record=true)", file=sys.stderr)
         cfg["record"] = True

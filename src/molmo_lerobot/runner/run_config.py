@@ -1,25 +1,49 @@
-"""Check a ``molmo-eval`` run config before any work starts: types, ranges and the work it asks for.
+"""The typed ``molmo-eval`` run config (``conf/eval.yaml``), validated once before any work.
 
-:func:`config_problems` lists every problem of the run-level options, one line each, so a
-run with nonsense options (``limit=0``, ``horizon=-5``, ``seed=abc``,
-``timing.policy_dt_ms=0``) stops before anything is written. :func:`episode_work_problem`
-bounds the physics steps one episode may ask for (a horizon of 1e12 seconds or a
-0.1 µs physics step would otherwise run until the watchdog).
+Hydra composes the config (groups, overrides, interpolations, sweeps); :meth:`RunConfig.of`
+validates the composed result and lists every problem, one line each naming its key, so a
+run with nonsense options (``limit=0``, ``horizon=-5``, ``seed=abc``, ``timing.policy_dt_ms=0``,
+``+timing.mode=hold``) stops before anything is written. The run reads the typed object or
+its validated plain form (:meth:`RunConfig.plain`, what :class:`~molmo_lerobot.context.RunContext`
+and the workers receive).
+
+A pydantic model rather than a dataclass schema in Hydra's ConfigStore: OmegaConf stops at
+the first wrongly typed value with its own multi-line message and checks no ranges, so the
+range and cross-field checks (timing ratios, camera options, the work one episode may ask
+for) would stay a second pass; here one pass reports everything. The core's own sections
+are closed (an unknown key is a problem); ``policy``, ``benchmark`` and ``executor`` (config
+groups plugins extend) and the top level (``+key=value`` for a plugin's own key) stay open.
+Missing keys take ``conf/eval.yaml``'s defaults (a test keeps the two equal).
+
+:func:`episode_work_problem` bounds the physics steps one episode may ask for (a horizon
+of 1e12 seconds or a 0.1 µs physics step would otherwise run until the watchdog).
 """
 
 from __future__ import annotations
 
+import copy
 import math
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import Annotated, Any
+
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    ValidationError,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
 
 from molmo_lerobot.benchmark.schema import MAX_TASK_HORIZON_SEC
+from molmo_lerobot.cameras.options import camera_option_problems
+from molmo_lerobot.robots.base import parse_base_size
+from molmo_lerobot.sim.env import CONTROL_MODES, Timing
 
 #: Most policy steps an episode may run (``horizon=``): about two hours at 66 ms per step.
 MAX_HORIZON_STEPS = 100_000
 #: Most physics steps (``mj_step``) one episode may ask for: horizon x ctrl ticks x substeps.
 MAX_PHYSICS_STEPS = 2_000_000
-TIMING_KEYS = ("policy_dt_ms", "ctrl_dt_ms", "sim_dt_ms")
 
 
 class RunConfigError(ValueError):
@@ -38,81 +62,279 @@ def _is_number(v: Any) -> bool:
     return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
 
 
-def config_problems(cfg: Mapping[str, Any]) -> list[str]:
-    """Every problem of the run-level options of ``cfg`` (a resolved ``conf/eval.yaml``), one line each."""
+def _problem(text: str) -> PydanticCustomError:
+    """A problem line; ``{key}`` in it becomes the dotted key (see :func:`_lines`)."""
+    return PydanticCustomError("run_config", text)  # no context: pydantic leaves the text as it is
+
+
+def _rule(ok: Callable[[Any], bool], text: str) -> BeforeValidator:
+    """Values for which ``ok`` is false fail with ``text`` (``{key}``: the key, ``{got}``: the value)."""
+    def check(value: Any) -> Any:
+        if not ok(value):
+            raise _problem(text.replace("{got}", repr(value)))
+        return value
+    return BeforeValidator(check)
+
+
+def _workers(value: Any) -> Any:
+    if not _is_int(value):
+        raise _problem(f"{{key}}: expected a positive integer, got {value!r}")
+    if value < 1:
+        raise _problem(f"{{key}} must be at least 1, got {value}")
+    return value
+
+
+def _optional(ok: Callable[[Any], bool]) -> Callable[[Any], bool]:
+    return lambda v: v is None or ok(v)
+
+
+Flag = Annotated[bool, _rule(lambda v: isinstance(v, bool), "{key}: expected true or false, got {got}")]
+Seconds = Annotated[int | float, _rule(lambda v: _is_number(v) and v > 0,
+                                       "{key}: expected a positive number of seconds, got {got}")]
+Millis = Annotated[int | float, _rule(lambda v: _is_number(v) and v > 0,
+                                      "{key}: expected a positive number of milliseconds, got {got}")]
+TaskSeconds = Annotated[int | float, _rule(lambda v: _is_number(v) and 0 < v <= MAX_TASK_HORIZON_SEC,
+                                           "{key}: expected a positive number of seconds, got {got} "
+                                           f"(at most {MAX_TASK_HORIZON_SEC:g})")]
+
+
+class _Section(BaseModel):
+    """A closed section of the run config: known keys, strict types."""
+
+    model_config = ConfigDict(strict=True, extra="forbid", frozen=True)
+
+
+class _OpenSection(BaseModel):
+    """A section a plugin's config may add keys to (kept as given)."""
+
+    model_config = ConfigDict(strict=True, extra="allow", frozen=True)
+
+
+class TimingConfig(_Section):
+    """How a policy step advances the simulation (:class:`~molmo_lerobot.sim.env.Timing`)."""
+
+    policy_dt_ms: Millis = 66.0
+    ctrl_dt_ms: Millis = 2.0
+    sim_dt_ms: Millis = 2.0
+    control: Annotated[str, _rule(lambda v: v in CONTROL_MODES,
+                                  f"timing: control must be one of {', '.join(CONTROL_MODES)}, got {{got}}")] = "hold"
+    sleep: Annotated[bool, _rule(lambda v: isinstance(v, bool), "timing: sleep must be true or false, got {got}")] = False
+
+    @model_validator(mode="after")
+    def _steps_divide(self) -> TimingConfig:
+        try:
+            Timing(**self.model_dump())
+        except ValueError as exc:
+            raise _problem(str(exc)) from None
+        return self
+
+
+class CameraConfig(_Section):
+    """Which camera system each episode runs with, set up how (:mod:`molmo_lerobot.cameras.options`)."""
+
+    overrides: dict[str, dict[str, Any]] = {}
+    system: str | None = None
+    eval: bool = False
+    rand_level: int | float = 0
+    randomization: int = 0
+
+    @model_validator(mode="before")
+    @classmethod
+    def _options(cls, data: Any) -> Any:
+        problems = camera_option_problems(data)
+        if problems:
+            raise _problem("\n".join(problems))
+        return data
+
+
+def _base_size(value: Any) -> Any:
+    if value != "default":
+        try:
+            parse_base_size(value)
+        except ValueError as exc:
+            raise _problem(f"robot.{exc} (or default)") from None
+    return value
+
+
+class RobotConfig(_Section):
+    base_size: Annotated[str | list[int | float] | None, BeforeValidator(_base_size)] = "default"
+
+
+class CustomObjectConfig(_Section):
+    path: str | None = None
+    name: str = "custom_object"
+    description: str | None = None
+
+
+class MolmoSpacesConfig(_Section):
+    """MolmoSpaces' data; :func:`~molmo_lerobot.molmospaces.settings.resolve` checks the values."""
+
+    physics_options: dict[str, Any] = {}
+    assets_dir: str | None = None
+    house_variant: str | None = "ceiling"
+    cache_dir: str | None = None
+    remote: str | None = None
+
+
+class PluginsConfig(_Section):
+    prefer: dict[str, dict[str, str]] = {}  # checked against the plugins by RunContext.build
+
+
+class HubConfig(_Section):
+    repo_id: str | None = None  # the recorder checks it (push=true)
+    private: bool = False
+
+
+class WandbConfig(_Section):
+    enable: bool = False
+    project: str = "molmo-eval"
+    entity: str | None = None
+
+
+class VideoConfig(_Section):
+    """How camera streams are encoded (record=true); the recorder checks the values with the encoder."""
+
+    vcodec: str = "libsvtav1"
+    crf: Annotated[int | float | None, _rule(_optional(_is_number), "{key}: expected a number or null, got {got}")] = None
+    g: int | None = 2
+    preset: Annotated[int | str | None, _rule(lambda v: v is None or isinstance(v, str) or _is_int(v),
+                                              "{key}: expected a preset name, a number or null, got {got}")] = None
+    encoder_threads: int | None = 1
+
+
+class BenchmarkConfig(_OpenSection):
+    name: str
+    path: str | None = None  # null: the shipped benchmark of this name
+
+
+class ExecutorConfig(_OpenSection):
+    """``conf/executor/<name>.yaml``; its executor checks the other options."""
+
+    name: str
+
+
+def _policy(value: Any) -> Any:
+    if not (isinstance(value, Mapping) and isinstance(value.get("name"), str) and value["name"]):
+        raise _problem(f"{{key}}: expected a mapping with a name (policy=<name>), got {value!r}")
+    return value
+
+
+class RunConfig(_OpenSection):
+    """``conf/eval.yaml``, typed; fields in the composed config's order (its defaults list first).
+
+    Keys plugins add at the top level (``+trace_dir=...``) are kept as given.
+    """
+
+    policy: Annotated[dict[str, Any], BeforeValidator(_policy)] = {"name": "scripted"}
+    benchmark: BenchmarkConfig = BenchmarkConfig(name="pick_v1")
+    executor: ExecutorConfig = ExecutorConfig(name="local", start_method="spawn")
+    horizons: Annotated[dict[str, TaskSeconds], _rule(
+        lambda v: isinstance(v, Mapping), "{key}: expected a mapping of task type to seconds, got {got}")] = {}
+    camera: CameraConfig = CameraConfig()
+    plugins: PluginsConfig = PluginsConfig()
+    asset_libraries: dict[str, Any] = {}  # checked with the MolmoSpaces settings by RunContext.build
+    grasp_libraries: dict[str, Any] = {}
+    molmospaces: MolmoSpacesConfig = MolmoSpacesConfig()
+    workers: Annotated[int, BeforeValidator(_workers)] = 2
+    worker_threads: Annotated[int | None, _rule(
+        _optional(lambda v: _is_int(v) and v >= 1),
+        "{key}: expected a positive integer (or null for the libraries' default), got {got}")] = 1
+    limit: Annotated[int | None, _rule(
+        _optional(lambda v: _is_int(v) and v >= 1),
+        "{key}: expected a positive integer (or null for every episode), got {got}")] = None
+    seed: Annotated[int, _rule(_is_int, "{key}: expected an integer, got {got}")] = 0
+    output_dir: Annotated[str | None, _rule(_optional(lambda v: isinstance(v, str)),
+                                            "{key}: expected a path, got {got}")] = None
+    record: Flag = False
+    record_hold_steps: Any = 10  # the recorder checks it (record=true)
+    push: Flag = False
+    resume: Flag = False
+    horizon: Annotated[int | None, _rule(
+        _optional(lambda v: _is_int(v) and 1 <= v <= MAX_HORIZON_STEPS),
+        f"{{key}}: expected a whole number of policy steps in 1..{MAX_HORIZON_STEPS} (or null), got {{got}}")] = None
+    episode_timeout_s: Seconds = 900
+    episode_retries: Annotated[int, _rule(lambda v: _is_int(v) and v >= 0,
+                                          "{key}: expected a non-negative integer, got {got}")] = 1
+    progress: Flag = True
+    progress_interval_s: Annotated[int | float | None, _rule(
+        _optional(lambda v: _is_number(v) and v > 0), "{key}: expected a positive number of seconds, got {got}")] = 30
+    timing: TimingConfig = TimingConfig()
+    custom_object: CustomObjectConfig = CustomObjectConfig()
+    end_on_success: Flag = False
+    robot: RobotConfig = RobotConfig()
+    video: VideoConfig = VideoConfig()
+    scene_xml_paths: list[str] = []
+    hub: HubConfig = HubConfig()
+    wandb: WandbConfig = WandbConfig()
+
+    @model_validator(mode="after")
+    def _bounded_work(self) -> RunConfig:
+        if self.horizon is not None:
+            problem = episode_work_problem(self.horizon, self.timing.model_dump(), "horizon")
+            if problem:
+                raise _problem(problem)
+        return self
+
+    @classmethod
+    def of(cls, config: RunConfig | Mapping[str, Any] | None) -> RunConfig:
+        """``config`` validated (a composed ``DictConfig`` is resolved first; a ``RunConfig`` is
+        returned as is). Raises :class:`RunConfigError` listing every problem."""
+        from omegaconf import DictConfig, OmegaConf
+
+        if isinstance(config, RunConfig):
+            return config
+        data = OmegaConf.to_container(config, resolve=True) if isinstance(config, DictConfig) else config
+        try:
+            return cls.model_validate(data or {})
+        except ValidationError as exc:
+            raise RunConfigError(_lines(exc)) from None
+
+    def plain(self) -> dict[str, Any]:
+        """The validated config as plain data (a fresh copy): what the run and its workers read."""
+        return copy.deepcopy(self.model_dump())
+
+
+def section_keys(path: str) -> tuple[list[str], bool] | None:
+    """The keys the schema knows at ``path`` (``""``: the top level) and whether it refuses
+    others; ``None`` for a path inside an open section or a free-form map."""
+    model: type[BaseModel] = RunConfig
+    for part in [p for p in path.split(".") if p]:
+        field = model.model_fields.get(part)
+        if field is None or not (isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel)):
+            return None
+        model = field.annotation
+    return list(model.model_fields), model.model_config.get("extra") == "forbid"
+
+
+def _lines(exc: ValidationError) -> list[str]:
+    """One line per problem, each naming its key; unknown keys grouped per section."""
     out: list[str] = []
-    workers = cfg.get("workers")
-    if not _is_int(workers):
-        out.append(f"workers: expected a positive integer, got {workers!r}")
-    elif workers < 1:
-        out.append(f"workers must be at least 1, got {workers}")
-    limit = cfg.get("limit")
-    if limit is not None and not (_is_int(limit) and limit >= 1):
-        out.append(f"limit: expected a positive integer (or null for every episode), got {limit!r}")
-    if not _is_int(cfg.get("seed")):
-        out.append(f"seed: expected an integer, got {cfg.get('seed')!r}")
-    horizon = cfg.get("horizon")
-    if horizon is not None and not (_is_int(horizon) and 1 <= horizon <= MAX_HORIZON_STEPS):
-        out.append(f"horizon: expected a whole number of policy steps in 1..{MAX_HORIZON_STEPS} "
-                   f"(or null), got {horizon!r}")
-    horizons = cfg.get("horizons") or {}
-    if not isinstance(horizons, Mapping):
-        out.append(f"horizons: expected a mapping of task type to seconds, got {horizons!r}")
-        horizons = {}
-    for task, value in horizons.items():
-        if not (_is_number(value) and 0 < value <= MAX_TASK_HORIZON_SEC):
-            out.append(f"horizons.{task}: expected a positive number of seconds, got {value!r} "
-                       f"(at most {MAX_TASK_HORIZON_SEC:g})")
-    out.extend(_timing_problems(cfg.get("timing")))
-    base_size = (cfg.get("robot") or {}).get("base_size", "default")
-    if base_size != "default":
-        from molmo_lerobot.robots.base import parse_base_size
-
-        try:
-            parse_base_size(base_size)
-        except ValueError as exc:
-            out.append(f"robot.{exc} (or default)")
-    from molmo_lerobot.cameras.options import camera_option_problems
-
-    out.extend(camera_option_problems(cfg.get("camera")))
-    timeout = cfg.get("episode_timeout_s", 900)
-    if not (_is_number(timeout) and timeout > 0):
-        out.append(f"episode_timeout_s: expected a positive number of seconds, got {timeout!r}")
-    threads = cfg.get("worker_threads", 1)
-    if threads is not None and not (_is_int(threads) and threads >= 1):
-        out.append(f"worker_threads: expected a positive integer (or null for the libraries' default), got {threads!r}")
-    retries = cfg.get("episode_retries", 1)
-    if not (_is_int(retries) and retries >= 0):
-        out.append(f"episode_retries: expected a non-negative integer, got {retries!r}")
-    for key in ("resume", "record", "push", "progress"):
-        if key in cfg and not isinstance(cfg[key], bool):
-            out.append(f"{key}: expected true or false, got {cfg[key]!r}")
-    if cfg.get("output_dir") is not None and not isinstance(cfg["output_dir"], str):
-        out.append(f"output_dir: expected a path, got {cfg['output_dir']!r}")
-    if not out and horizon is not None:
-        problem = episode_work_problem(horizon, cfg["timing"], "horizon")
-        if problem:
-            out.append(problem)
+    unknown: dict[str, list[str]] = {}
+    for error in exc.errors():
+        key = ".".join(str(p) for p in error["loc"])
+        if error["type"] == "run_config":
+            out.extend(error["msg"].replace("{key}", key).splitlines())
+        elif error["type"] == "missing":
+            out.append(f"{key}: missing (it has no default)")
+        elif error["type"] == "extra_forbidden":
+            section, _, name = key.rpartition(".")
+            unknown.setdefault(section, []).append(name)
+        else:
+            msg = error["msg"]
+            out.append(f"{key}: {msg[:1].lower()}{msg[1:]}, got {error['input']!r}")
+    for section, names in unknown.items():
+        known = (section_keys(section) or ([], False))[0]
+        out.append(f"{section}: unknown keys {sorted(names)} (known: {', '.join(known)})")
     return out
 
 
-def _timing_problems(timing: Any) -> list[str]:
-    if not isinstance(timing, Mapping):
-        return [f"timing: expected a mapping with {', '.join(TIMING_KEYS)}, got {timing!r}"]
-    out = [f"timing.{key}: expected a positive number of milliseconds, got {timing.get(key)!r}"
-           for key in TIMING_KEYS if not (_is_number(timing.get(key)) and timing[key] > 0)]
-    known = (*TIMING_KEYS, "control", "sleep")
-    unknown = sorted(set(timing) - set(known))
-    if unknown:
-        out.append(f"timing: unknown keys {unknown} (known: {', '.join(known)})")
-    if not out:
-        from molmo_lerobot.sim.env import Timing
-
-        try:
-            Timing(**timing)
-        except ValueError as exc:
-            out.append(str(exc))
-    return out
+def config_problems(cfg: Mapping[str, Any]) -> list[str]:
+    """Every problem of ``cfg`` (a resolved ``conf/eval.yaml``, possibly partial), one line each."""
+    try:
+        RunConfig.of(cfg)
+    except RunConfigError as exc:
+        return exc.problems
+    return []
 
 
 def physics_steps(horizon: int, timing: Mapping[str, float]) -> int:
@@ -129,10 +351,3 @@ def episode_work_problem(horizon: int, timing: Mapping[str, float], what: str) -
     return (f"{what}: {horizon:,} policy steps x {steps // horizon:,} physics steps each = {steps:,} physics steps, "
             f"over the limit of {MAX_PHYSICS_STEPS:,} per episode (at most {MAX_HORIZON_STEPS:,} policy steps); "
             "lower the horizon (horizon=, horizons.<task>=, task_horizon_sec) or raise timing.sim_dt_ms")
-
-
-def check_run_config(cfg: Mapping[str, Any]) -> None:
-    """Raise :class:`RunConfigError` listing every problem of ``cfg``; return if it can run."""
-    problems = config_problems(cfg)
-    if problems:
-        raise RunConfigError(problems)
