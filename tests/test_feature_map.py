@@ -18,7 +18,7 @@ from molmo_lerobot.paths import data_path
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.robots.franka_droid import FrankaDroid
 from molmo_lerobot.runner.evaluate import run_evaluation
-from molmo_lerobot.runner.recorders import EpisodeInfo
+from molmo_lerobot.recording import EpisodeInfo
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "tasks"))
 from droid_variants import droid_episode  # noqa: E402
@@ -179,7 +179,7 @@ def test_the_adapters_agree_on_franka_droid_with_droid_cameras(droid_run, tmp_pa
 def test_a_mobile_base_is_one_more_move_group(tmp_path):
     from molmo_lerobot.export.recorder import LeRobotRecorderFactory
     from molmo_lerobot.policies.replay import ReplayPolicy
-    from molmo_lerobot.runner.results import EpisodeResult, summarize
+    from molmo_lerobot.results import EpisodeResult, summarize
 
     fmap = FeatureMap.for_robot(MobileRobot, ["head/rgb", "wrist"], (32, 24))  # "/": recorded as head_rgb
     assert fmap.groups == ("base", "arm", "gripper") and fmap.action_layout() == "base (3) + arm (7) + gripper (1)"

@@ -118,7 +118,7 @@ def molmo_config_dirs() -> list[str]:
 
 @hookspec
 def molmo_recorders(config: dict[str, Any]) -> list[Any]:
-    """Recorder factories (:class:`~molmo_lerobot.runner.recorders.RecorderFactory`) for this run.
+    """Recorder factories (:class:`~molmo_lerobot.recording.RecorderFactory`) for this run.
 
     Called once in the main process with the resolved run config (a plain dict); return an
     empty list unless the config asks for your recording, and raise :class:`ConfigError` if

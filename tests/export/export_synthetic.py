@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from molmo_lerobot.runner.recorders import EpisodeInfo
-from molmo_lerobot.runner.results import EpisodeResult, summarize
+from molmo_lerobot.recording import EpisodeInfo
+from molmo_lerobot.results import EpisodeResult, summarize
 
 CAMS = ["exo", "wrist"]
 W, H = 32, 24

@@ -13,7 +13,7 @@ from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 from molmo_lerobot.export.glance import GlanceRecorderFactory, exterior_camera, object_category
 from molmo_lerobot.export.report import render_report, task_label, write_report
 from molmo_lerobot.export.wandb_log import log_run, metrics
-from molmo_lerobot.runner.results import EpisodeResult
+from molmo_lerobot.results import EpisodeResult
 
 
 def _results():

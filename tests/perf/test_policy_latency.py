@@ -17,7 +17,7 @@ import pytest
 
 from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.protocol.client import PolicyClient
-from molmo_lerobot.protocol.server import PolicyServer, serve_in_thread
+from molmo_lerobot.serving.server import PolicyServer, serve_in_thread
 
 pytestmark = pytest.mark.perf
 

@@ -17,7 +17,7 @@ from molmo_lerobot.paths import data_path
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.policies.base import EpisodeContext, Policy
-from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder
+from molmo_lerobot.recording import EpisodeInfo, Recorder
 from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim.env import Timing

@@ -68,7 +68,7 @@ def test_molmo_plugins_lists_it(target):
 
 def test_code_and_hydra_config_are_discovered(target):
     code = (
-        "from molmo_lerobot.config import compose; from molmo_lerobot.runner.policy import make_policy\n"
+        "from molmo_lerobot.config import compose; from molmo_lerobot.policies.factory import make_policy\n"
         "from molmo_lerobot.plugins import Plugins; from omegaconf import OmegaConf\n"
         "cfg = compose(['policy=example_sine', 'policy.amplitude=0.3'])\n"
         "p = make_policy(Plugins(), OmegaConf.to_container(cfg.policy))\n"

@@ -18,7 +18,7 @@ from molmo_lerobot.paths import data_path
 from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.policies.convention import MolmoSpacesConvention, get_convention
 from molmo_lerobot.policies.remote import RemotePolicy
-from molmo_lerobot.protocol.server import PolicyServer, serve_in_thread
+from molmo_lerobot.serving.server import PolicyServer, serve_in_thread
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim.env import Timing
 
@@ -135,7 +135,7 @@ def test_any_other_policy_plugin_is_wrapped(tmp_path):
     """policy=replay policy.convention=molmospaces replays MolmoSpaces-unit actions (gripper 0 … 255)."""
     from molmo_lerobot.plugins import Plugins
     from molmo_lerobot.policies.convention import ConventionAdapter
-    from molmo_lerobot.runner.policy import make_policy
+    from molmo_lerobot.policies.factory import make_policy
 
     np.save(tmp_path / "a.npy", np.array([[0.1] * 7 + [255.0], [0.2] * 7 + [51.0]]))
     plugins = Plugins()

@@ -168,7 +168,7 @@ def test_only_privileged_policies_get_the_simulator(tmp_path, episodes):
     seen = {}
     plugins = Plugins()
     config = {"timing": {"policy_dt_ms": 66.0, "ctrl_dt_ms": 2.0, "sim_dt_ms": 2.0}, "horizon": 2}
-    bench = Benchmark("t", [EpisodeSpec.model_validate(episodes[0])], None, "", tmp_path, [Origin("t.json")])
+    bench = Benchmark("t", [parse_episode(episodes[0], plugins)], None, "", tmp_path, [Origin("t.json")])
     plan = EpisodePlanner(RunContext.build(config), bench).plan(0)
     for name in ("scripted", "random"):
         job = WorkerJob(config=config, policy={"name": name}, output_dir=str(tmp_path), benchmark_name="t",

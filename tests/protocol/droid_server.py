@@ -1,6 +1,6 @@
 """A stand-in for openpi's ``serve_policy`` with a DROID policy, for tests.
 
-Written independently of :mod:`molmo_lerobot.protocol.server` (only the codec is shared) so
+Written independently of :mod:`molmo_lerobot.serving.server` (only the codec is shared) so
 that our client is tested against openpi's behaviour, not against our own server: metadata
 frame on connect, no reset endpoint, strict request -> response, the traceback as a text
 frame then close 1011 on any error, ``/healthz``. It checks every DROID key, dtype and

@@ -14,7 +14,7 @@ from websockets.sync.client import connect
 from molmo_lerobot.policies.base import Policy
 from molmo_lerobot.protocol.client import PolicyClient, PolicyServerError
 from molmo_lerobot.protocol.codec import packb, unpackb
-from molmo_lerobot.protocol.server import PolicyServer, serve_in_thread
+from molmo_lerobot.serving.server import PolicyServer, serve_in_thread
 
 OBS = {"qpos": {"arm": np.zeros(7), "gripper": np.zeros(1)}}
 

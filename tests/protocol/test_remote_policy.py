@@ -14,7 +14,7 @@ import pytest
 from droid_server import FakeDroidServer
 
 from molmo_lerobot.cli.bench import main as bench_main
-from molmo_lerobot.cli.serve import build_server
+from molmo_lerobot.serving.server import build_server
 from molmo_lerobot.cli.serve import main as serve_main
 from molmo_lerobot.config import compose
 from molmo_lerobot.plugins import Plugins
@@ -22,7 +22,7 @@ from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.random_policy import RandomPolicy
 from molmo_lerobot.policies.remote import RemotePolicy
 from molmo_lerobot.protocol.client import PolicyClientError
-from molmo_lerobot.protocol.server import serve_in_thread
+from molmo_lerobot.serving.server import serve_in_thread
 from molmo_lerobot.runner.evaluate import run_evaluation
 
 HORIZON = 30

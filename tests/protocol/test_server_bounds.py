@@ -15,7 +15,7 @@ from molmo_lerobot.policies.base import Policy
 from molmo_lerobot.policies.random_policy import RandomPolicy
 from molmo_lerobot.protocol.client import PolicyClient, PolicyServerError
 from molmo_lerobot.protocol.codec import unpackb
-from molmo_lerobot.protocol.server import PolicyServer, serve_in_thread
+from molmo_lerobot.serving.server import PolicyServer, serve_in_thread
 
 OBS = {"qpos": {"arm": np.zeros(7), "gripper": np.zeros(1)}, "prompt": "pick"}
 

@@ -54,7 +54,7 @@ MODULE = textwrap.dedent('''
 
     from molmo_lerobot import hookimpl
     from molmo_lerobot.policies.base import Policy, PolicyType
-    from molmo_lerobot.runner.recorders import Recorder, RecorderFactory
+    from molmo_lerobot.recording import Recorder, RecorderFactory
 
 
     class FaultyPolicy(Policy):

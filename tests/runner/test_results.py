@@ -2,7 +2,7 @@ import math
 
 import pytest
 
-from molmo_lerobot.runner.results import EpisodeResult, summarize, wilson_ci
+from molmo_lerobot.results import EpisodeResult, summarize, wilson_ci
 
 
 @pytest.mark.parametrize(
@@ -43,7 +43,7 @@ def test_episode_result_roundtrip_keeps_contract_fields():
 
 
 def test_no_episode_simulated_is_no_score_but_honest_counts():
-    from molmo_lerobot.runner.results import summary_lines
+    from molmo_lerobot.results import summary_lines
 
     rs = [EpisodeResult.failed(i, 1, "a.Pick", i, "RuntimeError: boom", task_type="pick") for i in range(3)]
     s = summarize(rs, benchmark={"name": "b"}, policy={"name": "p"})
@@ -56,7 +56,7 @@ def test_no_episode_simulated_is_no_score_but_honest_counts():
 
 
 def test_errors_lead_the_headline_and_tasks_without_a_valid_episode_have_no_rate():
-    from molmo_lerobot.runner.results import summary_lines
+    from molmo_lerobot.results import summary_lines
 
     rs = [EpisodeResult(0, 1, "a.Pick", True, True, 10, 1, task_type="pick"),
           EpisodeResult.failed(1, 2, "a.Open", 3, "RuntimeError: boom", task_type="open")]
@@ -71,7 +71,7 @@ def test_errors_lead_the_headline_and_tasks_without_a_valid_episode_have_no_rate
 def test_infrastructure_errors_and_output_failures_are_told_apart():
     """A dead worker is an infrastructure error (rerun by resume, and the summary says so); a
     thumbnail that could not be written leaves the outcome and is listed on its own."""
-    from molmo_lerobot.runner.results import summary_lines
+    from molmo_lerobot.results import summary_lines
 
     kept = EpisodeResult(0, 1, "a.Pick", True, True, 10, 1, task_type="pick",
                          output_errors=["GlanceRecorder: OSError: [Errno 28] No space left on device"])

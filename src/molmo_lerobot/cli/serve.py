@@ -25,11 +25,7 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from molmo_lerobot.plugins import Plugins
-    from molmo_lerobot.protocol.server import PolicyServer
-
-#: ``policy.serve*`` switches of a run (see protocol/run_server.py), not the policy's own options
-RUN_SERVING_KEYS = frozenset({"serve", "serve_max_batch", "serve_batch_timeout_ms"})
+    from molmo_lerobot.serving.server import PolicyServer
 
 SERVER_OPTIONS = {
     "host": str,
@@ -67,22 +63,11 @@ def parse_args(argv: list[str]) -> tuple[dict[str, Any], list[str]]:
     return options, overrides
 
 
-def build_server(plugins: Plugins, policy_cfg: dict[str, Any], **options: Any) -> PolicyServer:
-    """The server for the policy plugin ``policy_cfg`` names in ``plugins`` (built when the server starts)."""
-    from molmo_lerobot import __version__
-    from molmo_lerobot.protocol.server import PolicyServer
-    from molmo_lerobot.runner.policy import make_policy
-
-    cfg = {k: v for k, v in policy_cfg.items() if k not in RUN_SERVING_KEYS}
-    metadata = {"server": "molmo-serve", "version": __version__, "policy": cfg.get("name")}
-    return PolicyServer(lambda: make_policy(plugins, cfg), metadata=metadata, **options)
-
-
 def main(argv: list[str] | None = None) -> int:
     from molmo_lerobot.config import ConfigError, compose
     from molmo_lerobot.context import RunContext
     from molmo_lerobot.plugins import PluginError
-    from molmo_lerobot.protocol.server import PolicyNotServable
+    from molmo_lerobot.serving.server import PolicyNotServable, build_server
 
     try:
         options, overrides = parse_args(sys.argv[1:] if argv is None else argv)

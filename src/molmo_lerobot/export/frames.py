@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from molmo_lerobot.features import ACTION, STATE, FeatureError, FeatureMap
-from molmo_lerobot.runner.recorders import EpisodeInfo
+from molmo_lerobot.recording import EpisodeInfo
 
 EVAL_EPISODE_INDEX = "eval.episode_index"
 EVAL_SEED = "eval.seed"

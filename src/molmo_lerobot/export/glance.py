@@ -20,8 +20,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from molmo_lerobot.fileio import atomic_write
-from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder, RecorderFactory
-from molmo_lerobot.runner.results import EpisodeResult
+from molmo_lerobot.recording import EpisodeInfo, Recorder, RecorderFactory
+from molmo_lerobot.results import EpisodeResult
 
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetCatalog

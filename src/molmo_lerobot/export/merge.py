@@ -38,7 +38,7 @@ from molmo_lerobot.export.card import make_card
 from molmo_lerobot.export.frames import EVAL_EPISODE_INDEX
 from molmo_lerobot.export.portable import portable
 from molmo_lerobot.export.shards import SHARDS_DIR, Shard, list_shards
-from molmo_lerobot.runner.results import EpisodeResult
+from molmo_lerobot.results import EpisodeResult
 
 if TYPE_CHECKING:
     from molmo_lerobot.export.recorder import LeRobotRecorderFactory

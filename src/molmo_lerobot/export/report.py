@@ -21,7 +21,7 @@ from typing import Any
 
 from molmo_lerobot.export.merge import DATASET_DIR, EVAL_EPISODES, EVAL_INFO, read_eval_records
 from molmo_lerobot.fileio import atomic_write
-from molmo_lerobot.runner.results import EpisodeResult, wilson_ci
+from molmo_lerobot.results import EpisodeResult, wilson_ci
 
 REPORT_FILE = "report.html"
 

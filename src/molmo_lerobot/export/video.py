@@ -38,7 +38,7 @@ from lerobot.configs.video import RGBEncoderConfig
 from lerobot.datasets.compute_stats import DEFAULT_QUANTILES
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-from molmo_lerobot.config import ConfigError
+from molmo_lerobot.hookspecs import ConfigError
 
 #: h264 quality and speed when the config leaves them null: crf 18 matches the picture quality
 #: of LeRobot's default AV1 (crf 30, preset 12) on our 224x224 renders (42.0 dB PSNR both) with

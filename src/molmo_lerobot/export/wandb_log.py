@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from molmo_lerobot import fileio
-from molmo_lerobot.runner.results import EpisodeResult
+from molmo_lerobot.results import EpisodeResult
 
 log = logging.getLogger(__name__)
 

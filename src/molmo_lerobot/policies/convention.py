@@ -21,7 +21,7 @@ and ``robot_base_pose`` for it), so it works the same in a worker and behind ``m
 Policies apply it at their boundary:
 ``policy=remote`` on the wire, ``policy=lerobot`` for ``observation.state`` and the action
 vector, ``policy=pi0`` (molmo-pi0) for the DROID request; any other policy plugin is wrapped in a
-:class:`ConventionAdapter` (``molmo_lerobot.runner.policy.make_policy``).
+:class:`ConventionAdapter` (``molmo_lerobot.policies.factory.make_policy``).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """``policy=remote policy.host=… policy.port=…``: any policy served by ``molmo-serve``, over the wire.
 
-The client side of :mod:`molmo_lerobot.protocol.server`: observations travel in the native
+The client side of :mod:`molmo_lerobot.serving.server`: observations travel in the native
 format unchanged, each episode starts with a reset message (episode index, seed, prompt,
 move groups, policy period), so the served policy sees what it would see in process and a
 deterministic policy gives the same outcomes. Timeouts, connect retries with backoff and

@@ -30,12 +30,12 @@ from molmo_lerobot.context import RunContext
 from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import SettingsError
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.protocol.run_server import ServeError, served_policy
+from molmo_lerobot.serving.run_server import ServeError, served_policy
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
 from molmo_lerobot.runner.plan import EpisodePlan, EpisodePlanner
 from molmo_lerobot.runner.progress import Progress
-from molmo_lerobot.runner.results import EpisodeResult, summarize
+from molmo_lerobot.results import EpisodeResult, summarize
 from molmo_lerobot.runner.run_config import RunConfig, episode_work_problem
 from molmo_lerobot.runner.run_directory import RunDirectory, RunError
 from molmo_lerobot.runner.supervisor import RunInterrupted

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.errors import EPISODE
-from molmo_lerobot.runner.results import EpisodeResult
+from molmo_lerobot.results import EpisodeResult
 from molmo_lerobot.runner.rollout import horizon_with_source
 
 if TYPE_CHECKING:

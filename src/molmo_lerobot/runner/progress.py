@@ -26,7 +26,7 @@ from typing import IO, Any
 
 from molmo_lerobot import fileio
 from molmo_lerobot.fileio import atomic_write
-from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder, RecorderFactory
+from molmo_lerobot.recording import EpisodeInfo, Recorder, RecorderFactory
 
 PROGRESS_DIR = ".progress"
 LOGS_DIR = "logs"

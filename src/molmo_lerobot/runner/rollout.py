@@ -11,7 +11,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from molmo_lerobot.policies.base import Action, EpisodeContext, Policy
-    from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder, RecorderGroup
+    from molmo_lerobot.recording import EpisodeInfo, Recorder, RecorderGroup
 
 
 class ActionError(ValueError):
@@ -137,7 +137,7 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
     steps where it is asked for a new action (chunks run open loop), recorders at the steps
     they ask for. A recorder that raises fails its output, not the episode (:class:`RecorderGroup`).
     """
-    from molmo_lerobot.runner.recorders import RecorderGroup
+    from molmo_lerobot.recording import RecorderGroup
 
     recs = recorders if isinstance(recorders, RecorderGroup) else RecorderGroup(recorders)
     policy.reset(ctx)

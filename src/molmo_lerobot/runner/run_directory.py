@@ -22,7 +22,7 @@ from typing import Any
 
 from molmo_lerobot import fileio
 from molmo_lerobot.fileio import atomic_write
-from molmo_lerobot.runner.results import EpisodeResult
+from molmo_lerobot.results import EpisodeResult
 
 RUN_FILE = "run.json"
 EPISODES_FILE = "episodes.jsonl"

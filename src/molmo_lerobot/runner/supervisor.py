@@ -41,7 +41,7 @@ from typing import Any
 
 from molmo_lerobot.errors import INFRASTRUCTURE
 from molmo_lerobot.runner.plan import EpisodePlan
-from molmo_lerobot.runner.results import EpisodeResult
+from molmo_lerobot.results import EpisodeResult
 from molmo_lerobot.runner.worker import WorkerJob
 
 log = logging.getLogger(__name__)

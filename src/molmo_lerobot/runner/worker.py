@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING, Any
 from molmo_lerobot.cpu_threads import cap_threads
 from molmo_lerobot.errors import describe, error_kind
 from molmo_lerobot.policies.base import EpisodeContext
-from molmo_lerobot.runner.recorders import EpisodeInfo, RecorderFactory, RecorderGroup
-from molmo_lerobot.runner.results import EpisodeResult
+from molmo_lerobot.recording import EpisodeInfo, RecorderFactory, RecorderGroup
+from molmo_lerobot.results import EpisodeResult
 from molmo_lerobot.runner.rollout import rollout
 
 if TYPE_CHECKING:
@@ -50,7 +50,7 @@ class EpisodeWorker:
 
     def __init__(self, job: WorkerJob, worker_id: str) -> None:
         from molmo_lerobot.context import RunContext
-        from molmo_lerobot.runner.policy import make_policy
+        from molmo_lerobot.policies.factory import make_policy
 
         self.job = job
         self.worker_id = worker_id

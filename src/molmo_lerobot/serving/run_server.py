@@ -40,7 +40,7 @@ def serve_options(policy_cfg: dict[str, Any], workers: int) -> dict[str, Any] | 
 def _serve(config: dict[str, Any], options: dict[str, Any], threads: int | None, conn: Connection) -> None:
     """Server process: rebuild the run's context from its ``config``, build the server, report its
     port (or the error), serve until SIGTERM."""
-    from molmo_lerobot.cli.serve import build_server
+    from molmo_lerobot.serving.server import build_server
     from molmo_lerobot.context import RunContext
 
     cap_threads(threads)  # as many as each in-process worker would use: the same rounding

@@ -23,7 +23,7 @@ from molmo_lerobot.errors import describe
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetCatalog
     from molmo_lerobot.policies.base import Action, Observation
-    from molmo_lerobot.runner.results import EpisodeResult
+    from molmo_lerobot.results import EpisodeResult
 
 log = logging.getLogger(__name__)
 

@@ -4,7 +4,7 @@ Each connection gets its own policy instance (per-client state: a stateful polic
 shared between clients): a :meth:`~molmo_lerobot.policies.base.Policy.fork` of the policy
 built at start-up when it can share its model, else a fresh instance. On connect the server
 sends a metadata dict, then answers every binary msgpack observation (the native format of
-:mod:`molmo_lerobot.protocol.native`) with an action dict plus ``server_timing``.
+:mod:`molmo_lerobot.serving.native`) with an action dict plus ``server_timing``.
 ``{"endpoint": "reset", ...}`` resets the connection's policy; without it the policy is reset
 before its first observation. ``GET /healthz`` answers 200, ``GET /stats`` a JSON summary
 (requests served, the batch sizes seen, evictions).
@@ -18,7 +18,7 @@ Each client keeps its own policy state; an item that fails fails only its own re
 
 **Bounds.** Everything a client can ask for is bounded: the message size (in both directions,
 checked before a reply is encoded), move groups, images, arrays and numbers (see
-:mod:`~molmo_lerobot.protocol.native`), frames buffered per connection, and time: a
+:mod:`~molmo_lerobot.serving.native`), frames buffered per connection, and time: a
 connection must send its first request within ``first_request_timeout_s`` and is closed after
 ``idle_timeout_s`` without one. When all ``max_clients`` slots are taken, a new client evicts
 the connection idle the longest (at least ``evict_idle_s``; close code 1001, which our client
@@ -44,7 +44,7 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from http import HTTPStatus
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from websockets.asyncio.server import Server, ServerConnection, serve
@@ -55,7 +55,10 @@ from websockets.http11 import Request, Response
 from molmo_lerobot.policies.base import Action, Policy
 from molmo_lerobot.protocol.client import RESET_ENDPOINT
 from molmo_lerobot.protocol.codec import CodecError, packb, unpackb
-from molmo_lerobot.protocol.native import RequestError, action_nbytes, check_observation, episode_context
+from molmo_lerobot.serving.native import RequestError, action_nbytes, check_observation, episode_context
+
+if TYPE_CHECKING:
+    from molmo_lerobot.plugins import Plugins
 
 log = logging.getLogger(__name__)
 
@@ -470,3 +473,17 @@ def serve_in_thread(server: PolicyServer, start_timeout_s: float = 30.0) -> Iter
     finally:
         loop.call_soon_threadsafe(server.request_stop)
         thread.join(timeout=30)
+
+
+#: ``policy.serve*`` switches of a run (see serving/run_server.py), not the policy's own options
+RUN_SERVING_KEYS = frozenset({"serve", "serve_max_batch", "serve_batch_timeout_ms"})
+
+
+def build_server(plugins: Plugins, policy_cfg: dict[str, Any], **options: Any) -> PolicyServer:
+    """The server for the policy plugin ``policy_cfg`` names in ``plugins`` (built when the server starts)."""
+    from molmo_lerobot import __version__
+    from molmo_lerobot.policies.factory import make_policy
+
+    cfg = {k: v for k, v in policy_cfg.items() if k not in RUN_SERVING_KEYS}
+    metadata = {"server": "molmo-serve", "version": __version__, "policy": cfg.get("name")}
+    return PolicyServer(lambda: make_policy(plugins, cfg), metadata=metadata, **options)
