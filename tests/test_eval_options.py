@@ -18,7 +18,8 @@ from molmo_lerobot.overrides import molmo_episode_overrides as _override
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.episode_env import build_env
-from molmo_lerobot.runner.evaluate import RunError, run_evaluation
+from molmo_lerobot.errors import RunError
+from molmo_lerobot.runner.evaluate import run_evaluation
 from molmo_lerobot.sim.env import Timing
 
 CUSTOM_MJCF = """<mujoco><worldbody><body name="thing"><freejoint/>

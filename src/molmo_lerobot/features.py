@@ -25,13 +25,14 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from molmo_lerobot.errors import MolmoError
 
 IMAGE_PREFIX = "observation.images."
 STATE = "observation.state"
 ACTION = "action"
 
 
-class FeatureError(ValueError):
+class FeatureError(MolmoError, ValueError):
     """A value does not fit its feature; the message names the feature."""
 
 

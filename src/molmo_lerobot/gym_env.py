@@ -39,6 +39,7 @@ import numpy as np
 from gymnasium import spaces
 
 from molmo_lerobot.context import RunContext
+from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.features import FeatureMap, is_wrist
 from molmo_lerobot.runner.episode import Episode, load_run_benchmark, open_episode
 from molmo_lerobot.runner.plan import EpisodePlanner
@@ -46,7 +47,7 @@ from molmo_lerobot.runner.plan import EpisodePlanner
 NAMESPACE = "molmo_lerobot"
 
 
-class EpisodeIndexError(IndexError):
+class EpisodeIndexError(MolmoError, IndexError):
     """An episode index outside the benchmark."""
 
 

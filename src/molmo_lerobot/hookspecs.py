@@ -23,6 +23,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 import pluggy
+from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:
     from molmo_lerobot.assets.grasps import GraspLibraryType
@@ -39,7 +40,7 @@ hookspec = pluggy.HookspecMarker(PROJECT)
 hookimpl = pluggy.HookimplMarker(PROJECT)
 
 
-class ConfigError(ValueError):
+class ConfigError(MolmoError, ValueError):
     """A command-line override or config value is invalid; the message says which.
 
     Raise it from a hook that takes the run config to reject that config in one line.

@@ -28,6 +28,7 @@ import pluggy
 
 from molmo_lerobot import hookspecs
 from molmo_lerobot.hookspecs import ConfigError
+from molmo_lerobot.errors import MolmoError
 
 ENTRY_POINT_GROUP = hookspecs.PROJECT
 
@@ -50,7 +51,7 @@ PROVIDER_HOOKS = {kind: hook for hook, kind in KIND_HOOKS.items()
                   if kind in ("task", "robot", "camera", "scene", "asset_library", "grasp_library", "policy", "expert")}
 
 
-class PluginError(LookupError):
+class PluginError(MolmoError, LookupError):
     """A requested plugin is unknown or failed to load. The message says which and why."""
 
 

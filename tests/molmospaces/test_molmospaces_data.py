@@ -28,7 +28,8 @@ from molmo_lerobot.molmospaces.user import (
     register_user_grasp_library,
 )
 from molmo_lerobot.plugins import Plugins
-from molmo_lerobot.runner.evaluate import RunError, run_evaluation
+from molmo_lerobot.errors import RunError
+from molmo_lerobot.runner.evaluate import run_evaluation
 
 
 def _write_bench(path, episodes):

@@ -18,7 +18,8 @@ from test_lerobot_policy import save_tiny_act  # noqa: E402
 
 from molmo_lerobot.config import compose  # noqa: E402
 from molmo_lerobot.protocol.run_server import STATS_FILE  # noqa: E402
-from molmo_lerobot.runner.evaluate import RunError, run_evaluation  # noqa: E402
+from molmo_lerobot.errors import RunError  # noqa: E402
+from molmo_lerobot.runner.evaluate import run_evaluation  # noqa: E402
 
 HORIZON = 8
 

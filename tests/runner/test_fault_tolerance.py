@@ -197,7 +197,7 @@ def test_workers_of_a_killed_molmo_eval_end_on_their_own(faulty_policy, small_be
 def test_a_failing_export_leaves_the_score_standing(faulty_policy, small_bench, tmp_path, eval_config):
     """Scores first: results.json and episodes.jsonl are final before any export step runs; an export
     that fails is an error that says the score stands and where it is; the report still runs."""
-    from molmo_lerobot.runner.evaluate import ExportError
+    from molmo_lerobot.errors import ExportError
 
     out = tmp_path / "run"
     cfg = eval_config(small_bench, out, "policy=faulty", "workers=1", "horizon=2", "limit=3",

@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 
 from molmo_lerobot.cli.eval import main
-from molmo_lerobot.runner.evaluate import RunError, run_evaluation
+from molmo_lerobot.errors import RunError
+from molmo_lerobot.runner.evaluate import run_evaluation
 from molmo_lerobot.runner.rollout import horizon_with_source
 
 PICK_CLS = "molmo_lerobot.tasks.pick.PickTask"

@@ -28,6 +28,7 @@ import zstandard
 
 from molmo_lerobot import fileio
 from molmo_lerobot.assets.grasps import BuiltinGraspLibrary, GraspLibrary
+from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetCatalog
@@ -36,7 +37,7 @@ METADATA_FIELDS = ("assetId", "category", "description", "description_long", "de
                    "mass", "boundingBox")
 
 
-class AssetError(LookupError):
+class AssetError(MolmoError, LookupError):
     """An unknown UID or a malformed library; the message names the file, UID and field."""
 
 

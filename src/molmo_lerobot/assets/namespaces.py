@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import re
 
+from molmo_lerobot.errors import MolmoError
+
 NAMESPACE_RE = re.compile(r"[-_\w][-_\w/]*[-_\w]+")
 
 
-class NamespaceError(ValueError):
+class NamespaceError(MolmoError, ValueError):
     """An invalid namespace or dataset id; the message names it."""
 
 

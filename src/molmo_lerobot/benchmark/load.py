@@ -31,6 +31,7 @@ from pydantic import BaseModel, ValidationError
 
 from molmo_lerobot.benchmark.schema import BenchmarkMetadata, EpisodeSpec
 from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:
     from molmo_lerobot.plugins import Plugins
@@ -66,7 +67,7 @@ class Problem:
         return ": ".join([*parts, self.message])
 
 
-class BenchmarkError(ValueError):
+class BenchmarkError(MolmoError, ValueError):
     """A benchmark that cannot be loaded or used; ``problems`` lists every reason."""
 
     def __init__(self, problems: list[Problem]) -> None:

@@ -93,7 +93,8 @@ def _job(cfg: Any) -> int:
 
     from molmo_lerobot.config import ConfigError
     from molmo_lerobot.plugins import PluginError
-    from molmo_lerobot.runner.evaluate import RunError, run_evaluation
+    from molmo_lerobot.errors import RunError
+    from molmo_lerobot.runner.evaluate import run_evaluation
     from molmo_lerobot.runner.results import summary_lines
     from molmo_lerobot.runner.run_config import RunConfig, RunConfigError
     from molmo_lerobot.runner.supervisor import WorkerStartError

@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 import sys
 from typing import TYPE_CHECKING, Any
+from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:
     from molmo_lerobot.plugins import Plugins
@@ -45,7 +46,7 @@ SERVER_OPTIONS = {
 }
 
 
-class _Usage(Exception):
+class _Usage(MolmoError):
     pass
 
 

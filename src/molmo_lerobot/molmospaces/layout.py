@@ -23,6 +23,7 @@ import json
 from pathlib import Path
 
 from molmo_lerobot.resources import molmospaces as ms_resources
+from molmo_lerobot.errors import MolmoError
 
 #: The versions MolmoSpaces pins (the resource manager's table; install hints and on-demand installs).
 VERSIONS = ms_resources.VERSIONS
@@ -45,7 +46,7 @@ SPLITS = ("train", "val", "test")
 USER = "user"
 
 
-class SceneLookupError(LookupError):
+class SceneLookupError(MolmoError, LookupError):
     """No scene for an episode's ``(scene_dataset, data_split, house_index)``; says why and where."""
 
 

@@ -15,9 +15,10 @@ from pathlib import Path
 from typing import Any
 
 from molmo_lerobot.paths import molmospaces_assets_dir
+from molmo_lerobot.errors import MolmoError
 
 
-class SettingsError(ValueError):
+class SettingsError(MolmoError, ValueError):
     """A MolmoSpaces setting of the run config is invalid; the message names the key."""
 
 

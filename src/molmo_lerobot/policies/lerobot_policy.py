@@ -31,9 +31,10 @@ from molmo_lerobot.hookspecs import hookimpl
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
 from molmo_lerobot.policies.convention import ConventionName, get_convention
 from molmo_lerobot.policies.image_ops import resize_with_pad
+from molmo_lerobot.errors import MolmoError
 
 
-class WeightsNotLoadedError(RuntimeError):
+class WeightsNotLoadedError(MolmoError, RuntimeError):
     """A checkpoint's weights are not the ones in the model (missing, renamed or random)."""
 
 

@@ -14,13 +14,13 @@ from typing import Any
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
 from websockets.sync.client import ClientConnection, connect
 
-from molmo_lerobot.errors import InfrastructureError
+from molmo_lerobot.errors import InfrastructureError, MolmoError
 from molmo_lerobot.protocol.codec import CodecError, packb, unpackb
 
 RESET_ENDPOINT = "reset"
 
 
-class PolicyClientError(RuntimeError):
+class PolicyClientError(MolmoError, RuntimeError):
     """Talking to the policy server failed; the message says where and why."""
 
 
@@ -198,7 +198,7 @@ class PolicyClient:
             raise PolicyClientError(f"policy server {self.uri} sent a malformed {what}: {exc}") from exc
 
 
-class _Stale(Exception):
+class _Stale(MolmoError):
     """The connection closed without an answer (internal: triggers one reconnect)."""
 
 

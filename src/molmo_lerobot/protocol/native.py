@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from molmo_lerobot.policies.base import EpisodeContext
+from molmo_lerobot.errors import MolmoError
 
 DEFAULT_MOVE_GROUPS = {"arm": 7, "gripper": 1}
 MAX_MOVE_GROUPS = 16
@@ -26,7 +27,7 @@ MAX_POLICY_DT_S = 60.0
 RESET_KEYS = {"endpoint", "episode_index", "seed", "prompt", "move_groups", "policy_dt_s"}
 
 
-class RequestError(ValueError):
+class RequestError(MolmoError, ValueError):
     """A client's request cannot be served (the message is sent back to it)."""
 
 

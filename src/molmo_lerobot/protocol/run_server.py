@@ -20,11 +20,12 @@ from typing import Any
 
 from molmo_lerobot.cpu_threads import cap_threads
 from molmo_lerobot.fileio import atomic_write
+from molmo_lerobot.errors import MolmoError
 
 STATS_FILE = "serve_stats.json"
 
 
-class ServeError(RuntimeError):
+class ServeError(MolmoError, RuntimeError):
     """The run's policy server could not start."""
 
 

@@ -56,13 +56,14 @@ from molmo_lerobot.policies.base import Action, Policy
 from molmo_lerobot.protocol.client import RESET_ENDPOINT
 from molmo_lerobot.protocol.codec import CodecError, packb, unpackb
 from molmo_lerobot.protocol.native import RequestError, action_nbytes, check_observation, episode_context
+from molmo_lerobot.errors import MolmoError
 
 log = logging.getLogger(__name__)
 
 __all__ = ["PolicyServer", "PolicyNotServable", "RequestError", "serve_in_thread"]
 
 
-class PolicyNotServable(ValueError):
+class PolicyNotServable(MolmoError, ValueError):
     """The policy cannot run in a server (it needs the simulator)."""
 
 

@@ -28,6 +28,7 @@ from typing import Any
 
 from molmo_lerobot.benchmark.schema import known_task_type
 from molmo_lerobot.runner.results import wilson_ci
+from molmo_lerobot.errors import MolmoError
 
 METRICS = {"success": "success at the final step", "success_once": "success at any step"}
 #: ``results.json`` fields that define the trial an episode is (besides the benchmark).
@@ -40,7 +41,7 @@ NEUTRAL_CONFIG = frozenset({"policy", "benchmark", "seed", "limit", "workers", "
 Z95 = 1.959963984540054
 
 
-class CompareError(ValueError):
+class CompareError(MolmoError, ValueError):
     """The runs cannot be compared; the message says which run and why."""
 
 

@@ -27,6 +27,7 @@ from omegaconf import DictConfig
 from molmo_lerobot.assets.grasps import GraspError
 from molmo_lerobot.assets.libraries import AssetError
 from molmo_lerobot.context import RunContext
+from molmo_lerobot.errors import ExportError, RunError
 from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import SettingsError
 from molmo_lerobot.paths import data_path
@@ -37,16 +38,12 @@ from molmo_lerobot.runner.plan import EpisodePlan, EpisodePlanner
 from molmo_lerobot.runner.progress import Progress
 from molmo_lerobot.runner.results import EpisodeResult, summarize
 from molmo_lerobot.runner.run_config import RunConfig, episode_work_problem
-from molmo_lerobot.runner.run_directory import RunDirectory, RunError
+from molmo_lerobot.runner.run_directory import RunDirectory
 from molmo_lerobot.runner.supervisor import RunInterrupted
 from molmo_lerobot.runner.worker import WorkerJob
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
-
-
-class ExportError(RunError):
-    """The run is scored (``results.json`` written) but an export step after it failed."""
 
 
 @dataclass

@@ -8,17 +8,18 @@ from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
+from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:
     from molmo_lerobot.policies.base import Action, EpisodeContext, Policy
     from molmo_lerobot.runner.recorders import EpisodeInfo, Recorder, RecorderGroup
 
 
-class ActionError(ValueError):
+class ActionError(MolmoError, ValueError):
     """A policy returned something that is not a valid action or chunk."""
 
 
-class SimulationDiverged(RuntimeError):
+class SimulationDiverged(MolmoError, RuntimeError):
     """The physics blew up (non-finite state or a MuJoCo instability warning): the episode is an error."""
 
 

@@ -37,6 +37,7 @@ from pydantic_core import PydanticCustomError
 
 from molmo_lerobot.benchmark.schema import MAX_TASK_HORIZON_SEC
 from molmo_lerobot.cameras.options import camera_option_problems
+from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.robots.base import parse_base_size
 from molmo_lerobot.sim.env import CONTROL_MODES, Timing
 
@@ -46,7 +47,7 @@ MAX_HORIZON_STEPS = 100_000
 MAX_PHYSICS_STEPS = 2_000_000
 
 
-class RunConfigError(ValueError):
+class RunConfigError(MolmoError, ValueError):
     """The run config is invalid; ``problems`` holds one line per problem."""
 
     def __init__(self, problems: list[str]) -> None:

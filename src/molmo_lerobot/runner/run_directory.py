@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from molmo_lerobot import fileio
+from molmo_lerobot.errors import RunError
 from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.runner.results import EpisodeResult
 
@@ -35,10 +36,6 @@ _RECORD_TYPES: dict[str, tuple[type, ...]] = {
     "episode_index": (int,), "house_index": (int, type(None)), "task_cls": (str, type(None)), "success": (bool,),
     "success_once": (bool,), "steps": (int,), "seed": (int,), "error": (str, type(None)),
 }
-
-
-class RunError(RuntimeError):
-    """The run cannot start or continue; the message says why and what to do."""
 
 
 class RunDirectory:

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from molmo_lerobot.errors import INFRASTRUCTURE
+from molmo_lerobot.errors import INFRASTRUCTURE, MolmoError
 from molmo_lerobot.runner.plan import EpisodePlan
 from molmo_lerobot.runner.results import EpisodeResult
 from molmo_lerobot.runner.worker import WorkerJob
@@ -51,7 +51,7 @@ READY, INIT_ERROR, RESULT, DEAD = "ready", "init_error", "result", "dead"
 Event = tuple[str, Any]
 
 
-class WorkerStartError(RuntimeError):
+class WorkerStartError(MolmoError, RuntimeError):
     """No worker could start (e.g. the policy failed to load): the run cannot start."""
 
 
