@@ -15,7 +15,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from molmo_lerobot.benchmark.schema import episode_digest
+from molmo_lerobot.hashing import episode_digest
 
 STANDARD = "standard"
 

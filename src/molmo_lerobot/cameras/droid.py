@@ -33,7 +33,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.benchmark.schema import episode_digest
+from molmo_lerobot.hashing import episode_digest
 from molmo_lerobot.cameras.base import CameraSystem, episode_rng, look_rotation, mat_to_quat
 
 WRIST_MJCF_NAME = "gripper/wrist_camera"

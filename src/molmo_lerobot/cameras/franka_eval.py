@@ -35,7 +35,7 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from molmo_lerobot.benchmark.schema import episode_digest
+from molmo_lerobot.hashing import episode_digest
 from molmo_lerobot.cameras.base import CameraSystem, look_rotation, mat_to_quat
 from molmo_lerobot.cameras.droid import (
     ARM_ROOT,
