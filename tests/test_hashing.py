@@ -9,7 +9,8 @@ import pytest
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.hashing import canonical_json, content_sha256, episode_digest
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.runner.evaluate import episode_seed
+from molmo_lerobot.plugins import Plugins
+from molmo_lerobot.runner.plan import episode_seed
 
 #: (benchmark, episode index) -> (episode digest, seed at run seed 0, seed at run seed 3)
 PINNED = {
@@ -26,7 +27,7 @@ ODD = {"prompt": "pick up the crème brûlée", "b": [1, 2.5, None], "a": {"z": 
 
 @pytest.mark.parametrize(("name", "index"), sorted(PINNED))
 def test_shipped_episodes_keep_their_digests_and_seeds(name, index):
-    episode = load_benchmark(data_path("benchmarks") / name).episodes[index]
+    episode = load_benchmark(data_path("benchmarks") / name, Plugins()).episodes[index]
     digest, seed0, seed3 = PINNED[name, index]
     assert episode_digest(episode).hex() == digest
     assert episode_digest(episode.model_dump(mode="json")).hex() == digest
