@@ -33,8 +33,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from molmo_lerobot import hookimpl
+from molmo_lerobot.cameras.base import CameraSystem, episode_rng
 from molmo_lerobot.hashing import episode_digest
-from molmo_lerobot.cameras.base import CameraSystem, episode_rng, look_rotation, mat_to_quat
+from molmo_lerobot.poses import look_rotation, mat_to_quat
 
 WRIST_MJCF_NAME = "gripper/wrist_camera"
 ARM_ROOT = "fr3_link0"

@@ -35,8 +35,7 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from molmo_lerobot.hashing import episode_digest
-from molmo_lerobot.cameras.base import CameraSystem, look_rotation, mat_to_quat
+from molmo_lerobot.cameras.base import CameraSystem
 from molmo_lerobot.cameras.droid import (
     ARM_ROOT,
     EXO_CAMERA_1,
@@ -49,6 +48,8 @@ from molmo_lerobot.cameras.droid import (
     place_until_seen,
     task_objects,
 )
+from molmo_lerobot.hashing import episode_digest
+from molmo_lerobot.poses import look_rotation, mat_to_quat
 
 #: (width, height) their eval cameras render at, whatever the episode's ``img_resolution``
 EVAL_IMG_RESOLUTION = (640, 368)
