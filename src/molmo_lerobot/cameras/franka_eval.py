@@ -36,17 +36,17 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from molmo_lerobot.cameras.base import CameraSystem
-from molmo_lerobot.cameras.droid import (
+from molmo_lerobot.cameras.franka_mounts import (
     ARM_ROOT,
     EXO_CAMERA_1,
     MountNoise,
     add_wrist,
     arm_root,
-    wrist_mount,
     gripper_body,
     noisy_mount,
     place_until_seen,
     task_objects,
+    wrist_mount,
 )
 from molmo_lerobot.hashing import episode_digest
 from molmo_lerobot.poses import look_rotation, mat_to_quat
