@@ -110,7 +110,9 @@ def droid_run(tmp_path_factory):
     res = run_evaluation(compose(["policy=scripted", f"benchmark.path={bench}", "workers=1", f"horizon={STEPS}",
                                   "record=true", "progress=false", f"output_dir={out}"]))
     assert res.summary["n_errors"] == 0
-    fmap = FeatureMap.for_robot(FrankaDroid, DROID_CAMERAS, episode["img_resolution"])
+    width, height = episode["img_resolution"]
+    fmap = FeatureMap.build(FrankaDroid.move_groups, FrankaDroid.joint_names,
+                            [(c, height, width) for c in DROID_CAMERAS])
     return bench, out / "dataset", fmap
 
 
@@ -181,7 +183,8 @@ def test_a_mobile_base_is_one_more_move_group(tmp_path):
     from molmo_lerobot.policies.replay import ReplayPolicy
     from molmo_lerobot.runner.results import EpisodeResult, summarize
 
-    fmap = FeatureMap.for_robot(MobileRobot, ["head/rgb", "wrist"], (32, 24))  # "/": recorded as head_rgb
+    fmap = FeatureMap.build(MobileRobot.move_groups, MobileRobot.joint_names,
+                            [("head/rgb", 24, 32), ("wrist", 24, 32)])  # "/": recorded as head_rgb
     assert fmap.groups == ("base", "arm", "gripper") and fmap.action_layout() == "base (3) + arm (7) + gripper (1)"
     assert fmap.state_names[:4] == ("base_x", "base_y", "base_yaw", "joint1")
     assert fmap.action_dim == fmap.state_dim == 11

@@ -126,13 +126,6 @@ class FeatureMap:
         )
 
     @classmethod
-    def for_robot(cls, robot: Any, camera_names: Iterable[str], resolution: Sequence[int]) -> FeatureMap:
-        """A robot descriptor's (``move_groups``, ``joint_names``) with cameras at ``resolution``
-        (width, height: an episode's ``img_resolution``)."""
-        width, height = resolution
-        return cls.build(robot.move_groups, robot.joint_names, [(c, height, width) for c in camera_names])
-
-    @classmethod
     def from_observation(cls, move_groups: Mapping[str, int], joint_names: Mapping[str, Sequence[str]],
                          camera_names: Iterable[str], obs: Mapping[str, Any]) -> FeatureMap:
         """The map whose image and state sizes are those of an observation."""

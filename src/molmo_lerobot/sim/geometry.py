@@ -171,15 +171,3 @@ def net_contact_force(model: mujoco.MjModel, data: mujoco.MjData, on: frozenset[
         mujoco.mj_contactForce(model, data, i, force)
         net += sign * (c.frame.reshape(3, 3).T @ force[:3])
     return net
-
-
-def touching_bodies(model: mujoco.MjModel, data: mujoco.MjData, bodies: frozenset[int]) -> set[int]:
-    """Bodies outside ``bodies`` in contact with any of them right now."""
-    gb = model.geom_bodyid
-    out: set[int] = set()
-    for i in range(data.ncon):
-        c = data.contact[i]
-        b1, b2 = int(gb[c.geom1]), int(gb[c.geom2])
-        if (b1 in bodies) != (b2 in bodies):
-            out.add(b2 if b1 in bodies else b1)
-    return out
