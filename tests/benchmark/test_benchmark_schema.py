@@ -129,4 +129,3 @@ def test_molmospaces_names():
     typed = {name for name in molmospaces.TASK_CLS
              if task_spec_model(Plugins(), {"task_cls": name})[1] is not schema.GenericTaskSpec}
     assert set(molmospaces.TASK_CLS) == typed  # every MolmoSpaces task type has its spec model
-    assert "franka_droid" in molmospaces.FRANKA_ROBOT_NAMES

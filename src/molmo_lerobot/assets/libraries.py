@@ -33,9 +33,6 @@ from molmo_lerobot.errors import MolmoError
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetCatalog
 
-METADATA_FIELDS = ("assetId", "category", "description", "description_long", "description_short", "synset",
-                   "mass", "boundingBox")
-
 
 class AssetError(MolmoError, LookupError):
     """An unknown UID or a malformed library; the message names the file, UID and field."""

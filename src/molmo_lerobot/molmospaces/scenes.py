@@ -234,10 +234,6 @@ def _attach_added(world: mujoco.MjSpec, name: str, path: Path, pose: list[float]
         world.body(prefix + name).name = name
 
 
-#: Every scene dataset name MolmoSpaces' ``get_scenes`` accepts, plus ``user``.
-SCENE_DATASET_NAMES = (*layout.SCENE_DIRS, layout.USER)
-
-
 @hookimpl
 def molmo_scene_datasets() -> list[SceneDataset]:
     return [*(MolmoSpacesScenes(name) for name in layout.SCENE_DIRS), UserScenes()]
