@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -21,7 +22,7 @@ from molmo_lerobot.runner.evaluate import run_evaluation
 from molmo_lerobot.runner.recorders import EpisodeInfo
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "tasks"))
-from droid_variants import droid_episode  # noqa: E402
+from droid_variants import droid_episode
 
 #: the cameras franka_droid's DROID camera system builds, in its order
 DROID_CAMERAS = ["wrist_camera", "exo_camera_1"]
@@ -32,9 +33,9 @@ class MobileRobot:
     """The feature side of a robot descriptor (``RobotType``) with a mobile base as its first move group."""
 
     name = "mobile_franka"
-    move_groups = {"base": 3, "arm": 7, "gripper": 1}
-    joint_names = {"base": ["base_x", "base_y", "base_yaw"], "arm": [f"joint{k}" for k in range(1, 8)],
-                   "gripper": ["gripper"]}
+    move_groups: ClassVar[dict[str, int]] = {"base": 3, "arm": 7, "gripper": 1}
+    joint_names: ClassVar[dict[str, list[str]]] = {"base": ["base_x", "base_y", "base_yaw"],
+                                                   "arm": [f"joint{k}" for k in range(1, 8)], "gripper": ["gripper"]}
 
 
 def _jsonable(features: dict) -> dict:
@@ -131,8 +132,17 @@ def test_the_adapters_agree_on_franka_droid_with_droid_cameras(droid_run, tmp_pa
     import pandas as pd
 
     from molmo_lerobot.gym_env import MolmoEnv
-    from molmo_pi0.droid import (DROID, EXTERIOR, GRIPPER, JOINTS, WRIST, DroidConfig, droid_actions, droid_request,
-                                 pick_cameras)
+    from molmo_pi0.droid import (
+        DROID,
+        EXTERIOR,
+        GRIPPER,
+        JOINTS,
+        WRIST,
+        DroidConfig,
+        droid_actions,
+        droid_request,
+        pick_cameras,
+    )
 
     bench, root, fmap = droid_run
     obs, action = _observation(fmap), _action(fmap)

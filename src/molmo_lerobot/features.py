@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
 from molmo_lerobot.errors import MolmoError
 
 IMAGE_PREFIX = "observation.images."

@@ -23,6 +23,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 import pluggy
+
 from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:

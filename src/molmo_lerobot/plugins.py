@@ -27,8 +27,8 @@ from typing import Any
 import pluggy
 
 from molmo_lerobot import hookspecs
-from molmo_lerobot.hookspecs import ConfigError
 from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.hookspecs import ConfigError
 
 ENTRY_POINT_GROUP = hookspecs.PROJECT
 
@@ -106,7 +106,7 @@ class Plugins:
         self.records.append(rec)
         try:
             module = ep.load()
-        except BaseException as exc:  # noqa: BLE001 - even sys.exit() or KeyboardInterrupt at import
+        except BaseException as exc:  # even sys.exit() or KeyboardInterrupt at import
             rec.traceback = traceback.format_exc()
             self._break(rec, _one_line(exc))
             return
@@ -174,7 +174,7 @@ class Plugins:
             return True, impl.function(*(kwargs[arg] for arg in impl.argnames))
         except passthrough:
             raise
-        except BaseException as exc:  # noqa: BLE001 - a plugin must never take the process down
+        except BaseException as exc:  # a plugin must never take the process down
             self._break(rec, f"{hook_name}() failed: {_one_line(exc)}", warn=run_time)
             return False, None
 

@@ -20,8 +20,8 @@ import pytest
 from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.cameras import droid, franka_mounts
 from molmo_lerobot.cameras.franka_eval import episode_camera_seed, exo_ranges, workspace_centre, wrist_noise
-from molmo_lerobot.paths import data_path
 from molmo_lerobot.context import RunContext
+from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim import env as sim_env
@@ -29,8 +29,8 @@ from molmo_lerobot.sim.env import Timing
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tasks"))
-import camera_oracle  # noqa: E402
-from droid_variants import droid_episode  # noqa: E402
+import camera_oracle
+from droid_variants import droid_episode
 
 pytestmark = pytest.mark.parity
 
@@ -183,7 +183,8 @@ def test_eval_system_places_the_cameras_theirs_does(theirs, scenes, monkeypatch)
         agreed += not problems
         bad += problems
     print(f"\neval cameras: {len(ours)} cases ({len(scenes)} episodes x {len(LEVELS)} levels), {agreed} agreed "
-          f"({failed} of them: placement fails on both sides), {sum(o['checks'] for o in ours)} visibility checks; largest differences {DEVIATION}")
+          f"({failed} of them: placement fails on both sides), {sum(o['checks'] for o in ours)} visibility checks; "
+          f"largest differences {DEVIATION}")
     assert not bad, "\n".join(bad)
     assert 0 < failed < len(ours) // 2  # the stand-ins make some placements hopeless, most not
 
@@ -209,7 +210,8 @@ def test_fixed_and_randomized_droid_systems_place_the_cameras_theirs_do(theirs, 
                                                    droid.RANDOM_WRIST_FOV, droid.RANDOM_WRIST_NOISE, rng)
         env.model.cam_pos[wrist], env.model.cam_quat[wrist], env.model.cam_fovy[wrist] = pos, quat, fov
         seen = _Visibility(oracle)
-        probe = type("Probe", (), {"model": env.model, "visible_fractions": lambda self, c, b: seen(env, c, b)})()
+        probe = type("Probe", (), {"model": env.model,
+                                   "visible_fractions": lambda self, c, b, seen=seen, env=env: seen(env, c, b)})()
         error = None
         try:
             for cam in droid.RANDOM_EXO_CAMERAS:

@@ -95,7 +95,8 @@ def test_molmo_serve_help_prints_usage_and_exits_0(capsys):
 
 
 def test_remote_refuses_a_server_that_is_not_molmo_serve():
-    with FakeDroidServer().running() as srv, pytest.raises(ValueError, match="is not a molmo-serve server.*policy=pi0"):
+    with (FakeDroidServer().running() as srv,
+          pytest.raises(ValueError, match=r"is not a molmo-serve server.*policy=pi0")):
         remote(srv.port)
 
 

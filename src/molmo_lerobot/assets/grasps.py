@@ -22,8 +22,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from molmo_lerobot.fileio import atomic_open
 from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.fileio import atomic_open
 
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetCatalog

@@ -85,7 +85,7 @@ class AssetLibrary(ABC):
         """The grasp library that ships with this asset library, if any."""
         return None
 
-    def fetch_grasps(self, uid: str) -> None:
+    def fetch_grasps(self, uid: str) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
         """Make ``uid``'s grasp files local before a grasp lookup (nothing to do unless they are packed)."""
 
     def _unknown(self, uid: str) -> AssetError:

@@ -29,7 +29,8 @@ def parse_dataset_id(dataset_id: str) -> tuple[str | None, str]:
         raise NamespaceError(f"invalid dataset id {dataset_id!r}: expected [namespace/]name")
     namespace, _, name = dataset_id.rpartition("/")
     if not re.fullmatch(r"[-_.\w]+", name) or name in (".", ".."):
-        raise NamespaceError(f"invalid dataset id {dataset_id!r}: name {name!r} must use letters, digits, '-', '_', '.'")
+        raise NamespaceError(f"invalid dataset id {dataset_id!r}: name {name!r} must use letters, digits, "
+                             "'-', '_', '.'")
     if namespace:
         validate_namespace_id(namespace)
     return namespace or None, name

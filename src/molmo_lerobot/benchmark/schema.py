@@ -15,7 +15,7 @@ validation against the installed plugins, not parsing, reports it (with a "did y
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal
 
 from pydantic import (
     AfterValidator,
@@ -137,10 +137,7 @@ def _camera_tag(v: Any) -> str | None:
 
 
 CameraSpec = Annotated[
-    Union[
-        Annotated[RobotMountedCameraSpec, Tag("robot_mounted")],
-        Annotated[ExocentricCameraSpec, Tag("exocentric")],
-    ],
+    Annotated[RobotMountedCameraSpec, Tag("robot_mounted")] | Annotated[ExocentricCameraSpec, Tag("exocentric")],
     Discriminator(
         _camera_tag,
         custom_error_type="camera_type",

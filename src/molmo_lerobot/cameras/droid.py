@@ -127,7 +127,7 @@ def random_exo_draws(cam: ExoDraw, centre: np.ndarray, rng: Any) -> Callable[[],
 
     def draw() -> tuple[np.ndarray, list[float], float]:
         distance, azimuth, height = rng.uniform(*cam.distance), rng.uniform(*cam.azimuth), rng.uniform(*cam.height)
-        pos = centre + [distance * math.cos(azimuth), distance * math.sin(azimuth), height]
+        pos = centre + np.array([distance * math.cos(azimuth), distance * math.sin(azimuth), height])
         lookat = centre + rng.uniform(*cam.lookat_noise, size=3)
         return pos, mat_to_quat(look_rotation(lookat - pos, (0.0, 0.0, 1.0))), fovy
 

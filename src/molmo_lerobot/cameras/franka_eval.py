@@ -149,7 +149,7 @@ def eval_exo_draws(ref_pos: np.ndarray, ref_rot: np.ndarray, centre: np.ndarray,
         azimuth = azimuth0 + rng.uniform(*ranges.azimuth)
         distance = max(distance0 + rng.uniform(*ranges.distance), MIN_EXO_DISTANCE)
         height = height0 + rng.uniform(*ranges.height)
-        pos = centre + [distance * math.cos(azimuth), distance * math.sin(azimuth), height]
+        pos = centre + np.array([distance * math.cos(azimuth), distance * math.sin(azimuth), height])
         lookat = centre + rng.uniform(*ranges.lookat_noise, size=3)
         looking = Rotation.from_matrix(look_rotation(lookat - pos, (0.0, 0.0, 1.0)))
         rot = Slerp([0.0, 1.0], Rotation.concatenate([calibrated, looking]))(ranges.lookat_weight)

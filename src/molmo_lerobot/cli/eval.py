@@ -92,8 +92,8 @@ def _job(cfg: Any) -> int:
     from hydra.types import RunMode
 
     from molmo_lerobot.config import ConfigError
-    from molmo_lerobot.plugins import PluginError
     from molmo_lerobot.errors import RunError
+    from molmo_lerobot.plugins import PluginError
     from molmo_lerobot.runner.evaluate import run_evaluation
     from molmo_lerobot.runner.results import summary_lines
     from molmo_lerobot.runner.run_config import RunConfig, RunConfigError

@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 import sys
 from typing import TYPE_CHECKING, Any
+
 from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:
@@ -60,7 +61,8 @@ def parse_args(argv: list[str]) -> tuple[dict[str, Any], list[str]]:
             try:
                 options[key] = SERVER_OPTIONS[key](value)
             except ValueError:
-                raise SystemExit(f"molmo-serve: {key}={value!r} is not a valid {SERVER_OPTIONS[key].__name__}") from None
+                kind = SERVER_OPTIONS[key].__name__
+                raise SystemExit(f"molmo-serve: {key}={value!r} is not a valid {kind}") from None
         elif arg in ("-h", "--help"):
             raise _Usage
         else:

@@ -14,8 +14,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from molmo_lerobot.paths import molmospaces_assets_dir
 from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.paths import molmospaces_assets_dir
 
 
 class SettingsError(MolmoError, ValueError):

@@ -113,7 +113,8 @@ class PolicyClient:
             raise
         if not isinstance(metadata, dict):
             self.close()
-            raise PolicyClientError(f"policy server {self.uri} sent a {type(metadata).__name__} metadata frame, expected a dict")
+            raise PolicyClientError(f"policy server {self.uri} sent a {type(metadata).__name__} metadata frame, "
+                                    "expected a dict")
         self.metadata = metadata
         self.connects += 1
         return metadata
@@ -142,7 +143,8 @@ class PolicyClient:
         """Send one observation, return the server's response dict."""
         response = self._request(obs, "inference response")
         if not isinstance(response, dict):
-            raise PolicyClientError(f"policy server {self.uri} answered with a {type(response).__name__}, expected a dict")
+            raise PolicyClientError(f"policy server {self.uri} answered with a {type(response).__name__}, "
+                                    "expected a dict")
         return response
 
     def reset(self, **info: Any) -> dict[str, Any]:

@@ -14,6 +14,7 @@ from typing import Any
 
 import msgpack
 import numpy as np
+
 from molmo_lerobot.errors import MolmoError
 
 ALLOWED_DTYPES = tuple(np.dtype(t) for t in (

@@ -103,7 +103,8 @@ def link_flag(link_dir: Path, archive: str) -> Path:
 
 def is_own_file(rel: str) -> bool:
     """Their bookkeeping inside a version dir (metadata and flags), not part of the data."""
-    return rel in (REMOTE_MANIFEST, TRIES) or ("/" not in rel and rel.startswith(".") and rel.endswith("_complete_extract"))
+    return rel in (REMOTE_MANIFEST, TRIES) or ("/" not in rel and rel.startswith(".")
+                                                and rel.endswith("_complete_extract"))
 
 
 def convert(data_type: str, source: str, version: str, sizes: object, tries: object,

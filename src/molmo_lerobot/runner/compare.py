@@ -27,8 +27,8 @@ from pathlib import Path
 from typing import Any
 
 from molmo_lerobot.benchmark.schema import known_task_type
-from molmo_lerobot.runner.results import wilson_ci
 from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.runner.results import wilson_ci
 
 METRICS = {"success": "success at the final step", "success_once": "success at any step"}
 #: ``results.json`` fields that define the trial an episode is (besides the benchmark).

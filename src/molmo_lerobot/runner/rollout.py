@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
+
 from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:
@@ -200,4 +201,4 @@ def horizon_with_source(override: int | None, task_spec: Any, default_sec: float
     episode_sec = getattr(task_spec, "task_horizon_sec", None)
     seconds, source = ((task_sec, "task_horizons") if task_sec else
                        (episode_sec, "task_horizon_sec") if episode_sec else (default_sec, "default"))
-    return max(1, int(round(float(seconds) * 1000.0 / policy_dt_ms))), source
+    return max(1, round(float(seconds) * 1000.0 / policy_dt_ms)), source

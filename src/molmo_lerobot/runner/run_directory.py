@@ -14,6 +14,7 @@ one is refused). What the finalizers write (``dataset/``, ``report.html``) is th
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import sys
@@ -171,10 +172,8 @@ class EpisodeLog:
                 view = view[os.write(self.fd, view):]
             os.fsync(self.fd)
         except OSError as exc:
-            try:
+            with contextlib.suppress(OSError):
                 os.ftruncate(self.fd, start)
-            except OSError:
-                pass
             raise self.run_dir.write_error(f"episode {result.episode_index}", exc) from None
 
     def close(self) -> None:

@@ -34,7 +34,7 @@ import threading
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -66,10 +66,10 @@ class RunInterrupted(KeyboardInterrupt):
 class Transport(ABC):
     """How workers are started and talked to. Handles are opaque to the supervisor."""
 
-    def open(self, workers: int) -> None:
+    def open(self, workers: int) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
         """Prepare to start up to ``workers`` workers (e.g. join a cluster)."""
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
         """Every worker has ended: release what ``open`` acquired."""
 
     @abstractmethod
@@ -359,10 +359,8 @@ def reaping_children(timeout_s: float = 10.0) -> Iterator[None]:
     finally:
         for helper in helpers:
             if _helper_pid(helper) is not None:
-                try:
+                with suppress(OSError, ChildProcessError):
                     helper._stop()
-                except (OSError, ChildProcessError):
-                    pass
         deadline = time.monotonic() + timeout_s
         done: set[int] = set(before)
         while pids := [p for p in _children() if p not in done]:

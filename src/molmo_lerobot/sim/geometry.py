@@ -69,7 +69,7 @@ def geom_points(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> np.ndarra
             rings = [np.stack([np.cos(t), np.sin(t), np.zeros_like(t)], 1), np.stack([np.cos(t), np.zeros_like(t),
                      np.sin(t)], 1), np.stack([np.zeros_like(t), np.cos(t), np.sin(t)], 1)]
             sphere = np.concatenate(rings) * r
-            local = np.concatenate([sphere + [0, 0, s * size[1]] for s in (-1, 1)])
+            local = np.concatenate([sphere + np.array([0, 0, s * size[1]]) for s in (-1, 1)])
         elif kind == mujoco.mjtGeom.mjGEOM_ELLIPSOID:
             rings = [np.stack([np.cos(t), np.sin(t), np.zeros_like(t)], 1), np.stack([np.cos(t), np.zeros_like(t),
                      np.sin(t)], 1), np.stack([np.zeros_like(t), np.cos(t), np.sin(t)], 1)]
