@@ -30,7 +30,8 @@ def hub_standin(tmp_path_factory, monkeypatch):
             monkeypatch.setenv(key, value)
         monkeypatch.setattr(hfc, "ENDPOINT", hub.endpoint)
         monkeypatch.setattr(hf_api.api, "endpoint", hub.endpoint)  # the client behind huggingface_hub.upload_file & co
-        monkeypatch.setattr(hfc, "HUGGINGFACE_CO_URL_TEMPLATE", hub.endpoint + "/{repo_id}/resolve/{revision}/{filename}")
+        monkeypatch.setattr(hfc, "HUGGINGFACE_CO_URL_TEMPLATE",
+                            hub.endpoint + "/{repo_id}/resolve/{revision}/{filename}")
         monkeypatch.setattr(hfc, "HF_HUB_DISABLE_XET", True)
         monkeypatch.setattr(hfc, "HF_HUB_OFFLINE", False)
         monkeypatch.setattr(hfc, "HF_HUB_CACHE", str(cache))

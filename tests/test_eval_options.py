@@ -13,12 +13,13 @@ from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.config import compose
 from molmo_lerobot.context import RunContext
+from molmo_lerobot.errors import RunError
 from molmo_lerobot.overrides import OverrideError
 from molmo_lerobot.overrides import molmo_episode_overrides as _override
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.episode_env import build_env
-from molmo_lerobot.runner.evaluate import RunError, run_evaluation
+from molmo_lerobot.runner.evaluate import run_evaluation
 from molmo_lerobot.sim.env import Timing
 
 CUSTOM_MJCF = """<mujoco><worldbody><body name="thing"><freejoint/>
@@ -66,11 +67,11 @@ def test_custom_object_replaces_the_target_keeping_its_pose(episode, custom_mjcf
 
 
 def test_custom_object_errors_are_clear(episode, tmp_path):
-    with pytest.raises(OverrideError, match="custom_object.path: no MJCF file"):
+    with pytest.raises(OverrideError, match=r"custom_object.path: no MJCF file"):
         molmo_episode_overrides(episode, {"custom_object": {"path": str(tmp_path / "missing.xml")}})
-    with pytest.raises(OverrideError, match="camera.randomization must be 0-3, got 5"):
+    with pytest.raises(OverrideError, match=r"camera.randomization must be 0-3, got 5"):
         molmo_episode_overrides(episode, {"camera": {"randomization": 5}})
-    with pytest.raises(OverrideError, match="camera.overrides: no camera 'nope'"):
+    with pytest.raises(OverrideError, match=r"camera.overrides: no camera 'nope'"):
         molmo_episode_overrides(episode, {"camera": {"overrides": {"nope": {"fov": 10}}}})
 
 
@@ -136,7 +137,8 @@ def test_runs_that_cannot_simulate_fail_up_front(tmp_path, monkeypatch):
     """MolmoSpaces episodes whose scenes (and mobile robots) are missing here: one line, before any worker."""
     monkeypatch.setenv("MLSPACES_ASSETS_DIR", str(tmp_path / "no_assets"))
     bench = Path(__file__).parent / "data" / "molmospaces" / "mixed_tasks"
-    with pytest.raises(RunError, match=r"^cannot simulate 8 of 8 episodes: .*mixed_tasks/benchmark.json: episodes 0, 1: "
+    with pytest.raises(RunError, match=r"^cannot simulate 8 of 8 episodes: .*mixed_tasks/benchmark.json: "
+                                       r"episodes 0, 1: "
                                        r"field scene_dataset: scene 'procthor-objaverse' val house 2115: "
                                        r".*no_assets/scenes/procthor-objaverse-val/val_2115_ceiling.xml not found"):
         run_evaluation(compose(["policy=random", "workers=1", f"benchmark.path={bench}", "horizon=2",

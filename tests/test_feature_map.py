@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -16,12 +17,12 @@ from molmo_lerobot.export.frames import FrameLayout
 from molmo_lerobot.features import ACTION, STATE, FeatureError, FeatureMap, image_feature
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.policies.base import EpisodeContext
+from molmo_lerobot.recording import EpisodeInfo
 from molmo_lerobot.robots.franka_droid import FrankaDroid
 from molmo_lerobot.runner.evaluate import run_evaluation
-from molmo_lerobot.recording import EpisodeInfo
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "tasks"))
-from droid_variants import droid_episode  # noqa: E402
+from droid_variants import droid_episode
 
 #: the cameras franka_droid's DROID camera system builds, in its order
 DROID_CAMERAS = ["wrist_camera", "exo_camera_1"]
@@ -32,9 +33,9 @@ class MobileRobot:
     """The feature side of a robot descriptor (``RobotType``) with a mobile base as its first move group."""
 
     name = "mobile_franka"
-    move_groups = {"base": 3, "arm": 7, "gripper": 1}
-    joint_names = {"base": ["base_x", "base_y", "base_yaw"], "arm": [f"joint{k}" for k in range(1, 8)],
-                   "gripper": ["gripper"]}
+    move_groups: ClassVar[dict[str, int]] = {"base": 3, "arm": 7, "gripper": 1}
+    joint_names: ClassVar[dict[str, list[str]]] = {"base": ["base_x", "base_y", "base_yaw"],
+                                                   "arm": [f"joint{k}" for k in range(1, 8)], "gripper": ["gripper"]}
 
 
 def _jsonable(features: dict) -> dict:
@@ -110,7 +111,9 @@ def droid_run(tmp_path_factory):
     res = run_evaluation(compose(["policy=scripted", f"benchmark.path={bench}", "workers=1", f"horizon={STEPS}",
                                   "record=true", "progress=false", f"output_dir={out}"]))
     assert res.summary["n_errors"] == 0
-    fmap = FeatureMap.for_robot(FrankaDroid, DROID_CAMERAS, episode["img_resolution"])
+    width, height = episode["img_resolution"]
+    fmap = FeatureMap.build(FrankaDroid.move_groups, FrankaDroid.joint_names,
+                            [(c, height, width) for c in DROID_CAMERAS])
     return bench, out / "dataset", fmap
 
 
@@ -129,8 +132,17 @@ def test_the_adapters_agree_on_franka_droid_with_droid_cameras(droid_run, tmp_pa
     import pandas as pd
 
     from molmo_lerobot.gym_env import MolmoEnv
-    from molmo_pi0.droid import (DROID, EXTERIOR, GRIPPER, JOINTS, WRIST, DroidConfig, droid_actions, droid_request,
-                                 pick_cameras)
+    from molmo_pi0.droid import (
+        DROID,
+        EXTERIOR,
+        GRIPPER,
+        JOINTS,
+        WRIST,
+        DroidConfig,
+        droid_actions,
+        droid_request,
+        pick_cameras,
+    )
 
     bench, root, fmap = droid_run
     obs, action = _observation(fmap), _action(fmap)
@@ -181,7 +193,8 @@ def test_a_mobile_base_is_one_more_move_group(tmp_path):
     from molmo_lerobot.policies.replay import ReplayPolicy
     from molmo_lerobot.results import EpisodeResult, summarize
 
-    fmap = FeatureMap.for_robot(MobileRobot, ["head/rgb", "wrist"], (32, 24))  # "/": recorded as head_rgb
+    fmap = FeatureMap.build(MobileRobot.move_groups, MobileRobot.joint_names,
+                            [("head/rgb", 24, 32), ("wrist", 24, 32)])  # "/": recorded as head_rgb
     assert fmap.groups == ("base", "arm", "gripper") and fmap.action_layout() == "base (3) + arm (7) + gripper (1)"
     assert fmap.state_names[:4] == ("base_x", "base_y", "base_yaw", "joint1")
     assert fmap.action_dim == fmap.state_dim == 11

@@ -61,7 +61,8 @@ def holders(source: str) -> dict[str, str]:
     found: dict[str, str] = {}
     containers = set()
     for node in tree.body:
-        targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) else []
+        targets = (node.targets if isinstance(node, ast.Assign)
+                   else [node.target] if isinstance(node, ast.AnnAssign) else [])
         if _mutable_literal(getattr(node, "value", None)):
             containers |= {t.id for t in targets if isinstance(t, ast.Name)}
     for node in ast.walk(tree):

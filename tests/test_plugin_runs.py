@@ -14,7 +14,7 @@ import pytest
 from molmo_lerobot.cli.eval import main
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_plugins import IMPOSTOR, write_dist  # noqa: E402
+from test_plugins import IMPOSTOR, write_dist
 
 FAST = ["policy=random", "limit=2", "horizon=3", "workers=1", "progress=false"]
 BROKEN_RECORDER = """
@@ -53,7 +53,8 @@ def _episodes(run: Path) -> list[dict]:
     return [{k: r[k] for k in ("episode_index", "success", "steps", "seed", "error")} for r in rows]
 
 
-def test_a_clash_fails_the_run_naming_both_and_a_pin_runs_on_the_chosen_provider(install, tmp_path, monkeypatch, capsys):
+def test_a_clash_fails_the_run_naming_both_and_a_pin_runs_on_the_chosen_provider(install, tmp_path, monkeypatch,
+                                                                                   capsys):
     install(write_dist(tmp_path / "site", "impostor-bots", {"impostor_bots": IMPOSTOR},
                        {"impostor_franka": "impostor_bots"}), "impostor_bots")
     marker = tmp_path / "impostor-built"
@@ -106,7 +107,7 @@ def test_a_sweep_writes_one_complete_run_per_job(tmp_path, capsys):
     assert "Launching 2 jobs locally" in out.err
     jobs = sorted(p.name for p in sweep.iterdir() if p.is_dir())
     assert jobs == ["0-random-pick_v1", "1-scripted-pick_v1"]
-    for job, policy in zip(jobs, ("random", "scripted")):
+    for job, policy in zip(jobs, ("random", "scripted"), strict=True):
         summary = json.loads((sweep / job / "results.json").read_text())
         assert (summary["policy"]["name"], summary["n_episodes"]) == (policy, 2)
         assert len(_episodes(sweep / job)) == 2 and f"outputs: {sweep / job}" in out.out
@@ -130,7 +131,8 @@ def test_help_is_hydras_app_help_with_every_config_group(capsys):
     assert main(["--help"]) == 0
     out = capsys.readouterr().out
     assert out.startswith("usage: molmo-eval [-m]")
-    groups = dict(line.split(": ", 1) for line in out.split("== Config groups ==")[1].split("==")[0].strip().splitlines())
+    listing = out.split("== Config groups ==")[1].split("==")[0].strip()
+    groups = dict(line.split(": ", 1) for line in listing.splitlines())
     assert {"random", "scripted", "lerobot"} <= set(groups["policy"].split(", "))
     assert "--multirun" in out and "--cfg" in out
 

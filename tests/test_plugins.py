@@ -67,14 +67,16 @@ def test_broken_plugins_are_recorded_and_the_rest_works(broken_dist, monkeypatch
     assert rec["ur5"].distribution == "brokenbots" and rec["ur5"].version == "0.1"
     assert plugins.robot("gb").name == "goodbot"
     assert plugins.robot("franka_droid").name == "franka_droid"  # built-ins unaffected (Robotiq, never the Panda)
-    assert rec["kuka"].status == "error" and "molmo_robots() failed: RuntimeError: kuka meshes not found" in rec["kuka"].error
+    assert rec["kuka"].status == "error"
+    assert "molmo_robots() failed: RuntimeError: kuka meshes not found" in rec["kuka"].error
 
 
 @pytest.mark.parametrize(
     ("name", "needle"),
     [
         ("ur5", "plugin 'ur5' from brokenbots failed to load: RuntimeError: ur5 driver missing"),
-        ("kuka", "plugin 'kuka' from brokenbots failed to load: molmo_robots() failed: RuntimeError: kuka meshes not found"),
+        ("kuka", "plugin 'kuka' from brokenbots failed to load: "
+                 "molmo_robots() failed: RuntimeError: kuka meshes not found"),
     ],
 )
 def test_asking_for_the_broken_plugin_names_it(broken_dist, monkeypatch, name, needle):
@@ -87,7 +89,8 @@ def test_asking_for_the_broken_plugin_names_it(broken_dist, monkeypatch, name, n
 def test_validation_is_unaffected_by_broken_plugins(broken_dist, monkeypatch):
     bench = load_benchmark(DATA / "pick_list", Plugins())
     clean = [str(p) for p in validate_benchmark(bench, Plugins(), RunContext.build())]
-    assert [str(p) for p in validate_benchmark(bench, _with_broken(broken_dist, monkeypatch), RunContext.build())] == clean == []
+    broken = _with_broken(broken_dist, monkeypatch)
+    assert [str(p) for p in validate_benchmark(bench, broken, RunContext.build())] == clean == []
 
 
 def test_validation_names_the_broken_plugin_a_benchmark_needs(broken_dist, monkeypatch, tmp_path):
@@ -98,7 +101,8 @@ def test_validation_names_the_broken_plugin_a_benchmark_needs(broken_dist, monke
     d = tmp_path / "b"
     d.mkdir()
     (d / "benchmark.json").write_text(json.dumps(episodes))
-    (problem,) = validate_benchmark(load_benchmark(d, Plugins()), _with_broken(broken_dist, monkeypatch), RunContext.build())
+    (problem,) = validate_benchmark(load_benchmark(d, Plugins()), _with_broken(broken_dist, monkeypatch),
+                                    RunContext.build())
     assert (problem.episode_index, problem.field) == (0, "robot.robot_name")
     assert problem.message.startswith("no robot plugin provides 'ur5'")
     assert problem.message.endswith("; plugin 'ur5' from brokenbots failed to load: RuntimeError: ur5 driver missing")
@@ -225,7 +229,7 @@ def test_a_recorder_rejecting_the_config_fails_the_run_with_its_message():
             raise ValueError("picky.fps must be positive")
 
     plugins = _bare((_GoodRecorder(), "good"), (Picky(), "picky"))
-    with pytest.raises(ConfigError, match="picky.fps must be positive"):
+    with pytest.raises(ConfigError, match=r"picky.fps must be positive"):
         plugins.recorder_factories({})
     assert plugins.broken() == []
 
@@ -399,7 +403,8 @@ def test_molmo_bench_validate_reports_a_clash_in_one_line(impostor_dist):
     from molmo_lerobot.paths import data_path
 
     env = {**os.environ, "PYTHONPATH": str(impostor_dist)}
-    res = subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.bench", "validate", str(data_path("benchmarks") / "pick_v1")],
+    res = subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.bench", "validate",
+                          str(data_path("benchmarks") / "pick_v1")],
                          capture_output=True, text=True, env=env, timeout=300)
     assert res.returncode == 1 and "Traceback" not in res.stderr
     assert res.stderr.strip().splitlines() == [

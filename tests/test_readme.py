@@ -32,7 +32,7 @@ def test_plugin_snippet_installs_and_runs_as_copied(tmp_path):
     project = tmp_path / "my-plugin"
     toml_body = None
     for lang, body in _blocks(_section("Writing a plugin")):
-        first, _, rest = body.partition("\n")
+        first, _, _rest = body.partition("\n")
         name = first.lstrip("# ").strip()
         if lang == "toml":
             toml_body = body
@@ -47,7 +47,8 @@ def test_plugin_snippet_installs_and_runs_as_copied(tmp_path):
         '[tool.hatch.build.targets.wheel]\npackages = ["my_package"]\n\n' + toml_body)
     site = tmp_path / "site"
     proc = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation",
-                           "--no-index", "--target", str(site), str(project)], capture_output=True, text=True, timeout=300)
+                           "--no-index", "--target", str(site), str(project)],
+                          capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert (site / "my_package" / "conf" / "policy" / "my_policy.yaml").is_file()
     out = tmp_path / "run"

@@ -19,7 +19,7 @@ from molmo_lerobot.fileio import UnsafePathError, atomic_write
 
 if str(Path(__file__).parent / "export") not in sys.path:
     sys.path.insert(0, str(Path(__file__).parent / "export"))
-import export_synthetic as S  # noqa: E402 - the synthetic rollouts of tests/export
+import export_synthetic as S  # the synthetic rollouts of tests/export
 
 SRC = Path(__file__).parents[1] / "src" / "molmo_lerobot"
 
@@ -60,7 +60,7 @@ def test_a_dangling_link_as_the_file_is_never_created_through(tmp_path, outside)
     root = tmp_path / "run"
     root.mkdir()
     (root / "w0g0.log").symlink_to(outside / "created.log")
-    with pytest.raises(UnsafePathError, match="w0g0.log is a symlink"):
+    with pytest.raises(UnsafePathError, match=r"w0g0.log is a symlink"):
         fileio.open_fd(root / "w0g0.log", os.O_WRONLY | os.O_CREAT | os.O_APPEND, root=root)
     atomic_write(root / "w0g0.log", "x", root=root)  # an atomic replace swaps the link itself
     assert not (root / "w0g0.log").is_symlink() and _tree(outside) == []

@@ -1,4 +1,8 @@
-"""Whose failure it is: the episode's, or the machinery's around it (disk, network, policy server).
+"""The errors of molmo_lerobot, and whose failure one is: the episode's, or the machinery's around it.
+
+Every exception class of the package derives from :class:`MolmoError` (next to the builtin base
+its callers catch: ``ValueError``, ``LookupError``, ``OSError`` …), so ``except MolmoError``
+catches what this package raises on purpose and nothing else.
 
 An episode error is part of the result (the policy raised, the physics diverged) and stays
 when a run is resumed. An infrastructure failure says nothing about the policy: it is
@@ -18,8 +22,26 @@ EPISODE, INFRASTRUCTURE = "episode", "infrastructure"
 MACHINE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EIO})
 
 
-class InfrastructureError(RuntimeError):
+class MolmoError(Exception):
+    """Base of every molmo_lerobot error.
+
+    The message is one line that names what it is about (the file, episode, field or option),
+    says what is wrong and, where there is a remedy, what to do: ``"<where>: <what>; <what to do>"``.
+    An error that gathers several problems puts one per line (``molmo-eval`` prints each as one
+    ``error:`` line)."""
+
+
+class InfrastructureError(MolmoError, RuntimeError):
     """A failure of what runs the episode, not of the episode (e.g. the policy server is gone)."""
+
+
+class RunError(MolmoError, RuntimeError):
+    """The run cannot start or continue; the message says why and what to do."""
+
+
+class ExportError(RunError):
+    """An export step failed (merging the dataset shards, a recorder's finalizer, the report); a
+    run's score, written before any export, stands."""
 
 
 def error_kind(exc: BaseException) -> str:

@@ -26,12 +26,14 @@ from typing import Any
 
 import numpy as np
 
+from molmo_lerobot.errors import MolmoError
+
 IMAGE_PREFIX = "observation.images."
 STATE = "observation.state"
 ACTION = "action"
 
 
-class FeatureError(ValueError):
+class FeatureError(MolmoError, ValueError):
     """A value does not fit its feature; the message names the feature."""
 
 
@@ -123,13 +125,6 @@ class FeatureMap:
             action_sizes=tuple(int(d) for d in move_groups.values()),
             state_names=tuple(state_names), action_names=tuple(action_names),
         )
-
-    @classmethod
-    def for_robot(cls, robot: Any, camera_names: Iterable[str], resolution: Sequence[int]) -> FeatureMap:
-        """A robot descriptor's (``move_groups``, ``joint_names``) with cameras at ``resolution``
-        (width, height: an episode's ``img_resolution``)."""
-        width, height = resolution
-        return cls.build(robot.move_groups, robot.joint_names, [(c, height, width) for c in camera_names])
 
     @classmethod
     def from_observation(cls, move_groups: Mapping[str, int], joint_names: Mapping[str, Sequence[str]],

@@ -31,11 +31,13 @@ from collections.abc import Iterator
 from pathlib import Path, PurePosixPath
 from typing import IO, Any
 
+from molmo_lerobot.errors import MolmoError
+
 _DIR = os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC
 _NEW = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC
 
 
-class UnsafePathError(OSError):
+class UnsafePathError(MolmoError, OSError):
     """A write would go through a symbolic link (or a non-directory) below its root."""
 
     def __str__(self) -> str:  # the one-line message, without "[Errno 40]"

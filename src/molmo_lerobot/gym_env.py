@@ -24,21 +24,22 @@ Action
     ``action`` feature of our datasets), e.g. Franka: 7 arm joint targets + 1 gripper command.
 
 The reward is the task's own (``Task.reward``: e.g. the opening fraction for open/close), else
-1.0 on success and 0.0 otherwise. ``info`` carries ``is_success`` (success in the current state, LeRobot's key), ``success_once``,
-``episode_index``, ``task`` (the task type), ``task_description`` (the prompt), ``seed`` and
+1.0 on success and 0.0 otherwise. ``info`` carries ``is_success`` (success in the current state, LeRobot's key),
+``success_once``, ``episode_index``, ``task`` (the task type), ``task_description`` (the prompt), ``seed`` and
 ``horizon``. ``terminated`` is set on success when ``end_on_success``; ``truncated`` at the horizon.
 ``render()`` returns the first exterior (non-wrist) camera's image.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 from molmo_lerobot.context import RunContext
+from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.features import FeatureMap, is_wrist
 from molmo_lerobot.runner.episode import Episode, load_run_benchmark, open_episode
 from molmo_lerobot.runner.plan import EpisodePlanner
@@ -46,14 +47,14 @@ from molmo_lerobot.runner.plan import EpisodePlanner
 NAMESPACE = "molmo_lerobot"
 
 
-class EpisodeIndexError(IndexError):
+class EpisodeIndexError(MolmoError, IndexError):
     """An episode index outside the benchmark."""
 
 
 class MolmoEnv(gym.Env):
     """One benchmark as a Gymnasium env; see the module docstring for the conventions."""
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 15}
 
     def __init__(self, benchmark: str = "pick_v1", *, episode_index: int | None = None, run_seed: int = 0,
                  horizon: int | None = None, end_on_success: bool = False, timing: dict[str, float] | None = None,

@@ -24,6 +24,8 @@ from typing import TYPE_CHECKING, Any
 
 import pluggy
 
+from molmo_lerobot.errors import MolmoError
+
 if TYPE_CHECKING:
     from molmo_lerobot.assets.grasps import GraspLibraryType
     from molmo_lerobot.assets.libraries import AssetLibraryType
@@ -39,7 +41,7 @@ hookspec = pluggy.HookspecMarker(PROJECT)
 hookimpl = pluggy.HookimplMarker(PROJECT)
 
 
-class ConfigError(ValueError):
+class ConfigError(MolmoError, ValueError):
     """A command-line override or config value is invalid; the message says which.
 
     Raise it from a hook that takes the run config to reject that config in one line.

@@ -27,9 +27,11 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.benchmark.schema import EpisodeSpec, episode_digest
+from molmo_lerobot.benchmark.schema import EpisodeSpec
 from molmo_lerobot.cameras.franka_eval import EVAL_IMG_RESOLUTION
 from molmo_lerobot.cameras.options import EVAL_NAMES, run_camera_system
+from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.hashing import episode_digest
 
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetCatalog
@@ -39,7 +41,7 @@ CAMERA_JITTER = {"pos": 0.02, "dir_deg": 2.0, "fov_deg": 2.0, "offset": 0.005}
 TARGET_FIELDS = ("pickup_obj_name",)
 
 
-class OverrideError(ValueError):
+class OverrideError(MolmoError, ValueError):
     """An eval-time option that cannot be applied to an episode; the message names it."""
 
 

@@ -27,6 +27,7 @@ from typing import Any
 import pluggy
 
 from molmo_lerobot import hookspecs
+from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.hookspecs import ConfigError
 
 ENTRY_POINT_GROUP = hookspecs.PROJECT
@@ -50,7 +51,7 @@ PROVIDER_HOOKS = {kind: hook for hook, kind in KIND_HOOKS.items()
                   if kind in ("task", "robot", "camera", "scene", "asset_library", "grasp_library", "policy", "expert")}
 
 
-class PluginError(LookupError):
+class PluginError(MolmoError, LookupError):
     """A requested plugin is unknown or failed to load. The message says which and why."""
 
 
@@ -105,7 +106,7 @@ class Plugins:
         self.records.append(rec)
         try:
             module = ep.load()
-        except BaseException as exc:  # noqa: BLE001 - even sys.exit() or KeyboardInterrupt at import
+        except BaseException as exc:  # even sys.exit() or KeyboardInterrupt at import
             rec.traceback = traceback.format_exc()
             self._break(rec, _one_line(exc))
             return
@@ -173,7 +174,7 @@ class Plugins:
             return True, impl.function(*(kwargs[arg] for arg in impl.argnames))
         except passthrough:
             raise
-        except BaseException as exc:  # noqa: BLE001 - a plugin must never take the process down
+        except BaseException as exc:  # a plugin must never take the process down
             self._break(rec, f"{hook_name}() failed: {_one_line(exc)}", warn=run_time)
             return False, None
 

@@ -75,7 +75,7 @@ class Recorder(ABC):
     def end_episode(self, result: EpisodeResult) -> None:
         """Keep the episode, or discard it if ``result.error`` is set."""
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
         """The worker is done: flush and finish this worker's output."""
 
 
@@ -85,7 +85,7 @@ class RecorderFactory(ABC):
     @abstractmethod
     def make(self, worker_id: str, output_dir: Path) -> Recorder: ...
 
-    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any]) -> None:
+    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any]) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
         """Runs once in the main process after every worker closed."""
 
     def missing(self, output_dir: Path, results: list[EpisodeResult]) -> set[int]:

@@ -113,7 +113,7 @@ def test_user_library_registered_at_runtime(user_lib, tmp_path, monkeypatch):
     monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(tmp_path / "home"))
     cat = _builtin_catalog()
     lib = _register(cat, user_lib)
-    assert lib.name == "mine" and [l.name for l in cat.libraries] == ["mine", "builtin"]
+    assert lib.name == "mine" and [library.name for library in cat.libraries] == ["mine", "builtin"]
     loc = cat.locate_uid("my_cabinet")
     assert (loc.library, loc.archive, loc.mjcf_path) == ("mine", None, user_lib / "my_cabinet" / "my_cabinet.xml")
     doc = cat.annotation("my_cabinet")
@@ -155,7 +155,7 @@ def test_malformed_user_libraries_name_the_file(tmp_path):
     with pytest.raises(AssetError, match=r"bad/assets_index.json: file not found"):
         register_user_asset_library(cat, "bad", root)
     (root / "assets_index.json").write_text("{not json")
-    with pytest.raises(AssetError, match="assets_index.json: invalid JSON"):
+    with pytest.raises(AssetError, match=r"assets_index.json: invalid JSON"):
         register_user_asset_library(cat, "bad", root)
     (root / "assets_index.json").write_text(json.dumps({"x": {"uid": "x", "object_path": "x.xml"}}))
     with pytest.raises(AssetError, match=r"assets_index.json: field x.object_path: .*x.xml not found"):

@@ -111,9 +111,9 @@ def test_a_user_library_taking_a_library_name_fails_naming_the_key(tmp_path):
     lib = tmp_path / "lib"
     lib.mkdir()
     (lib / "assets_index.json").write_text(json.dumps({}))
-    with pytest.raises(AssetError, match="^asset_libraries.builtin: an asset library named 'builtin' is already"):
+    with pytest.raises(AssetError, match=r"^asset_libraries.builtin: an asset library named 'builtin' is already"):
         RunContext.build({"asset_libraries": {"builtin": str(lib)}})
-    with pytest.raises(AssetError, match="^grasp_libraries.g: .*no asset library named 'nope'"):
+    with pytest.raises(AssetError, match=r"^grasp_libraries.g: .*no asset library named 'nope'"):
         RunContext.build({"grasp_libraries": {"g": {"path": str(lib), "asset_library": "nope"}}})
     run = RunContext.build({"asset_libraries": {"a": str(lib), "b": str(lib)}})
     assert [lib.name for lib in run.catalog.libraries][:3] == ["b", "a", "builtin"]  # the last configured goes first

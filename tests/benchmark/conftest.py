@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import pytest
 
 from molmo_lerobot import hookspecs
-from molmo_lerobot.benchmark.molmospaces import FRANKA_ROBOT_NAMES, task_aliases
+from molmo_lerobot.benchmark.molmospaces import task_aliases
 from molmo_lerobot.plugins import Plugins
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "molmospaces"
@@ -23,7 +23,8 @@ class FakeProviders:
 
     @hookspecs.hookimpl
     def molmo_robots(self):
-        return [SimpleNamespace(name="franka", aliases=FRANKA_ROBOT_NAMES, move_groups={"arm": 7, "gripper": 1})]
+        return [SimpleNamespace(name="franka", aliases=("franka_droid", "franka_cap"),
+                                move_groups={"arm": 7, "gripper": 1})]
 
     @hookspecs.hookimpl
     def molmo_scene_datasets(self):

@@ -100,7 +100,8 @@ def test_every_bad_episode_is_reported_with_file_index_and_field(episodes, tmp_p
         f"{f}: episode 0: field task.robot_base_pose: expected 7 values, got 6",
         f"{f}: episode 2: field language: missing",
         f"{f}: episode 3: field cameras[0].camera_offset: expected 3 values, got 1",
-        f"{f}: episode 3: field cameras[1].type: unknown camera type 'fisheye' (expected 'robot_mounted' or 'exocentric')",
+        f"{f}: episode 3: field cameras[1].type: unknown camera type 'fisheye' "
+        "(expected 'robot_mounted' or 'exocentric')",
     ]
 
 
@@ -124,7 +125,8 @@ def test_legacy_layout_names_the_bad_file_and_keeps_indices(data, tmp_path):
     ep3.write_text(json.dumps(raw))
     (d / "house_x").mkdir()
     assert _problems(d) == [
-        f"{d / 'house_12' / 'episode_00000001.json'}: invalid JSON at line 1, column 3: Expecting property name enclosed in double quotes",
+        f"{d / 'house_12' / 'episode_00000001.json'}: invalid JSON at line 1, column 3: "
+        "Expecting property name enclosed in double quotes",
         f"{d / 'house_x'}: directory name is not house_<integer>",
         f"{ep3}: episode 3: field task.pickup_obj_start_pose: expected 7 values, got 3",
     ]

@@ -59,7 +59,8 @@ def test_every_molmospaces_task_type_gets_its_typed_spec(mixed, plugins):
 def test_camera_kinds_and_inferred_type(mixed):
     pick = EpisodeSpec.model_validate(mixed[2])
     wrist, front = pick.cameras
-    assert isinstance(wrist, schema.RobotMountedCameraSpec) and wrist.camera_quaternion == [-0.006, -0.001, 0.986, 0.169]
+    assert isinstance(wrist, schema.RobotMountedCameraSpec)
+    assert wrist.camera_quaternion == [-0.006, -0.001, 0.986, 0.169]
     assert isinstance(front, schema.ExocentricCameraSpec) and front.record_depth and front.forward == [-0.8, 0.0, -0.6]
     nav = EpisodeSpec.model_validate(mixed[7])  # no "type" key: a camera without a world position is robot-mounted
     assert isinstance(nav.cameras[0], schema.RobotMountedCameraSpec) and not nav.cameras[0].record_depth
@@ -98,8 +99,10 @@ def _errors(raw):
 @pytest.mark.parametrize(
     ("path", "value", "loc", "msg"),
     [
-        (("task", "robot_base_pose"), [1, 2, 3, 1, 0, 0], ("task", "pick", "robot_base_pose"), "expected 7 values, got 6"),
-        (("cameras", 0, "camera_offset"), [0.1, 0.2], ("cameras", 0, "robot_mounted", "camera_offset"), "expected 3 values, got 2"),
+        (("task", "robot_base_pose"), [1, 2, 3, 1, 0, 0], ("task", "pick", "robot_base_pose"),
+         "expected 7 values, got 6"),
+        (("cameras", 0, "camera_offset"), [0.1, 0.2], ("cameras", 0, "robot_mounted", "camera_offset"),
+         "expected 3 values, got 2"),
         (("cameras", 0, "camera_quaternion"), [0, 0, 0, 0], ("cameras", 0, "robot_mounted", "camera_quaternion"),
          "quaternion (qw, qx, qy, qz) must not be all zero"),
         (("scene_modifications", "object_poses", "pillow_1c5c1394_1_0_0"), [1, 2, 3, float("nan"), 0, 0, 0],
@@ -129,4 +132,3 @@ def test_molmospaces_names():
     typed = {name for name in molmospaces.TASK_CLS
              if task_spec_model(Plugins(), {"task_cls": name})[1] is not schema.GenericTaskSpec}
     assert set(molmospaces.TASK_CLS) == typed  # every MolmoSpaces task type has its spec model
-    assert "franka_droid" in molmospaces.FRANKA_ROBOT_NAMES

@@ -31,7 +31,8 @@ def test_molmospaces_files_in_both_layouts_validate(data, fake_plugins):
 
 
 def test_unknown_task_class_suggests_the_close_one(data, tmp_path, fake_plugins):
-    bench = _load_edited(data, tmp_path, lambda eps: eps[2]["task"].update(task_cls="molmo_spaces.tasks.pick_task.PickTsk"))
+    bench = _load_edited(data, tmp_path,
+                         lambda eps: eps[2]["task"].update(task_cls="molmo_spaces.tasks.pick_task.PickTsk"))
     (problem,) = validate_benchmark(bench, fake_plugins, RunContext.build())
     assert (problem.episode_index, problem.field) == (2, "task.task_cls")
     assert problem.message.startswith("unknown task 'molmo_spaces.tasks.pick_task.PickTsk'; "
@@ -74,8 +75,10 @@ def test_mobile_robot_episodes_fail_cleanly(data, fake_plugins):
         (lambda ep: ep.update(cameras=[]), "source.camera_system_class",
          "warning: no camera system plugin provides 'FrankaDroidCameraSystem' (available: none); "
          "install a plugin that provides it, or set camera.system= for the run"),
-        (lambda ep: ep["cameras"][0].update(fov=0.0), "cameras[0].fov", "field of view must be in (0, 180) degrees, got 0.0"),
-        (lambda ep: ep["language"].update(task_description="  "), "language.task_description", "empty task description"),
+        (lambda ep: ep["cameras"][0].update(fov=0.0), "cameras[0].fov",
+         "field of view must be in (0, 180) degrees, got 0.0"),
+        (lambda ep: ep["language"].update(task_description="  "), "language.task_description",
+         "empty task description"),
     ],
 )
 def test_each_problem_names_index_and_field(data, tmp_path, fake_plugins, edit, field, message):
@@ -99,4 +102,5 @@ def test_installed_plugins_accept_the_molmospaces_pick_files(data):
     if any(r.status != "ok" for r in plugins.records if r.name in ("pick", "franka", "tabletop")):
         pytest.fail("built-in plugins failed to load: " + "; ".join(f"{r.name}: {r.error}" for r in plugins.broken()))
     for layout in ("pick_list", "pick_legacy"):
-        assert [str(p) for p in validate_benchmark(load_benchmark(data / layout, plugins), plugins, RunContext.build())] == []
+        problems = validate_benchmark(load_benchmark(data / layout, plugins), plugins, RunContext.build())
+        assert [str(p) for p in problems] == []

@@ -50,7 +50,8 @@ def test_multi_worker_recording_loads_and_agrees_with_episodes_jsonl(recorded):
     assert not (out / "dataset_shards").exists()
     # two workers finish in any order; the dataset still follows the benchmark, and names the robot
     assert [(r["episode_index"], r["benchmark_episode_index"]) for r in stored] == [(i, i) for i in range(4)]
-    assert [int(ds[int(ds.meta.episodes[i]["dataset_from_index"])]["eval.episode_index"]) for i in range(4)] == [0, 1, 2, 3]
+    firsts = [int(ds.meta.episodes[i]["dataset_from_index"]) for i in range(4)]
+    assert [int(ds[first]["eval.episode_index"]) for first in firsts] == [0, 1, 2, 3]
     assert json.loads((out / "dataset" / "meta" / "info.json").read_text())["robot_type"] == "franka"
     page = write_report(out, res.summary, res.episodes).read_text()
     assert page.count("<video") == 8
@@ -59,9 +60,9 @@ def test_multi_worker_recording_loads_and_agrees_with_episodes_jsonl(recorded):
 def test_a_dataset_about_to_be_pushed_names_no_path_of_this_machine(recorded, hub_standin, tmp_path_factory, tmp_path):
     """Every file pushed (and every file of the local dataset) is free of the run's, the temp
     dir's, the home dir's and the repository's absolute paths, which the run config holds."""
-    import molmo_lerobot
     from huggingface_hub import snapshot_download
 
+    import molmo_lerobot
     from molmo_lerobot.export.hub import push_dataset
 
     out, res = recorded
@@ -71,7 +72,8 @@ def test_a_dataset_about_to_be_pushed_names_no_path_of_this_machine(recorded, hu
                                     local_dir=tmp_path / "pushed"))
     places = {Path(molmo_lerobot.__file__).parents[2], Path.home(), tmp_path_factory.getbasetemp(), out, Path.cwd()}
     needles = {str(p).encode() for place in places for p in (place, place.resolve())}
-    files = [p for root in (out / "dataset", pushed) for p in root.rglob("*") if p.is_file() and ".cache" not in p.parts]
+    files = [p for root in (out / "dataset", pushed) for p in root.rglob("*")
+             if p.is_file() and ".cache" not in p.parts]
     assert len(files) > 10 and any(p.name == "results.json" for p in files)
     leaks = [(str(p), n.decode()) for p in files for n in needles if n in p.read_bytes()]
     assert not leaks, leaks
@@ -105,7 +107,7 @@ def test_the_readme_lerobot_train_command_trains_on_the_export_and_its_checkpoin
     keys = [arg.split("=", 1)[0] for arg in cmd]
     assert set(overrides) <= set(keys), f"README's command lacks {set(overrides) - set(keys)}"
     cmd = [str(Path(sys.executable).parent / cmd[0])] + [
-        f"{key}={overrides[key]}" if key in overrides else arg for key, arg in zip(keys[1:], cmd[1:])]
+        f"{key}={overrides[key]}" if key in overrides else arg for key, arg in zip(keys[1:], cmd[1:], strict=True)]
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": "egl"}
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import logging
 
+import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
 import numpy as np
 import pytest
 
-import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
 from molmo_lerobot.export.hub import push_dataset
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 

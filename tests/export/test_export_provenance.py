@@ -13,9 +13,9 @@ import json
 import subprocess
 import sys
 
+import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
 import pytest
 
-import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
 from molmo_lerobot.export.merge import read_eval_records
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import json
 import shutil
 
+import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
 import numpy as np
 import pytest
 
-import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
 from molmo_lerobot.export.frames import FrameLayout
 from molmo_lerobot.export.merge import EVAL_EPISODES, read_eval_records
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory, RecordConfigError
@@ -70,7 +70,7 @@ def test_dataset_episodes_follow_benchmark_order_and_carry_their_provenance(two_
     """Workers finished 0, 4 (w0) before 1 (w1g0) and 3 (w1g1): the dataset still reads 0, 1, 3, 4."""
     import pyarrow.dataset as pads
 
-    out, factory, _, _, _ = two_worker_run
+    out, _factory, _, _, _ = two_worker_run
     records = [r for r in read_eval_records(out / "dataset") if r["episode_index"] is not None]
     assert [(r["episode_index"], r["benchmark_episode_index"]) for r in records] == [(0, 0), (1, 1), (2, 3), (3, 4)]
     frames = pads.dataset(str(out / "dataset" / "data"), format="parquet").to_table().to_pandas()
@@ -123,7 +123,8 @@ def test_results_card_and_cleanup(two_worker_run):
     card = (root / "README.md").read_text()
     assert "| **all** | 6 | 50.0% |" in card and "meta/eval/episodes.jsonl" in card
     info = json.loads((root / "meta/eval/info.json").read_text())
-    assert info["n_recorded"] == 4 and len(info["torn_shards"]) == 1 and info["fps_exact"] == pytest.approx(15.1515, 1e-3)
+    assert info["n_recorded"] == 4 and len(info["torn_shards"]) == 1
+    assert info["fps_exact"] == pytest.approx(15.1515, 1e-3)
     assert not (out / SHARDS_DIR).exists()
     assert not list(out.glob(".dataset-merge-*"))
     assert (root / EVAL_EPISODES).is_file()
@@ -182,7 +183,7 @@ def test_frame_layout_rejects_mismatched_steps():
     layout = FrameLayout.from_step(info, S.obs(0, 0), None)
     bad = S.obs(0, 1)
     bad["images"]["wrist"] = np.zeros((S.H + 1, S.W, 3), np.uint8)
-    with pytest.raises(FeatureError, match="observation.images.wrist"):
+    with pytest.raises(FeatureError, match=r"observation.images.wrist"):
         layout.frame(bad, {"arm": np.zeros(3), "gripper": np.zeros(1)}, None, False, False, "t", S.info(0, 5))
     with pytest.raises(FeatureError, match="action: move group 'arm' has 2 values"):
         layout.frame(S.obs(0, 1), {"arm": np.zeros(2), "gripper": np.zeros(1)}, None, False, False, "t", S.info(0, 5))

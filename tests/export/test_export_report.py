@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import json
-import time
 import re
+import time
 
 import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
+
 from molmo_lerobot.assets.catalog import AssetCatalog
 from molmo_lerobot.assets.libraries import BuiltinAssetLibrary
-from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 from molmo_lerobot.export.glance import GlanceRecorderFactory, exterior_camera, object_category
+from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 from molmo_lerobot.export.report import render_report, task_label, write_report
 from molmo_lerobot.export.wandb_log import log_run, metrics
 from molmo_lerobot.results import EpisodeResult

@@ -7,10 +7,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
 import numpy as np
 import pytest
 
-import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 
 CFG = {"benchmark": {"name": "synth_v1"}, "policy": {"name": "scripted"},
@@ -51,7 +51,8 @@ def test_the_video_backend_lerobot_picks_loads_and_decodes_our_videos(recorded):
         except (ImportError, OSError, RuntimeError):
             if _outside_this_venv(spec):
                 pytest.skip(f"torchcodec comes from {spec.origin}, a venv `make .venv` does not manage here")
-            pytest.fail("torchcodec is installed but cannot load: run `make .venv` (it removes it so LeRobot uses PyAV)")
+            pytest.fail("torchcodec is installed but cannot load: "
+                        "run `make .venv` (it removes it so LeRobot uses PyAV)")
 
 
 def test_lerobot_dataset_viz_saves_a_recording_of_our_episode(recorded, tmp_path):

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import json
 
+import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
 import numpy as np
 import pytest
 
-import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
 from molmo_lerobot.config import compose
 from molmo_lerobot.export.merge import read_eval_records
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory, RecordConfigError

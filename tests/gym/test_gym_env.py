@@ -38,16 +38,16 @@ def test_spaces_and_info_follow_lerobot_conventions(env):
     assert info["episode_index"] == 2
     hold = obs["agent_pos"]
     for t in range(12):
-        obs, reward, terminated, truncated, info = env.step(hold)
+        obs, _reward, terminated, truncated, info = env.step(hold)
         assert truncated == (t == 11) and not terminated and {"is_success", "success_once"} <= set(info)
     assert env.render().shape == (224, 224, 3)
     assert env.unwrapped.task_description() == info["task_description"]
 
 
 def test_bad_input_is_one_clear_error(env):
-    with pytest.raises(EpisodeSetupError, match="unknown benchmark 'nope'.*pick_v1"):
+    with pytest.raises(EpisodeSetupError, match=r"unknown benchmark 'nope'.*pick_v1"):
         MolmoEnv("nope")
-    with pytest.raises(EpisodeIndexError, match="episode_index 60 is outside benchmark 'pick_v1'.*0..59"):
+    with pytest.raises(EpisodeIndexError, match=r"episode_index 60 is outside benchmark 'pick_v1'.*0..59"):
         MolmoEnv("pick_v1", episode_index=60)
     env.reset(seed=0)
     with pytest.raises(ValueError, match=r"action has shape \(7,\), expected \(8,\): arm \(7\) \+ gripper \(1\)"):
@@ -81,7 +81,8 @@ def test_replayed_actions_give_molmo_evals_trial(tmp_path):
     ep = next(e for e in res.episodes if e.episode_index == index)
     assert ep.error is None and ep.seed == info["seed"]
     assert (ep.success, ep.success_once) == (info["is_success"], info["success_once"])
-    records = [json.loads(line) for line in (out / "dataset" / "meta" / "eval" / "episodes.jsonl").read_text().splitlines()]
+    eval_records = out / "dataset" / "meta" / "eval" / "episodes.jsonl"
+    records = [json.loads(line) for line in eval_records.read_text().splitlines()]
     ds_index = next(r["episode_index"] for r in records if r["benchmark_episode_index"] == index)
     frames = pd.concat(pd.read_parquet(p) for p in sorted((out / "dataset" / "data").rglob("*.parquet")))
     recorded = np.stack(frames[frames["episode_index"] == ds_index]["observation.state"].to_numpy())

@@ -12,10 +12,10 @@ import pytest
 
 pytest.importorskip("lerobot_env_molmo", reason="make .venv installs plugins/lerobot_env_molmo")
 
-from lerobot.envs.configs import EnvConfig  # noqa: E402
+from lerobot.envs.configs import EnvConfig
 
-from molmo_lerobot.config import compose  # noqa: E402
-from molmo_lerobot.runner.evaluate import run_evaluation  # noqa: E402
+from molmo_lerobot.config import compose
+from molmo_lerobot.runner.evaluate import run_evaluation
 
 
 def test_lerobot_imports_the_plugin_and_names_features_as_our_datasets():

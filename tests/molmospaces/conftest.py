@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from standin import build_assets  # noqa: E402
+from standin import build_assets
 
 
 @pytest.fixture(scope="session")

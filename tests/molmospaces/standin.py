@@ -97,7 +97,7 @@ def write_scene(path: Path, origin: tuple[float, float], yaw: float, objects: li
     cx, cy = _rot(yaw, 0.3, 0.0)
     q = " ".join(f"{v:.9f}" for v in _yaw_quat(yaw))
     models, bodies, poses = [], [], []
-    for k, (body, uid, how) in enumerate(objects):
+    for k, (body, _uid, how) in enumerate(objects):
         lx, ly = _rot(yaw, 0.5, -0.12 + 0.24 * k)
         pose = [ox + lx, oy + ly, TABLE_H + HALF[2], *_yaw_quat(yaw)]
         poses.append(pose)

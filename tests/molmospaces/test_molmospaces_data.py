@@ -22,13 +22,14 @@ from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.cli import bench as bench_cli
 from molmo_lerobot.config import compose
 from molmo_lerobot.context import RunContext
+from molmo_lerobot.errors import RunError
 from molmo_lerobot.molmospaces import layout
 from molmo_lerobot.molmospaces.user import (
     register_user_asset_library,
     register_user_grasp_library,
 )
 from molmo_lerobot.plugins import Plugins
-from molmo_lerobot.runner.evaluate import RunError, run_evaluation
+from molmo_lerobot.runner.evaluate import run_evaluation
 
 
 def _write_bench(path, episodes):
@@ -51,7 +52,8 @@ def test_scene_paths_follow_molmospaces(tmp_path):
     with pytest.raises(layout.SceneLookupError, match="FloorPlan1 belongs to split 'train', not data_split 'val'"):
         layout.scene_xml(tmp_path, "ithor", "val", 1)
     assert layout.scene_xml(tmp_path, "procthor-10k", "val", 3).name == "val_3_ceiling.xml"
-    assert layout.scene_xml(tmp_path, "procthor-10k", "train", 3, "base") == tmp_path / "scenes/procthor-10k-train/train_3.xml"
+    assert (layout.scene_xml(tmp_path, "procthor-10k", "train", 3, "base")
+            == tmp_path / "scenes/procthor-10k-train/train_3.xml")
     assert layout.scene_xml(tmp_path, "procthor-100k-debug", "val", 1).parent.name == "procthor-objaverse-val"
     assert layout.scene_xml(tmp_path, "procthor-objaverse-debug", "train", 1).parent.name == "procthor-objaverse-debug"
     assert layout.scene_xml(tmp_path, "holodeck-objaverse", "val", 1194).parent.name == "holodeck-objaverse-val"
@@ -65,9 +67,9 @@ def test_scene_paths_follow_molmospaces(tmp_path):
 
 def test_scene_loads_with_its_physics_metadata_and_modifications(assets, tmp_path):
     root, houses = assets
+    from molmo_lerobot.benchmark.task_specs import parse_episode
     from molmo_lerobot.runner.episode_env import build_env
     from molmo_lerobot.sim.env import PHYSICS_OPTIONS, Timing
-    from molmo_lerobot.benchmark.task_specs import parse_episode
 
     house = houses[0]  # iTHOR FloorPlan15
     ep = pick_episode(house)
@@ -122,7 +124,8 @@ def test_thor_and_objaverse_libraries_and_droid_grasps(assets, tmp_path):
     register_user_grasp_library(cat, "better", mine, "thor")
     assert [g.name for g in cat._grasp_sources("Mug_1", "franka_droid")] == ["better/droid", "droid"]
     assert cat.count_grasps("Mug_1", robot="franka_droid") == 1
-    with pytest.raises(AssetError, match="not installed under .*objaverse.*molmo-resources install objects/objaverse@"):
+    with pytest.raises(AssetError,
+                       match=r"not installed under .*objaverse.*molmo-resources install objects/objaverse@"):
         cat.library("objaverse").install("f" * 32)
 
 
@@ -265,7 +268,8 @@ def _every_task(houses):
     base = pick_episode(houses[0])
     t = base["task"]
     pose = t["pickup_obj_start_pose"]
-    rec = {"place_receptacle_name": "place_receptacle/0/Bowl_27", "place_receptacle_start_pose": [0.6, -2.2, 0.8, 1, 0, 0, 0]}
+    rec = {"place_receptacle_name": "place_receptacle/0/Bowl_27",
+           "place_receptacle_start_pose": [0.6, -2.2, 0.8, 1, 0, 0, 0]}
     tasks = {
         "molmo_spaces.tasks.pick_task.PickTask": {},
         "molmo_spaces.tasks.pick_and_place_task.PickAndPlaceTask": rec,
@@ -284,7 +288,8 @@ def _every_task(houses):
         ep["task"] = {"task_cls": cls, "robot_base_pose": t["robot_base_pose"], "pickup_obj_name": t["pickup_obj_name"],
                       "pickup_obj_start_pose": pose, **extra}
         if "Place" in cls:
-            ep["scene_modifications"]["added_objects"] = {"place_receptacle/0/Bowl_27": "objects/thor/Kitchen/Bowl_27.xml"}
+            ep["scene_modifications"]["added_objects"] = {
+                "place_receptacle/0/Bowl_27": "objects/thor/Kitchen/Bowl_27.xml"}
         if "Door" in cls or "Nav" in cls:
             ep["robot"] = {"robot_name": "rby1", "init_qpos": {"base": [0.0, 0.0, 0.0]}}
         out.append(ep)
@@ -313,8 +318,9 @@ def test_every_task_type_in_both_layouts_is_valid(assets, tmp_path, capsys):
 
 
 def test_install_uid_fetches_objaverse_objects_and_grasps_through_the_resource_manager(tmp_path):
-    from molmo_lerobot.resources import pack
     from standin import object_xml, save_npz
+
+    from molmo_lerobot.resources import pack
 
     uids = ("a" * 32, "b" * 32)
     objects, grasps = tmp_path / "objects_src", tmp_path / "grasps_src"
@@ -338,10 +344,11 @@ def test_one_warning_per_missing_resource_and_user_scenes_from_overrides(assets,
     _, houses = assets
     ithor = houses[0]
     distinct = [{**pick_episode(ithor), "seed": i} for i in range(3)]  # duplicates are refused by content
-    bench = _write_bench(tmp_path / "b", distinct + [user_pick_episode()])
+    bench = _write_bench(tmp_path / "b", [*distinct, user_pick_episode()])
     assert bench_cli.main(["validate", str(bench), f"molmospaces.assets_dir={tmp_path / 'none'}"]) == 0
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 2 and "episodes 0, 1, 2: field scene_dataset" in err[0] and "episode 3: field scene_dataset" in err[1]
+    assert len(err) == 2 and "episodes 0, 1, 2: field scene_dataset" in err[0]
+    assert "episode 3: field scene_dataset" in err[1]
     write_user_library(tmp_path)
     assert bench_cli.main(["validate", str(bench), f"scene_xml_paths=[{tmp_path / 'scene.xml'}]"]) == 0
     assert capsys.readouterr().err == ""
@@ -365,7 +372,8 @@ def test_objaverse_uid_known_by_metadata_but_not_installed_says_how_to_install(a
     cat = RunContext.build().catalog
     assert cat.locate_uid(uid).mjcf_path == copy / "objects/objaverse" / uid / f"{uid}.xml"
     assert cat.annotation(uid)["category"] == "vase"
-    with pytest.raises(AssetError, match=rf"object '{uid}' is not installed .*molmo-resources install objects/objaverse@"):
+    with pytest.raises(AssetError,
+                       match=rf"object '{uid}' is not installed .*molmo-resources install objects/objaverse@"):
         cat.install_uid(uid)
     with pytest.raises(AssetError, match="unknown asset UID 'Mug_9'"):
         cat.install_uid("Mug_9")

@@ -162,23 +162,24 @@ def applied_theirs(out: dict[str, Any], case: str) -> dict[str, Any]:
     action = MolmoSpacesConvention().action({"gripper": out[f"{case}.gripper"]})
     return applied(out[f"{case}.arm"], action["gripper"], [
         _request(*args) for args in zip(out[f"{case}.req_exterior"], out[f"{case}.req_wrist"],
-                                        out[f"{case}.req_joints"], out[f"{case}.req_gripper"], out[f"{case}.prompts"])])
+                                        out[f"{case}.req_joints"], out[f"{case}.req_gripper"], out[f"{case}.prompts"],
+                                        strict=True)])
 
 
 def differences(ours: dict[str, Any], theirs: dict[str, Any]) -> list[str]:
     """Where two :func:`applied` records differ (empty: they agree), step by step: everything exactly
     but the gripper command, within 1e-12 (their continuous command is the output x 255, ours / 255)."""
     diffs = []
-    for t, (a, b) in enumerate(zip(ours["arm"], theirs["arm"])):
+    for t, (a, b) in enumerate(zip(ours["arm"], theirs["arm"], strict=False)):
         if a != b:
             diffs.append(f"step {t}: arm {a} != {b}")
-    for t, (a, b) in enumerate(zip(ours["gripper"], theirs["gripper"])):
+    for t, (a, b) in enumerate(zip(ours["gripper"], theirs["gripper"], strict=False)):
         if abs(a - b) > 1e-12:
             diffs.append(f"step {t}: gripper {a} != {b}")
     if len(ours["arm"]) != len(theirs["arm"]):
         diffs.append(f"steps {len(ours['arm'])} != {len(theirs['arm'])}")
     if len(ours["requests"]) != len(theirs["requests"]):
         diffs.append(f"server requests {len(ours['requests'])} != {len(theirs['requests'])}")
-    for i, (a, b) in enumerate(zip(ours["requests"], theirs["requests"])):
+    for i, (a, b) in enumerate(zip(ours["requests"], theirs["requests"], strict=False)):
         diffs += [f"request {i}: {k} {a[k]!r} != {b[k]!r}" for k in a if a[k] != b[k]]
     return diffs

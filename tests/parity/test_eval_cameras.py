@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 
 from molmo_lerobot.benchmark.task_specs import parse_episode
-from molmo_lerobot.cameras import droid
+from molmo_lerobot.cameras import droid, franka_mounts
 from molmo_lerobot.cameras.franka_eval import episode_camera_seed, exo_ranges, workspace_centre, wrist_noise
-from molmo_lerobot.paths import data_path
 from molmo_lerobot.context import RunContext
+from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim import env as sim_env
@@ -29,8 +29,8 @@ from molmo_lerobot.sim.env import Timing
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tasks"))
-import camera_oracle  # noqa: E402
-from droid_variants import droid_episode  # noqa: E402
+import camera_oracle
+from droid_variants import droid_episode
 
 pytestmark = pytest.mark.parity
 
@@ -183,7 +183,8 @@ def test_eval_system_places_the_cameras_theirs_does(theirs, scenes, monkeypatch)
         agreed += not problems
         bad += problems
     print(f"\neval cameras: {len(ours)} cases ({len(scenes)} episodes x {len(LEVELS)} levels), {agreed} agreed "
-          f"({failed} of them: placement fails on both sides), {sum(o['checks'] for o in ours)} visibility checks; largest differences {DEVIATION}")
+          f"({failed} of them: placement fails on both sides), {sum(o['checks'] for o in ours)} visibility checks; "
+          f"largest differences {DEVIATION}")
     assert not bad, "\n".join(bad)
     assert 0 < failed < len(ours) // 2  # the stand-ins make some placements hopeless, most not
 
@@ -199,22 +200,23 @@ def test_fixed_and_randomized_droid_systems_place_the_cameras_theirs_do(theirs, 
         # molmo_lerobot.cameras.droid: ours seeds two streams from the episode; theirs uses numpy's
         # global generator): same draws in, same cameras out
         env, _, _ = _build(raw, {"system": "droid_randomized"}, monkeypatch)
-        objects = droid.task_objects(env.spec)
+        objects = franka_mounts.task_objects(env.spec)
         centre = np.mean([*(env.data.xpos[env.body_id(n)] for n in objects), scene["tcp"]], axis=0)
         oracle = {**ORACLES[1 + i % 2], "centre": centre.tolist()}
         rng = np.random.RandomState(1000 + i)
         wrist = env.model.camera("wrist_camera").id
         mount = env.model.camera("robot_0/gripper/wrist_camera").id
-        pos, quat, fov = droid.noisy_mount(env.model.cam_pos[mount], env.model.cam_quat[mount],
-                                           droid.RANDOM_WRIST_FOV, droid.RANDOM_WRIST_NOISE, rng)
+        pos, quat, fov = franka_mounts.noisy_mount(env.model.cam_pos[mount], env.model.cam_quat[mount],
+                                                   droid.RANDOM_WRIST_FOV, droid.RANDOM_WRIST_NOISE, rng)
         env.model.cam_pos[wrist], env.model.cam_quat[wrist], env.model.cam_fovy[wrist] = pos, quat, fov
         seen = _Visibility(oracle)
-        probe = type("Probe", (), {"model": env.model, "visible_fractions": lambda self, c, b: seen(env, c, b)})()
+        probe = type("Probe", (), {"model": env.model,
+                                   "visible_fractions": lambda self, c, b, seen=seen, env=env: seen(env, c, b)})()
         error = None
         try:
             for cam in droid.RANDOM_EXO_CAMERAS:
-                placed = droid.place_until_seen(probe, cam.name, [*objects, "robot_0/gripper/base"], cam.attempts,
-                                                droid.random_exo_draws(cam, centre, rng), "ours")
+                placed = franka_mounts.place_until_seen(probe, cam.name, [*objects, "robot_0/gripper/base"],
+                                                        cam.attempts, droid.random_exo_draws(cam, centre, rng), "ours")
                 c = env.model.camera(cam.name).id
                 env.model.cam_pos[c], env.model.cam_quat[c], env.model.cam_fovy[c] = placed
         except ValueError as exc:

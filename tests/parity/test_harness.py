@@ -16,5 +16,5 @@ def test_their_venv_runs_molmo_spaces_pinned(theirs):
 
 
 def test_a_failing_helper_raises_with_their_traceback(theirs):
-    with pytest.raises(theirs.TheirError, match="AttributeError.*no_such_helper"):
+    with pytest.raises(theirs.TheirError, match=r"AttributeError.*no_such_helper"):
         theirs.run("theirs:no_such_helper", {"x": np.arange(3.0), "label": "a"})

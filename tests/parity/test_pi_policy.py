@@ -12,7 +12,17 @@ import json
 
 import numpy as np
 import pytest
-from pi_policy_scenario import CASES, DT, Case, applied_ours, applied_theirs, chunks, differences, observations, run_ours
+from pi_policy_scenario import (
+    CASES,
+    DT,
+    Case,
+    applied_ours,
+    applied_theirs,
+    chunks,
+    differences,
+    observations,
+    run_ours,
+)
 from record_pi_policy import EXPECTED
 
 from molmo_lerobot.config import compose

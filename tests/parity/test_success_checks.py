@@ -25,6 +25,7 @@ import mujoco
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from theirs import contact_table
 
 from molmo_lerobot.benchmark.schema import EpisodeSpec
 from molmo_lerobot.benchmark.task_specs import parse_episode
@@ -32,7 +33,6 @@ from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.robots.base import RobotType
 from molmo_lerobot.sim.env import Env, Timing
 from molmo_lerobot.sim.geometry import subtree
-from theirs import contact_table
 
 pytestmark = pytest.mark.parity
 
@@ -47,6 +47,7 @@ PLATE_R, PLATE_HEIGHT = 0.08, 0.01
 HAND_HOME = np.array([-0.9, 0.0, 1.0])  # the gripper's tool point with every slide at 0
 PAD_Y, PAD_HALF_Y = 0.06, 0.005  # finger pad centre (open) and half thickness
 PEN = 0.0005  # how far a resting body sinks into what carries it
+IDENTITY = Rotation.identity()
 
 SCENE_XML = f"""
 <mujoco model="parity_success">
@@ -222,7 +223,7 @@ def resting_z(body: str) -> float:
     return TABLE_TOP + HALF_HEIGHT[body] - PEN
 
 
-def in_frame(base_pose: np.ndarray, local_pos, local_rot: Rotation = Rotation.identity()):
+def in_frame(base_pose: np.ndarray, local_pos, local_rot: Rotation = IDENTITY):
     """World (pos, quat) of a pose given in the frame of ``base_pose`` (7 values)."""
     base = Rotation.from_quat(base_pose[3:], scalar_first=True)
     return base_pose[:3] + base.apply(local_pos), quat(base * local_rot)
@@ -267,7 +268,7 @@ def pick_cases(rng) -> list:
             task = {"task_type": "pick", "pickup_obj_name": "apple", "succ_pos_threshold": threshold,
                     "pickup_obj_start_pose": [*rest, 1.0, 0.0, 0.0, 0.0],
                     "pickup_obj_goal_pose": [*rest[:2], rest[2] + 0.1, 1.0, 0.0, 0.0, 0.0]}
-            pos = rest + [0, 0, threshold + delta]
+            pos = rest + np.array([0, 0, threshold + delta])
             case(cases, task, "lift_boundary", State().place("apple", pos).hand(pos))
     return cases
 
@@ -304,7 +305,7 @@ def receptacle_pose(task: dict, rng, moved: float | None = None, tilt: float = 0
 
 
 def put(s: State, obj: str, rec: np.ndarray, receptacle: str, local_xy=(0.0, 0.0), lift: float = -PEN,
-        local_rot: Rotation = Rotation.identity()) -> State:
+        local_rot: Rotation = IDENTITY) -> State:
     """``obj`` upright in ``receptacle`` (at pose ``rec``) at ``local_xy``, its base ``lift`` above the floor."""
     pos, q = in_frame(rec, [local_xy[0], local_xy[1], floor_height(receptacle) + HALF_HEIGHT[obj] + lift], local_rot)
     return s.place(obj, pos, q)

@@ -11,10 +11,9 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+import camera_oracle
 import mujoco
 import numpy as np
-
-import camera_oracle
 
 
 class _Env:

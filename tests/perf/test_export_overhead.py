@@ -28,8 +28,8 @@ import pytest
 
 from molmo_lerobot.config import compose
 from molmo_lerobot.plugins import Plugins
-from molmo_lerobot.runner import evaluate
 from molmo_lerobot.recording import Recorder, RecorderFactory
+from molmo_lerobot.runner import evaluate
 
 pytestmark = [pytest.mark.perf, pytest.mark.timeout(7200)]  # MOLMO_PERF_EPISODES=60: ~20 min
 N_EPISODES = int(os.environ.get("MOLMO_PERF_EPISODES", "6"))

@@ -15,10 +15,10 @@ import pytest
 
 pytest.importorskip("lerobot")
 
-from molmo_lerobot.config import compose  # noqa: E402
-from molmo_lerobot.export import merge, recorder  # noqa: E402
-from molmo_lerobot.export.merge import read_eval_records  # noqa: E402
-from molmo_lerobot.runner.evaluate import run_evaluation  # noqa: E402
+from molmo_lerobot.config import compose
+from molmo_lerobot.export import merge, recorder
+from molmo_lerobot.export.merge import read_eval_records
+from molmo_lerobot.runner.evaluate import run_evaluation
 
 pytestmark = pytest.mark.perf
 EPISODES = int(os.environ.get("MOLMO_PERF_EPISODES", "16"))

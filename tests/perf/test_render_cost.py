@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 
 from molmo_lerobot.benchmark.load import load_benchmark
-from molmo_lerobot.paths import data_path
 from molmo_lerobot.context import RunContext
+from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.recording import EpisodeInfo, Recorder
-from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.sim.env import Timing
 
 CHUNK = 4
@@ -117,6 +117,6 @@ def test_render_cost_per_frame():
             rows.append((f"{width}x{height}", shadows, statistics.median(times)))
         renderer.close()
         env.close()
-    print("\nper-frame render cost (update_scene + render, one camera, median of %d):" % frames)
+    print(f"\nper-frame render cost (update_scene + render, one camera, median of {frames}):")
     for res, shadows, ms in rows:
         print(f"  {res:>8}  shadows={'on ' if shadows else 'off'}  {ms:7.2f} ms")

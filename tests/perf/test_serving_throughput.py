@@ -21,11 +21,11 @@ import pytest
 
 pytest.importorskip("torch")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
-from test_lerobot_policy import save_tiny_act  # noqa: E402
+from test_lerobot_policy import save_tiny_act
 
-from molmo_lerobot.config import compose  # noqa: E402
-from molmo_lerobot.serving.run_server import STATS_FILE  # noqa: E402
-from molmo_lerobot.runner.evaluate import run_evaluation  # noqa: E402
+from molmo_lerobot.config import compose
+from molmo_lerobot.runner.evaluate import run_evaluation
+from molmo_lerobot.serving.run_server import STATS_FILE
 
 pytestmark = pytest.mark.perf
 WORKERS = [int(w) for w in os.environ.get("MOLMO_PERF_WORKERS", "1,2,4").split(",")]

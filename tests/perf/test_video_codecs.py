@@ -21,14 +21,14 @@ import pytest
 from lerobot.datasets.compute_stats import RunningQuantileStats
 
 from molmo_lerobot.benchmark.load import load_benchmark
+from molmo_lerobot.context import RunContext
 from molmo_lerobot.export.video import CameraStreamEncoder, PixelStats, VideoSettings
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.context import RunContext
 from molmo_lerobot.policies.base import EpisodeContext
-from molmo_lerobot.runner.plan import episode_seed
 from molmo_lerobot.policies.factory import make_policy
-from molmo_lerobot.runner.rollout import resolve_horizon
 from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.runner.plan import episode_seed
+from molmo_lerobot.runner.rollout import resolve_horizon
 from molmo_lerobot.sim.env import Timing
 
 pytestmark = pytest.mark.perf

@@ -74,7 +74,8 @@ def test_code_and_hydra_config_are_discovered(target):
         "p = make_policy(Plugins(), OmegaConf.to_container(cfg.policy))\n"
         "print(type(p).__module__, type(p).__name__, cfg.policy.amplitude, cfg.policy.period_s)\n"
     )
-    proc = subprocess.run([sys.executable, "-c", code], env=env_with(target), capture_output=True, text=True, timeout=120)
+    proc = subprocess.run([sys.executable, "-c", code], env=env_with(target), capture_output=True, text=True,
+                          timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["molmo_example_policy", "SinePolicy", "0.3", "2.0"]
 

@@ -7,6 +7,7 @@ state; the pi0 presets built on it are checked against MolmoSpaces' PI_Policy in
 from __future__ import annotations
 
 import json
+from typing import ClassVar
 
 import mujoco
 import numpy as np
@@ -18,8 +19,8 @@ from molmo_lerobot.paths import data_path
 from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.policies.convention import MolmoSpacesConvention, get_convention
 from molmo_lerobot.policies.remote import RemotePolicy
-from molmo_lerobot.serving.server import PolicyServer, serve_in_thread
 from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.serving.server import PolicyServer, serve_in_thread
 from molmo_lerobot.sim.env import Timing
 
 MS = MolmoSpacesConvention()
@@ -76,7 +77,8 @@ def test_molmospaces_view_of_an_episode(robot, gripper, joints):
 
 
 def test_images_are_flat_per_camera_and_depth_suffixed():
-    obs = {"images": {"exo_camera_1": np.zeros((4, 6, 3), np.uint8)}, "depth": {"exo_camera_1": np.ones((4, 6), np.float32)},
+    obs = {"images": {"exo_camera_1": np.zeros((4, 6, 3), np.uint8)},
+           "depth": {"exo_camera_1": np.ones((4, 6), np.float32)},
            "joint_qpos": {"arm": np.zeros(7)}, "joint_qvel": {"arm": np.zeros(7)},
            "tcp_pose": np.array([1.0, 2, 3, 1, 0, 0, 0]), "robot_base_pose": np.array([1.0, 0, 0, 0, 0, 0, 1])}
     view = MS.observation(obs)
@@ -90,10 +92,11 @@ def test_images_are_flat_per_camera_and_depth_suffixed():
 def test_their_actions_become_ours():
     step = MS.action({"arm": np.arange(7.0), "gripper": np.array([255.0]), "done": True})
     assert step["gripper"][0] == 1.0 and step["done"] is True and (step["arm"] == np.arange(7.0)).all()
-    chunk = MS.action([{"arm": np.zeros(7), "gripper": np.array([0.0])}, {"arm": np.ones(7), "gripper": np.array([127.5])}])
+    chunk = MS.action([{"arm": np.zeros(7), "gripper": np.array([0.0])},
+                       {"arm": np.ones(7), "gripper": np.array([127.5])}])
     assert chunk["arm"].shape == (2, 7) and chunk["gripper"][:, 0].tolist() == [0.0, 0.5]
     assert get_convention("native").action(step) is step
-    with pytest.raises(ValueError, match="policy.convention='droid'"):
+    with pytest.raises(ValueError, match=r"policy.convention='droid'"):
         get_convention("droid")
     with pytest.raises(ValueError, match="non-empty list of dicts"):
         MS.action([])
@@ -103,7 +106,7 @@ class EchoTheirs(Policy):
     """A served policy written against MolmoSpaces' observations: holds the arm, closes the gripper (255)."""
 
     needs_images = True
-    seen: list[dict] = []
+    seen: ClassVar[list[dict]] = []
 
     def reset(self, ctx):
         pass
@@ -115,7 +118,8 @@ class EchoTheirs(Policy):
 
 def test_remote_policy_speaks_their_convention_on_the_wire():
     server = PolicyServer(EchoTheirs, port=0, metadata={"server": "molmo-serve", "policy": "echo"})
-    native = {"images": {"wrist_camera": np.full((4, 4, 3), 7, np.uint8)}, "qpos": {"arm": np.arange(7.0), "gripper": [0.5]},
+    native = {"images": {"wrist_camera": np.full((4, 4, 3), 7, np.uint8)},
+              "qpos": {"arm": np.arange(7.0), "gripper": [0.5]},
               "joint_qpos": {"arm": np.arange(7.0), "gripper": np.array([0.4, 0.4])},
               "joint_qvel": {"arm": np.zeros(7), "gripper": np.zeros(2)},
               "tcp_pose": np.array([0.5, 0, 0.2, 1, 0, 0, 0]), "robot_base_pose": np.array([0.0, 0, 0, 1, 0, 0, 0]),
@@ -127,7 +131,8 @@ def test_remote_policy_speaks_their_convention_on_the_wire():
         action = policy.act(native)
         policy.close()
     got = EchoTheirs.seen[-1]
-    assert (got["wrist_camera"] == 7).all() and got["qpos"]["gripper"] == pytest.approx([0.4, 0.4]) and got["task"] == "pick"
+    assert (got["wrist_camera"] == 7).all() and got["qpos"]["gripper"] == pytest.approx([0.4, 0.4])
+    assert got["task"] == "pick"
     assert "images" not in got and action["gripper"][0] == 1.0 and (action["arm"] == np.arange(7.0)).all()
 
 

@@ -86,7 +86,7 @@ def test_chunk_mode_returns_whole_chunk(act_dir):
 def test_missing_camera_and_bad_state_are_clear(act_dir):
     policy = LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu"})
     policy.reset(ctx())
-    with pytest.raises(KeyError, match="wants camera 'front'.*policy.cameras"):
+    with pytest.raises(KeyError, match=r"wants camera 'front'.*policy.cameras"):
         policy.act(obs(camera="exo"))
     bad = LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu", "state": ["arm"]})
     bad.reset(ctx())
@@ -109,7 +109,7 @@ def test_molmospaces_convention_state_and_gripper_units(tmp_path):
 
 
 def test_bad_config_names_field(act_dir):
-    with pytest.raises(ValueError, match="policy.mode"):
+    with pytest.raises(ValueError, match=r"policy.mode"):
         LeRobotPolicy({"name": "lerobot", "path": act_dir, "mode": "sometimes"})
     with pytest.raises(FileNotFoundError, match="no such directory"):
         LeRobotPolicy({"name": "lerobot", "path": "/nonexistent/ckpt"})

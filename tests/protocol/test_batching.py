@@ -45,7 +45,7 @@ class Batcher(Policy):
         if any(o.get("poison") for o in observations):
             raise RuntimeError("one item breaks the whole call")
         out = []
-        for p, o in zip(policies, observations):
+        for p, o in zip(policies, observations, strict=True):
             if o.get("bad"):
                 out.append(ValueError("bad observation on purpose"))
                 continue

@@ -46,9 +46,9 @@ def test_server_that_never_answers_times_out():
 
 
 def test_server_that_never_sends_metadata_times_out():
-    with FakeDroidServer(mode="silent_metadata").running() as srv:
-        with pytest.raises(PolicyTimeoutError, match="sent no metadata frame within 0.5 s"):
-            PolicyClient("127.0.0.1", srv.port, timeout_s=0.5).connect()
+    with (FakeDroidServer(mode="silent_metadata").running() as srv,
+          pytest.raises(PolicyTimeoutError, match=r"sent no metadata frame within 0.5 s")):
+        PolicyClient("127.0.0.1", srv.port, timeout_s=0.5).connect()
 
 
 def test_tcp_listener_that_never_handshakes_times_out():
@@ -56,7 +56,7 @@ def test_tcp_listener_that_never_handshakes_times_out():
         sock.bind(("127.0.0.1", 0))
         sock.listen(8)
         c = PolicyClient("127.0.0.1", sock.getsockname()[1], timeout_s=0.3, connect_timeout_s=1.0)
-        with pytest.raises(PolicyTimeoutError, match="could not connect .* within 1 s"):
+        with pytest.raises(PolicyTimeoutError, match=r"could not connect .* within 1 s"):
             c.connect()
 
 

@@ -22,14 +22,15 @@ def test_array_roundtrip_keeps_dtype_shape_and_is_read_only(dtype):
 def test_wire_format_is_openpis():
     a = np.arange(6, dtype=np.float32).reshape(2, 3)[:, ::2]  # non-contiguous view
     raw = msgpack.unpackb(packb({"a": a, "s": np.int32(7)}), raw=False)
-    assert raw["a"] == {b"__ndarray__": True, b"data": np.ascontiguousarray(a).tobytes(), b"dtype": "<f4", b"shape": [2, 2]}
+    assert raw["a"] == {b"__ndarray__": True, b"data": np.ascontiguousarray(a).tobytes(), b"dtype": "<f4",
+                        b"shape": [2, 2]}
     assert raw["s"] == {b"__npgeneric__": True, b"data": 7, b"dtype": "<i4"}
 
 
 def test_decodes_openpi_style_bytes_keys_and_str_keys():
     data = np.array([1.5, 2.5], dtype="<f8").tobytes()
     for keys in ((b"__ndarray__", b"data", b"dtype", b"shape"), ("__ndarray__", "data", "dtype", "shape")):
-        msg = msgpack.packb({"x": dict(zip(keys, (True, data, "<f8", [2])))}, use_bin_type=True)
+        msg = msgpack.packb({"x": dict(zip(keys, (True, data, "<f8", [2]), strict=True))}, use_bin_type=True)
         np.testing.assert_array_equal(unpackb(msg)["x"], [1.5, 2.5])
     scalar = unpackb(packb(np.float32(0.25)))
     assert isinstance(scalar, np.float32) and scalar == 0.25

@@ -110,9 +110,9 @@ def test_reset_message_to_openpi_server_surfaces_its_error():
 
 
 def test_config_errors_name_the_field():
-    with pytest.raises(ValueError, match="policy.action_mode"):
+    with pytest.raises(ValueError, match=r"policy.action_mode"):
         make_pi0_policy({"name": "pi0", "action_mode": "torque"})
-    with pytest.raises(ValueError, match="policy.colour"):
+    with pytest.raises(ValueError, match=r"policy.colour"):
         make_pi0_policy({"name": "pi0", "colour": "red"})
 
 

@@ -14,7 +14,6 @@ import pytest
 from droid_server import FakeDroidServer
 
 from molmo_lerobot.cli.bench import main as bench_main
-from molmo_lerobot.serving.server import build_server
 from molmo_lerobot.cli.serve import main as serve_main
 from molmo_lerobot.config import compose
 from molmo_lerobot.plugins import Plugins
@@ -22,8 +21,8 @@ from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.random_policy import RandomPolicy
 from molmo_lerobot.policies.remote import RemotePolicy
 from molmo_lerobot.protocol.client import PolicyClientError
-from molmo_lerobot.serving.server import serve_in_thread
 from molmo_lerobot.runner.evaluate import run_evaluation
+from molmo_lerobot.serving.server import build_server, serve_in_thread
 
 HORIZON = 30
 CTX = EpisodeContext(spec=None, episode_index=3, seed=1234, prompt="pick the mug",  # type: ignore[arg-type]
@@ -95,7 +94,8 @@ def test_molmo_serve_help_prints_usage_and_exits_0(capsys):
 
 
 def test_remote_refuses_a_server_that_is_not_molmo_serve():
-    with FakeDroidServer().running() as srv, pytest.raises(ValueError, match="is not a molmo-serve server.*policy=pi0"):
+    with (FakeDroidServer().running() as srv,
+          pytest.raises(ValueError, match=r"is not a molmo-serve server.*policy=pi0")):
         remote(srv.port)
 
 

@@ -14,11 +14,12 @@ import pytest
 
 pytest.importorskip("torch")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
-from test_lerobot_policy import save_tiny_act  # noqa: E402
+from test_lerobot_policy import save_tiny_act
 
-from molmo_lerobot.config import compose  # noqa: E402
-from molmo_lerobot.serving.run_server import STATS_FILE  # noqa: E402
-from molmo_lerobot.runner.evaluate import RunError, run_evaluation  # noqa: E402
+from molmo_lerobot.config import compose
+from molmo_lerobot.errors import RunError
+from molmo_lerobot.runner.evaluate import run_evaluation
+from molmo_lerobot.serving.run_server import STATS_FILE
 
 HORIZON = 8
 

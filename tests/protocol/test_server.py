@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import http.client
 import threading
+from typing import ClassVar
 
 import msgpack
 import numpy as np
@@ -19,7 +20,7 @@ from molmo_lerobot.serving.server import PolicyServer, serve_in_thread
 class CountingPolicy(Policy):
     """Returns its own call count: shows per-connection state and resets."""
 
-    instances: list[CountingPolicy] = []
+    instances: ClassVar[list[CountingPolicy]] = []
 
     def __init__(self) -> None:
         self.calls, self.prompt, self.closed = 0, None, False
@@ -121,7 +122,7 @@ def test_healthz_and_client_limit(server):
     for c in clients:
         c.connect()
     extra = PolicyClient("127.0.0.1", server.port, timeout_s=2, connect_timeout_s=0.5)
-    with pytest.raises(PolicyClientError, match="could not connect.*503"):
+    with pytest.raises(PolicyClientError, match=r"could not connect.*503"):
         extra.connect()
     clients[0].close()
     for c in clients[1:]:

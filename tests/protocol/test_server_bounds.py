@@ -68,9 +68,9 @@ class HugeReplyPolicy(Policy):
 
 
 def test_reply_size_is_bounded_before_encoding():
-    with serve_in_thread(PolicyServer(HugeReplyPolicy, port=0, max_message_bytes=2**20)) as srv:
-        with pytest.raises(PolicyServerError, match=r"reply \(12800000 bytes\) exceeds the limit of 1048576 bytes"):
-            client(srv).infer(OBS)
+    with (serve_in_thread(PolicyServer(HugeReplyPolicy, port=0, max_message_bytes=2**20)) as srv,
+          pytest.raises(PolicyServerError, match=r"reply \(12800000 bytes\) exceeds the limit of 1048576 bytes")):
+        client(srv).infer(OBS)
 
 
 def test_connection_that_never_sends_is_closed_quickly():

@@ -48,7 +48,7 @@ def _outside_untouched(tmp_path):
     ids=["traversal", "absolute", "symlink-escape", "symlink-absolute", "hardlink-escape", "device"],
 )
 def test_unsafe_archives_are_refused(members, match, craft_version, tar_member, tmp_path):
-    remote = craft_version([tar_member(n, d, k, l) for n, d, k, l in members])
+    remote = craft_version([tar_member(*member) for member in members])
     mgr = ResourceManager(tmp_path / "cache", tmp_path / "install", remote, progress=False)
     with pytest.raises(UnsafeArchiveError, match=match) as err:
         mgr.install("objects/evil@1")
@@ -63,7 +63,7 @@ def test_unsafe_archives_are_refused(members, match, craft_version, tar_member, 
 def test_corrupted_archive_is_refused_before_extraction(craft_version, tar_member, tmp_path):
     remote = craft_version([tar_member("ok.txt", b"ok")], corrupt=True)
     mgr = ResourceManager(tmp_path / "cache", tmp_path / "install", remote, progress=False)
-    with pytest.raises(CorruptArchiveError, match="sha256 .* refusing to extract"):
+    with pytest.raises(CorruptArchiveError, match=r"sha256 .* refusing to extract"):
         mgr.install("objects/evil@1")
     assert list((tmp_path / "cache" / "objects").rglob("*.txt")) == []
     tmp_left = tmp_path / "cache" / ".molmo" / "objects" / "evil" / "1" / "tmp"

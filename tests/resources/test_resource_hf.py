@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import httpx
 import pytest
 from huggingface_hub import HfApi, hf_hub_download, snapshot_download
@@ -28,7 +30,7 @@ def test_standin_speaks_the_hub_api(hub_standin, src_tree, tmp_path, read_tree):
     old = snapshot_download("me/data", repo_type="dataset", revision="v3.0", local_dir=tmp_path / "old")
     assert (tmp_path / "old" / "README.txt").read_text() == "top level\n" and old == str(tmp_path / "old")
     path = hf_hub_download("me/data", "README.txt", repo_type="dataset")
-    assert open(path).read() == "new"
+    assert Path(path).read_text() == "new"
     tree = list(api.list_repo_tree("me/data", repo_type="dataset", path_in_repo="mug_02"))
     assert {e.path for e in tree} == {"mug_02/mug_02.xml", "mug_02/same.xml", "mug_02/parts"}
     api.delete_tag("me/data", tag="v3.0", repo_type="dataset")
@@ -63,7 +65,8 @@ def test_hf_remote_round_trip(hub_standin, src_tree, tmp_path, read_tree):
 
 def test_cli_with_hf_remote(hub_standin, src_tree, tmp_path, capsys, read_tree):
     url = "hf://datasets/me/cli"
-    assert main(["pack", str(src_tree), "--remote", url, "--data-type", "scenes", "--source", "s", "--version", "2"]) == 0
+    assert main(["pack", str(src_tree), "--remote", url, "--data-type", "scenes", "--source", "s",
+                 "--version", "2"]) == 0
     assert main(["install", "scenes/s@2", "--remote", url, "--cache-dir", str(tmp_path / "c"), "--install-dir",
                  str(tmp_path / "i"), "--on-demand", "--no-progress"]) == 0
     assert "0 archives extracted" in capsys.readouterr().out

@@ -88,7 +88,7 @@ def test_extraction_never_follows_a_link_in_its_own_archive(tar_member, tmp_path
         for info, data in [tar_member("l1", None, tarfile.SYMTYPE, "."), tar_member("l1/x.txt", b"x")]:
             tar.addfile(info, io.BytesIO(data) if data is not None else None)
     (tmp_path / "a.tar.zst").write_bytes(zstandard.ZstdCompressor().compress(buf.getvalue()))
-    with pytest.raises(UnsafeArchiveError, match="l1 is a symlink; refusing to write 'l1/x.txt' through it"):
+    with pytest.raises(UnsafeArchiveError, match=r"l1 is a symlink; refusing to write 'l1/x.txt' through it"):
         safe_extract(tmp_path / "a.tar.zst", tmp_path / "out", "a")
     assert not (tmp_path / "out" / "x.txt").exists()
 
@@ -149,7 +149,7 @@ def test_member_larger_than_its_index_stops_before_writing_and_is_not_retried(cr
     )
     assert (remote_dir / "objects/evil/1/archives/bomb.tar.zst").stat().st_size < 65536
     remote = _counting(remote_dir)
-    with pytest.raises(UnsafeArchiveError, match="bomb.bin' has size 67108864, but its indexed size is 2"):
+    with pytest.raises(UnsafeArchiveError, match=r"bomb.bin' has size 67108864, but its indexed size is 2"):
         _mgr(tmp_path, remote).install(SPEC)
     assert [d for d in remote.downloads if "/archives/" in d] == ["objects/evil/1/archives/bomb.tar.zst"]
     written = sum(p.stat().st_size for p in (tmp_path / "cache").rglob("*") if p.is_file())
@@ -162,7 +162,7 @@ def test_unindexed_member_is_refused_before_writing(craft_archives, tar_member, 
         {"a.tar.zst": [tar_member("ok.txt", b"ok"), tar_member("extra.bin", bytes(8 << 20))]},
         edit_index=lambda idx: idx["a.tar.zst"].pop("extra.bin"),
     )
-    with pytest.raises(ResourceError, match="'extra.bin' is not in the index"):
+    with pytest.raises(ResourceError, match=r"'extra.bin' is not in the index"):
         _mgr(tmp_path, remote_dir).install(SPEC)
     assert not any(p.name == "extra.bin" for p in (tmp_path / "cache").rglob("*"))
 
@@ -171,13 +171,13 @@ def test_stream_past_the_index_allowance_is_refused(craft_archives, tar_member, 
     info, data = tar_member("ok.txt", b"ok")
     info.pax_headers = {"comment": "x" * (4 << 20)}  # a 4 MiB header: bytes the index never allowed
     remote_dir = craft_archives({"a.tar.zst": [(info, data)]})
-    with pytest.raises(UnsafeArchiveError, match="past its limit of .* bytes"):
+    with pytest.raises(UnsafeArchiveError, match=r"past its limit of .* bytes"):
         _mgr(tmp_path, remote_dir).install(SPEC)
 
 
 def test_repeated_member_is_refused(craft_archives, tar_member, tmp_path):
     remote_dir = craft_archives({"a.tar.zst": [tar_member("ok.txt", b"ok"), tar_member("ok.txt", b"ok")]})
-    with pytest.raises(UnsafeArchiveError, match="'ok.txt' appears twice"):
+    with pytest.raises(UnsafeArchiveError, match=r"'ok.txt' appears twice"):
         _mgr(tmp_path, remote_dir).install(SPEC)
 
 
@@ -199,7 +199,8 @@ def _first(d):
 
 @pytest.mark.parametrize("edit_manifest, edit_index, match", [
     (_set("archives", []), None, "field archives: Input should be a valid dictionary"),
-    (_set("archives", _first, "size", "12"), None, r"field archives\.a\.tar\.zst\.size: Input should be a valid integer"),
+    (_set("archives", _first, "size", "12"), None,
+     r"field archives\.a\.tar\.zst\.size: Input should be a valid integer"),
     (_set("archives", _first, "sha256", 5), None, r"field archives\.a\.tar\.zst\.sha256"),
     (_set("uid_depth", "x"), None, "field uid_depth: Input should be a valid integer"),
     (_set("link", 5), None, "field link: Input should be 'dir' or 'file'"),
@@ -227,7 +228,8 @@ def test_wrong_field_types_are_one_line(craft_archives, tar_member, tmp_path, ca
                                             ("install", '{"objects": ["1"]}'), ("install", "{not json")])
 def test_bad_local_manifests_are_one_line(src_tree, tmp_path, which, content):
     pack(src_tree, tmp_path / "remote", "objects/lib@1")
-    ResourceManager(tmp_path / "cache", tmp_path / "install", tmp_path / "remote", progress=False).install("objects/lib@1")
+    mgr = ResourceManager(tmp_path / "cache", tmp_path / "install", tmp_path / "remote", progress=False)
+    mgr.install("objects/lib@1")
     path = tmp_path / which / ".molmo" / "installed.json"
     path.write_text(content)
     for cmd in (["verify", "--cache-dir", str(tmp_path / "cache"), "--install-dir", str(tmp_path / "install")],
@@ -241,7 +243,8 @@ def test_bad_local_manifests_are_one_line(src_tree, tmp_path, which, content):
 
 def test_cached_manifest_edited_to_wrong_types_is_one_line(src_tree, tmp_path, capsys):
     pack(src_tree, tmp_path / "remote", "objects/lib@1")
-    ResourceManager(tmp_path / "cache", tmp_path / "install", tmp_path / "remote", progress=False).install("objects/lib@1")
+    mgr = ResourceManager(tmp_path / "cache", tmp_path / "install", tmp_path / "remote", progress=False)
+    mgr.install("objects/lib@1")
     path = tmp_path / "cache" / ".molmo" / "objects" / "lib" / "1" / "manifest.json"
     manifest = json.loads(path.read_text())
     manifest["uid_depth"] = [0]

@@ -73,7 +73,7 @@ def test_on_demand_installs_archives_on_first_use(src_tree, tmp_path):
     assert p.read_text() == "<mujoco model='apple'/>\n"
     mgr.ensure_path("objects/lib@1", "README.txt")
     assert mgr.is_complete("objects/lib@1")
-    with pytest.raises(ResourceError, match="no archive holds 'nope.txt'"):
+    with pytest.raises(ResourceError, match=r"no archive holds 'nope.txt'"):
         mgr.ensure_path("objects/lib@1", "nope.txt")
     assert mgr.verify() == []
 
@@ -112,7 +112,7 @@ def test_overlapping_dirs_and_bad_specs_are_refused(tmp_path):
         ResourceManager(tmp_path / "c", tmp_path / "c" / "inst")
     with pytest.raises(ResourceError, match="expected DATA_TYPE/SOURCE@VERSION"):
         ResourceManager(tmp_path / "c", tmp_path / "i").install("objects-lib-1")
-    with pytest.raises(ResourceError, match="no objects/lib@9 .versions there: none"):
+    with pytest.raises(ResourceError, match=r"no objects/lib@9 .versions there: none"):
         _mgr(tmp_path).install("objects/lib@9")
 
 

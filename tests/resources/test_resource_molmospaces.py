@@ -9,6 +9,7 @@ import re
 import subprocess
 import sys
 import tarfile
+from pathlib import Path
 
 import pytest
 
@@ -57,7 +58,7 @@ def _data(root):
         for f in files:
             rel = os.path.relpath(os.path.join(dirpath, f), root)
             if not ms.is_own_file(rel) and not rel.endswith("_complete_links"):
-                out[rel] = open(os.path.join(dirpath, f), "rb").read()
+                out[rel] = Path(dirpath, f).read_bytes()
     return out
 
 
@@ -333,7 +334,8 @@ def test_preset_installs_the_pinned_versions_into_the_assets_dir(bucket, tmp_pat
     n = sum(len(s) for s in ms.VERSIONS.values())
     assert out.count("installed ") == n
     assert (assets / "robots" / "franka_droid" / "a" / "franka_droid.xml").is_symlink()  # per file, eager
-    assert (assets / "objects" / "thor").is_symlink() and (assets / "objects" / "thor" / "b.txt").read_text() == "20251117"
+    assert (assets / "objects" / "thor").is_symlink()
+    assert (assets / "objects" / "thor" / "b.txt").read_text() == "20251117"
     assert (assets / "grasps" / "droid" / "a" / "droid.xml").is_file()  # eager
     # scenes: on demand, but (as MolmoSpaces' setup does) small datasets are extracted whole
     assert "scenes/ithor@20251217_with_occupancy (on demand, 2 of its 2 base archives extracted)" in out

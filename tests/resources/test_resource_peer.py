@@ -102,7 +102,8 @@ def test_peer_and_ours_use_each_others_installs(tmp_path):
         assert ours.linked() == VERSIONS
         assert ours.verify() == []
         assert ours.is_complete("objects/thor@1") and not ours.is_complete("scenes/ithor@1")
-        assert (tmp_path / "iA" / "objects" / "thor" / "item_1" / "item_1.xml").read_text() == "<mujoco model='thor_1'/>\n"
+        item = tmp_path / "iA" / "objects" / "thor" / "item_1" / "item_1.xml"
+        assert item.read_text() == "<mujoco model='thor_1'/>\n"
         files = ours.ensure_uid("scenes/ithor@1", "item_2")  # on demand, through our index of their tries
         assert sum(bucket.archive_gets().values()) == peer_gets + 1
         assert (tmp_path / "iA" / "scenes" / "ithor" / "item_2" / "item_2.xml").is_symlink() and files

@@ -53,7 +53,7 @@ def test_newcombe_ci_contains_estimate_and_stays_in_range_for_all_small_tables()
     for cells in itertools.product(range(4), repeat=4):
         if sum(cells) == 0:
             continue
-        both, only_a, only_b, neither = cells
+        _both, only_a, only_b, _neither = cells
         n = sum(cells)
         lo, hi = paired_diff_ci(*cells)
         diff = (only_b - only_a) / n
@@ -89,10 +89,10 @@ def test_compare_pairs_shared_episodes_with_per_task_table(tmp_path):
 def test_compare_refuses_different_benchmarks_and_unfinished_runs(tmp_path):
     a = _write_run(tmp_path / "a", {0: (True, True)})
     b = _write_run(tmp_path / "b", {0: (True, True)}, sha="cd" * 32)
-    with pytest.raises(CompareError, match="refusing to compare.*sha256 abababababab.*sha256 cdcdcdcdcdcd"):
+    with pytest.raises(CompareError, match=r"refusing to compare.*sha256 abababababab.*sha256 cdcdcdcdcdcd"):
         compare_runs(load_run(a), load_run(b))
     (b / "results.json").unlink()
-    with pytest.raises(CompareError, match="no results.json.*resume=true"):
+    with pytest.raises(CompareError, match=r"no results.json.*resume=true"):
         load_run(b)
     c = _write_run(tmp_path / "c", {5: (True, True)})
     with pytest.raises(CompareError, match="share no episodes"):
@@ -153,7 +153,7 @@ def test_compare_refuses_runs_of_different_trials(tmp_path, path, value, needle)
     """Issue 11.10: runs with different horizons, timing or eval options were paired without a word."""
     a = _write_run(tmp_path / "a", {i: (True, True) for i in range(4)}, header=TRIAL)
     b = _write_run(tmp_path / "b", {i: (False, True) for i in range(4)}, header=_changed(path, value))
-    with pytest.raises(CompareError, match="refusing to compare.*ran different trials") as info:
+    with pytest.raises(CompareError, match=r"refusing to compare.*ran different trials") as info:
         compare_runs(load_run(a), load_run(b))
     assert needle in str(info.value) and "--allow-different-trials" in str(info.value)
     rep = compare_runs(load_run(a), load_run(b), allow_different_trials=True)
@@ -178,7 +178,8 @@ def test_compare_refuses_different_per_episode_horizons_and_flags_the_rest(tmp_p
     assert "config differs: episode_timeout_s 900 vs 5" in notes  # workers and output_dir do not matter
     # a run that does not record a trial field cannot be checked on it: say so
     d = _write_run(tmp_path / "d", {i: (True, True) for i in range(4)})
-    assert any("not checked: timing, horizon, eval_options" in n for n in compare_runs(load_run(a), load_run(d))["notes"])
+    notes = compare_runs(load_run(a), load_run(d))["notes"]
+    assert any("not checked: timing, horizon, eval_options" in n for n in notes)
 
 
 def test_errored_episodes_without_a_task_type_stay_in_their_task(tmp_path):

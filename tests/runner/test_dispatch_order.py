@@ -44,7 +44,8 @@ def test_a_recorded_run_merges_a_few_shards_in_benchmark_order(tmp_path, monkeyp
 
     seen: list[int] = []
     inner = aggregate.aggregate_datasets
-    monkeypatch.setattr(aggregate, "aggregate_datasets", lambda repo_ids, *a, **k: seen.append(len(repo_ids)) or inner(repo_ids, *a, **k))
+    monkeypatch.setattr(aggregate, "aggregate_datasets",
+                        lambda repo_ids, *a, **k: seen.append(len(repo_ids)) or inner(repo_ids, *a, **k))
     out = tmp_path / "run"
     cfg = compose(["policy=random", "benchmark=pick_v1", "limit=6", "horizon=3", "workers=2", "record=true",
                    f"output_dir={out}", "progress=false"])

@@ -83,7 +83,7 @@ def test_kill_9_of_one_worker_from_outside_mid_run(executor, faulty_policy, smal
     by = {r.episode_index: r for r in res.episodes}
     assert sorted(by) == list(range(8)) and res.summary["n_errors"] == 0
     assert by[3].attempts == 2 and by[3].steps == 8
-    assert [int(p) for p in (markers / "pids-3").read_text().split()][0] == killed[0]
+    assert next(int(p) for p in (markers / "pids-3").read_text().split()) == killed[0]
     assert all(by[i].attempts == 1 for i in by if i != 3)
 
 
@@ -197,7 +197,7 @@ def test_workers_of_a_killed_molmo_eval_end_on_their_own(faulty_policy, small_be
 def test_a_failing_export_leaves_the_score_standing(faulty_policy, small_bench, tmp_path, eval_config):
     """Scores first: results.json and episodes.jsonl are final before any export step runs; an export
     that fails is an error that says the score stands and where it is; the report still runs."""
-    from molmo_lerobot.runner.evaluate import ExportError
+    from molmo_lerobot.errors import ExportError
 
     out = tmp_path / "run"
     cfg = eval_config(small_bench, out, "policy=faulty", "workers=1", "horizon=2", "limit=3",
@@ -284,8 +284,8 @@ class _ScriptedTransport:
 
 
 def _supervise(transport, n, **options):
-    from molmo_lerobot.runner.supervisor import Supervisor
     from molmo_lerobot.runner.plan import EpisodePlan
+    from molmo_lerobot.runner.supervisor import Supervisor
 
     results = []
     items = [EpisodePlan(i, {"house_index": i, "task": {"task_cls": "x"}}, 100 + i, "pick", "", 5, "cli", "")

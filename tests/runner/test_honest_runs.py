@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 
 from molmo_lerobot.cli.eval import main
-from molmo_lerobot.runner.evaluate import RunError, run_evaluation
+from molmo_lerobot.errors import RunError
+from molmo_lerobot.runner.evaluate import run_evaluation
 from molmo_lerobot.runner.rollout import horizon_with_source
 
 PICK_CLS = "molmo_lerobot.tasks.pick.PickTask"
@@ -45,8 +46,8 @@ def test_errored_and_invalid_episodes_count_in_their_task(faulty_policy, small_b
 
     bench = _bench(small_bench, tmp_path, edit)
     out = tmp_path / "run"
-    res = run_evaluation(eval_config(bench, out, *_common(faulty_policy, "limit=5", "+policy.faults={1: raise, 4: hang}",
-                                                          "episode_timeout_s=8")))
+    res = run_evaluation(eval_config(bench, out, *_common(faulty_policy, "limit=5",
+                                                          "+policy.faults={1: raise, 4: hang}", "episode_timeout_s=8")))
     assert list(res.summary["per_task"]) == ["pick"]
     pick = res.summary["per_task"]["pick"]
     assert (pick["n_episodes"], pick["n_errors"], pick["n_valid"]) == (5, 3, 2)

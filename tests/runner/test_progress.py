@@ -58,7 +58,8 @@ def test_molmo_eval_off_a_terminal_prints_plain_lines_with_steps(faulty_policy, 
     out = tmp_path / "run"
     proc = subprocess.run(
         [sys.executable, "-m", "molmo_lerobot.cli.eval", f"benchmark.path={small_bench}", "policy=faulty",
-         "workers=1", "limit=2", "horizon=40", "policy.act_sleep_s=0.05", f"policy.marker_dir={faulty_policy.marker_dir}",
+         "workers=1", "limit=2", "horizon=40", "policy.act_sleep_s=0.05",
+         f"policy.marker_dir={faulty_policy.marker_dir}",
          f"output_dir={out}", "progress_interval_s=0.5"],
         capture_output=True, text=True, timeout=600,
     )

@@ -6,7 +6,8 @@ import pytest
 from omegaconf import OmegaConf
 
 from molmo_lerobot.config import compose
-from molmo_lerobot.runner.evaluate import RunError, _make_executor, run_evaluation
+from molmo_lerobot.errors import RunError
+from molmo_lerobot.runner.evaluate import _make_executor, run_evaluation
 from molmo_lerobot.runner.ray_executor import RayExecutor
 
 

@@ -7,8 +7,8 @@ from pathlib import Path
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.config import compose
-from molmo_lerobot.runner.evaluate import run_evaluation
 from molmo_lerobot.recording import Recorder, RecorderFactory
+from molmo_lerobot.runner.evaluate import run_evaluation
 
 
 class StepCounter(Recorder):

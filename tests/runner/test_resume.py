@@ -12,7 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from molmo_lerobot.runner.evaluate import RunError, run_evaluation
+from molmo_lerobot.errors import RunError
+from molmo_lerobot.runner.evaluate import run_evaluation
 
 EVAL = [sys.executable, "-m", "molmo_lerobot.cli.eval"]
 

@@ -19,11 +19,13 @@ from molmo_lerobot.runner.run_config import MAX_PHYSICS_STEPS, config_problems, 
         (["horizon=1e99"], "horizon: expected a whole number of policy steps in 1..100000 (or null), got 1e+99"),
         (["seed=abc"], "seed: expected an integer, got 'abc'"),
         (["workers=abc"], "workers: expected a positive integer, got 'abc'"),
-        (["worker_threads=0"], "worker_threads: expected a positive integer (or null for the libraries' default), got 0"),
+        (["worker_threads=0"],
+         "worker_threads: expected a positive integer (or null for the libraries' default), got 0"),
         (["timing.policy_dt_ms=0"], "timing.policy_dt_ms: expected a positive number of milliseconds, got 0"),
         (["timing.ctrl_dt_ms=abc"], "timing.ctrl_dt_ms: expected a positive number of milliseconds, got 'abc'"),
         (["timing.ctrl_dt_ms=5"], "timing: policy_dt_ms / ctrl_dt_ms must be a whole multiple"),
-        (["+horizons.pick=1e12"], "horizons.pick: expected a positive number of seconds, got 1000000000000.0 (at most 3600)"),
+        (["+horizons.pick=1e12"],
+         "horizons.pick: expected a positive number of seconds, got 1000000000000.0 (at most 3600)"),
         (["episode_timeout_s=-1"], "episode_timeout_s: expected a positive number of seconds, got -1"),
         (["resume=maybe"], "resume: expected true or false, got 'maybe'"),
         # bounded work per episode: the run's horizon times the physics steps per policy step
@@ -49,8 +51,9 @@ def test_every_problem_is_listed_one_per_line(capsys, tmp_path):
 
 
 def test_defaults_are_valid():
-    from molmo_lerobot.config import compose
     from omegaconf import OmegaConf
+
+    from molmo_lerobot.config import compose
 
     assert config_problems(OmegaConf.to_container(compose([]), resolve=True)) == []
 

@@ -7,7 +7,8 @@ import os
 
 import pytest
 
-from molmo_lerobot.runner.evaluate import RunError, run_evaluation
+from molmo_lerobot.errors import RunError
+from molmo_lerobot.runner.evaluate import run_evaluation
 from molmo_lerobot.runner.fingerprint import checkpoint_sha256, policy_checkpoints
 
 

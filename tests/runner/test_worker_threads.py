@@ -30,7 +30,8 @@ def test_cap_threads_sets_torch_threads_before_or_after_its_import(torch_first):
 
 
 def test_null_leaves_the_default():
-    code = "from molmo_lerobot.cpu_threads import cap_threads\ncap_threads(None)\nimport torch\nprint(torch.get_num_threads())"
+    code = ("from molmo_lerobot.cpu_threads import cap_threads\ncap_threads(None)\n"
+            "import torch\nprint(torch.get_num_threads())")
     assert _threads_in_fresh_process(code, env_threads="2") == 2
 
 

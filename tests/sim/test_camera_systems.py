@@ -14,16 +14,16 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
-from molmo_lerobot.cameras.base import choose_camera_system  # noqa: E402
-from molmo_lerobot.context import RunContext  # noqa: E402
-from molmo_lerobot.paths import data_path  # noqa: E402
-from molmo_lerobot.plugins import Plugins  # noqa: E402
-from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
-from molmo_lerobot.sim.env import Timing  # noqa: E402
+from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.cameras.base import choose_camera_system
+from molmo_lerobot.context import RunContext
+from molmo_lerobot.paths import data_path
+from molmo_lerobot.plugins import Plugins
+from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.sim.env import Timing
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tasks"))
-from droid_variants import droid_episode  # noqa: E402
+from droid_variants import droid_episode
 
 
 def _pick(k: int = 0) -> dict:
@@ -94,7 +94,7 @@ def test_randomized_placement_is_reproducible_per_episode():
         target = a["task"]["pickup_obj_name"]
         gripper = "robot_0/gripper/base"
         centre = (e1.body_pose(target)[:3] + e1.data.site_xpos[e1.robot.tcp_site]) / 2  # objects + TCP
-        for name, fov, (near, far) in zip(EXO, (72, 72, 140), ((0.2, 0.8), (0.2, 0.8), (0.2, 0.5))):
+        for name, fov, (near, far) in zip(EXO, (72, 72, 140), ((0.2, 0.8), (0.2, 0.8), (0.2, 0.5)), strict=True):
             c = e1.model.camera(name).id
             pos, rot = e1.data.cam_xpos[c], e1.data.cam_xmat[c].reshape(3, 3)
             to_centre = (centre - pos) / np.linalg.norm(centre - pos)

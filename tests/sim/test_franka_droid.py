@@ -15,19 +15,19 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
-from molmo_lerobot.config import compose  # noqa: E402
-from molmo_lerobot.context import RunContext  # noqa: E402
-from molmo_lerobot.molmospaces.user import register_user_grasp_library  # noqa: E402
-from molmo_lerobot.paths import data_path  # noqa: E402
-from molmo_lerobot.plugins import Plugins  # noqa: E402
-from molmo_lerobot.robots import franka_droid  # noqa: E402
-from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
-from molmo_lerobot.runner.evaluate import run_evaluation  # noqa: E402
-from molmo_lerobot.sim.env import Timing  # noqa: E402
+from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.config import compose
+from molmo_lerobot.context import RunContext
+from molmo_lerobot.molmospaces.user import register_user_grasp_library
+from molmo_lerobot.paths import data_path
+from molmo_lerobot.plugins import Plugins
+from molmo_lerobot.robots import franka_droid
+from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.runner.evaluate import run_evaluation
+from molmo_lerobot.sim.env import Timing
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tasks"))
-from droid_variants import OPEN_DRIVERS, droid_episode, on_pedestal  # noqa: E402
+from droid_variants import OPEN_DRIVERS, droid_episode, on_pedestal
 
 #: MolmoSpaces' FrankaRobotConfig.init_qpos and a wrist camera as their benchmark files write it
 MS_INIT_QPOS = {"base": [], "arm": [0, -0.7853, 0, -2.35619, 0, 1.57079, 0.0], "gripper": [0.00296, 0.00296]}
@@ -46,7 +46,8 @@ def ms_pick_episode(k: int = 0) -> dict:
     raw["robot"] = {"robot_name": "franka_droid", "init_qpos": copy.deepcopy(MS_INIT_QPOS)}
     exo = next(c for c in raw["cameras"] if c["type"] == "exocentric")
     raw["cameras"] = [MS_WRIST, {**exo, "name": "exo_camera_1"}]
-    raw["source"] = {"h5_file": "none.h5", "traj_key": "traj_0", "camera_system_class": "FrankaRandomizedDroidCameraSystem"}
+    raw["source"] = {"h5_file": "none.h5", "traj_key": "traj_0",
+                     "camera_system_class": "FrankaRandomizedDroidCameraSystem"}
     return raw
 
 
@@ -60,8 +61,8 @@ def _env(raw: dict, camera_system: str | None = None, run: RunContext | None = N
 
 def _pad_gap(env) -> float:
     m, d = env.model, env.data
-    l, r = (m.geom(f"robot_0/gripper/{s}_fingerpad_collision").id for s in ("left", "right"))
-    return float(np.linalg.norm(d.geom_xpos[l] - d.geom_xpos[r]))
+    left, right = (m.geom(f"robot_0/gripper/{s}_fingerpad_collision").id for s in ("left", "right"))
+    return float(np.linalg.norm(d.geom_xpos[left] - d.geom_xpos[right]))
 
 
 def test_molmospaces_names_resolve():
@@ -152,7 +153,8 @@ def test_tcp_is_the_pinch_point_in_the_unified_convention():
         mujoco.mj_forward(m, d)
         across = _in_tcp(d, site, d.geom_xpos[pads[0]])[0] - _in_tcp(d, site, d.geom_xpos[pads[1]])[0]
         assert abs(across[1]) == pytest.approx(np.linalg.norm(across), rel=1e-3)  # fingers open along ±y
-        assert max(np.abs(_in_tcp(d, site, _geom_points(m, d, g))[:, 1]).max() for g in tips) <= ROBOTIQ_2F85.open_half_span
+        widest = max(np.abs(_in_tcp(d, site, _geom_points(m, d, g))[:, 1]).max() for g in tips)
+        assert widest <= ROBOTIQ_2F85.open_half_span
         palm = _in_tcp(d, site, _geom_points(m, d, m.geom("robot_0/gripper/hand_collision").id))[:, 2].max()
         assert -palm == pytest.approx(ROBOTIQ_2F85.palm_to_tcp, abs=2e-3)
         base = d.xpos[m.body("robot_0/gripper/base").id]

@@ -16,23 +16,23 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
-from molmo_lerobot.cameras.franka_eval import (  # noqa: E402
+from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.cameras.franka_eval import (
     FrankaEvalCameraSystem,
     episode_camera_seed,
     exo_ranges,
     wrist_noise,
 )
-from molmo_lerobot.cameras.options import camera_option_problems, episode_camera_system  # noqa: E402
-from molmo_lerobot.context import RunContext  # noqa: E402
-from molmo_lerobot.paths import data_path  # noqa: E402
-from molmo_lerobot.plugins import Plugins  # noqa: E402
-from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
-from molmo_lerobot.sim import env as sim_env  # noqa: E402
-from molmo_lerobot.sim.env import Timing  # noqa: E402
+from molmo_lerobot.cameras.options import camera_option_problems, episode_camera_system
+from molmo_lerobot.context import RunContext
+from molmo_lerobot.paths import data_path
+from molmo_lerobot.plugins import Plugins
+from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.sim import env as sim_env
+from molmo_lerobot.sim.env import Timing
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tasks"))
-from droid_variants import droid_episode  # noqa: E402
+from droid_variants import droid_episode
 
 
 def _pick(k: int = 0) -> dict:

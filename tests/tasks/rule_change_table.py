@@ -19,13 +19,13 @@ import sys
 from pathlib import Path
 
 from molmo_lerobot.benchmark.task_specs import parse_episode
-from molmo_lerobot.paths import data_path
 from molmo_lerobot.context import RunContext
+from molmo_lerobot.paths import data_path
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.scripted import ScriptedExpert
 from molmo_lerobot.runner.episode_env import build_env
-from molmo_lerobot.runner.rollout import resolve_horizon, rollout
 from molmo_lerobot.runner.plan import episode_seed
+from molmo_lerobot.runner.rollout import resolve_horizon, rollout
 from molmo_lerobot.sim.env import Timing
 
 

@@ -9,12 +9,12 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.benchmark.generate_articulated import generate_benchmark  # noqa: E402
-from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
-from molmo_lerobot.context import RunContext  # noqa: E402
-from molmo_lerobot.plugins import Plugins  # noqa: E402
-from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
-from molmo_lerobot.sim.env import Timing  # noqa: E402
+from molmo_lerobot.benchmark.generate_articulated import generate_benchmark
+from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.context import RunContext
+from molmo_lerobot.plugins import Plugins
+from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.sim.env import Timing
 
 
 @pytest.fixture(scope="module")
@@ -99,7 +99,7 @@ def test_custom_threshold_is_used_and_reported(plugins, open_episodes):
 def test_start_state_list_gives_the_named_joint_its_first_value(plugins, open_episodes):
     """MolmoSpaces reads ``joint_start_position[0]`` and sets ``joint_name`` only."""
     raw = next(e for e in open_episodes if e["task"]["pickup_obj_name"] == "kitchen_hinge_cabinet")
-    spec, env, task = _setup(plugins, raw, joint_start_position=[-0.3, 9.0])  # the second value is ignored
+    _spec, env, task = _setup(plugins, raw, joint_start_position=[-0.3, 9.0])  # the second value is ignored
     m, q = env.model, -0.3
     qs = {m.joint(j).name: float(env.data.qpos[m.jnt_qposadr[j]]) for j in task.joints}
     assert qs.pop(m.joint(task.joint).name) == pytest.approx(q)

@@ -9,14 +9,14 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.benchmark.generate_articulated import generate_benchmark  # noqa: E402
-from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
-from molmo_lerobot.context import RunContext  # noqa: E402
-from molmo_lerobot.policies.base import EpisodeContext  # noqa: E402
-from molmo_lerobot.policies.scripted import ScriptedExpert  # noqa: E402
-from molmo_lerobot.runner.rollout import resolve_horizon, rollout  # noqa: E402
-from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
-from molmo_lerobot.sim.env import Timing  # noqa: E402
+from molmo_lerobot.benchmark.generate_articulated import generate_benchmark
+from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.context import RunContext
+from molmo_lerobot.policies.base import EpisodeContext
+from molmo_lerobot.policies.scripted import ScriptedExpert
+from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.runner.rollout import resolve_horizon, rollout
+from molmo_lerobot.sim.env import Timing
 
 
 def _run(raw: dict, policy, control: str | None = None) -> tuple[bool, float]:

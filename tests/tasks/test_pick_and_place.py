@@ -13,16 +13,17 @@ from scipy.spatial.transform import Rotation
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES  # noqa: E402
-from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
-from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
-from molmo_lerobot.context import RunContext  # noqa: E402
-from molmo_lerobot.plugins import Plugins  # noqa: E402
-from molmo_lerobot.robots.franka import FINGER_TRAVEL  # noqa: E402
-from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
-from molmo_lerobot.sim.env import Timing  # noqa: E402
-from molmo_lerobot.sim import geometry  # noqa: E402
-from task_scenes import make_task_env, put_in_receptacle, settle  # noqa: E402
+from task_scenes import make_task_env, put_in_receptacle, settle
+
+from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES
+from molmo_lerobot.benchmark.generate import generate_benchmark
+from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.context import RunContext
+from molmo_lerobot.plugins import Plugins
+from molmo_lerobot.robots.franka import FINGER_TRAVEL
+from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.sim import geometry
+from molmo_lerobot.sim.env import Timing
 
 
 def _episode(task: str, seed: int = 3) -> dict:
@@ -137,7 +138,7 @@ def test_yaw_is_ignored(pnp):
 
 def test_polygon_gap():
     square = geometry.polygon(np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float))
-    shifted = geometry.polygon(np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float) + [1.25, 0.0])
+    shifted = geometry.polygon(np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float) + np.array([1.25, 0.0]))
     assert geometry.gap(square, geometry.polygon(np.array([[0.5, 0.5], [1.5, 0.5], [1.5, 1.5]]))) == 0.0
     assert geometry.gap(square, shifted) == pytest.approx(0.25)
     a = (np.zeros(3), np.ones(3))
@@ -240,7 +241,7 @@ def test_bad_receptacle_is_named():
     env = build_env(spec, Timing(), run)
     try:
         env.reset(0)
-        with pytest.raises(ValueError, match="task.place_receptacle_name: no body 'unicorn'"):
+        with pytest.raises(ValueError, match=r"task.place_receptacle_name: no body 'unicorn'"):
             Plugins().task_type("pick_and_place").create(spec, env)
     finally:
         env.close()

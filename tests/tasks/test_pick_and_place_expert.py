@@ -8,15 +8,15 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
-from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
-from molmo_lerobot.context import RunContext  # noqa: E402
-from molmo_lerobot.plugins import Plugins  # noqa: E402
-from molmo_lerobot.policies.base import EpisodeContext  # noqa: E402
-from molmo_lerobot.policies.scripted_place import ScriptedPlace  # noqa: E402
-from molmo_lerobot.runner.rollout import rollout  # noqa: E402
-from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
-from molmo_lerobot.sim.env import Timing  # noqa: E402
+from molmo_lerobot.benchmark.generate import generate_benchmark
+from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.context import RunContext
+from molmo_lerobot.plugins import Plugins
+from molmo_lerobot.policies.base import EpisodeContext
+from molmo_lerobot.policies.scripted_place import ScriptedPlace
+from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.runner.rollout import rollout
+from molmo_lerobot.sim.env import Timing
 
 HORIZON = 220  # the script takes about 150 policy steps; the rest checks that the result lasts
 

@@ -11,13 +11,13 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS  # noqa: E402
-from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
-from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
-from molmo_lerobot.context import RunContext  # noqa: E402
-from molmo_lerobot.robots.franka import FINGER_TRAVEL  # noqa: E402
-from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
-from molmo_lerobot.sim.env import Timing  # noqa: E402
+from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
+from molmo_lerobot.benchmark.generate import generate_benchmark
+from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.context import RunContext
+from molmo_lerobot.robots.franka import FINGER_TRAVEL
+from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.sim.env import Timing
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +55,7 @@ def _lift_by(env, task, metres):
 
 
 def test_start_state_is_not_success(setup):
-    env, task = setup
+    _env, task = setup
     assert task.lift() == pytest.approx(0.0, abs=1e-9) and not task.success() and task.reward() == 0.0
 
 
@@ -123,7 +123,7 @@ def test_unknown_pick_object_is_named(raw_episode):
     env = build_env(spec, Timing(), run)
     try:
         env.reset(0)
-        with pytest.raises(ValueError, match="task.pickup_obj_name: no body 'unicorn'"):
+        with pytest.raises(ValueError, match=r"task.pickup_obj_name: no body 'unicorn'"):
             plugins.task_type("pick").create(spec, env)
     finally:
         env.close()

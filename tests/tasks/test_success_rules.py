@@ -12,15 +12,16 @@ from scipy.spatial.transform import Rotation
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.benchmark.generate import generate_benchmark  # noqa: E402
-from molmo_lerobot.benchmark.generate_articulated import generate_benchmark as generate_articulated  # noqa: E402
-from molmo_lerobot.benchmark.task_specs import parse_episode  # noqa: E402
-from molmo_lerobot.context import RunContext  # noqa: E402
-from molmo_lerobot.plugins import Plugins  # noqa: E402
-from molmo_lerobot.runner.episode_env import build_env  # noqa: E402
-from molmo_lerobot.sim.env import Timing  # noqa: E402
-from molmo_lerobot.tasks.pick_and_place import tilt  # noqa: E402
-from task_scenes import hold, make_task_env, put_in_receptacle, settle  # noqa: E402
+from task_scenes import hold, make_task_env, put_in_receptacle, settle
+
+from molmo_lerobot.benchmark.generate import generate_benchmark
+from molmo_lerobot.benchmark.generate_articulated import generate_benchmark as generate_articulated
+from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.context import RunContext
+from molmo_lerobot.plugins import Plugins
+from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.sim.env import Timing
+from molmo_lerobot.tasks.pick_and_place import tilt
 
 
 @pytest.fixture
@@ -116,7 +117,7 @@ def test_carry_forward_of_a_supported_pose(pnp, monkeypatch):
     monkeypatch.setattr(task, "supported_by_fallback", lambda: False)
     pose = env.body_pose(task.object_name)
     for dz, ok in ((0.0045, True), (0.0055, False)):
-        env._place(task.object_name, pose + [0, 0, dz, 0, 0, 0, 0])
+        env._place(task.object_name, pose + np.array([0, 0, dz, 0, 0, 0, 0]))
         mujoco.mj_forward(env.model, env.data)
         assert task.supported() is ok, dz
 
@@ -156,7 +157,7 @@ def test_next_to_without_a_supporting_contact_falls_back_to_boxes(dz, ok):
                   for c, s in [geometry.aabb(m, d, [g])])
         centre, size = geometry.body_aabb(m, d, obj)
         rise = top + dz - (centre[2] - size[2] / 2)
-        env._place(task.object_name, env.body_pose(task.object_name) + [0, 0, rise, 0, 0, 0, 0])
+        env._place(task.object_name, env.body_pose(task.object_name) + np.array([0, 0, rise, 0, 0, 0, 0]))
         mujoco.mj_forward(m, d)
         assert task.supporting_root(obj) is None
         task.min_gap, task.max_gap = 0.0, 10.0
@@ -251,7 +252,7 @@ def test_any_inst_of_category_needs_a_category(articulated):
     env.reset(0)
     env.scene_metadata["objects"].get(raw["task"]["pickup_obj_name"], {}).pop("category", None)
     try:
-        with pytest.raises(ValueError, match="task.any_inst_of_category: no category"):
+        with pytest.raises(ValueError, match=r"task.any_inst_of_category: no category"):
             Plugins().task_type("open").create(spec, env)
     finally:
         env.close()

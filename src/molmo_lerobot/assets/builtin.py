@@ -69,7 +69,8 @@ class BuiltinObject:
         if self.shape not in expected:
             raise ValueError(f"object {self.uid!r}: shape {self.shape!r} is not one of {SHAPES}")
         if len(self.size) != expected[self.shape] or min(self.size) <= 0:
-            raise ValueError(f"object {self.uid!r}: {self.shape} needs {expected[self.shape]} positive sizes, got {self.size}")
+            raise ValueError(f"object {self.uid!r}: {self.shape} needs {expected[self.shape]} positive sizes, "
+                             f"got {self.size}")
 
     @property
     def half_extents(self) -> tuple[float, float, float]:
@@ -126,18 +127,22 @@ GREY = (0.6, 0.62, 0.65, 1.0)
 BUILTIN_OBJECTS: dict[str, BuiltinObject] = dict(
     [
         _obj("builtin_red_block", "block", "box", (0.025, 0.025, 0.025), RED, 0.08, "red wooden block", "block.n.01"),
-        _obj("builtin_green_block", "block", "box", (0.022, 0.022, 0.022), GREEN, 0.06, "green wooden block", "block.n.01"),
+        _obj("builtin_green_block", "block", "box", (0.022, 0.022, 0.022), GREEN, 0.06, "green wooden block",
+             "block.n.01"),
         _obj("builtin_blue_block", "block", "box", (0.027, 0.027, 0.027), BLUE, 0.1, "blue wooden block", "block.n.01"),
-        _obj("builtin_yellow_brick", "brick", "box", (0.02, 0.045, 0.025), YELLOW, 0.09, "yellow toy brick", "brick.n.01"),
+        _obj("builtin_yellow_brick", "brick", "box", (0.02, 0.045, 0.025), YELLOW, 0.09, "yellow toy brick",
+             "brick.n.01"),
         _obj("builtin_red_can", "can", "cylinder", (0.03, 0.055), RED, 0.15, "red soda can", "can.n.01"),
         _obj("builtin_grey_can", "can", "cylinder", (0.032, 0.04), GREY, 0.2, "grey tin can", "can.n.01"),
         _obj("builtin_red_mug", "mug", "cylinder", (0.034, 0.045), RED, 0.15, "red ceramic mug", "mug.n.04"),
         _obj("builtin_blue_mug", "mug", "cylinder", (0.034, 0.045), BLUE, 0.15, "blue ceramic mug", "mug.n.04"),
         _obj("builtin_white_cup", "cup", "cylinder", (0.029, 0.05), WHITE, 0.05, "white paper cup", "cup.n.01"),
-        _obj("builtin_green_bottle", "bottle", "cylinder", (0.03, 0.08), GREEN, 0.2, "green plastic bottle", "bottle.n.01"),
+        _obj("builtin_green_bottle", "bottle", "cylinder", (0.03, 0.08), GREEN, 0.2, "green plastic bottle",
+             "bottle.n.01"),
         _obj("builtin_yellow_ball", "ball", "sphere", (0.032,), YELLOW, 0.06, "yellow tennis ball", "tennis_ball.n.01"),
         _obj("builtin_orange", "fruit", "sphere", (0.034,), ORANGE, 0.13, "orange fruit", "orange.n.01"),
-        _obj("builtin_purple_marker", "marker", "capsule", (0.015, 0.05), PURPLE, 0.04, "purple felt marker", "marker.n.03"),
+        _obj("builtin_purple_marker", "marker", "capsule", (0.015, 0.05), PURPLE, 0.04, "purple felt marker",
+             "marker.n.03"),
     ]
 )
 

@@ -92,7 +92,8 @@ class AssetCatalog:
         for lib in self.libraries:
             if lib.name == name:
                 return lib
-        raise AssetError(f"no asset library named {name!r} (registered: {', '.join(l.name for l in self.libraries)})")
+        registered = ", ".join(lib.name for lib in self.libraries)
+        raise AssetError(f"no asset library named {name!r} (registered: {registered})")
 
     # -- lookups -----------------------------------------------------------------------
     def owners(self, uid: str) -> list[AssetLibrary]:
@@ -108,7 +109,7 @@ class AssetCatalog:
         known = [u for lib in self.libraries if lib.enumerable for u in lib.uids()]
         close = difflib.get_close_matches(uid, known, n=3)
         hint = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
-        return AssetError(f"unknown asset UID {uid!r} in libraries {[l.name for l in self.libraries]}{hint}")
+        return AssetError(f"unknown asset UID {uid!r} in libraries {[lib.name for lib in self.libraries]}{hint}")
 
     def annotation(self, uid: str) -> dict:
         """The union of ``uid``'s metadata over every library (higher priority wins per field)."""

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.fileio import atomic_open
 
 if TYPE_CHECKING:
@@ -30,7 +31,7 @@ if TYPE_CHECKING:
 KEY = "transforms"
 
 
-class GraspError(LookupError):
+class GraspError(MolmoError, LookupError):
     """No grasps for a UID/robot, or a grasp file is malformed (the message names the file)."""
 
 

@@ -28,15 +28,13 @@ import zstandard
 
 from molmo_lerobot import fileio
 from molmo_lerobot.assets.grasps import BuiltinGraspLibrary, GraspLibrary
+from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetCatalog
 
-METADATA_FIELDS = ("assetId", "category", "description", "description_long", "description_short", "synset",
-                   "mass", "boundingBox")
 
-
-class AssetError(LookupError):
+class AssetError(MolmoError, LookupError):
     """An unknown UID or a malformed library; the message names the file, UID and field."""
 
 
@@ -87,7 +85,7 @@ class AssetLibrary(ABC):
         """The grasp library that ships with this asset library, if any."""
         return None
 
-    def fetch_grasps(self, uid: str) -> None:
+    def fetch_grasps(self, uid: str) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
         """Make ``uid``'s grasp files local before a grasp lookup (nothing to do unless they are packed)."""
 
     def _unknown(self, uid: str) -> AssetError:

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import re
 
+from molmo_lerobot.errors import MolmoError
+
 NAMESPACE_RE = re.compile(r"[-_\w][-_\w/]*[-_\w]+")
 
 
-class NamespaceError(ValueError):
+class NamespaceError(MolmoError, ValueError):
     """An invalid namespace or dataset id; the message names it."""
 
 
@@ -27,7 +29,8 @@ def parse_dataset_id(dataset_id: str) -> tuple[str | None, str]:
         raise NamespaceError(f"invalid dataset id {dataset_id!r}: expected [namespace/]name")
     namespace, _, name = dataset_id.rpartition("/")
     if not re.fullmatch(r"[-_.\w]+", name) or name in (".", ".."):
-        raise NamespaceError(f"invalid dataset id {dataset_id!r}: name {name!r} must use letters, digits, '-', '_', '.'")
+        raise NamespaceError(f"invalid dataset id {dataset_id!r}: name {name!r} must use letters, digits, "
+                             "'-', '_', '.'")
     if namespace:
         validate_namespace_id(namespace)
     return namespace or None, name

@@ -27,8 +27,8 @@ from molmo_lerobot.assets.builtin import (
     BuiltinObject,
     BuiltinReceptacle,
 )
-from molmo_lerobot.cameras.base import look_rotation, mat_to_quat
 from molmo_lerobot.fileio import atomic_write
+from molmo_lerobot.poses import look_rotation, mat_to_quat
 from molmo_lerobot.robots.franka import Franka
 from molmo_lerobot.sim.tabletop import ProceduralTabletop, ProceduralTabletopReceptacles
 

@@ -18,7 +18,6 @@ same trial would count twice).
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import re
@@ -27,10 +26,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pydantic import BaseModel, ValidationError
+from pydantic import ValidationError
 
 from molmo_lerobot.benchmark.schema import BenchmarkMetadata, EpisodeSpec
 from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.hashing import canonical_json, content_sha256
 
 if TYPE_CHECKING:
     from molmo_lerobot.plugins import Plugins
@@ -66,7 +67,7 @@ class Problem:
         return ": ".join([*parts, self.message])
 
 
-class BenchmarkError(ValueError):
+class BenchmarkError(MolmoError, ValueError):
     """A benchmark that cannot be loaded or used; ``problems`` lists every reason."""
 
     def __init__(self, problems: list[Problem]) -> None:
@@ -104,13 +105,6 @@ class Benchmark:
 # Hashing -----------------------------------------------------------------------------------
 
 
-def canonical_json(obj: Any) -> str:
-    """JSON with sorted keys and no whitespace: equal content gives equal text."""
-    if isinstance(obj, BaseModel):
-        obj = obj.model_dump(mode="json")
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
-
-
 def benchmark_sha256(episodes: list[EpisodeSpec]) -> str:
     """SHA-256 of the canonical JSON of the validated episodes, in order.
 
@@ -118,7 +112,7 @@ def benchmark_sha256(episodes: list[EpisodeSpec]) -> str:
     defaults and the file layout do not change it; any change of content does.
     """
     data = [ep.model_dump(mode="json") for ep in episodes]
-    return hashlib.sha256(canonical_json(data).encode("utf-8")).hexdigest()
+    return content_sha256(data).hex()
 
 
 # Loading -----------------------------------------------------------------------------------

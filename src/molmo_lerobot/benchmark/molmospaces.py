@@ -38,14 +38,6 @@ SHARED_TASK_CLS: dict[str, tuple[str, ...]] = {
 #: The task type used for a shared class when an episode gives no ``task_type``.
 SHARED_TASK_DEFAULT = {cls: names[0] for cls, names in SHARED_TASK_CLS.items()}
 
-#: MolmoSpaces robot names that denote a fixed-base Franka arm with a parallel gripper
-#: (``franka_droid``: the DROID set-up; ``franka_cap``: the same arm, other cameras/gripper).
-FRANKA_ROBOT_NAMES = ("franka_droid", "franka_cap")
-
-#: MolmoSpaces robots with a mobile base (door opening, navigation); no built-in plugin.
-MOBILE_ROBOT_NAMES = ("rby1", "rby1m")
-
-
 def task_aliases(task_name: str) -> tuple[str, ...]:
     """Dotted ``task_cls`` paths a task plugin named ``task_name`` should register as aliases.
 

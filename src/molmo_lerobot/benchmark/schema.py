@@ -14,10 +14,8 @@ validation against the installed plugins, not parsing, reports it (with a "did y
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal
 
 from pydantic import (
     AfterValidator,
@@ -139,10 +137,7 @@ def _camera_tag(v: Any) -> str | None:
 
 
 CameraSpec = Annotated[
-    Union[
-        Annotated[RobotMountedCameraSpec, Tag("robot_mounted")],
-        Annotated[ExocentricCameraSpec, Tag("exocentric")],
-    ],
+    Annotated[RobotMountedCameraSpec, Tag("robot_mounted")] | Annotated[ExocentricCameraSpec, Tag("exocentric")],
     Discriminator(
         _camera_tag,
         custom_error_type="camera_type",
@@ -327,9 +322,3 @@ class BenchmarkMetadata(_Model):
     camera_system_class: str | None = None
     source_data_date: str | None = None
     benchmark_created_date: str | None = None
-
-
-def episode_digest(episode: EpisodeSpec | dict[str, Any]) -> bytes:
-    """SHA-256 of an episode's content (its JSON, keys sorted): what seeds its randomizations."""
-    data = episode.model_dump(mode="json") if isinstance(episode, BaseModel) else episode
-    return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).digest()

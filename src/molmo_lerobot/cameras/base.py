@@ -15,7 +15,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from molmo_lerobot.benchmark.schema import episode_digest
+from molmo_lerobot.hashing import episode_digest
 
 STANDARD = "standard"
 
@@ -78,24 +78,3 @@ def episode_rng(episode: Any, stream: int = 0) -> np.random.Generator:
     digest = episode_digest(episode)
     return np.random.default_rng([*digest[:16], stream] if stream else list(digest[:16]))
 
-
-def look_rotation(forward: Sequence[float], up: Sequence[float]) -> np.ndarray:
-    """Rotation matrix of a MuJoCo camera (looks along -z, +y up) looking along ``forward``."""
-    f = np.asarray(forward, dtype=np.float64)
-    u = np.asarray(up, dtype=np.float64)
-    if np.linalg.norm(f) < 1e-9:
-        raise ValueError("camera forward direction is zero")
-    f = f / np.linalg.norm(f)
-    x = np.cross(f, u)
-    if np.linalg.norm(x) < 1e-6:
-        raise ValueError(f"camera up {list(u)} is parallel to its forward direction {list(f)}")
-    x /= np.linalg.norm(x)
-    y = np.cross(-f, x)
-    return np.column_stack([x, y, -f])
-
-
-def mat_to_quat(mat: np.ndarray) -> list[float]:
-    """A rotation matrix as a wxyz quaternion."""
-    quat = np.zeros(4)
-    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(mat, dtype=np.float64).reshape(9))
-    return quat.tolist()

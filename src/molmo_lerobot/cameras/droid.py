@@ -1,6 +1,6 @@
 """DROID camera systems for ``franka_droid`` (a camera plugin), as MolmoSpaces configures them
-(``molmo_spaces/configs/camera_configs.py``); MolmoSpaces' eval cameras, built on the same parts,
-are in :mod:`molmo_lerobot.cameras.franka_eval`.
+(``molmo_spaces/configs/camera_configs.py``), and MolmoSpaces' eval cameras
+(:mod:`molmo_lerobot.cameras.franka_eval`), both built on :mod:`molmo_lerobot.cameras.franka_mounts`.
 
 ``FrankaDroidCameraSystem`` (alias ``droid``): fixed cameras, no noise —
 
@@ -30,30 +30,26 @@ from typing import Any
 
 import mujoco
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.benchmark.schema import episode_digest
-from molmo_lerobot.cameras.base import CameraSystem, episode_rng, look_rotation, mat_to_quat
+from molmo_lerobot.cameras.base import CameraSystem, episode_rng
+from molmo_lerobot.cameras.franka_eval import FrankaEvalCameraSystem
+from molmo_lerobot.cameras.franka_mounts import (
+    EXO_CAMERA_1,
+    MountNoise,
+    add_wrist,
+    arm_root,
+    gripper_body,
+    noisy_mount,
+    place_until_seen,
+    task_objects,
+    wrist_mount,
+)
+from molmo_lerobot.hashing import episode_digest
+from molmo_lerobot.poses import look_rotation, mat_to_quat
 
-WRIST_MJCF_NAME = "gripper/wrist_camera"
-ARM_ROOT = "fr3_link0"
-#: DROID's shoulder camera: offset and wxyz quaternion in fr3_link0's frame, fov
-EXO_CAMERA_1 = ((0.1, 0.57, 0.66), (-0.3633, -0.1241, 0.4263, 0.8191), 71.0)
 FIXED_WRIST_FOV = 56.74
 RANDOM_WRIST_FOV = 52.0
-
-
-@dataclass(frozen=True)
-class MountNoise:
-    """Noise of a camera on its mount: fov (deg, added), position (m, per axis of the camera's
-    frame) and orientation (deg, ± per x/y/z Euler angle, applied in the camera's frame)."""
-
-    fov: tuple[float, float]
-    pos: tuple[tuple[float, float, float], tuple[float, float, float]]
-    rot_deg: tuple[float, float, float]
-
-
 RANDOM_WRIST_NOISE = MountNoise((-4.0, 4.0), ((-0.015, -0.005, -0.01), (0.015, 0.005, 0.01)), (8.0, 4.0, 4.0))
 
 
@@ -75,62 +71,6 @@ RANDOM_EXO_CAMERAS = (
     ExoDraw("exo_camera_2", (0.2, 0.8), (0.05, 0.6), (64.0, 72.0), 100),
     ExoDraw("exo_camera_3", (0.2, 0.5), (0.1, 0.6), (137.0, 140.0), 20),
 )
-#: the least fraction of an exocentric camera's pixels each task object and the gripper must cover
-MIN_VISIBLE_FRACTION = 1e-4
-
-
-def wrist_mount(world: mujoco.MjSpec) -> mujoco.MjsCamera:
-    found = [c for c in world.cameras if c.name == WRIST_MJCF_NAME or c.name.endswith("/" + WRIST_MJCF_NAME)]
-    if len(found) != 1:
-        raise ValueError(f"camera system: the robot has no (unique) {WRIST_MJCF_NAME!r} camera; "
-                         "DROID camera systems need franka_droid")
-    return found[0]
-
-
-def arm_root(find_body: Callable[[str], mujoco.MjsBody | None]) -> mujoco.MjsBody:
-    body = find_body(ARM_ROOT)
-    if body is None:
-        raise ValueError(f"camera system: no body {ARM_ROOT!r} (DROID camera systems need franka_droid)")
-    return body
-
-
-def noisy_mount(pos: Sequence[float], quat: Sequence[float], fov: float, noise: MountNoise,
-                rng: Any) -> tuple[np.ndarray, np.ndarray, float]:
-    """A mounted camera's pose (position, wxyz quaternion in its parent's frame) and fov with
-    ``noise`` drawn from ``rng`` in MolmoSpaces' order: fov, position, orientation."""
-    fov = fov + rng.uniform(*noise.fov)
-    rot = Rotation.from_quat(np.asarray(quat, dtype=np.float64), scalar_first=True)
-    pos = np.asarray(pos, dtype=np.float64) + rot.apply(rng.uniform(*noise.pos, size=3))
-    limit = np.asarray(noise.rot_deg, dtype=np.float64)
-    rot = rot * Rotation.from_euler("xyz", rng.uniform(-limit, limit, size=3), degrees=True)
-    return pos, rot.as_quat(scalar_first=True), float(fov)
-
-
-def gripper_body(env: Any) -> str:
-    """The body holding the robot's TCP site (``franka_droid``: ``gripper/base``): the gripper the
-    exocentric cameras must see."""
-    return env.model.body(int(env.model.site_bodyid[env.robot.tcp_site])).name
-
-
-def place_until_seen(env: Any, camera: str, must_see: Sequence[str], attempts: int,
-                     draw: Callable[[], tuple[Sequence[float], Sequence[float], float]],
-                     system: str) -> tuple[list[float], list[float], float]:
-    """Set ``camera`` (a world camera of the probe scene ``env``) to ``draw()``'s pose until every
-    body of ``must_see`` covers :data:`MIN_VISIBLE_FRACTION` of its image, at most ``attempts``
-    times; the pose that passed, or a ``ValueError`` naming ``system`` when none did."""
-    cid = env.model.camera(camera).id
-    for _ in range(attempts):
-        pos, quat, fovy = draw()
-        env.model.cam_pos[cid], env.model.cam_quat[cid], env.model.cam_fovy[cid] = pos, quat, fovy
-        if min(env.visible_fractions(camera, must_see).values()) >= MIN_VISIBLE_FRACTION:
-            return [float(v) for v in pos], [float(v) for v in quat], float(fovy)
-    raise ValueError(f"{system}: no placement of {camera} in {attempts} draws sees all of {list(must_see)} "
-                     f"(each must cover {MIN_VISIBLE_FRACTION:g} of the image)")
-
-
-def add_wrist(world: mujoco.MjSpec, pos: Sequence[float], quat: Sequence[float], fov: float) -> None:
-    mount = wrist_mount(world)
-    mount.parent.add_camera(name="wrist_camera", pos=list(pos), quat=list(quat), fovy=float(fov))
 
 
 class FrankaDroidCameraSystem(CameraSystem):
@@ -146,17 +86,6 @@ class FrankaDroidCameraSystem(CameraSystem):
         offset, quat, fov = EXO_CAMERA_1
         arm_root(find_body).add_camera(name="exo_camera_1", pos=list(offset), quat=list(quat), fovy=fov)
         return ["wrist_camera", "exo_camera_1"]
-
-
-def task_objects(episode: Any) -> list[str]:
-    """The bodies the exocentric cameras must see: ``task_relevant_objects``, else the task's
-    target, receptacle and other receptacles."""
-    if episode.task_relevant_objects:
-        return list(dict.fromkeys(episode.task_relevant_objects))
-    task = episode.task
-    names = [getattr(task, "pickup_obj_name", None), getattr(task, "place_receptacle_name", None),
-             *(getattr(task, "other_receptacle_names", None) or [])]
-    return list(dict.fromkeys(n for n in names if n))
 
 
 class FrankaRandomizedDroidCameraSystem(CameraSystem):
@@ -198,7 +127,7 @@ def random_exo_draws(cam: ExoDraw, centre: np.ndarray, rng: Any) -> Callable[[],
 
     def draw() -> tuple[np.ndarray, list[float], float]:
         distance, azimuth, height = rng.uniform(*cam.distance), rng.uniform(*cam.azimuth), rng.uniform(*cam.height)
-        pos = centre + [distance * math.cos(azimuth), distance * math.sin(azimuth), height]
+        pos = centre + np.array([distance * math.cos(azimuth), distance * math.sin(azimuth), height])
         lookat = centre + rng.uniform(*cam.lookat_noise, size=3)
         return pos, mat_to_quat(look_rotation(lookat - pos, (0.0, 0.0, 1.0))), fovy
 
@@ -207,6 +136,4 @@ def random_exo_draws(cam: ExoDraw, centre: np.ndarray, rng: Any) -> Callable[[],
 
 @hookimpl
 def molmo_camera_systems() -> list[CameraSystem]:
-    from molmo_lerobot.cameras.franka_eval import FrankaEvalCameraSystem  # built on this module's parts
-
     return [FrankaDroidCameraSystem(), FrankaRandomizedDroidCameraSystem(), FrankaEvalCameraSystem()]

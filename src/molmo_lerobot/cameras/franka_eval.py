@@ -35,20 +35,21 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from molmo_lerobot.benchmark.schema import episode_digest
-from molmo_lerobot.cameras.base import CameraSystem, look_rotation, mat_to_quat
-from molmo_lerobot.cameras.droid import (
+from molmo_lerobot.cameras.base import CameraSystem
+from molmo_lerobot.cameras.franka_mounts import (
     ARM_ROOT,
     EXO_CAMERA_1,
     MountNoise,
     add_wrist,
     arm_root,
-    wrist_mount,
     gripper_body,
     noisy_mount,
     place_until_seen,
     task_objects,
+    wrist_mount,
 )
+from molmo_lerobot.hashing import episode_digest
+from molmo_lerobot.poses import look_rotation, mat_to_quat
 
 #: (width, height) their eval cameras render at, whatever the episode's ``img_resolution``
 EVAL_IMG_RESOLUTION = (640, 368)
@@ -148,7 +149,7 @@ def eval_exo_draws(ref_pos: np.ndarray, ref_rot: np.ndarray, centre: np.ndarray,
         azimuth = azimuth0 + rng.uniform(*ranges.azimuth)
         distance = max(distance0 + rng.uniform(*ranges.distance), MIN_EXO_DISTANCE)
         height = height0 + rng.uniform(*ranges.height)
-        pos = centre + [distance * math.cos(azimuth), distance * math.sin(azimuth), height]
+        pos = centre + np.array([distance * math.cos(azimuth), distance * math.sin(azimuth), height])
         lookat = centre + rng.uniform(*ranges.lookat_noise, size=3)
         looking = Rotation.from_matrix(look_rotation(lookat - pos, (0.0, 0.0, 1.0)))
         rot = Slerp([0.0, 1.0], Rotation.concatenate([calibrated, looking]))(ranges.lookat_weight)

@@ -18,7 +18,8 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.cameras.base import STANDARD, CameraSystem, look_rotation, mat_to_quat
+from molmo_lerobot.cameras.base import STANDARD, CameraSystem
+from molmo_lerobot.poses import look_rotation, mat_to_quat
 
 
 def _lookat_quat(offset: Sequence[float], lookat: Sequence[float]) -> list[float]:

@@ -92,9 +92,10 @@ def _job(cfg: Any) -> int:
     from hydra.types import RunMode
 
     from molmo_lerobot.config import ConfigError
+    from molmo_lerobot.errors import RunError
     from molmo_lerobot.plugins import PluginError
-    from molmo_lerobot.runner.evaluate import RunError, run_evaluation
     from molmo_lerobot.results import summary_lines
+    from molmo_lerobot.runner.evaluate import run_evaluation
     from molmo_lerobot.runner.run_config import RunConfig, RunConfigError
     from molmo_lerobot.runner.supervisor import WorkerStartError
 

@@ -37,8 +37,9 @@ def _parser() -> argparse.ArgumentParser:
                                       "JSON version table {data_type: {source: version}}")
     ins.add_argument("--remote", help="directory, file://, http(s):// bucket or hf://datasets/<ns>/<repo>[/<prefix>] "
                                       f"(with --preset: default MolmoSpaces' bucket {ms.BUCKET_URL})")
-    ins.add_argument("--cache-dir", type=Path, help="with --preset: default $MLSPACES_CACHE_DIR or "
-                                                    "~/.cache/molmo-spaces-resources (shared with molmospaces-resources)")
+    ins.add_argument("--cache-dir", type=Path,
+                     help="with --preset: default $MLSPACES_CACHE_DIR or ~/.cache/molmo-spaces-resources "
+                          "(shared with molmospaces-resources)")
     ins.add_argument("--install-dir", type=Path, help="with --preset: default MolmoSpaces' assets dir "
                                                       "($MLSPACES_ASSETS_DIR or ours)")
     ins.add_argument("--on-demand", action="store_true", help="fetch manifests and index only; archives on first use")

@@ -24,6 +24,8 @@ import logging
 import sys
 from typing import TYPE_CHECKING, Any
 
+from molmo_lerobot.errors import MolmoError
+
 if TYPE_CHECKING:
     from molmo_lerobot.serving.server import PolicyServer
 
@@ -41,7 +43,7 @@ SERVER_OPTIONS = {
 }
 
 
-class _Usage(Exception):
+class _Usage(MolmoError):
     pass
 
 
@@ -55,7 +57,8 @@ def parse_args(argv: list[str]) -> tuple[dict[str, Any], list[str]]:
             try:
                 options[key] = SERVER_OPTIONS[key](value)
             except ValueError:
-                raise SystemExit(f"molmo-serve: {key}={value!r} is not a valid {SERVER_OPTIONS[key].__name__}") from None
+                kind = SERVER_OPTIONS[key].__name__
+                raise SystemExit(f"molmo-serve: {key}={value!r} is not a valid {kind}") from None
         elif arg in ("-h", "--help"):
             raise _Usage
         else:

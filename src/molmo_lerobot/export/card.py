@@ -17,7 +17,7 @@ def _pct(x: float | None) -> str:
 def _ci(ci: Any) -> str:
     if ci is None:  # no episode simulated: no interval
         return "n/a"
-    lo, hi = (list(ci) + [0.0, 1.0])[:2]
+    lo, hi = [*ci, 0.0, 1.0][:2]
     return f"[{_pct(lo)}, {_pct(hi)}]"
 
 

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot import fileio
+from molmo_lerobot.errors import ExportError
 from molmo_lerobot.export.card import make_card
 from molmo_lerobot.export.frames import EVAL_EPISODE_INDEX
 from molmo_lerobot.export.portable import portable
@@ -50,10 +51,6 @@ EVAL_EPISODES = "meta/eval/episodes.jsonl"
 EVAL_INFO = "meta/eval/info.json"
 MERGE_PREFIX = ".dataset-merge-"  # + session: a merge's work directory
 PREVIOUS = "previous"  # in the work directory: the dataset being replaced, during the swap
-
-
-class ExportError(RuntimeError):
-    """The merged dataset could not be built or failed its checks; the message says which."""
 
 
 @dataclass

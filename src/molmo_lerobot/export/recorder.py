@@ -21,10 +21,10 @@ from pathlib import Path
 from typing import Any
 
 from molmo_lerobot import fileio
-from molmo_lerobot.hookspecs import ConfigError
 from molmo_lerobot.export.frames import FrameLayout
 from molmo_lerobot.export.shards import SHARDS_DIR, new_session, shard_name, write_marker
 from molmo_lerobot.export.video import RecordingDataset, VideoSettings
+from molmo_lerobot.hookspecs import ConfigError
 from molmo_lerobot.recording import EpisodeInfo, Recorder, RecorderFactory
 from molmo_lerobot.results import EpisodeResult
 

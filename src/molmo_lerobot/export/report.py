@@ -34,8 +34,10 @@ th{background:#f6f6f6} td.num{text-align:right;font-variant-numeric:tabular-nums
 .ok{color:#137333;font-weight:600} .fail{color:#b3261e} .err{color:#b3261e;font-size:.8rem;max-width:28rem}
 video{width:192px;border-radius:3px;background:#000;margin-right:4px}
 h3{font-size:.95rem;margin:.6rem 0 .3rem} .cols{display:flex;gap:2.5rem;flex-wrap:wrap;align-items:flex-start}
-.grp{max-height:24rem;overflow-y:auto;display:block} .bar{display:inline-block;height:8px;background:#1a73e8;vertical-align:middle}
-td.which{max-width:34rem;font-size:.8rem} a.tag{font-size:.75rem;color:#b3261e;text-decoration:none;border:1px solid #e8b4b0;border-radius:3px;padding:0 3px}
+.grp{max-height:24rem;overflow-y:auto;display:block}
+.bar{display:inline-block;height:8px;background:#1a73e8;vertical-align:middle}
+td.which{max-width:34rem;font-size:.8rem}
+a.tag{font-size:.75rem;color:#b3261e;text-decoration:none;border:1px solid #e8b4b0;border-radius:3px;padding:0 3px}
 #episodes img{height:64px;border-radius:3px;display:block} .filter label{margin-right:1rem}
 """
 
@@ -50,7 +52,7 @@ def _e(x: Any) -> str:
 
 def _bars_svg(summary: dict[str, Any]) -> str:
     """Horizontal bars per task (and overall): success at the end and at any step, with 95% CI whiskers."""
-    rows = [("all", summary)] + sorted((summary.get("per_task") or {}).items())
+    rows = [("all", summary), *sorted((summary.get("per_task") or {}).items())]
     left, width, bar, gap = 140, 420, 11, 10
     height = len(rows) * (2 * bar + gap) + 40
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{left + width + 60}" height="{height}" '
@@ -61,10 +63,12 @@ def _bars_svg(summary: dict[str, Any]) -> str:
                      f'<text x="{x}" y="{height - 12}" text-anchor="middle" fill="#666">{int(tick * 100)}%</text>')
     y = 14.0
     for name, b in rows:
-        parts.append(f'<text x="{left - 8}" y="{y + bar + 3}" text-anchor="end">{_e(name)} (n={b.get("n_episodes", 0)})</text>')
-        for key, ci_key, color in (("success_rate", "ci95", "#1a73e8"), ("success_once_rate", "success_once_ci95", "#9bbcf3")):
+        parts.append(f'<text x="{left - 8}" y="{y + bar + 3}" text-anchor="end">'
+                     f'{_e(name)} (n={b.get("n_episodes", 0)})</text>')
+        for key, ci_key, color in (("success_rate", "ci95", "#1a73e8"),
+                                   ("success_once_rate", "success_once_ci95", "#9bbcf3")):
             rate = float(b.get(key) or 0.0)  # null: no episode of this block simulated
-            lo, hi = (list(b.get(ci_key) or (rate, rate)) + [0.0, 1.0])[:2]
+            lo, hi = [*(b.get(ci_key) or (rate, rate)), 0.0, 1.0][:2]
             parts.append(f'<rect x="{left}" y="{y}" width="{rate * width:.1f}" height="{bar}" fill="{color}">'
                          f'<title>{_e(name)} {key}: {_pct(rate)} (95% CI {_pct(lo)}–{_pct(hi)})</title></rect>')
             cy = y + bar / 2
@@ -86,12 +90,12 @@ def _bars_svg(summary: dict[str, Any]) -> str:
 
 
 def _task_table(summary: dict[str, Any]) -> str:
-    rows = [("all", summary)] + sorted((summary.get("per_task") or {}).items())
+    rows = [("all", summary), *sorted((summary.get("per_task") or {}).items())]
     out = ["<table><tr><th>task</th><th>episodes</th><th>success (end)</th><th>95% CI</th>"
            "<th>success (any step)</th><th>95% CI</th><th>errors</th></tr>"]
     for name, b in rows:
-        lo, hi = (list(b.get("ci95") or (None, None)) + [0, 1])[:2]
-        lo2, hi2 = (list(b.get("success_once_ci95") or (None, None)) + [0, 1])[:2]
+        lo, hi = [*(b.get("ci95") or (None, None)), 0, 1][:2]
+        lo2, hi2 = [*(b.get("success_once_ci95") or (None, None)), 0, 1][:2]
         out.append(f"<tr><td>{_e(name)}</td><td class=num>{b.get('n_episodes', 0)}</td>"
                    f"<td class=num>{_pct(b.get('success_rate', 0))}</td><td>{_pct(lo)} – {_pct(hi)}</td>"
                    f"<td class=num>{_pct(b.get('success_once_rate', 0))}</td><td>{_pct(lo2)} – {_pct(hi2)}</td>"
@@ -229,7 +233,8 @@ def _first_success_svg(results: list[EpisodeResult], policy_dt_s: float) -> str:
     parts.append(f'<line x1="{left}" y1="{top + h}" x2="{left + w}" y2="{top + h}" stroke="#999"/>')
     for tick in range(5):
         x = left + tick * w / 4
-        parts.append(f'<text x="{x:.1f}" y="{top + h + 14}" text-anchor="middle" fill="#666">{hi * tick / 4:.1f}</text>')
+        parts.append(f'<text x="{x:.1f}" y="{top + h + 14}" text-anchor="middle" fill="#666">'
+                     f'{hi * tick / 4:.1f}</text>')
     parts.append(f'<text x="{left + w / 2}" y="{top + h + 30}" text-anchor="middle" fill="#444">seconds to first '
                  f'success</text><text x="{left - 6}" y="{top + 8}" text-anchor="end" fill="#666">{peak}</text></svg>')
     median = times[len(times) // 2] if len(times) % 2 else (times[len(times) // 2 - 1] + times[len(times) // 2]) / 2
@@ -296,7 +301,7 @@ def render_report(summary: dict[str, Any], results: list[EpisodeResult],
     bench = summary.get("benchmark") or {}
     policy = summary.get("policy") or {}
     policy_name = policy.get("name", "?") if isinstance(policy, dict) else str(policy)
-    lo, hi = (list(summary.get("ci95") or (None, None)) + [0, 1])[:2]
+    lo, hi = [*(summary.get("ci95") or (None, None)), 0, 1][:2]
     title = f"{policy_name} on {bench.get('name', '?')}"
     versions = ", ".join(f"{k} {v}" for k, v in (summary.get("versions") or {}).items())
     policy_dt_s = float((summary.get("timing") or {}).get("policy_dt_ms", 66.0)) / 1000.0

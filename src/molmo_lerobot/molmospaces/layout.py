@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.resources import molmospaces as ms_resources
 
 #: The versions MolmoSpaces pins (the resource manager's table; install hints and on-demand installs).
@@ -45,7 +46,7 @@ SPLITS = ("train", "val", "test")
 USER = "user"
 
 
-class SceneLookupError(LookupError):
+class SceneLookupError(MolmoError, LookupError):
     """No scene for an episode's ``(scene_dataset, data_split, house_index)``; says why and where."""
 
 
@@ -61,7 +62,8 @@ def scene_dir(assets: Path, dataset: str, split: str) -> Path:
         raise SceneLookupError(f"unknown MolmoSpaces scene dataset {dataset!r} (known: {', '.join(SCENE_DIRS)})")
     pattern = SCENE_DIRS[dataset]
     if "{split}" in pattern and split not in SPLITS:
-        raise SceneLookupError(f"scene dataset {dataset!r}: data_split must be one of {', '.join(SPLITS)}, got {split!r}")
+        raise SceneLookupError(f"scene dataset {dataset!r}: data_split must be one of {', '.join(SPLITS)}, "
+                               f"got {split!r}")
     return assets / "scenes" / pattern.format(split=split)
 
 
@@ -97,7 +99,9 @@ def install_command(resource: str, assets: Path) -> str:
 def expected_metadata_name(xml: Path) -> str:
     """The metadata file name MolmoSpaces looks for first beside scene ``xml``."""
     name = xml.name
-    return name.replace("_ceiling.xml", "_metadata.json") if "ceiling" in name else name.replace(".xml", "_metadata.json")
+    if "ceiling" in name:
+        return name.replace("_ceiling.xml", "_metadata.json")
+    return name.replace(".xml", "_metadata.json")
 
 
 def metadata_path(xml: Path) -> Path | None:

@@ -47,11 +47,13 @@ class _DataUnpickler(pickle.Unpickler):
     """Unpickles plain containers, strings, numbers and numpy arrays (protocols 2-5, in-band
     buffers only); refuses everything else."""
 
-    ALLOWED = {("numpy.core.multiarray", "_reconstruct"), ("numpy._core.multiarray", "_reconstruct"),
-               ("numpy.core.multiarray", "scalar"), ("numpy._core.multiarray", "scalar"),
-               ("numpy.core.numeric", "_frombuffer"), ("numpy._core.numeric", "_frombuffer"),  # protocol 5
-               ("numpy", "ndarray"), ("numpy", "dtype"), ("builtins", "set"), ("builtins", "frozenset"),
-               ("collections", "OrderedDict")}
+    ALLOWED = frozenset({
+        ("numpy.core.multiarray", "_reconstruct"), ("numpy._core.multiarray", "_reconstruct"),
+        ("numpy.core.multiarray", "scalar"), ("numpy._core.multiarray", "scalar"),
+        ("numpy.core.numeric", "_frombuffer"), ("numpy._core.numeric", "_frombuffer"),  # protocol 5
+        ("numpy", "ndarray"), ("numpy", "dtype"), ("builtins", "set"), ("builtins", "frozenset"),
+        ("collections", "OrderedDict"),
+    })
 
     def find_class(self, module: str, name: str):
         if (module, name) not in self.ALLOWED:
@@ -183,7 +185,8 @@ class MolmoSpacesObjects(AssetLibrary):
             return False
         if self._file(uid) is not None:
             return True
-        return self.name == "objaverse" and _OBJAVERSE_UID.fullmatch(uid) is not None and self._metadata(uid) is not None
+        return (self.name == "objaverse" and _OBJAVERSE_UID.fullmatch(uid) is not None
+                and self._metadata(uid) is not None)
 
     def metadata(self, uid: str) -> dict:
         if uid not in self:

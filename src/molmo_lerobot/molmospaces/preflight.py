@@ -79,6 +79,7 @@ def preflight(bench: Any, ctx: RunContext, indices: Iterable[int], skip: Iterabl
     ((file, field, message), eps), *rest = reasons.items()
     shown = ", ".join(map(str, eps[:5])) + (", ..." if len(eps) > 5 else "")
     n_eps = sum(len(v) for v in reasons.values())
-    more = f"; {len(rest)} more missing resource{'s' * (len(rest) != 1)} (molmo-bench validate lists them)" if rest else ""
+    more = (f"; {len(rest)} more missing resource{'s' * (len(rest) != 1)} (molmo-bench validate lists them)"
+            if rest else "")
     return (f"cannot simulate {n_eps} of {len(bench.episodes)} episodes: {file}: episode{'s' * (len(eps) != 1)} "
             f"{shown}: field {field}: {message}{more}")

@@ -53,7 +53,8 @@ def physics_option_values(options: dict[str, Any]) -> dict[str, Any]:
             member = getattr(enum, prefix + value.upper(), None)
             if member is None:
                 names = [n.removeprefix(prefix).lower() for n in dir(enum) if n.startswith(prefix)]
-                raise ValueError(f"molmospaces.physics_options.{key}: unknown value {value!r} (one of {', '.join(names)})")
+                raise ValueError(f"molmospaces.physics_options.{key}: unknown value {value!r} "
+                                 f"(one of {', '.join(names)})")
             value = member
         out[key] = value
     return out
@@ -205,7 +206,7 @@ def _find_removed(world: mujoco.MjSpec, name: str) -> mujoco.MjsBody | None:
     body = world.worldbody.first_body()
     while body is not None:
         n = body.name
-        if n == name or n.endswith(f"/{name}") or n == base or n.endswith(f"/{base}"):
+        if n in (name, base) or n.endswith(f"/{name}") or n.endswith(f"/{base}"):
             return body
         body = world.worldbody.next_body(body)
     return None
@@ -232,10 +233,6 @@ def _attach_added(world: mujoco.MjSpec, name: str, path: Path, pose: list[float]
         frame.attach_body(body, prefix, "")
     if len(parts) == 1:
         world.body(prefix + name).name = name
-
-
-#: Every scene dataset name MolmoSpaces' ``get_scenes`` accepts, plus ``user``.
-SCENE_DATASET_NAMES = (*layout.SCENE_DIRS, layout.USER)
 
 
 @hookimpl

@@ -14,10 +14,11 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.paths import molmospaces_assets_dir
 
 
-class SettingsError(ValueError):
+class SettingsError(MolmoError, ValueError):
     """A MolmoSpaces setting of the run config is invalid; the message names the key."""
 
 

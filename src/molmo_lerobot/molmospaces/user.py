@@ -88,8 +88,9 @@ class UserAssetLibrary(AssetLibrary):
                     raise AssetError(f"{self.index_path}: field {uid}.{key}: missing")
                 paths[key] = _inside(self.root, entry[key], self.index_path, f"{uid}.{key}", AssetError)
             npz = entry.get("metadata_npz_path")
-            paths["metadata_npz_path"] = (None if npz is None else
-                                          _inside(self.root, npz, self.index_path, f"{uid}.metadata_npz_path", AssetError))
+            paths["metadata_npz_path"] = (
+                None if npz is None
+                else _inside(self.root, npz, self.index_path, f"{uid}.metadata_npz_path", AssetError))
             self._entries[uid] = paths
         self._docs: dict[str, dict] = {}
 

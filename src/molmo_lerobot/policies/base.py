@@ -95,7 +95,7 @@ class Policy(ABC):
     def act(self, obs: Observation) -> Action:
         """Return one action or a chunk of actions (leading time axis) for ``obs``."""
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
         """Release resources (connections, GPU memory). Called once when the worker ends."""
 
     def fork(self) -> Policy | None:

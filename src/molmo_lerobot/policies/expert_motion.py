@@ -11,22 +11,13 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
+from molmo_lerobot.poses import frame_matrix
 
 #: largest per-step change of a joint target in contact (rad): the Panda/FR3 shoulder actuators' force
 #: limit over their gain (87 N m / 4500 N m/rad = 0.019 rad) with a margin; see PhasedExpert._path
 CONTACT_STEP = 0.015
 #: policy steps over which a move in contact speeds up and slows down
 CONTACT_RAMP = 4
-
-
-def pose_matrix(pose7: np.ndarray) -> np.ndarray:
-    """``[x, y, z, qw, qx, qy, qz]`` as a 4x4 homogeneous matrix."""
-    T = np.eye(4)
-    mat = np.zeros(9)
-    mujoco.mju_quat2Mat(mat, np.asarray(pose7[3:], dtype=np.float64))
-    T[:3, :3] = mat.reshape(3, 3)
-    T[:3, 3] = pose7[:3]
-    return T
 
 
 def object_grasps(env: Any, name: str, catalog: Any) -> np.ndarray:
@@ -142,10 +133,7 @@ class PhasedExpert(Policy):
     def _tcp_T(self) -> np.ndarray:
         """Current world pose of the gripper TCP as a 4x4 matrix."""
         site = self.env.robot.tcp_site
-        T = np.eye(4)
-        T[:3, :3] = self.env.data.site_xmat[site].reshape(3, 3)
-        T[:3, 3] = self.env.data.site_xpos[site]
-        return T
+        return frame_matrix(self.env.data.site_xpos[site], self.env.data.site_xmat[site])
 
     def _move(self, q_goal: np.ndarray, gripper: float, min_time: float) -> None:
         """Queue a smooth joint-space move from the last command to ``q_goal``."""

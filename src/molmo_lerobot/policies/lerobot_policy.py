@@ -26,6 +26,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.features import IMAGE_PREFIX, STATE, camera_of, concat, split
 from molmo_lerobot.hookspecs import hookimpl
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
@@ -33,7 +34,7 @@ from molmo_lerobot.policies.convention import ConventionName, get_convention
 from molmo_lerobot.policies.image_ops import resize_with_pad
 
 
-class WeightsNotLoadedError(RuntimeError):
+class WeightsNotLoadedError(MolmoError, RuntimeError):
     """A checkpoint's weights are not the ones in the model (missing, renamed or random)."""
 
 
@@ -108,7 +109,7 @@ def verify_weights_loaded(model: Any, model_file: str, max_unmatched_fraction: f
         raise WeightsNotLoadedError(f"{model_file}: no such weights file")
     with safe_open(model_file, framework="pt", device="cpu") as f:
         by_suffix: dict[str, str | None] = {}
-        for key in f.keys():
+        for key in f.keys():  # noqa: SIM118 - a safetensors handle has keys() but is not iterable
             for suffix in _suffixes(key):
                 by_suffix[suffix] = None if suffix in by_suffix and by_suffix[suffix] != key else key
         state = model.state_dict()
@@ -193,7 +194,8 @@ class LeRobotPolicy(Policy):
         try:
             config = PreTrainedConfig.from_pretrained(path)
         except Exception as exc:
-            raise ValueError(f"policy.path={path!r}: not a LeRobot pretrained policy ({type(exc).__name__}: {exc})") from None
+            raise ValueError(f"policy.path={path!r}: not a LeRobot pretrained policy "
+                             f"({type(exc).__name__}: {exc})") from None
         config.device = self.device
         if self.cfg.n_action_steps is not None and hasattr(config, "n_action_steps"):
             config.n_action_steps = self.cfg.n_action_steps
@@ -236,7 +238,7 @@ class LeRobotPolicy(Policy):
         forks: list[LeRobotPolicy] = policies  # type: ignore[assignment]
         results: list[Any] = [None] * len(forks)
         todo: list[tuple[int, dict[str, Any]]] = []
-        for i, (p, obs) in enumerate(zip(forks, observations)):
+        for i, (p, obs) in enumerate(zip(forks, observations, strict=True)):
             if p._queue is None:
                 results[i] = TypeError("act_batch needs forks of a LeRobotPolicy (LeRobotPolicy.fork)")
             elif p.cfg.mode == "step" and p._queue:
@@ -248,14 +250,15 @@ class LeRobotPolicy(Policy):
                     results[i] = exc
         if todo:
             lead = forks[todo[0][0]]
-            batch = {key: (torch.stack([b[key] for _, b in todo]) if torch.is_tensor(value) else [b[key] for _, b in todo])
+            batch = {key: (torch.stack([b[key] for _, b in todo]) if torch.is_tensor(value)
+                           else [b[key] for _, b in todo])
                      for key, value in todo[0][1].items()}
             with torch.inference_mode():
                 chunk = lead.policy.predict_action_chunk(lead.preprocessor(batch))
                 n = getattr(lead.policy.config, "n_action_steps", None)
                 chunk = lead.postprocessor(chunk[:, :n] if n else chunk)
             chunks = chunk.detach().to("cpu", torch.float32).numpy()
-            for (i, _), actions in zip(todo, chunks):
+            for (i, _), actions in zip(todo, chunks, strict=True):
                 p = forks[i]
                 try:
                     if p.cfg.mode == "step":
@@ -310,7 +313,7 @@ class LeRobotPolicy(Policy):
         view = self.convention.observation(obs)
         images = self.convention.images(view)
         batch: dict[str, Any] = {}
-        for key, (c, h, w) in self.image_features.items():
+        for key, (_c, h, w) in self.image_features.items():
             short = key.removeprefix(IMAGE_PREFIX)
             camera = next((cam for cam, k in self.cfg.cameras.items() if k in (key, short)), None)
             camera = camera or camera_of(key, images) or short
@@ -364,4 +367,5 @@ def make_lerobot_policy(cfg: dict[str, Any]) -> Policy:
 
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
-    return [PolicyType("lerobot", make_lerobot_policy, "any LeRobot pretrained policy (policy.path=…)", conventions=True)]
+    return [PolicyType("lerobot", make_lerobot_policy, "any LeRobot pretrained policy (policy.path=…)",
+                       conventions=True)]

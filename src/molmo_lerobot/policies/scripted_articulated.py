@@ -20,6 +20,7 @@ import numpy as np
 
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.expert_motion import PhasedExpert, robot_grasps
+from molmo_lerobot.poses import frame_matrix
 
 PREGRASP_DISTANCE = 0.10
 #: opening fraction the expert drives to when opening (the success threshold is 0.2 by default)
@@ -74,10 +75,7 @@ class ScriptedArticulated(PhasedExpert):
         if q is not None:
             d.qpos[self.qadr] = q
         mujoco.mj_kinematics(m, d)
-        T = np.eye(4)
-        T[:3, :3] = d.xmat[self.body].reshape(3, 3)
-        T[:3, 3] = d.xpos[self.body]
-        return T
+        return frame_matrix(d.xpos[self.body], d.xmat[self.body])
 
     def _choose_grasp(self) -> tuple[np.ndarray, np.ndarray]:
         """(grasp pose in the moving body's frame, pre-grasp arm q) for the first reachable candidate."""

@@ -17,7 +17,8 @@ import numpy as np
 
 from molmo_lerobot.assets.builtin import HANDS, PANDA_HAND
 from molmo_lerobot.policies.base import EpisodeContext
-from molmo_lerobot.policies.expert_motion import PhasedExpert, object_grasps, pose_matrix
+from molmo_lerobot.policies.expert_motion import PhasedExpert, object_grasps
+from molmo_lerobot.poses import pose_matrix
 
 PREGRASP_DISTANCE = 0.10
 LIFT_HEIGHT = 0.12

@@ -23,6 +23,7 @@ import numpy as np
 
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.scripted_pick import ScriptedPick
+from molmo_lerobot.poses import frame_matrix
 from molmo_lerobot.sim import geometry
 from molmo_lerobot.tasks.pick_and_place import PickAndPlaceNextToTaskSpec
 
@@ -77,10 +78,7 @@ class ScriptedPlace(ScriptedPick):
     # Geometry -------------------------------------------------------------------------------------
     def _tcp(self) -> np.ndarray:
         site = self.env.robot.tcp_site
-        T = np.eye(4)
-        T[:3, :3] = self.env.data.site_xmat[site].reshape(3, 3)
-        T[:3, 3] = self.env.data.site_xpos[site]
-        return T
+        return frame_matrix(self.env.data.site_xpos[site], self.env.data.site_xmat[site])
 
     def _others(self) -> list[frozenset[int]]:
         """Free top-level objects other than the one held (receptacles and distractors), as body sets."""

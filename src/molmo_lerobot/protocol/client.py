@@ -14,13 +14,13 @@ from typing import Any
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
 from websockets.sync.client import ClientConnection, connect
 
-from molmo_lerobot.errors import InfrastructureError
+from molmo_lerobot.errors import InfrastructureError, MolmoError
 from molmo_lerobot.protocol.codec import CodecError, packb, unpackb
 
 RESET_ENDPOINT = "reset"
 
 
-class PolicyClientError(RuntimeError):
+class PolicyClientError(MolmoError, RuntimeError):
     """Talking to the policy server failed; the message says where and why."""
 
 
@@ -113,7 +113,8 @@ class PolicyClient:
             raise
         if not isinstance(metadata, dict):
             self.close()
-            raise PolicyClientError(f"policy server {self.uri} sent a {type(metadata).__name__} metadata frame, expected a dict")
+            raise PolicyClientError(f"policy server {self.uri} sent a {type(metadata).__name__} metadata frame, "
+                                    "expected a dict")
         self.metadata = metadata
         self.connects += 1
         return metadata
@@ -142,7 +143,8 @@ class PolicyClient:
         """Send one observation, return the server's response dict."""
         response = self._request(obs, "inference response")
         if not isinstance(response, dict):
-            raise PolicyClientError(f"policy server {self.uri} answered with a {type(response).__name__}, expected a dict")
+            raise PolicyClientError(f"policy server {self.uri} answered with a {type(response).__name__}, "
+                                    "expected a dict")
         return response
 
     def reset(self, **info: Any) -> dict[str, Any]:
@@ -198,7 +200,7 @@ class PolicyClient:
             raise PolicyClientError(f"policy server {self.uri} sent a malformed {what}: {exc}") from exc
 
 
-class _Stale(Exception):
+class _Stale(MolmoError):
     """The connection closed without an answer (internal: triggers one reconnect)."""
 
 

@@ -15,6 +15,8 @@ from typing import Any
 import msgpack
 import numpy as np
 
+from molmo_lerobot.errors import MolmoError
+
 ALLOWED_DTYPES = tuple(np.dtype(t) for t in (
     np.bool_, np.int8, np.int16, np.int32, np.int64, np.uint8, np.uint16, np.uint32, np.uint64,
     np.float16, np.float32, np.float64,
@@ -24,7 +26,7 @@ _ALLOWED_TEXT = "bool, int8-64, uint8-64, float16/32/64"
 _ARRAY, _GENERIC = "__ndarray__", "__npgeneric__"
 
 
-class CodecError(ValueError):
+class CodecError(MolmoError, ValueError):
     """A value cannot be encoded, or a received message is not a valid protocol message."""
 
 

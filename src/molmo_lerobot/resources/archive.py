@@ -67,20 +67,20 @@ def pack_archive(root: Path, rel_paths: Iterable[str], out: Path, level: int = 1
     """
     out = Path(out)
     cctx = zstandard.ZstdCompressor(level=level)
-    with atomic_open(out, "wb") as fh, cctx.stream_writer(fh, closefd=False) as zw:
-        with tarfile.open(fileobj=zw, mode="w|", format=tarfile.PAX_FORMAT) as tar:
-            for rel in rel_paths:
-                info = tar.gettarinfo(str(root / rel), arcname=rel)
-                info.uid = info.gid = 0
-                info.uname = info.gname = ""
-                info.mtime = 0
-                if info.isreg():
-                    info.mode = 0o644
-                    with open(root / rel, "rb") as src:
-                        tar.addfile(info, src)
-                else:
-                    info.mode = 0o777
-                    tar.addfile(info)
+    with (atomic_open(out, "wb") as fh, cctx.stream_writer(fh, closefd=False) as zw,
+          tarfile.open(fileobj=zw, mode="w|", format=tarfile.PAX_FORMAT) as tar):
+        for rel in rel_paths:
+            info = tar.gettarinfo(str(root / rel), arcname=rel)
+            info.uid = info.gid = 0
+            info.uname = info.gname = ""
+            info.mtime = 0
+            if info.isreg():
+                info.mode = 0o644
+                with open(root / rel, "rb") as src:
+                    tar.addfile(info, src)
+            else:
+                info.mode = 0o777
+                tar.addfile(info)
     return {"size": out.stat().st_size, "sha256": sha256_file(out)}
 
 
@@ -107,11 +107,13 @@ def check_member(member: tarfile.TarInfo, archive: str) -> None:
     if member.ischr() or member.isblk() or member.isfifo():
         raise UnsafeArchiveError(f"{where} is a device or fifo; refusing to extract")
     if member.issym() and link_escapes(name, member.linkname):
-        raise UnsafeArchiveError(f"{where} is a symlink to {member.linkname!r} outside the archive; refusing to extract")
+        raise UnsafeArchiveError(f"{where} is a symlink to {member.linkname!r} outside the archive; "
+                                 "refusing to extract")
     if member.islnk():
         target = posixpath.normpath(member.linkname)
         if PurePosixPath(target).is_absolute() or target == ".." or target.startswith("../"):
-            raise UnsafeArchiveError(f"{where} is a hard link to {member.linkname!r} outside the archive; refusing to extract")
+            raise UnsafeArchiveError(f"{where} is a hard link to {member.linkname!r} outside the archive; "
+                                     "refusing to extract")
     if not (member.isreg() or member.isdir() or member.issym() or member.islnk()):
         raise UnsafeArchiveError(f"{where} has an unsupported type; refusing to extract")
 

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from molmo_lerobot.errors import MolmoError
 
-class ResourceError(RuntimeError):
+
+class ResourceError(MolmoError, RuntimeError):
     """A resource could not be packed, fetched, installed or verified."""
 
 

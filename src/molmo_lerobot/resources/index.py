@@ -82,7 +82,7 @@ def open_readonly(path: str | os.PathLike, complete_key: bytes = COMPLETE_KEY) -
     global _ENVS_PID
     path = Path(path)
     with _ENVS_LOCK:
-        if _ENVS_PID != os.getpid():
+        if os.getpid() != _ENVS_PID:
             for env, _ in _ENVS.values():
                 with contextlib.suppress(lmdb.Error):
                     env.close()

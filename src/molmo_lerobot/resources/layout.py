@@ -93,10 +93,10 @@ class Layout(ABC):
         """Held (inside the manager's version lock) while the version's cache dir changes."""
         return contextlib.nullcontext()
 
-    def prepare(self) -> None:
+    def prepare(self) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
         """Ready the version dir before archives are extracted into it."""
 
-    def record_cache(self, add: Edit) -> None:
+    def record_cache(self, add: Edit) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
         """Record the version as present in the cache (``add`` edits ``{type: {source: [versions]}}``)."""
 
     # -- links -------------------------------------------------------------------------
@@ -108,10 +108,10 @@ class Layout(ABC):
         """Files of the version dir linked in a per-file link tree beyond the data."""
         return []
 
-    def flag_links(self, link_dir: Path, archives: list[str]) -> None:
+    def flag_links(self, link_dir: Path, archives: list[str]) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
         """Mark ``archives`` as linked in the per-file link tree ``link_dir``."""
 
-    def record_link(self, point: Edit, previous: str | None) -> None:
+    def record_link(self, point: Edit, previous: str | None) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
         """Record the install dir's link (``point`` edits ``{type: {source: version}}``; ``previous``:
         the version linked before)."""
 

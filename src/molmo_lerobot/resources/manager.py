@@ -242,14 +242,14 @@ class ResourceManager:
         manifest = self.manifest(spec)
         idx = PathIndex(self.meta_dir(spec) / "index.lmdb")
         try:
-            idx.env
+            _ = idx.env  # opening it checks it is there and complete
         except ResourceError:
             if not self.use_lock:
                 raise ResourceError(f"{spec}: index missing or incomplete in {self.cache_dir}; "
                                     "a leader must install it first (no-lock mode)") from None
             with self._version_lock(spec):
                 try:
-                    idx.env  # another process may have built it while we waited
+                    _ = idx.env  # another process may have built it while we waited
                 except ResourceError:
                     path = self.meta_dir(spec) / "index.json.gz"
                     entries = check_index(read_json(path, f"{spec}: {path}"), manifest["archives"], f"{spec}: {path}")
@@ -713,7 +713,7 @@ def _make_links(root: Path, target: Path, files: Iterable[str], install: Path) -
 
 def _remove_link_tree(path: Path, install: Path) -> None:
     """Delete a tree of links made by :func:`_make_links` (and a layout's flags), refusing one that holds real files."""
-    for dirpath, dirnames, filenames in os.walk(path):
+    for dirpath, _dirnames, filenames in os.walk(path):
         for name in filenames:
             if dirpath == str(path) and any(layout.own_link_file(name) for layout in LAYOUTS):
                 continue
@@ -730,4 +730,4 @@ def _force_remove(func, path, _exc: BaseException) -> None:
         func(path)
 
 
-__all__ = ["InstallResult", "ResourceManager", "ResourceSpec", "pack", "PostSetup"]
+__all__ = ["InstallResult", "PostSetup", "ResourceManager", "ResourceSpec", "pack"]

@@ -105,7 +105,8 @@ def check_index(entries: object, archives: Mapping[str, object], where: str) -> 
         raise ResourceError(f"{where}: must hold a JSON object {{archive: {{path: entry}}}}")
     if set(entries) != set(archives):
         extra, missing = sorted(set(entries) - set(archives)), sorted(set(archives) - set(entries))
-        raise ResourceError(f"{where}: lists other archives than the manifest (extra {extra[:3]}, missing {missing[:3]})")
+        raise ResourceError(f"{where}: lists other archives than the manifest "
+                            f"(extra {extra[:3]}, missing {missing[:3]})")
     owner: dict[str, str] = {}
     for archive, files in entries.items():
         if not isinstance(files, dict):

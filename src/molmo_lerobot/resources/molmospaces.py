@@ -44,9 +44,8 @@ TRIES = "mjthor_resources_combined_meta.json.gz"
 LOCAL_MANIFEST = "mjthor_data_type_to_source_to_versions.json"
 LOCK = ".lock"
 
-#: MolmoSpaces' public buckets (their R2 bucket for MuJoCo data) and Hub repo.
+#: MolmoSpaces' public bucket (their R2 bucket for MuJoCo data)
 BUCKET_URL = "https://pub-3555e9bb2d304fab9c6c79819e48aa40.r2.dev"
-HF_URL = "hf://datasets/allenai/molmospaces/mujoco"
 
 #: Per data type: (link mode, eager); sources listed in ``EAGER_SOURCES`` are always eager.
 BEHAVIOUR = {
@@ -104,7 +103,8 @@ def link_flag(link_dir: Path, archive: str) -> Path:
 
 def is_own_file(rel: str) -> bool:
     """Their bookkeeping inside a version dir (metadata and flags), not part of the data."""
-    return rel in (REMOTE_MANIFEST, TRIES) or ("/" not in rel and rel.startswith(".") and rel.endswith("_complete_extract"))
+    return rel in (REMOTE_MANIFEST, TRIES) or ("/" not in rel and rel.startswith(".")
+                                                and rel.endswith("_complete_extract"))
 
 
 def convert(data_type: str, source: str, version: str, sizes: object, tries: object,

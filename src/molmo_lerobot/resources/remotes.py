@@ -311,7 +311,8 @@ def _stream_to(open_stream, remote: str, rel: str, dest: Path, what: str = "the 
         fileio.replace(part, dest, root=Path(dest).parent)
     except httpx.HTTPError as exc:
         reason = str(exc).splitlines()[0][:160] if str(exc) else ""
-        raise ResourceError(f"remote {remote}: {rel}: transfer of {what} failed ({type(exc).__name__}: {reason})") from None
+        raise ResourceError(f"remote {remote}: {rel}: transfer of {what} failed "
+                            f"({type(exc).__name__}: {reason})") from None
     finally:
         fileio.remove(part)
 

@@ -22,6 +22,7 @@ import math
 from collections.abc import Sequence
 from functools import cache
 from pathlib import Path
+from typing import ClassVar
 
 import mujoco
 import numpy as np
@@ -143,10 +144,12 @@ class Franka(RobotType):
 
     name = "franka"
     aliases = ("franka_panda",)  # never franka_droid: that is a Robotiq 2F-85, see franka_droid.py
-    move_groups = {"arm": 7, "gripper": 1}
-    joint_names = {"arm": [f"panda_joint{k}" for k in range(1, 8)], "gripper": ["panda_gripper"]}
+    move_groups: ClassVar[dict[str, int]] = {"arm": 7, "gripper": 1}
+    joint_names: ClassVar[dict[str, list[str]]] = {"arm": [f"panda_joint{k}" for k in range(1, 8)],
+                                                   "gripper": ["panda_gripper"]}
     #: hand pointing down above the table, fingers along the world y axis
-    default_init_qpos = {"arm": [0.0, -0.55, 0.0, -2.4, 0.0, 1.85, 0.785], "gripper": [0.0]}
+    default_init_qpos: ClassVar[dict[str, list[float]]] = {"arm": [0.0, -0.55, 0.0, -2.4, 0.0, 1.85, 0.785],
+                                                           "gripper": [0.0]}
 
     def init_qpos(self, group: str, values: Sequence[float]) -> np.ndarray:
         """Also accepts MolmoSpaces' two finger-joint positions (metres) for the gripper."""

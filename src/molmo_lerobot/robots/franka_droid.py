@@ -41,6 +41,7 @@ import math
 from collections.abc import Sequence
 from functools import cache
 from pathlib import Path
+from typing import ClassVar
 from xml.etree import ElementTree
 
 import mujoco
@@ -87,9 +88,10 @@ _DRIVERS = {"finger_joint": "left_driver_joint", "right_outer_knuckle_joint": "r
 
 def robotiq_xml() -> Path:
     """robosuite's Robotiq 2F-85 MJCF inside the installed package (the package is not imported)."""
-    return package_asset_dir("robosuite", "models", "assets", "grippers", marker="robotiq_gripper_85.xml",
-                             what="the franka_droid robot (Robotiq 2F-85 gripper)",
-                             install="pip install --no-deps robosuite: only its asset files are used") / "robotiq_gripper_85.xml"
+    grippers = package_asset_dir("robosuite", "models", "assets", "grippers", marker="robotiq_gripper_85.xml",
+                                 what="the franka_droid robot (Robotiq 2F-85 gripper)",
+                                 install="pip install --no-deps robosuite: only its asset files are used")
+    return grippers / "robotiq_gripper_85.xml"
 
 
 def molmospaces_model(assets_dir: Path | None = None) -> Path | None:
@@ -251,12 +253,14 @@ class FrankaDroid(RobotType):
     """Franka arm + Robotiq 2F-85 (DROID), MolmoSpaces' names; see the module docstring."""
 
     name = "franka_droid"
-    move_groups = {"arm": 7, "gripper": 1}
-    joint_names = {"arm": [f"fr3_joint{k}" for k in range(1, 8)], "gripper": ["robotiq_gripper"]}
+    move_groups: ClassVar[dict[str, int]] = {"arm": 7, "gripper": 1}
+    joint_names: ClassVar[dict[str, list[str]]] = {"arm": [f"fr3_joint{k}" for k in range(1, 8)],
+                                                   "gripper": ["robotiq_gripper"]}
     default_camera_system = "FrankaDroidCameraSystem"
     default_base_size = BASE_SIZE
     #: MolmoSpaces' FrankaRobotConfig.init_qpos (gripper open)
-    default_init_qpos = {"arm": [0.0, -0.7853, 0.0, -2.35619, 0.0, 1.57079, 0.0], "gripper": [0.0]}
+    default_init_qpos: ClassVar[dict[str, list[float]]] = {"arm": [0.0, -0.7853, 0.0, -2.35619, 0.0, 1.57079, 0.0],
+                                                           "gripper": [0.0]}
 
     def init_qpos(self, group: str, values: Sequence[float]) -> np.ndarray:
         """MolmoSpaces' gripper ``init_qpos`` is the two driver angles (rad); one value is normalized."""

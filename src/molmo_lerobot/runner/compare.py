@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from molmo_lerobot.benchmark.schema import known_task_type
+from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.results import wilson_ci
 
 METRICS = {"success": "success at the final step", "success_once": "success at any step"}
@@ -40,7 +41,7 @@ NEUTRAL_CONFIG = frozenset({"policy", "benchmark", "seed", "limit", "workers", "
 Z95 = 1.959963984540054
 
 
-class CompareError(ValueError):
+class CompareError(MolmoError, ValueError):
     """The runs cannot be compared; the message says which run and why."""
 
 

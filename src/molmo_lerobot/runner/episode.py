@@ -10,6 +10,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from molmo_lerobot.errors import MolmoError
+
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
     from molmo_lerobot.benchmark.schema import EpisodeSpec
@@ -21,7 +23,7 @@ if TYPE_CHECKING:
     from molmo_lerobot.tasks.base import Task, TaskType
 
 
-class EpisodeSetupError(ValueError):
+class EpisodeSetupError(MolmoError, ValueError):
     """An episode that cannot be set up; the message names the file, episode and field."""
 
 

@@ -11,6 +11,7 @@ simulates, is recorded with its task type, prompt, horizon and where that horizo
 
 from __future__ import annotations
 
+import contextlib
 import platform
 import re
 import sys
@@ -27,26 +28,23 @@ from omegaconf import DictConfig
 from molmo_lerobot.assets.grasps import GraspError
 from molmo_lerobot.assets.libraries import AssetError
 from molmo_lerobot.context import RunContext
+from molmo_lerobot.errors import ExportError, RunError
 from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import SettingsError
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.serving.run_server import ServeError, served_policy
+from molmo_lerobot.results import EpisodeResult, summarize
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
 from molmo_lerobot.runner.plan import EpisodePlan, EpisodePlanner
 from molmo_lerobot.runner.progress import Progress
-from molmo_lerobot.results import EpisodeResult, summarize
 from molmo_lerobot.runner.run_config import RunConfig, episode_work_problem
-from molmo_lerobot.runner.run_directory import RunDirectory, RunError
+from molmo_lerobot.runner.run_directory import RunDirectory
 from molmo_lerobot.runner.supervisor import RunInterrupted
 from molmo_lerobot.runner.worker import WorkerJob
+from molmo_lerobot.serving.run_server import ServeError, served_policy
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
-
-
-class ExportError(RunError):
-    """The run is scored (``results.json`` written) but an export step after it failed."""
 
 
 @dataclass
@@ -66,10 +64,8 @@ class EvalResults:
 def _versions() -> dict[str, str]:
     out = {"python": platform.python_version()}
     for dist in ("molmo-lerobot", "mujoco", "lerobot", "torch", "numpy", "gymnasium-robotics", "mink"):
-        try:
+        with contextlib.suppress(metadata.PackageNotFoundError):
             out[dist] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            pass
     return out
 
 
@@ -170,7 +166,8 @@ def _plan_run(planner: EpisodePlanner, indices: list[int]) -> tuple[dict[int, Ep
         if work:
             too_long.append(work)
         task_type = ctx.plugins.task_type(plan.task_type)
-        entry = thresholds.setdefault(task_type.name, {**task_type.thresholds(plan.episode(ctx.plugins)), "horizon_steps": []})
+        entry = thresholds.setdefault(task_type.name,
+                                      {**task_type.thresholds(plan.episode(ctx.plugins)), "horizon_steps": []})
         if plan.horizon not in entry["horizon_steps"]:
             entry["horizon_steps"].append(plan.horizon)
     if too_long:
@@ -212,7 +209,8 @@ def _run_plans(cfg: dict[str, Any], ctx: RunContext, bench: Benchmark, plans: di
     ``episodes.jsonl`` as it comes; ``results`` (those done before a resume) gains every episode."""
     todo = [p for p in plans.values() if p.error is None and p.episode_index not in results]
     progress = Progress(len(plans), len(results), f"{bench.name} · {cfg['policy']['name']}", run_dir.path,
-                        enabled=bool(cfg.get("progress", True)), heartbeat_s=float(cfg.get("progress_interval_s") or 30.0))
+                        enabled=bool(cfg.get("progress", True)),
+                        heartbeat_s=float(cfg.get("progress_interval_s") or 30.0))
     progress.success = sum(r.success for r in results.values())
     progress.errors = sum(r.error is not None for r in results.values())
     log = run_dir.episode_log()

@@ -8,6 +8,7 @@ same way, then exits, so none is left running without one.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
 import signal
@@ -83,10 +84,8 @@ class ProcessTransport(Transport):
         return _Worker(proc, parent)
 
     def submit(self, handle: _Worker, item: EpisodePlan) -> None:
-        try:
+        with contextlib.suppress(OSError):  # it died: its sentinel says so
             handle.conn.send(item)
-        except (BrokenPipeError, ConnectionResetError, OSError):
-            pass  # it died: its sentinel says so
 
     def wait(self, handles: list[_Worker], timeout: float) -> None:
         live = [h for h in handles if not h.dead]
@@ -115,15 +114,11 @@ class ProcessTransport(Transport):
         return out
 
     def stop(self, handle: _Worker) -> None:
-        try:
+        with contextlib.suppress(OSError):
             handle.conn.send(None)  # idle: close and exit
-        except (BrokenPipeError, ConnectionResetError, OSError):
-            pass
         if handle.proc.is_alive():
-            try:
+            with contextlib.suppress(ProcessLookupError):
                 os.kill(handle.proc.pid, signal.SIGTERM)  # busy: abort the episode, close and exit
-            except ProcessLookupError:
-                pass
 
     def ended(self, handle: _Worker) -> bool:
         if handle.proc.is_alive():

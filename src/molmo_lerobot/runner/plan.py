@@ -10,12 +10,11 @@ runs. An episode that cannot run still gets a plan, saying why (:attr:`EpisodePl
 
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.errors import EPISODE
+from molmo_lerobot.hashing import content_sha256
 from molmo_lerobot.results import EpisodeResult
 from molmo_lerobot.runner.rollout import horizon_with_source
 
@@ -26,13 +25,9 @@ if TYPE_CHECKING:
     from molmo_lerobot.plugins import Plugins
 
 
-def _canonical(spec: dict[str, Any]) -> str:
-    return json.dumps(spec, sort_keys=True, separators=(",", ":"), default=str)
-
-
 def episode_seed(run_seed: int, spec: dict[str, Any]) -> int:
     """Seed from the run seed and the episode's identity (its canonical content)."""
-    digest = hashlib.sha256(f"{int(run_seed)}\n{_canonical(spec)}".encode()).digest()
+    digest = content_sha256(spec, prefix=f"{int(run_seed)}\n", ensure_ascii=True)
     return int.from_bytes(digest[:4], "little") & 0x7FFFFFFF
 
 
@@ -120,7 +115,7 @@ class EpisodePlanner:
             horizon, source = horizon_with_source(self.horizon, spec.task, default_sec, self.policy_dt_ms,
                                                   self.horizons.get(task_type))
         return EpisodePlan(index, raw, episode_seed(self.run_seed, raw), task_type, spec.language.task_description,
-                           horizon, source, hashlib.sha256(_canonical(raw).encode()).hexdigest(), problems, error)
+                           horizon, source, content_sha256(raw, ensure_ascii=True).hex(), problems, error)
 
     def _task_type(self, spec: EpisodeSpec) -> tuple[str, float | None]:
         """The task type's name and default horizon (seconds); without a plugin, the known name and none."""

@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -42,10 +43,8 @@ def redirect_worker_output(output_dir: str | Path, worker_id: str) -> Path | Non
         return None
     path = Path(output_dir) / LOGS_DIR / f"{worker_id}.log"
     for stream in (sys.stdout, sys.stderr):
-        try:
+        with contextlib.suppress(OSError, ValueError):
             stream.flush()
-        except (OSError, ValueError):
-            pass
     try:
         fd = fileio.open_fd(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644, root=output_dir)
     except fileio.UnsafePathError as exc:

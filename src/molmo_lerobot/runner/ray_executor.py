@@ -18,8 +18,16 @@ from typing import Any
 
 from molmo_lerobot.runner.plan import EpisodePlan
 from molmo_lerobot.runner.progress import redirect_worker_output
-from molmo_lerobot.runner.supervisor import (DEAD, INIT_ERROR, READY, RESULT, Event, Supervisor, Transport,
-                                             WorkerStartError)
+from molmo_lerobot.runner.supervisor import (
+    DEAD,
+    INIT_ERROR,
+    READY,
+    RESULT,
+    Event,
+    Supervisor,
+    Transport,
+    WorkerStartError,
+)
 from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob
 
 
@@ -83,7 +91,7 @@ class RayTransport(Transport):
         os.environ.setdefault("MUJOCO_GL", "egl")  # local-cluster workers inherit the driver's environment
         kwargs: dict[str, Any] = dict(include_dashboard=self.include_dashboard, logging_level=logging.WARNING)
         if self.address is None:
-            kwargs["num_cpus"] = max(1, int(round(workers * self.num_cpus_per_worker)))
+            kwargs["num_cpus"] = max(1, round(workers * self.num_cpus_per_worker))
         try:
             ray.init(address=self.address, **kwargs)
         except (ConnectionError, RuntimeError, ValueError) as exc:

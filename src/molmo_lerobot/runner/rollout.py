@@ -9,16 +9,18 @@ from typing import TYPE_CHECKING, Any
 import mujoco
 import numpy as np
 
+from molmo_lerobot.errors import MolmoError
+
 if TYPE_CHECKING:
     from molmo_lerobot.policies.base import Action, EpisodeContext, Policy
     from molmo_lerobot.recording import EpisodeInfo, Recorder, RecorderGroup
 
 
-class ActionError(ValueError):
+class ActionError(MolmoError, ValueError):
     """A policy returned something that is not a valid action or chunk."""
 
 
-class SimulationDiverged(RuntimeError):
+class SimulationDiverged(MolmoError, RuntimeError):
     """The physics blew up (non-finite state or a MuJoCo instability warning): the episode is an error."""
 
 
@@ -199,4 +201,4 @@ def horizon_with_source(override: int | None, task_spec: Any, default_sec: float
     episode_sec = getattr(task_spec, "task_horizon_sec", None)
     seconds, source = ((task_sec, "task_horizons") if task_sec else
                        (episode_sec, "task_horizon_sec") if episode_sec else (default_sec, "default"))
-    return max(1, int(round(float(seconds) * 1000.0 / policy_dt_ms))), source
+    return max(1, round(float(seconds) * 1000.0 / policy_dt_ms)), source

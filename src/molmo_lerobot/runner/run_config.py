@@ -37,6 +37,7 @@ from pydantic_core import PydanticCustomError
 
 from molmo_lerobot.benchmark.schema import MAX_TASK_HORIZON_SEC
 from molmo_lerobot.cameras.options import camera_option_problems
+from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.robots.base import parse_base_size
 from molmo_lerobot.sim.env import CONTROL_MODES, Timing
 
@@ -46,7 +47,7 @@ MAX_HORIZON_STEPS = 100_000
 MAX_PHYSICS_STEPS = 2_000_000
 
 
-class RunConfigError(ValueError):
+class RunConfigError(MolmoError, ValueError):
     """The run config is invalid; ``problems`` holds one line per problem."""
 
     def __init__(self, problems: list[str]) -> None:
@@ -118,7 +119,8 @@ class TimingConfig(_Section):
     sim_dt_ms: Millis = 2.0
     control: Annotated[str, _rule(lambda v: v in CONTROL_MODES,
                                   f"timing: control must be one of {', '.join(CONTROL_MODES)}, got {{got}}")] = "hold"
-    sleep: Annotated[bool, _rule(lambda v: isinstance(v, bool), "timing: sleep must be true or false, got {got}")] = False
+    sleep: Annotated[bool, _rule(lambda v: isinstance(v, bool),
+                                 "timing: sleep must be true or false, got {got}")] = False
 
     @model_validator(mode="after")
     def _steps_divide(self) -> TimingConfig:
@@ -195,7 +197,8 @@ class VideoConfig(_Section):
     """How camera streams are encoded (record=true); the recorder checks the values with the encoder."""
 
     vcodec: str = "libsvtav1"
-    crf: Annotated[int | float | None, _rule(_optional(_is_number), "{key}: expected a number or null, got {got}")] = None
+    crf: Annotated[int | float | None,
+                   _rule(_optional(_is_number), "{key}: expected a number or null, got {got}")] = None
     g: int | None = 2
     preset: Annotated[int | str | None, _rule(lambda v: v is None or isinstance(v, str) or _is_int(v),
                                               "{key}: expected a preset name, a number or null, got {got}")] = None
@@ -339,7 +342,8 @@ def config_problems(cfg: Mapping[str, Any]) -> list[str]:
 
 def physics_steps(horizon: int, timing: Mapping[str, float]) -> int:
     """``mj_step`` calls an episode of ``horizon`` policy steps makes under ``timing``."""
-    per_policy_step = round(timing["policy_dt_ms"] / timing["ctrl_dt_ms"]) * round(timing["ctrl_dt_ms"] / timing["sim_dt_ms"])
+    per_policy_step = (round(timing["policy_dt_ms"] / timing["ctrl_dt_ms"])
+                       * round(timing["ctrl_dt_ms"] / timing["sim_dt_ms"]))
     return horizon * per_policy_step
 
 

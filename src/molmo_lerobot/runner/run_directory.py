@@ -14,6 +14,7 @@ one is refused). What the finalizers write (``dataset/``, ``report.html``) is th
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import sys
@@ -21,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from molmo_lerobot import fileio
+from molmo_lerobot.errors import RunError
 from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.results import EpisodeResult
 
@@ -35,10 +37,6 @@ _RECORD_TYPES: dict[str, tuple[type, ...]] = {
     "episode_index": (int,), "house_index": (int, type(None)), "task_cls": (str, type(None)), "success": (bool,),
     "success_once": (bool,), "steps": (int,), "seed": (int,), "error": (str, type(None)),
 }
-
-
-class RunError(RuntimeError):
-    """The run cannot start or continue; the message says why and what to do."""
 
 
 class RunDirectory:
@@ -174,10 +172,8 @@ class EpisodeLog:
                 view = view[os.write(self.fd, view):]
             os.fsync(self.fd)
         except OSError as exc:
-            try:
+            with contextlib.suppress(OSError):
                 os.ftruncate(self.fd, start)
-            except OSError:
-                pass
             raise self.run_dir.write_error(f"episode {result.episode_index}", exc) from None
 
     def close(self) -> None:

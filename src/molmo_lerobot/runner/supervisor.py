@@ -34,14 +34,14 @@ import threading
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from molmo_lerobot.errors import INFRASTRUCTURE
-from molmo_lerobot.runner.plan import EpisodePlan
+from molmo_lerobot.errors import INFRASTRUCTURE, MolmoError
 from molmo_lerobot.results import EpisodeResult
+from molmo_lerobot.runner.plan import EpisodePlan
 from molmo_lerobot.runner.worker import WorkerJob
 
 log = logging.getLogger(__name__)
@@ -51,7 +51,7 @@ READY, INIT_ERROR, RESULT, DEAD = "ready", "init_error", "result", "dead"
 Event = tuple[str, Any]
 
 
-class WorkerStartError(RuntimeError):
+class WorkerStartError(MolmoError, RuntimeError):
     """No worker could start (e.g. the policy failed to load): the run cannot start."""
 
 
@@ -66,10 +66,10 @@ class RunInterrupted(KeyboardInterrupt):
 class Transport(ABC):
     """How workers are started and talked to. Handles are opaque to the supervisor."""
 
-    def open(self, workers: int) -> None:
+    def open(self, workers: int) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
         """Prepare to start up to ``workers`` workers (e.g. join a cluster)."""
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
         """Every worker has ended: release what ``open`` acquired."""
 
     @abstractmethod
@@ -359,10 +359,8 @@ def reaping_children(timeout_s: float = 10.0) -> Iterator[None]:
     finally:
         for helper in helpers:
             if _helper_pid(helper) is not None:
-                try:
+                with suppress(OSError, ChildProcessError):
                     helper._stop()
-                except (OSError, ChildProcessError):
-                    pass
         deadline = time.monotonic() + timeout_s
         done: set[int] = set(before)
         while pids := [p for p in _children() if p not in done]:

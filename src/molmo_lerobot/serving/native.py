@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.policies.base import EpisodeContext
 
 DEFAULT_MOVE_GROUPS = {"arm": 7, "gripper": 1}
@@ -26,7 +27,7 @@ MAX_POLICY_DT_S = 60.0
 RESET_KEYS = {"endpoint", "episode_index", "seed", "prompt", "move_groups", "policy_dt_s"}
 
 
-class RequestError(ValueError):
+class RequestError(MolmoError, ValueError):
     """A client's request cannot be served (the message is sent back to it)."""
 
 
@@ -63,7 +64,8 @@ def episode_context(request: dict[str, Any]) -> EpisodeContext:
     if not isinstance(prompt, str) or len(prompt) > MAX_PROMPT_CHARS:
         raise RequestError(f"prompt must be a string of at most {MAX_PROMPT_CHARS} characters")
     dt = request.get("policy_dt_s", 0.066)
-    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not (0 < dt <= MAX_POLICY_DT_S and math.isfinite(dt)):
+    if (isinstance(dt, bool) or not isinstance(dt, (int, float))
+            or not (0 < dt <= MAX_POLICY_DT_S and math.isfinite(dt))):
         raise RequestError(f"policy_dt_s must be a number in (0, {MAX_POLICY_DT_S:g}], got {_show(dt)}")
     is_reset = request.get("endpoint") == "reset"
     return EpisodeContext(

@@ -19,12 +19,13 @@ from pathlib import Path
 from typing import Any
 
 from molmo_lerobot.cpu_threads import cap_threads
+from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.fileio import atomic_write
 
 STATS_FILE = "serve_stats.json"
 
 
-class ServeError(RuntimeError):
+class ServeError(MolmoError, RuntimeError):
     """The run's policy server could not start."""
 
 
@@ -40,8 +41,8 @@ def serve_options(policy_cfg: dict[str, Any], workers: int) -> dict[str, Any] | 
 def _serve(config: dict[str, Any], options: dict[str, Any], threads: int | None, conn: Connection) -> None:
     """Server process: rebuild the run's context from its ``config``, build the server, report its
     port (or the error), serve until SIGTERM."""
-    from molmo_lerobot.serving.server import build_server
     from molmo_lerobot.context import RunContext
+    from molmo_lerobot.serving.server import build_server
 
     cap_threads(threads)  # as many as each in-process worker would use: the same rounding
     try:
@@ -49,7 +50,8 @@ def _serve(config: dict[str, Any], options: dict[str, Any], threads: int | None,
         server.run(ready=lambda srv: conn.send(("ready", srv.port)))
     except BaseException as exc:  # reported to the run, which fails with this line
         with contextlib.suppress(OSError):
-            conn.send(("error", f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}"))
+            text = str(exc).strip()
+            conn.send(("error", f"{type(exc).__name__}: {text.splitlines()[0] if text else ''}"))
 
 
 def fetch_stats(port: int) -> dict[str, Any] | None:
@@ -87,7 +89,8 @@ def served_policy(config: dict[str, Any], workers: int, output_dir: str | Path |
         try:
             kind, value = parent.recv()
         except EOFError:
-            raise ServeError(f"policy.serve: the policy server died while starting (exit code {proc.exitcode})") from None
+            raise ServeError(f"policy.serve: the policy server died while starting "
+                             f"(exit code {proc.exitcode})") from None
         if kind != "ready":
             raise ServeError(f"policy.serve: the policy server did not start: {value}")
         port = int(value)

@@ -52,6 +52,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.frames import CloseCode
 from websockets.http11 import Request, Response
 
+from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.policies.base import Action, Policy
 from molmo_lerobot.protocol.client import RESET_ENDPOINT
 from molmo_lerobot.protocol.codec import CodecError, packb, unpackb
@@ -62,10 +63,10 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PolicyServer", "PolicyNotServable", "RequestError", "serve_in_thread"]
+__all__ = ["PolicyNotServable", "PolicyServer", "RequestError", "serve_in_thread"]
 
 
-class PolicyNotServable(ValueError):
+class PolicyNotServable(MolmoError, ValueError):
     """The policy cannot run in a server (it needs the simulator)."""
 
 
@@ -401,7 +402,7 @@ class PolicyServer:
                     self._wake.clear()
                 batch, self._pending = self._pending[: self.max_batch], self._pending[self.max_batch:]
                 results, infer_ms = await self._call(self._run_batch, batch)
-                for item, result in zip(batch, results):
+                for item, result in zip(batch, results, strict=True):
                     if item.future.done():
                         continue
                     if isinstance(result, Exception):
@@ -431,7 +432,7 @@ class PolicyServer:
         except Exception:  # cannot tell whose item broke the call: run each alone
             log.warning("batched act of %d failed; retrying each request alone", len(batch), exc_info=True)
             results = []
-            for p, o in zip(policies, observations):
+            for p, o in zip(policies, observations, strict=True):
                 try:
                     results.append(type(p).act_batch([p], [o])[0])
                 except Exception as exc:

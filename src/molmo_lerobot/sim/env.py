@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 import mujoco
 import numpy as np
 
+from molmo_lerobot.poses import pose7, unit_pose
 from molmo_lerobot.sim.geometry import subtree
 from molmo_lerobot.sim.spec_compat import set_joint_damping
 
@@ -221,13 +222,6 @@ def make_env(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: Robo
 # The environment ---------------------------------------------------------------------------------
 
 
-def pose7(pos: np.ndarray, mat: np.ndarray) -> np.ndarray:
-    """Position + rotation matrix as ``[x, y, z, qw, qx, qy, qz]``."""
-    quat = np.zeros(4)
-    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(mat, dtype=np.float64).reshape(9))
-    return np.concatenate([pos, quat])
-
-
 class Env:
     """One episode's simulation. Built by :func:`make_env`; see the module docstring for timing."""
 
@@ -258,7 +252,7 @@ class Env:
         self.rng = np.random.default_rng()
         base = np.asarray(robot.base_pose(spec.task.robot_base_pose), dtype=np.float64)
         #: the robot base's world pose (x, y, z, qw, qx, qy, qz): where MolmoSpaces puts its base body
-        self.base_pose = np.concatenate([base[:3], base[3:] / np.linalg.norm(base[3:])])
+        self.base_pose = unit_pose(base)
 
     # Lifecycle -----------------------------------------------------------------------------------
     def reset(self, seed: int) -> None:

@@ -69,7 +69,7 @@ def geom_points(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> np.ndarra
             rings = [np.stack([np.cos(t), np.sin(t), np.zeros_like(t)], 1), np.stack([np.cos(t), np.zeros_like(t),
                      np.sin(t)], 1), np.stack([np.zeros_like(t), np.cos(t), np.sin(t)], 1)]
             sphere = np.concatenate(rings) * r
-            local = np.concatenate([sphere + [0, 0, s * size[1]] for s in (-1, 1)])
+            local = np.concatenate([sphere + np.array([0, 0, s * size[1]]) for s in (-1, 1)])
         elif kind == mujoco.mjtGeom.mjGEOM_ELLIPSOID:
             rings = [np.stack([np.cos(t), np.sin(t), np.zeros_like(t)], 1), np.stack([np.cos(t), np.zeros_like(t),
                      np.sin(t)], 1), np.stack([np.zeros_like(t), np.cos(t), np.sin(t)], 1)]
@@ -171,15 +171,3 @@ def net_contact_force(model: mujoco.MjModel, data: mujoco.MjData, on: frozenset[
         mujoco.mj_contactForce(model, data, i, force)
         net += sign * (c.frame.reshape(3, 3).T @ force[:3])
     return net
-
-
-def touching_bodies(model: mujoco.MjModel, data: mujoco.MjData, bodies: frozenset[int]) -> set[int]:
-    """Bodies outside ``bodies`` in contact with any of them right now."""
-    gb = model.geom_bodyid
-    out: set[int] = set()
-    for i in range(data.ncon):
-        c = data.contact[i]
-        b1, b2 = int(gb[c.geom1]), int(gb[c.geom2])
-        if (b1 in bodies) != (b2 in bodies):
-            out.add(b2 if b1 in bodies else b1)
-    return out

@@ -42,6 +42,7 @@ from shapely.geometry import Point
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.molmospaces import task_aliases
 from molmo_lerobot.benchmark.schema import Pose7, Vec4
+from molmo_lerobot.poses import frame_matrix, pose_matrix, unit_pose
 from molmo_lerobot.sim import geometry
 from molmo_lerobot.tasks.base import Task, TaskType
 from molmo_lerobot.tasks.pick import PickTaskSpec
@@ -114,13 +115,6 @@ def _resolved(spec: EpisodeSpec, fields: tuple[str, ...], model: type) -> dict[s
     return out
 
 
-def _pose_matrix(pose: np.ndarray) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_quat(np.asarray(pose[3:7], dtype=np.float64), scalar_first=True).as_matrix()
-    T[:3, 3] = pose[:3]
-    return T
-
-
 def tilt(start: np.ndarray, now: np.ndarray) -> float:
     """Radians the rotation from ``start`` to ``now`` (3x3 world rotations) turns the world's up axis."""
     up = (now @ start.T)[:, 2]
@@ -170,16 +164,12 @@ class PickAndPlaceTask(Task):
         """The receptacle's start pose: ``place_receptacle_start_pose``, else its pose now."""
         given = getattr(self.env.spec.task, "place_receptacle_start_pose", None)
         pose = np.asarray(given, dtype=np.float64) if given else self.env.body_pose(self.receptacle_name)
-        self.start_pose = _pose_matrix(pose)
+        self.start_pose = pose_matrix(unit_pose(pose))
         self.supported_rel_poses = []
 
     # measurements
     def _pose(self, body: int) -> np.ndarray:
-        d = self.env.data
-        T = np.eye(4)
-        T[:3, :3] = d.xmat[body].reshape(3, 3)
-        T[:3, 3] = d.xpos[body]
-        return T
+        return frame_matrix(self.env.data.xpos[body], self.env.data.xmat[body])
 
     def support_force(self) -> np.ndarray:
         """Net world contact force (N) the receptacle's top-level body exerts on the object."""

@@ -156,8 +156,8 @@ def check_checkpoint(name: str | None, action_mode: str) -> None:
         return
     parts = [p for p in PurePosixPath(name.replace("\\", "/")).parts if p not in ("/", "")]
     if action_mode == "joint_position" and any(p in VELOCITY_CHECKPOINTS for p in parts):
-        raise ValueError(f"checkpoint {name!r} is an openpi DROID joint-velocity checkpoint but this pi0 preset applies "
-                         "absolute joint targets (MolmoSpaces' pi0 eval config): use policy=pi0_droid")
+        raise ValueError(f"checkpoint {name!r} is an openpi DROID joint-velocity checkpoint but this pi0 preset "
+                         "applies absolute joint targets (MolmoSpaces' pi0 eval config): use policy=pi0_droid")
     if action_mode == "joint_velocity" and any("jointpos" in p for p in parts):
         raise ValueError(f"checkpoint {name!r} outputs joint positions but this pi0 preset integrates joint "
                          "velocities (openpi's DROID): use policy=pi0_molmospaces")

@@ -19,8 +19,8 @@ def make_pi0_policy(cfg: dict[str, Any]) -> Policy:
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
     return [PolicyType("pi0", make_pi0_policy, "pi0 / pi0.5: openpi server (DROID keys) or LeRobot PI0 (policy.path); "
-                       "presets policy=pi0 (MolmoSpaces' eval config), policy=pi0_droid (openpi's velocity checkpoints)",
-                       conventions=True)]
+                       "presets policy=pi0 (MolmoSpaces' eval config), "
+                       "policy=pi0_droid (openpi's velocity checkpoints)", conventions=True)]
 
 
 @hookimpl
