@@ -6,7 +6,7 @@ it. Grasp lookups try grasp libraries in priority order — a newly registered o
 restricted to those mapped to a library holding the UID (or to any library): first those
 made for the requested robot, then (MolmoSpaces' unified TCP convention makes grasps transfer)
 those kept under another robot's name. The default catalog holds our built-in objects, the
-articulated kitchen items and MolmoSpaces' ``thor``/``objaverse`` libraries with their
+articulated kitchen items, LIBERO's objects (``libero``) and MolmoSpaces' ``thor``/``objaverse`` libraries with their
 ``droid``/``droid_objaverse`` grasps; user libraries in MolmoSpaces' format go first.
 """
 
@@ -200,11 +200,13 @@ class AssetCatalog:
 def default_catalog() -> AssetCatalog:
     """The process-wide catalog: built-in, articulated and MolmoSpaces objects; user libraries join at runtime."""
     from molmo_lerobot.assets.articulated import ArticulatedAssetLibrary
+    from molmo_lerobot.assets.libero import LiberoAssetLibrary
     from molmo_lerobot.molmospaces.layout import OBJECT_LIBRARY_TO_GRASP_LIBRARIES
     from molmo_lerobot.molmospaces.libraries import MolmoSpacesGrasps, MolmoSpacesObjects
 
     catalog = AssetCatalog()
     catalog.register_library(ArticulatedAssetLibrary(), first=False)
+    catalog.register_library(LiberoAssetLibrary(), first=False)
     for source, grasp_sources in OBJECT_LIBRARY_TO_GRASP_LIBRARIES.items():
         catalog.register_library(MolmoSpacesObjects(source), first=False)
         for grasps in grasp_sources:
