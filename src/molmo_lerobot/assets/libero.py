@@ -250,12 +250,13 @@ class LiberoObject:
 
     @property
     def description(self) -> str:
-        """``"<colour> <material> <name>"`` without repeated words (``"red ceramic bowl"``)."""
-        words: list[str] = []
-        for w in f"{self.color} {self.material} {self.name}".split():
-            if w not in words:
-                words.append(w)
-        return " ".join(words)
+        """``"<colour> <material> <name>"`` (``"red ceramic bowl"``, ``"cardboard orange juice carton"``)."""
+        return _phrase(self.color, self.material, self.name)
+
+    @property
+    def colored_name(self) -> str:
+        """``"<colour> <name>"`` (``"red orange juice carton"``, ``"orange juice carton"``)."""
+        return _phrase(self.color, self.name)
 
     def _tree(self) -> ElementTree.Element:
         return ElementTree.parse(self.xml_path).getroot()
@@ -335,7 +336,7 @@ class LiberoObject:
             "description_long": f"a {self.description} ({self.mass * 1000:.0f} g, "
                                 f"{2 * hx * 100:.1f} x {2 * hy * 100:.1f} x {2 * hz * 100:.1f} cm)",
             "description_short": {"one_word": words[-1], "two_words": " ".join(words[-2:]),
-                                  "three_words": " ".join(f"{self.color} {self.name}".split()[-3:])},
+                                  "three_words": " ".join(self.colored_name.split()[-3:])},
             "synset": self.synset,
             "mass": self.mass,
             "boundingBox": {"x": round(2 * hx, 6), "y": round(2 * hy, 6), "z": round(2 * hz, 6)},
@@ -398,6 +399,14 @@ class LiberoObject:
                 ElementTree.SubElement(body, "geom", **attrs, pos=_fmt(pos - centre), quat=quat, group="1",
                                        contype="0", conaffinity="0", mass="0")
         return ElementTree.tostring(doc, encoding="unicode")
+
+
+def _phrase(*words: str) -> str:
+    """``words`` joined, each qualifier (all but the last) left out where the last already starts with it
+    or holds it ("orange" + "orange juice carton" -> "orange juice carton")."""
+    *qualifiers, name = words
+    kept = [w for w in qualifiers if w not in name.split()]
+    return " ".join([*kept, name])
 
 
 def _collides(el: ElementTree.Element) -> bool:
