@@ -1,7 +1,7 @@
 """Grasps of the libero objects: computed from their collision geometry, deterministic, cached; the top
 grasp lifts the object with franka_droid's Robotiq (a floating gripper, ``grasp_lift.py``).
 
-The default run checks two objects; ``-m slow`` checks every graspable object of the library."""
+The default run lifts two objects; ``-m slow`` checks determinism and caching and lifts every graspable object."""
 
 from __future__ import annotations
 
@@ -36,6 +36,7 @@ def _lifts(library: LiberoGraspLibrary, uid: str) -> None:
     assert rise > 0.8 * LIFT, f"{uid}: the top grasp lifted it {rise:.3f} m of {LIFT} m"
 
 
+@pytest.mark.slow
 def test_grasps_are_deterministic_cached_and_only_for_known_grippers(library):
     first = library.load("libero_black_book", "franka_droid")
     assert library.path("libero_black_book", "franka_droid").is_relative_to(library.root)
