@@ -72,9 +72,12 @@ def settle(house: int, poses: dict[str, list[float]]) -> tuple[dict[str, list[fl
     return out, shift
 
 
-def _layout(house: int, target: str, others: list[str], z: float, rng: np.random.Generator) -> dict[str, list[float]] | None:
-    """Poses for ``target`` and ``others`` inside the workspace, footprints apart, or None."""
-    placed: list[tuple[float, float, float]] = []
+def _layout(house: int, target: str, others: list[str], z: float, defaults: dict[str, list[float]],
+            rng: np.random.Generator) -> dict[str, list[float]] | None:
+    """Poses for ``target`` and ``others`` inside the workspace, footprints apart (also from the objects
+    left at their ``defaults`` poses), or None."""
+    placed = [(pose[0], pose[1], resting_radius(LIBERO_OBJECTS[uid])) for uid, pose in defaults.items()
+              if uid not in (target, *others)]
     poses = {}
     for k, uid in enumerate([target, *others]):
         obj = LIBERO_OBJECTS[uid]
@@ -101,7 +104,7 @@ def _pick_episode(scene: LiberoRooms, house: int, index: int, seed: int) -> dict
     for _ in range(_MAX_TRIES):
         n = int(rng.integers(2, 4))
         others = [small[int(k)] for k in rng.choice(len(small), n, replace=False)]
-        near = _layout(house, target, others, meta["table_height"], rng)
+        near = _layout(house, target, others, meta["table_height"], defaults, rng)
         if near is None:
             continue
         settled, shift = settle(house, {**defaults, **near})
