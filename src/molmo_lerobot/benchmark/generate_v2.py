@@ -4,7 +4,8 @@
 --name pick_v2 --out benchmarks/pick_v2`` writes the same two files as ``molmo-bench generate``
 (:func:`~molmo_lerobot.benchmark.generate.write_benchmark`). Per episode: a house, the object to
 pick (a graspable one), a collision-free layout of it and two or three of the house's other objects
-inside the robot's workspace (the rest stay where the house puts them), the robot's start pose
+inside the robot's workspace (the rest stay where the house puts them, and the layout keeps clear
+of them too), the robot's start pose
 (:data:`READY_ARM`, the gripper 0.27 m above the table pointing down, small joint jitter). The layout
 is then settled: the house (without the robot) is simulated for :data:`SETTLE_S` and the resting
 poses are what the episode records; a layout in which anything moved more than
