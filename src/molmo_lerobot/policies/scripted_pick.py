@@ -45,14 +45,15 @@ class ScriptedPick(PhasedExpert):
         return pose_matrix(self.env.body_pose(self.target))
 
     def _neighbours(self) -> list[tuple[np.ndarray, float]]:
-        """Centres and footprint radii of the other free objects."""
+        """Centres and footprint radii (of their collision geoms) of the other free objects."""
         env, m = self.env, self.env.model
         out = []
         skip = env.subtree_bodies(self.target) | env.robot.body_ids
         for b in range(1, m.nbody):
             if b in skip or m.body_jntnum[b] == 0 or m.body_parentid[b] != 0:
                 continue
-            geoms = range(m.body_geomadr[b], m.body_geomadr[b] + m.body_geomnum[b])
+            geoms = [g for g in range(m.body_geomadr[b], m.body_geomadr[b] + m.body_geomnum[b])
+                     if m.geom_contype[g] or m.geom_conaffinity[g]]
             radius = max((m.geom_rbound[g] + np.linalg.norm(m.geom_pos[g]) for g in geoms), default=0.0)
             out.append((env.data.xpos[b].copy(), float(radius)))
         return out
