@@ -6,7 +6,6 @@ franka_droid, DROID cameras) at the default texture size and shadows, then for v
 
 from __future__ import annotations
 
-import os
 import statistics
 import time
 

@@ -7,7 +7,6 @@ as the policy sees them."""
 
 from __future__ import annotations
 
-import json
 import sys
 
 import cv2
@@ -52,7 +51,8 @@ def main(out: str) -> None:
         rows.append(np.concatenate([*left, gap, *right], axis=1))
     sheet = np.concatenate(rows, axis=0)
     head = np.full((24, sheet.shape[1], 3), 255, np.uint8)
-    cv2.putText(head, "v2: pick_v2 (exterior | wrist)", (4, 17), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
+    cv2.putText(head, "v2: pick_v2 (exterior | wrist)", (4, 17), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1,
+                cv2.LINE_AA)
     cv2.putText(head, "v1: pick/place/next_to/color/open/close (exterior | wrist)", (460, 17),
                 cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
     sheet = np.concatenate([head, sheet], axis=0)

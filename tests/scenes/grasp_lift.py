@@ -32,7 +32,8 @@ def lift_height(mjcf: str, uid: str, rest_z: float, grasp: np.ndarray) -> float:
     world.option.timestep = DT
     for k, v in PHYSICS_OPTIONS.items():
         setattr(world.option, k, v)
-    world.worldbody.add_geom(name="table", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[1, 1, 0.1], friction=[1.0, 0.01, 0.001])
+    world.worldbody.add_geom(name="table", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[1, 1, 0.1],
+                             friction=[1.0, 0.01, 0.001])
     attach_mjcf(world, mjcf, uid, pos=[0.0, 0.0, rest_z])
     T_obj = np.eye(4)
     T_obj[2, 3] = rest_z

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from grasp_lift import LIFT, lift_height  # noqa: E402
+from grasp_lift import LIFT, lift_height
 
-from molmo_lerobot.assets.libero import LIBERO_OBJECTS  # noqa: E402
-from molmo_lerobot.assets.libero_grasps import LiberoGraspLibrary, compute_grasps  # noqa: E402
+from molmo_lerobot.libero.grasps import LiberoGraspLibrary, compute_grasps
+from molmo_lerobot.libero.objects import LIBERO_OBJECTS
 
 GRASPABLE = sorted(u for u, o in LIBERO_OBJECTS.items() if o.graspable)
 QUICK = ["libero_black_book", "libero_milk"]

@@ -1,6 +1,6 @@
 """Deterministic v2 benchmarks in the textured LIBERO rooms (``libero_rooms``, franka_droid, DROID cameras).
 
-``python -m molmo_lerobot.benchmark.generate_v2 --task pick --houses 20 --episodes-per-house 5 --seed 0
+``python -m molmo_lerobot.libero.generate --task pick --houses 20 --episodes-per-house 5 --seed 0
 --name pick_v2 --out benchmarks/pick_v2`` writes the same two files as ``molmo-bench generate``
 (:func:`~molmo_lerobot.benchmark.generate.write_benchmark`). Per episode: a house, the object to
 pick (a graspable one), a collision-free layout of it and two or three of the house's other objects
@@ -25,10 +25,10 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from molmo_lerobot.assets.libero import LIBERO_OBJECTS
 from molmo_lerobot.benchmark.generate import _r, _yaw_quat, benchmark_metadata, write_benchmark
+from molmo_lerobot.libero.objects import LIBERO_OBJECTS
+from molmo_lerobot.libero.rooms import REGION_X, REGION_Y, LiberoRooms, resting_radius
 from molmo_lerobot.sim.env import PHYSICS_OPTIONS
-from molmo_lerobot.sim.libero_rooms import REGION_X, REGION_Y, LiberoRooms, resting_radius
 
 GENERATOR_VERSION = 2
 TASK_CLS = {"pick": "molmo_lerobot.tasks.pick.PickTask"}

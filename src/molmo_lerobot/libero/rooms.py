@@ -5,7 +5,7 @@ room, study) with its floor, wall and table-top textures and LIBERO's background
 (visual meshes only: kitchen cabinets and fridge, a wall unit, shelves, plants, lamps, pictures),
 a table (legs, or a counter block in kitchens) of realistic height and size, lights (a key light
 that casts shadows, a fill light), and its objects from the ``libero`` asset library
-(:mod:`molmo_lerobot.assets.libero`): graspable items no two of which share a name and colour (so
+(:mod:`molmo_lerobot.libero.objects`): graspable items no two of which share a name and colour (so
 "the red ketchup bottle" names one), two flat distractors and three receptacles (two of one kind in
 different colours, one of another kind). Every file is read in place from the installed LIBERO
 asset distributions.
@@ -32,8 +32,9 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.assets.libero import LIBERO_LIBRARY_TYPE, LIBERO_OBJECTS, LiberoObject, assets_root, texture_file
 from molmo_lerobot.assets.libraries import AssetLibraryType
+from molmo_lerobot.libero.library import LIBERO_LIBRARY_TYPE
+from molmo_lerobot.libero.objects import LIBERO_OBJECTS, LiberoObject, assets_root, texture_file
 from molmo_lerobot.sim.scenes import SceneDataset, attach_mjcf
 
 _SALT = 0x1B3A0
@@ -74,7 +75,8 @@ _DECOR = {
     "kitchen": (Decor("kitchen_cabinets", "kitchen_background/visual/kitchen_background_vis.msh",
                       "kitchen_background/kitchen_background.png", 0.01, "back", 0.0, 0.31),
                 Decor("fridge", "fridge/visual/fridge_vis.msh", "fridge/metal.png", 0.01, "right", -math.pi / 2, 0.24)),
-    "living_room": (Decor("wall_unit", "living_room/visual/living_room_vis.msh", "living_room/living_room_wall_unit.png",
+    "living_room": (Decor("wall_unit", "living_room/visual/living_room_vis.msh",
+                           "living_room/living_room_wall_unit.png",
                           0.7, "back", 0.0, 0.2),
                     Decor("plant", "plant/visual/plant_vis.msh", "plant/plant_texture.png", 0.7, "right", 0.0, 0.4),
                     Decor("floor_lamp", "floor_lamp/visual/floor_lamp_vis.msh", "floor_lamp/lamp_texture.png", 1.0,
@@ -241,11 +243,13 @@ class LiberoRooms(SceneDataset):
         floor = self._material(world, "floor", lay["floor"], (0.8, 0.8), True)
         walls = self._material(world, "walls", lay["wall"], (0.5, 0.5), True, specular=0.05)
         cx, cy = (back + behind) / 2, (left + right) / 2
-        wb.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[(back - behind) / 2, (left - right) / 2, 0.05],
+        wb.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE,
+                size=[(back - behind) / 2, (left - right) / 2, 0.05],
                     pos=[cx, cy, 0.0], material=floor, friction=[1.0, 0.01, 0.001])
         height = 2.6
         for name, pos, size in (("wall_back", [back + 0.02, cy, height / 2], [0.02, (left - right) / 2, height / 2]),
-                                ("wall_behind", [behind - 0.02, cy, height / 2], [0.02, (left - right) / 2, height / 2]),
+                                ("wall_behind", [behind - 0.02, cy, height / 2],
+                                 [0.02, (left - right) / 2, height / 2]),
                                 ("wall_right", [cx, right - 0.02, height / 2], [(back - behind) / 2, 0.02, height / 2]),
                                 ("wall_left", [cx, left + 0.02, height / 2], [(back - behind) / 2, 0.02, height / 2])):
             wb.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_BOX, pos=pos, size=size, material=walls,
