@@ -23,8 +23,9 @@ and ``gripper`` (0 open … 1 closed). The base starts where ``task.robot_base_p
 episode's ``robot.init_qpos["base"]`` (``[x, y, yaw]``), where given, moves it from there.
 
 The navigation camera ``head_camera`` is the robot's own (:data:`HEAD_CAMERA_POS` /
-:data:`HEAD_CAMERA_QUAT` / :data:`HEAD_CAMERA_FOVY` on ``robot_0/base``: on a mast at the back of
-the base, 1.4 m above the floor, looking ahead and 20° down); :mod:`molmo_lerobot.cameras.mobile`
+:data:`HEAD_CAMERA_QUAT` / :data:`HEAD_CAMERA_FOVY` on ``robot_0/base``: on a mast above the
+base's centre, 1.65 m above the floor, looking ahead and 25° down, fov 75°: over the arm in its
+start pose, which shows at the image's bottom edge); :mod:`molmo_lerobot.cameras.mobile`
 renders it beside the wrist camera. MolmoSpaces' Franka has no head camera (their nav runs on
 RB-Y1), so its pose is ours. Their base box is textured with their ``DarkWood2.png``, which is in
 their assets; ours is the pedestal colour.
@@ -45,10 +46,10 @@ from molmo_lerobot.robots.franka_droid import BASE_SIZE, NAMESPACE, FrankaDroid,
 
 #: MolmoSpaces' ``base_control_params``: slide kp, hinge kp (damping ratio 1 on all) and the slides' range (m)
 BASE_XY_KP, BASE_THETA_KP, BASE_DAMPING_RATIO, BASE_RANGE = 25000.0, 5000.0, 1.0, 25.0
-#: the head camera on ``robot_0/base`` (MuJoCo camera: looks along -z, +y up): 0.15 m behind the
-#: base's centre, 1.4 m up, looking along the base's +x and pitched 20° down; vertical fov (deg)
-HEAD_CAMERA_POS = (-0.15, 0.0, 1.4)
-HEAD_CAMERA_PITCH_DEG = 20.0
+#: the head camera on ``robot_0/base`` (MuJoCo camera: looks along -z, +y up): above the base's centre,
+#: 1.65 m up, looking along the base's +x and pitched 25° down; vertical fov (deg)
+HEAD_CAMERA_POS = (0.0, 0.0, 1.65)
+HEAD_CAMERA_PITCH_DEG = 25.0
 HEAD_CAMERA_FOVY = 75.0
 BASE_JOINTS = ("base_x", "base_y", "base_theta")
 
