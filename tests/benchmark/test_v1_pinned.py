@@ -35,6 +35,8 @@ PINNED = {
                 {(227, "task_horizon_sec"): 60}, {"open": {"task_success_threshold": 0.2}}),
     "close_v1": ("8afa0ef54043fb383925543f1868c2a2bfad8d4e14134a9c527a287d372110d8",
                  {(227, "task_horizon_sec"): 60}, {"close": {"task_success_threshold": 0.2}}),
+    "nav_v1": ("cb3966f9c37425d3a64dedcd36edaa7af550ed91f799bdc10904eb2fc74c9523",
+               {(682, "task_horizon_sec"): 60}, {"nav_to_obj": {"succ_pos_threshold": 1.5}}),
 }
 
 

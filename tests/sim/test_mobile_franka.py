@@ -66,11 +66,11 @@ def test_base_starts_at_the_base_pose_and_drives_where_commanded(run):
         env.close()
 
 
-def test_init_qpos_base_moves_the_start_and_features_list_the_base(run):
-    env = _env(run, _episode([-1.0, 0.8, -0.3]))
+def test_robot_base_pose_wins_over_init_qpos_base_and_features_list_the_base(run):
+    env = _env(run, _episode([0.0, 0.0, 0.0]))  # what their files write; their eval then sets robot_base_pose
     try:
         obs = env.observe(images=True)
-        assert obs["qpos"]["base"] == pytest.approx([-1.0, 0.8, -0.3], abs=1e-9)
+        assert obs["qpos"]["base"] == pytest.approx([START[0], START[1], YAW], abs=1e-9)
         assert env.camera_system == "MobileFrankaCameraSystem" and env.camera_names == ["head_camera", "wrist_camera"]
         assert obs["images"]["head_camera"].shape == (96, 96, 3) and obs["images"]["head_camera"].std() > 0
         fmap = FeatureMap.from_observation(env.move_groups, env.joint_names, env.camera_names, obs)
@@ -83,3 +83,8 @@ def test_init_qpos_base_moves_the_start_and_features_list_the_base(run):
             .tolist() == [1, 2, 3]
     finally:
         env.close()
+
+
+def test_a_base_init_qpos_of_another_size_is_an_error_naming_the_field(run):
+    with pytest.raises(ValueError, match=r"robot\.init_qpos\['base'\]: expected \[\] or \[x, y, yaw\], got 2"):
+        _env(run, _episode([1.0, 2.0]))

@@ -19,8 +19,10 @@ Built as their ``add_robot_to_scene`` builds it, under the namespace ``robot_0/`
 
 Move groups, in their order: ``base`` (world x, y in metres and yaw in radians; a yaw target is
 wrapped to within ±π of the current yaw, as their base group does), ``arm`` (7 joint positions)
-and ``gripper`` (0 open … 1 closed). The base starts where ``task.robot_base_pose`` puts it; an
-episode's ``robot.init_qpos["base"]`` (``[x, y, yaw]``), where given, moves it from there.
+and ``gripper`` (0 open … 1 closed). The base starts where ``task.robot_base_pose`` puts it, whatever
+``robot.init_qpos["base"]`` says (``[]`` or three values): their JSON evaluation sets the base group
+from ``init_qpos`` and then the base pose from ``robot_base_pose`` (``tasks/json_eval_task_sampler.py``,
+``randomize_scene`` before ``_sample_task``); their files write ``[0, 0, 0]`` there.
 
 The navigation camera ``head_camera`` is the robot's own (:data:`HEAD_CAMERA_POS` /
 :data:`HEAD_CAMERA_QUAT` / :data:`HEAD_CAMERA_FOVY` on ``robot_0/base``: on a mast above the
@@ -179,12 +181,15 @@ class MobileFranka(FrankaDroid):
     joint_names: ClassVar[dict[str, list[str]]] = {"base": list(BASE_JOINTS), **FrankaDroid.joint_names}
     default_camera_system = "MobileFrankaCameraSystem"
     default_base_size = BASE_SIZE
-    #: MolmoSpaces' MobileFrankaRobotConfig.init_qpos for arm and gripper; the base stays at the start pose
+    #: MolmoSpaces' MobileFrankaRobotConfig.init_qpos for arm and gripper; the base starts at robot_base_pose
     default_init_qpos: ClassVar[dict[str, list[float]]] = {"base": [], **FrankaDroid.default_init_qpos}
 
     def init_qpos(self, group: str, values: Sequence[float]) -> np.ndarray:
-        """``base``: ``[x, y, yaw]`` or ``[]`` (stay at ``robot_base_pose``); others as ``franka_droid``."""
-        if group == "base" and not len(values):
+        """``base``: ``[]`` or three values, either way the base stays at ``robot_base_pose`` (module
+        docstring); ``arm`` and ``gripper`` as ``franka_droid``."""
+        if group == "base":
+            if len(values) not in (0, 3):
+                raise ValueError(f"expected [] or [x, y, yaw], got {len(values)} values")
             return np.zeros(0)
         return super().init_qpos(group, values)
 
