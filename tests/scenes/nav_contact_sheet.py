@@ -63,7 +63,7 @@ def _row(spec, index: int, ctx: RunContext) -> np.ndarray:
             else:
                 continue
             break
-        name, dist = task.nearest()
+        _, dist = task.nearest()
         end = [_label(env.render(c), f"success {task.success()} {dist:.2f} m {c}") for c in env.camera_names]
         return np.hstack([*start, *end, _label(_top(env), spec.prompt)])
     finally:

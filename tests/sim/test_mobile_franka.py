@@ -62,6 +62,7 @@ def test_base_starts_at_the_base_pose_and_drives_where_commanded(run):
         assert env.data.xpos[body][:2] == pytest.approx(goal[:2], abs=2e-3)
         assert math.atan2(env.data.xmat[body][3], env.data.xmat[body][0]) == pytest.approx(goal[2], abs=2e-3)
         assert obs["qpos"]["arm"] == pytest.approx(arm, abs=0.02)  # the arm rides along, held
+        assert obs["robot_base_pose"][:2] == pytest.approx(goal[:2], abs=2e-3)  # the base pose follows the robot
     finally:
         env.close()
 

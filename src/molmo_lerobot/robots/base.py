@@ -49,6 +49,11 @@ class RobotHandle(ABC):
         """``group``'s joints in their own units (rad, m), as MolmoSpaces' ``qpos`` reports them."""
         return self.qpos(data, group)
 
+    def base_pose(self, data: mujoco.MjData) -> np.ndarray | None:
+        """The base's world pose now (x, y, z, qw, qx, qy, qz) for a robot that moves it; ``None`` for a
+        fixed base (it stays at the episode's ``robot_base_pose``)."""
+        return None
+
     def joint_qvel(self, data: mujoco.MjData, group: str) -> np.ndarray:
         """Their velocities, as MolmoSpaces' ``qvel`` reports them."""
         return self.qvel(data, group)

@@ -92,6 +92,7 @@ class MobileFrankaHandle(FrankaDroidHandle):
         self._base_q = np.array([model.jnt_qposadr[j] for j in joints])
         self._base_v = np.array([model.jnt_dofadr[j] for j in joints])
         self._base_u = np.array([model.actuator(f"{prefix}{name}_act").id for name in BASE_JOINTS])
+        self._base_body = model.body(f"{prefix}base").id
         self._base_lo = np.array([-np.inf] * 3)
         self._base_hi = np.array([np.inf] * 3)
         limited = model.actuator_ctrllimited[self._base_u].astype(bool)
@@ -126,6 +127,10 @@ class MobileFrankaHandle(FrankaDroidHandle):
 
     def targets(self, data, group):
         return data.ctrl[self._base_u].copy() if group == "base" else super().targets(data, group)
+
+    def base_pose(self, data):
+        """The base body's world pose now (observations' ``robot_base_pose`` follow the robot)."""
+        return np.concatenate([data.xpos[self._base_body], data.xquat[self._base_body]])
 
     def command(self, data, group, values):
         if group != "base":

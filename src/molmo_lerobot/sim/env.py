@@ -351,7 +351,7 @@ class Env:
             "qpos": {g: self.robot.qpos(d, g) for g in self.move_groups},
             "qvel": {g: self.robot.qvel(d, g) for g in self.move_groups},
             "tcp_pose": pose7(d.site_xpos[site], d.site_xmat[site]),
-            "robot_base_pose": self.base_pose.copy(),
+            "robot_base_pose": self._base_now(),
             "joint_qpos": {g: self.robot.joint_qpos(d, g) for g in self.move_groups},
             "joint_qvel": {g: self.robot.joint_qvel(d, g) for g in self.move_groups},
         }
@@ -360,6 +360,11 @@ class Env:
             if self._depth_cameras:
                 obs["depth"] = {name: self.render_depth(name) for name in self._depth_cameras}
         return obs
+
+    def _base_now(self) -> np.ndarray:
+        """The robot base's world pose: where a mobile robot has driven it, else :attr:`base_pose`."""
+        moving = self.robot.base_pose(self.data)
+        return self.base_pose.copy() if moving is None else np.asarray(moving, dtype=np.float64)
 
     @staticmethod
     def camera_view_options() -> mujoco.MjvOption:
