@@ -7,8 +7,8 @@ textures from LIBERO's scene textures; in every room two or three pieces of furn
 against its walls, clear of the doorways (tables on legs, cabinets, sideboards, textured with
 LIBERO's wood and stone); and :data:`N_OBJECTS` of LIBERO's household objects
 (:mod:`molmo_lerobot.libero.objects`) standing upright on the furniture tops, from categories of
-which two have two instances each (in different rooms), so that "any bowl" has candidates. Every
-file is read in place from the installed LIBERO asset distributions.
+which two have two instances each (in different rooms where the furniture allows), so that "any
+bowl" has candidates. Every file is read in place from the installed LIBERO asset distributions.
 
 Walls and furniture collide (group 0 visual + collision in one geom: boxes); the floor spans the
 house. The metadata lists the rooms, doorways, furniture and objects (with their categories, the
