@@ -6,7 +6,8 @@
 door the robot starts on (alternating along the house's episodes, so each house has push and pull
 episodes), and the robot's start pose sampled as MolmoSpaces' door sampler samples it
 (``DoorOpeningTaskSamplerConfig``): 1.0–1.5 m from the handle on that side, facing it within ±0.25
-rad, clear of the wall, of the door's swing and of the rooms' walls. The task is MolmoSpaces'
+rad, clear of the wall, of the door's swing and of the rooms' walls, and where their push / pull test
+(made from the handle's motion as seen from the base) agrees with the side of the swing. The task is MolmoSpaces'
 ``DoorOpeningTask`` with their defaults written out (hinge range, reset state 0, threshold 0.67);
 the prompt is their push / pull prompt (:func:`molmo_lerobot.tasks.door_opening.is_pushing`).
 ``cameras: []``: the robot's camera system builds them. Same arguments, same JSON.
@@ -67,7 +68,9 @@ def start_pose(house: int, side: int, rng: np.random.Generator) -> list[float]:
             continue
         to_handle = handle[:2] - p
         yaw = math.atan2(to_handle[1], to_handle[0]) + float(rng.uniform(-YAW_NOISE, YAW_NOISE))
-        return [_r(p[0]), _r(p[1]), 0.0, *(_r(q) for q in _yaw_quat(yaw))]
+        pose = [_r(p[0]), _r(p[1]), 0.0, *(_r(q) for q in _yaw_quat(yaw))]
+        if (prompt(house, pose) == PUSH_PROMPT) == (side != door["swing_side"]):  # their prompt tells the truth
+            return pose
     raise RuntimeError(f"door_rooms house {house}: no start pose on side {side}")
 
 

@@ -184,6 +184,7 @@ class DoorRooms(SceneDataset):
         leaf.add_joint(name=HINGE_JOINT, type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0.0, 0.0, float(-sx * sy)],
                        range=[0.0, DOOR_RANGE], damping=lay["damping"], frictionloss=lay["frictionloss"],
                        armature=0.1)
+        world.add_exclude(bodyname1="world", bodyname2=f"{DOOR_NAME}/leaf")  # the leaf turns inside the wall
         w = door["leaf_width"]
         leaf.add_geom(name=f"{DOOR_NAME}/leaf_panel", type=mujoco.mjtGeom.mjGEOM_BOX,
                       pos=[0.0, sy * w / 2, (DOOR_HEIGHT - 0.02) / 2 + 0.01],

@@ -48,6 +48,8 @@ BASE_CLEARANCE, LEAF_HALF = 0.3, 0.03
 #: base speeds while driving (m/s, rad/s) and its largest step in contact (m per policy step)
 DRIVE_SPEED, TURN_SPEED, BASE_CONTACT_STEP = 0.4, 0.8, 0.012
 IK_ITERS = 400
+#: turns of the last arm joint added to the IK seed, tried in turn for the grasp (rad)
+WRIST_SEEDS = (0.0, math.pi / 2, -math.pi / 2)
 
 
 def _yaw_of(v: np.ndarray) -> float:
@@ -118,19 +120,26 @@ class ScriptedDoor(PhasedExpert):
         approach[2] = 0.0
         approach /= np.linalg.norm(approach)
         self.approach0 = approach
-        #: the pushing case: opening moves the handle away from the robot
-        turned = self._body_T(float(d.qpos[self.qadr]) + 0.5, near)[:2, 3]
-        self.pushing = bool(np.linalg.norm(turned - base_xy) > np.linalg.norm(h[:2] - base_xy))
+        #: the pushing case: opening moves the handle away from the robot's side of the wall
+        turned = self._body_T(float(d.qpos[self.qadr]) + 0.1, near)[:2, 3]
+        self.pushing = bool((turned - h[:2]) @ approach[:2] > 0.0)
         self.handle_body = near
         # the grasp: TCP at the bar's centre, +z into the leaf, fingers level across the bar
         z = approach
         y = np.cross([0.0, 0.0, 1.0], z)
         y /= np.linalg.norm(y)
         x = np.cross(y, z)
-        T = np.eye(4)
-        T[:3, :3] = np.column_stack([x, y, z])
-        T[:3, 3] = h
-        self.grasp_local = np.linalg.inv(self._body_T()) @ T
+        leaf_inv = np.linalg.inv(self._body_T())
+        #: the two grasps (fingers either way across the bar), the one nearer the hand's current roll first
+        self.grasps = []
+        for sign in (1.0, -1.0):
+            T = np.eye(4)
+            T[:3, :3] = np.column_stack([sign * x, sign * y, z])
+            T[:3, 3] = h
+            self.grasps.append(leaf_inv @ T)
+        if self._tcp_T()[:3, 1] @ y < 0:
+            self.grasps.reverse()
+        self.grasp_local = self.grasps[0]
         # the doorway's centre line (push): half way along the leaf from the hinge
         along = h[:2] - self.anchor
         along -= approach[:2] * float(along @ approach[:2])
@@ -227,18 +236,22 @@ class ScriptedDoor(PhasedExpert):
             self.stand = self._stand()
             self._move_all(self.stand, self.q_cmd, 0.0, 1.0)
         elif phase == "reach":
-            T_pre = self._grasp_T(q_door)
-            T_pre[:3, 3] -= PREGRASP_DISTANCE * T_pre[:3, 2]
-            q = self._solve(T_pre, self.b_cmd, self.q_cmd)
-            if q is None:
-                raise RuntimeError("scripted door expert: the pre-grasp is out of reach")
-            self._move_all(self.b_cmd, q, 0.0, 1.5)
+            for grasp, roll in ((g, r) for g in self.grasps for r in WRIST_SEEDS):
+                self.grasp_local = grasp
+                T = self._grasp_T(q_door)
+                T_pre = T.copy()
+                T_pre[:3, 3] -= PREGRASP_DISTANCE * T[:3, 2]
+                seed = self.q_cmd.copy()
+                seed[-1] += roll
+                q_pre = self._solve(T_pre, self.b_cmd, seed)
+                self.q_grasp = None if q_pre is None else self._solve(T, self.b_cmd, q_pre)
+                if self.q_grasp is not None:
+                    break
+            else:
+                raise RuntimeError("scripted door expert: the handle is out of reach from the grasp stand")
+            self._move_all(self.b_cmd, q_pre, 0.0, 1.5)
         elif phase == "insert":
-            T = self._grasp_T(q_door)
-            q = self._solve(T, self.b_cmd, self.q_cmd)
-            if q is None:
-                raise RuntimeError("scripted door expert: the grasp is out of reach")
-            self._move_all(self.b_cmd, q, 0.0, 1.0)
+            self._move_all(self.b_cmd, self.q_grasp, 0.0, 1.0)
         elif phase == "close":
             self._move_all(self.b_cmd, self.q_cmd, 1.0, 0.6)
             self._move_all(self.b_cmd, self.q_cmd, 1.0, 0.2)
