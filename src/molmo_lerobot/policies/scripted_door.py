@@ -12,9 +12,9 @@ Base plan while the door turns by ``dq``:
 
 * pull (the door swings towards the robot): the base turns about the hinge with the leaf, rigidly,
   so the arm keeps its grasp configuration;
-* push: the base faces through the doorway on its centre line and follows the handle into it,
-  ``d(dq)`` from the wall plane, never nearer the leaf than the leaf's angle leaves room for
-  (:meth:`ScriptedDoor._push_base`).
+* push: the base faces through the doorway and follows the handle into it, between the jambs and
+  never nearer the leaf than the leaf's angle leaves room for, as near as that allows to where it
+  would stand to grasp the handle (:meth:`ScriptedDoor._push_base`).
 
 Script: drive (to the grasp stand, arm at its start) → reach (pre-grasp 10 cm back) → insert →
 close → swing (via-points every :data:`VIA_STEP` rad to :data:`OPEN_GOAL` of the range, paced as
@@ -43,11 +43,16 @@ OPEN_GOAL = 0.8
 VIA_STEP = 0.06
 #: horizontal distance from the base centre to the handle where the robot stands to grasp it
 STAND = 0.6
-#: base half-width plus the margin it keeps from the leaf while pushing, and the leaf's half thickness
-BASE_CLEARANCE, LEAF_HALF = 0.3, 0.03
+#: while pushing: the base's margin from the leaf's free edge (the far jamb), from the turning leaf,
+#: and the leaf's half thickness
+JAMB_MARGIN, LEAF_MARGIN, LEAF_HALF = 0.07, 0.05, 0.03
+#: lanes across the doorway the push plan chooses among
+LANES = 9
 #: base speeds while driving (m/s, rad/s) and its largest step in contact (m per policy step)
 DRIVE_SPEED, TURN_SPEED, BASE_CONTACT_STEP = 0.4, 0.8, 0.012
 IK_ITERS = 400
+#: the smallest joint-limit margin (fraction of the range) a planned arm configuration may have
+MIN_MARGIN = 0.02
 #: turns of the last arm joint added to the IK seed, tried in turn for the grasp (rad)
 WRIST_SEEDS = (0.0, math.pi / 2, -math.pi / 2)
 
@@ -108,6 +113,9 @@ class ScriptedDoor(PhasedExpert):
         lo, hi = (env.spec.task.articulated_joint_range or m.jnt_range[self.hinge])
         self.q_goal = float(lo + OPEN_GOAL * (hi - lo))
         self.scratch = mujoco.MjData(m)
+        arm_dofs = [j for j in range(self.ik.model.njnt)
+                    if self.ik.model.joint(j).name.split("/")[-1] in env.robot_type.joint_names["arm"]]
+        self.arm_range = self.ik.model.jnt_range[arm_dofs].T.copy()
         self.b_cmd = env.robot.qpos(d, "base")
         self.anchor = d.xanchor[self.hinge][:2].copy()
         self.axis_sign = float(np.sign(d.xaxis[self.hinge][2]))
@@ -140,12 +148,12 @@ class ScriptedDoor(PhasedExpert):
         if self._tcp_T()[:3, 1] @ y < 0:
             self.grasps.reverse()
         self.grasp_local = self.grasps[0]
-        # the doorway's centre line (push): half way along the leaf from the hinge
         along = h[:2] - self.anchor
         along -= approach[:2] * float(along @ approach[:2])
         self.leaf_dir = along / np.linalg.norm(along)
-        self.handle_along = float(np.linalg.norm(along))
-        self.centre = self.anchor + self.leaf_dir * (self.handle_along + 0.08) / 2
+        self.half_width = float(env.robot_type.base_size(env.spec.robot)[1]) / 2
+        #: the lanes (distance from the hinge along the closed leaf) the base may take through the doorway
+        self.lanes = (JAMB_MARGIN + self.half_width, self._leaf_extent() - JAMB_MARGIN - self.half_width)
 
     # Geometry -----------------------------------------------------------------------------------
     def _body_T(self, q: float | None = None, body: int | None = None) -> np.ndarray:
@@ -156,6 +164,18 @@ class ScriptedDoor(PhasedExpert):
         mujoco.mj_kinematics(m, d)
         b = self.leaf if body is None else body
         return frame_matrix(d.xpos[b], d.xmat[b])
+
+    def _leaf_extent(self) -> float:
+        """How far the closed leaf reaches from the hinge along it (its geoms' boxes)."""
+        m, d = self.env.model, self.env.data
+        reach = 0.0
+        for g in range(m.ngeom):
+            if int(m.geom_bodyid[g]) != self.leaf:
+                continue
+            centre = d.geom_xpos[g] + d.geom_xmat[g].reshape(3, 3) @ m.geom_aabb[g][:3]
+            half = np.abs(d.geom_xmat[g].reshape(3, 3)) @ m.geom_aabb[g][3:]
+            reach = max(reach, float((centre[:2] - self.anchor) @ self.leaf_dir + np.abs(self.leaf_dir) @ half[:2]))
+        return reach
 
     def _grasp_T(self, q: float) -> np.ndarray:
         return self._body_T(q) @ self.grasp_local
@@ -175,18 +195,22 @@ class ScriptedDoor(PhasedExpert):
         return np.array([xy[0], xy[1], stand[2] + turn])
 
     def _push_base(self, q: float) -> np.ndarray:
-        """On the doorway's centre line facing through it, ``STAND`` behind the handle along it, but
-        no nearer the turned leaf than :data:`BASE_CLEARANCE` (the leaf at the base's near edge)."""
+        """Facing through the doorway, inside it between the jambs (:data:`JAMB_MARGIN` clear), no
+        nearer the turned leaf than :data:`LEAF_MARGIN` (the leaf at the base's edge nearer the hinge):
+        of the lanes across the doorway, the one that puts the base nearest ``STAND`` behind the handle."""
         q0 = float(self.env.spec.task.articulated_joint_reset_state[0]
                    if self.env.spec.task.articulated_joint_reset_state else 0.0)
-        angle = abs(q - q0)
+        tan = math.tan(min(abs(q - q0), 1.45))
         out = -self.approach0[:2]  # the robot's side of the wall
-        h = self._grasp_T(q)[:2, 3]
-        depth_handle = float((h - self.anchor) @ out)
-        near_edge = float((self.centre - self.anchor) @ self.leaf_dir) - BASE_CLEARANCE
-        depth_min = BASE_CLEARANCE + LEAF_HALF - max(near_edge, 0.0) * math.tan(min(angle, 1.45))
-        depth = max(depth_min, depth_handle + STAND)
-        xy = self.centre + depth * out
+        h = self._grasp_T(q)[:2, 3] - self.anchor
+        ideal = np.array([float(h @ self.leaf_dir), float(h @ out) + STAND])  # (lane, depth)
+        best = None
+        for lane in np.linspace(self.lanes[0], self.lanes[1], LANES):
+            depth_min = self.half_width + LEAF_MARGIN + LEAF_HALF - max(lane - self.half_width - LEAF_MARGIN, 0.0) * tan
+            at = np.array([lane, max(depth_min, ideal[1])])
+            if best is None or np.linalg.norm(at - ideal) < np.linalg.norm(best - ideal) - 1e-9:
+                best = at
+        xy = self.anchor + best[0] * self.leaf_dir + best[1] * out
         return np.array([xy[0], xy[1], _yaw_of(self.approach0)])
 
     # Queueing -----------------------------------------------------------------------------------
@@ -227,6 +251,11 @@ class ScriptedDoor(PhasedExpert):
         pace = np.minimum(1.0, np.minimum(np.arange(1, n + 1), np.arange(n, 0, -1)) / ramp)
         self._queue(bases, arms, gripper, n, np.cumsum(pace) / pace.sum())
 
+    def _margin(self, q_arm: np.ndarray) -> float:
+        """The arm's smallest distance to a joint limit, as a fraction of that joint's range."""
+        lo, hi = self.arm_range
+        return float(np.min(np.minimum(q_arm - lo, hi - q_arm) / (hi - lo)))
+
     def _solve(self, T: np.ndarray, base: np.ndarray, seed: np.ndarray) -> np.ndarray | None:
         return self.ik.solve_at(T, base, seed)
 
@@ -236,6 +265,7 @@ class ScriptedDoor(PhasedExpert):
             self.stand = self._stand()
             self._move_all(self.stand, self.q_cmd, 0.0, 1.0)
         elif phase == "reach":
+            best: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None
             for grasp, roll in ((g, r) for g in self.grasps for r in WRIST_SEEDS):
                 self.grasp_local = grasp
                 T = self._grasp_T(q_door)
@@ -244,11 +274,12 @@ class ScriptedDoor(PhasedExpert):
                 seed = self.q_cmd.copy()
                 seed[-1] += roll
                 q_pre = self._solve(T_pre, self.b_cmd, seed)
-                self.q_grasp = None if q_pre is None else self._solve(T, self.b_cmd, q_pre)
-                if self.q_grasp is not None:
-                    break
-            else:
+                q = None if q_pre is None else self._solve(T, self.b_cmd, q_pre)
+                if q is not None and (best is None or self._margin(q) > best[0]):
+                    best = (self._margin(q), grasp, q_pre, q)
+            if best is None:
                 raise RuntimeError("scripted door expert: the handle is out of reach from the grasp stand")
+            _, self.grasp_local, q_pre, self.q_grasp = best
             self._move_all(self.b_cmd, q_pre, 0.0, 1.5)
         elif phase == "insert":
             self._move_all(self.b_cmd, self.q_grasp, 0.0, 1.0)
@@ -263,7 +294,7 @@ class ScriptedDoor(PhasedExpert):
                 q = q_door + (self.q_goal - q_door) * k / n
                 base = self._push_base(q) if self.pushing else self._pull_base(stand, q - q_door)
                 arm = self._solve(self._grasp_T(q), base, arms[-1] if arms else q_arm)
-                if arm is None:
+                if arm is None or self._margin(arm) < MIN_MARGIN:
                     break
                 bases.append(base)
                 arms.append(arm)
