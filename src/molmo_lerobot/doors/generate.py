@@ -133,8 +133,8 @@ def generate_benchmark(n_houses: int, episodes_per_house: int, seed: int,
         "prompt_counts": {p: prompts.count(p) for p in sorted(set(prompts))},
         "robot_counts": {ROBOT: len(episodes)},
         "house_counts": {str(h): episodes_per_house for h in houses},
-        "generator": {"module": __name__, "n_houses": len(houses), "episodes_per_house": episodes_per_house,
-                      "seed": seed, "version": GENERATOR_VERSION},
+        "generator": {"module": "molmo_lerobot.doors.generate", "n_houses": len(houses),
+                      "episodes_per_house": episodes_per_house, "seed": seed, "version": GENERATOR_VERSION},
     }
     return episodes, metadata
 
