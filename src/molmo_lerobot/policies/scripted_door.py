@@ -138,15 +138,13 @@ class ScriptedDoor(PhasedExpert):
         y /= np.linalg.norm(y)
         x = np.cross(y, z)
         leaf_inv = np.linalg.inv(self._body_T())
-        #: the two grasps (fingers either way across the bar), the one nearer the hand's current roll first
+        #: the two grasps (fingers either way across the bar); ``reach`` keeps the one IK holds best
         self.grasps = []
         for sign in (1.0, -1.0):
             T = np.eye(4)
             T[:3, :3] = np.column_stack([sign * x, sign * y, z])
             T[:3, 3] = h
             self.grasps.append(leaf_inv @ T)
-        if self._tcp_T()[:3, 1] @ y < 0:
-            self.grasps.reverse()
         self.grasp_local = self.grasps[0]
         along = h[:2] - self.anchor
         along -= approach[:2] * float(along @ approach[:2])
@@ -256,9 +254,6 @@ class ScriptedDoor(PhasedExpert):
         lo, hi = self.arm_range
         return float(np.min(np.minimum(q_arm - lo, hi - q_arm) / (hi - lo)))
 
-    def _solve(self, T: np.ndarray, base: np.ndarray, seed: np.ndarray) -> np.ndarray | None:
-        return self.ik.solve_at(T, base, seed)
-
     def _plan(self, phase: str) -> None:
         q_door = float(self.env.data.qpos[self.qadr])
         if phase == "drive":
@@ -273,8 +268,8 @@ class ScriptedDoor(PhasedExpert):
                 T_pre[:3, 3] -= PREGRASP_DISTANCE * T[:3, 2]
                 seed = self.q_cmd.copy()
                 seed[-1] += roll
-                q_pre = self._solve(T_pre, self.b_cmd, seed)
-                q = None if q_pre is None else self._solve(T, self.b_cmd, q_pre)
+                q_pre = self.ik.solve_at(T_pre, self.b_cmd, seed)
+                q = None if q_pre is None else self.ik.solve_at(T, self.b_cmd, q_pre)
                 if q is not None and (best is None or self._margin(q) > best[0]):
                     best = (self._margin(q), grasp, q_pre, q)
             if best is None:
@@ -293,7 +288,7 @@ class ScriptedDoor(PhasedExpert):
             for k in range(1, n + 1):
                 q = q_door + (self.q_goal - q_door) * k / n
                 base = self._push_base(q) if self.pushing else self._pull_base(stand, q - q_door)
-                arm = self._solve(self._grasp_T(q), base, arms[-1] if arms else q_arm)
+                arm = self.ik.solve_at(self._grasp_T(q), base, arms[-1] if arms else q_arm)
                 if arm is None or self._margin(arm) < MIN_MARGIN:
                     break
                 bases.append(base)
@@ -307,7 +302,7 @@ class ScriptedDoor(PhasedExpert):
         elif phase == "retreat":
             T = self._tcp_T()
             T[:3, 3] -= PREGRASP_DISTANCE * T[:3, 2]
-            q = self._solve(T, self.b_cmd, self.q_cmd)
+            q = self.ik.solve_at(T, self.b_cmd, self.q_cmd)
             self._move_all(self.b_cmd, self.q_cmd if q is None else q, 0.0, 0.8)
         else:  # hold
             self._move_all(self.b_cmd, self.q_cmd, self.g_cmd, self.chunk * self.dt)
