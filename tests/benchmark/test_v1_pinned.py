@@ -35,6 +35,8 @@ PINNED = {
                 {(227, "task_horizon_sec"): 60}, {"open": {"task_success_threshold": 0.2}}),
     "close_v1": ("8afa0ef54043fb383925543f1868c2a2bfad8d4e14134a9c527a287d372110d8",
                  {(227, "task_horizon_sec"): 60}, {"close": {"task_success_threshold": 0.2}}),
+    "door_v1": ("0989b1636b3fc2a400df5865a06c6d02717a40eed5a62b081d72c170908ab5b9",
+                {(606, "task_horizon_sec"): 60}, {"door_opening": {"door_openness_threshold": 0.67}}),
 }
 
 
