@@ -37,6 +37,8 @@ PINNED = {
                  {(227, "task_horizon_sec"): 60}, {"close": {"task_success_threshold": 0.2}}),
     "nav_v1": ("cb3966f9c37425d3a64dedcd36edaa7af550ed91f799bdc10904eb2fc74c9523",
                {(682, "task_horizon_sec"): 60}, {"nav_to_obj": {"succ_pos_threshold": 1.5}}),
+    "door_v1": ("0989b1636b3fc2a400df5865a06c6d02717a40eed5a62b081d72c170908ab5b9",
+                {(606, "task_horizon_sec"): 60}, {"door_opening": {"door_openness_threshold": 0.67}}),
 }
 
 
