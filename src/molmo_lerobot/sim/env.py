@@ -265,10 +265,11 @@ class Env:
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         init = self.spec.robot.init_qpos
-        unknown = sorted(g for g, v in init.items() if g not in self.move_groups and v)  # MolmoSpaces: "base": []
+        groups = [*self.move_groups, *self.robot_type.held_groups]
+        unknown = sorted(g for g, v in init.items() if g not in groups and v)  # MolmoSpaces: "base": []
         if unknown:
-            raise ValueError(f"robot.init_qpos: unknown move group(s) {unknown} (robot has {sorted(self.move_groups)})")
-        for group in self.move_groups:
+            raise ValueError(f"robot.init_qpos: unknown move group(s) {unknown} (robot has {sorted(groups)})")
+        for group in groups:
             values = init.get(group) or self.robot_type.default_init_qpos[group]
             try:
                 qpos = self.robot_type.init_qpos(group, values)
