@@ -10,7 +10,7 @@ path and how to install it.
 
 Built as their ``add_robot_to_scene`` builds it (holonomic base, ``use_holo_base``): the model's
 ``robot_0/base`` subtree (the file's names already carry the namespace) at the world origin, 5 mm
-up, every body gravity-compensated (``gravcomp``); a world site ``robot_0/world`` and three
+up, every body below it gravity-compensated (``gravcomp``); a world site ``robot_0/world`` and three
 site-transmission position actuators that drive ``robot_0/base_site`` relative to it
 (:data:`BASE_ACTUATORS`: x and y ±25 m, kp 25000; yaw ±π, kp 5000; damping ratio 0.5). The
 model's slide joints ``base_x`` / ``base_y`` and hinge ``base_theta`` are the base's world x, y
@@ -259,8 +259,7 @@ class RBY1(RobotType):
         yaw = _yaw(pose[3:])
         spec = load_model(self.name, self.xml, self.assets_dir)
         root = spec.body(ROOT_BODY)
-        root.gravcomp = 1.0
-        for body in root.find_all("body"):
+        for body in root.find_all("body"):  # the bodies below the base, as their gravcomp override
             body.gravcomp = 1.0
         world.worldbody.add_frame(pos=[0.0, 0.0, INSERT_Z]).attach_body(root, "", "")
         world.worldbody.add_site(name=NAMESPACE + "world", pos=[0.0, 0.0, INSERT_Z])
