@@ -117,14 +117,20 @@ def test_rby1m_reads_its_own_file(run, assets):
 
 def test_a_missing_model_is_one_line_naming_the_path_and_the_install(tmp_path, monkeypatch):
     monkeypatch.setenv("MLSPACES_ASSETS_DIR", str(tmp_path / "none"))
-    run = RunContext.build()
-    raw = _episode()
-    raw["task"]["robot_base_pose"] = [-0.95, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]  # not a cached model
+    run = RunContext.build()  # the episode of the tests above: their compiled model is cached for another dir
     with pytest.raises(FileNotFoundError) as err:
-        _env(run, raw)
+        _env(run, _episode())
     msg = str(err.value)
     assert "\n" not in msg and str(tmp_path / "none" / "robots" / "rby1" / "rby1_site_control.xml") in msg
     assert "molmo-resources install robots/rby1@20251224" in msg
+
+
+def test_a_model_without_their_names_is_refused_naming_the_file_and_the_names(tmp_path):
+    path = write_standin(tmp_path)
+    path.write_text(path.read_text().replace('"robot_0/torso_3"', '"robot_0/waist_3"'))
+    match = r"rby1_site_control\.xml: not MolmoSpaces' RB-Y1 model .* no \['robot_0/torso_3'\]"
+    with pytest.raises(ValueError, match=match):
+        RBY1("rby1", "rby1_site_control.xml", str(tmp_path)).spec()
 
 
 @pytest.mark.parametrize(("init", "match"), [

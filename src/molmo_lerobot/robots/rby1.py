@@ -96,8 +96,13 @@ def load_model(name: str, xml: str, assets_dir: str | Path | None = None) -> muj
             f"{path.parents[2]}`, or `molmo-resources install --preset molmospaces`; or point "
             "molmospaces.assets_dir / MLSPACES_ASSETS_DIR at an assets dir that has it)")
     spec = mujoco.MjSpec.from_file(str(path))
-    if spec.body(ROOT_BODY) is None:
-        raise ValueError(f"{path}: no body {ROOT_BODY!r} (MolmoSpaces' RB-Y1 root body)")
+    wanted = [(spec.body, ROOT_BODY), *((spec.site, NAMESPACE + s) for s in ("base_site", "ee_site_l", "ee_site_r"))]
+    for group, (joints, actuators) in GROUPS.items():
+        wanted += [(spec.joint, NAMESPACE + j) for j in joints]
+        wanted += [] if group == "base" else [(spec.actuator, NAMESPACE + a) for a in actuators]
+    missing = [name for find, name in wanted if find(name) is None]
+    if missing:
+        raise ValueError(f"{path}: not MolmoSpaces' RB-Y1 model as their robot view reads it: no {missing}")
     return spec
 
 

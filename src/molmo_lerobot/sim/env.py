@@ -120,11 +120,13 @@ _MODEL_CACHE_SIZE = 4
 def _model_key(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: RobotType,
                cameras: CameraSystem) -> str:
     mods = spec.scene_modifications.model_dump(mode="json", exclude={"object_poses"})
-    return json.dumps([spec.scene_dataset, spec.data_split, spec.house_index, robot.name, spec.task.robot_base_pose,
+    return json.dumps([spec.scene_dataset, spec.data_split, spec.house_index, robot.name,
+                       vars(robot),  # a configured robot's settings (rby1: where its model is read from)
+                       spec.task.robot_base_pose,
                        robot.base_size(spec.robot),
                        list(spec.img_resolution), [c.model_dump(mode="json") for c in spec.cameras], mods,
                        timing.sim_dt_ms, type(scene).__qualname__, cameras.name,
-                       cameras.episode_key(spec)], sort_keys=True)
+                       cameras.episode_key(spec)], sort_keys=True, default=str)
 
 
 def _add_primitive(world: mujoco.MjSpec, name: str, prim: Any) -> None:
