@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
+from typing import ClassVar
 
 import mujoco
 import numpy as np
@@ -201,7 +202,9 @@ class RobotType(ABC):
     move_groups: dict[str, int]
     #: move group -> public joint names (no "/": they become LeRobot feature names)
     joint_names: dict[str, list[str]]
-    #: move group -> default initial positions, used where an episode gives none
+    #: groups of the robot that take no actions (group -> size): set from ``init_qpos`` at reset and held
+    held_groups: ClassVar[dict[str, int]] = {}
+    #: move group (and held group) -> default initial positions, used where an episode gives none
     default_init_qpos: dict[str, list[float]]
     #: camera system for episodes that name no cameras and no ``source.camera_system_class``
     default_camera_system: str | None = None
@@ -211,9 +214,15 @@ class RobotType(ABC):
 
     def init_qpos(self, group: str, values: Sequence[float]) -> np.ndarray:
         """An episode's ``robot.init_qpos[group]`` in public units; ``ValueError`` if it does not fit."""
-        if len(values) != self.move_groups[group]:
-            raise ValueError(f"expected {self.move_groups[group]} values, got {len(values)}")
+        size = self.move_groups[group] if group in self.move_groups else self.held_groups[group]
+        if len(values) != size:
+            raise ValueError(f"expected {size} values, got {len(values)}")
         return np.asarray(values, dtype=np.float64)
+
+    def configured(self, settings: object) -> RobotType:
+        """This robot under the run's MolmoSpaces settings (``settings.assets_dir``: where a robot
+        whose model is in their assets finds it); most robots take none."""
+        return self
 
     @abstractmethod
     def spec(self) -> mujoco.MjSpec:

@@ -20,6 +20,6 @@ def build_env(spec: EpisodeSpec, timing: Timing, ctx: RunContext, camera: Mappin
     """The episode's environment under the run ``ctx``; ``camera`` is the run's ``camera`` options (see
     :func:`~molmo_lerobot.cameras.options.episode_camera_system` for the choice of cameras)."""
     plugins = ctx.plugins
-    robot = plugins.robot(spec.robot.robot_name)
+    robot = plugins.robot(spec.robot.robot_name).configured(ctx.settings)
     cameras = episode_camera_system(spec, camera, plugins.camera_system, robot.default_camera_system)
     return make_env(spec, timing, plugins.scene_dataset(spec.scene_dataset), robot, cameras, ctx)

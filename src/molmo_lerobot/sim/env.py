@@ -120,11 +120,13 @@ _MODEL_CACHE_SIZE = 4
 def _model_key(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: RobotType,
                cameras: CameraSystem) -> str:
     mods = spec.scene_modifications.model_dump(mode="json", exclude={"object_poses"})
-    return json.dumps([spec.scene_dataset, spec.data_split, spec.house_index, robot.name, spec.task.robot_base_pose,
+    return json.dumps([spec.scene_dataset, spec.data_split, spec.house_index, robot.name,
+                       vars(robot),  # a configured robot's settings (rby1: where its model is read from)
+                       spec.task.robot_base_pose,
                        robot.base_size(spec.robot),
                        list(spec.img_resolution), [c.model_dump(mode="json") for c in spec.cameras], mods,
                        timing.sim_dt_ms, type(scene).__qualname__, cameras.name,
-                       cameras.episode_key(spec)], sort_keys=True)
+                       cameras.episode_key(spec)], sort_keys=True, default=str)
 
 
 def _add_primitive(world: mujoco.MjSpec, name: str, prim: Any) -> None:
@@ -265,10 +267,11 @@ class Env:
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         init = self.spec.robot.init_qpos
-        unknown = sorted(g for g, v in init.items() if g not in self.move_groups and v)  # MolmoSpaces: "base": []
+        groups = [*self.move_groups, *self.robot_type.held_groups]
+        unknown = sorted(g for g, v in init.items() if g not in groups and v)  # MolmoSpaces: "base": []
         if unknown:
-            raise ValueError(f"robot.init_qpos: unknown move group(s) {unknown} (robot has {sorted(self.move_groups)})")
-        for group in self.move_groups:
+            raise ValueError(f"robot.init_qpos: unknown move group(s) {unknown} (robot has {sorted(groups)})")
+        for group in groups:
             values = init.get(group) or self.robot_type.default_init_qpos[group]
             try:
                 qpos = self.robot_type.init_qpos(group, values)
