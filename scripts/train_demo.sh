@@ -15,14 +15,17 @@
 #   STEPS BATCH CHUNK N_ACTION_STEPS          ACT training; DEVICE: cuda where torch sees a GPU, else cpu
 #   ACT_ARGS="--policy.dim_model=256 ..."     further lerobot-train flags
 #   EVAL_LIMIT=60 WORKERS=2       pick_v1 episodes scored per policy, worker processes
-# Defaults: state, 20 x 10 episodes, 1500 steps, batch 64, chunk 20 of which 10 run, dim_model 256,
-# lr 1e-4 (CPU: ~30 min); images, 20 x 10 episodes, 20000 steps, batch 32, chunk 20 (GPU).
+#   TRAIN_THREADS=1               torch threads of lerobot-train on cpu (on 2 shared cores, 2 threads
+#                                 made a step 20x slower than 1)
+# Defaults: state, 20 x 10 episodes, 3000 steps, batch 32, chunk 20 of which 10 run, dim_model 128,
+# 2 encoder layers, lr 2e-4 (a CPU); images, 20 x 10 episodes, 20000 steps, batch 32, chunk 20 (a GPU).
 set -euo pipefail
 
 PYTHON=${PYTHON:-python}
 INPUTS=${INPUTS:-state}
 case "$INPUTS" in
-  state) defaults=(20 10 1500 64 20 10 "--policy.dim_model=256 --policy.dim_feedforward=1024 --policy.optimizer_lr=1e-4") ;;
+  state) defaults=(20 10 3000 32 20 10 "--policy.dim_model=128 --policy.dim_feedforward=512 --policy.n_heads=4
+    --policy.n_encoder_layers=2 --policy.optimizer_lr=2e-4") ;;
   images) defaults=(20 10 20000 32 20 20 "") ;;
   *) echo "train_demo.sh: INPUTS=$INPUTS: expected state or images" >&2; exit 2 ;;
 esac
@@ -34,7 +37,7 @@ RES=${RES:-64}
 STEPS=${STEPS:-${defaults[2]}}
 BATCH=${BATCH:-${defaults[3]}}
 DEVICE=${DEVICE:-$("$PYTHON" -c 'import torch; print("cuda" if torch.cuda.is_available() else "cpu")')}
-read -r -a ACT_ARGS <<< "${ACT_ARGS-${defaults[6]}}"
+read -r -a ACT_ARGS <<< "$(echo ${ACT_ARGS-${defaults[6]}})"
 CHUNK=${CHUNK:-${defaults[4]}}
 N_ACTION_STEPS=${N_ACTION_STEPS:-${defaults[5]}}
 EVAL_LIMIT=${EVAL_LIMIT:-60}
@@ -85,7 +88,9 @@ CKPT="$WORK/train/checkpoints/last/pretrained_model"
 if [ ! -f "$CKPT/model.safetensors" ]; then
   stamp "3/5 lerobot-train ACT ($INPUTS): $STEPS steps, batch $BATCH, chunk $CHUNK ($N_ACTION_STEPS run), on $DEVICE"
   rm -rf "$WORK/train"
-  "$PYTHON" -m lerobot.scripts.lerobot_train --dataset.repo_id=local/pick_train-scripted \
+  threads=()
+  [ "$DEVICE" = cpu ] && threads=(env OMP_NUM_THREADS="${TRAIN_THREADS:-1}")
+  "${threads[@]}" "$PYTHON" -m lerobot.scripts.lerobot_train --dataset.repo_id=local/pick_train-scripted \
     --dataset.root="$DATASET" --dataset.video_backend=pyav --policy.type=act \
     --policy.device="$DEVICE" --policy.push_to_hub=false --policy.pretrained_backbone_weights=null \
     --policy.chunk_size="$CHUNK" --policy.n_action_steps="$N_ACTION_STEPS" --policy.use_vae=false \

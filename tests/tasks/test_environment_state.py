@@ -84,7 +84,7 @@ def test_recorder_env_and_policy_see_the_same_vector(genv, tmp_path):
     policy.reset(EpisodeContext(spec=None, episode_index=0, seed=0, prompt=ep.prompt,
                                 move_groups=dict(ep.env.move_groups), policy_dt_s=0.066))
     np.testing.assert_array_equal(policy._batch(obs)[ENV_STATE].numpy(), recorded)
-    with pytest.raises(KeyError, match="observation.environment_state"):
+    with pytest.raises(KeyError, match=r"observation\.environment_state"):
         policy._batch({k: v for k, v in obs.items() if k != ENV_STATE_KEY})
     with pytest.raises(FeatureError, match=r"observation.environment_state: 3 values, expected 7"):
         layout.frame({**obs, ENV_STATE_KEY: np.zeros(3)}, {}, None, False, False, "", info)
@@ -92,7 +92,8 @@ def test_recorder_env_and_policy_see_the_same_vector(genv, tmp_path):
 
 def test_recorded_only_when_asked_and_a_state_policy_gets_it(tmp_path):
     args = ["benchmark=pick_v1", "limit=1", "workers=1", "horizon=3", "record=true", "progress=false"]
-    run_evaluation(compose(["policy=scripted", *args, "record_environment_state=true", f"output_dir={tmp_path / 'on'}"]))
+    run_evaluation(compose(["policy=scripted", *args, "record_environment_state=true",
+                            f"output_dir={tmp_path / 'on'}"]))
     root = tmp_path / "on" / "dataset"
     feats = json.loads((root / "meta" / "info.json").read_text())["features"]
     assert feats[ENV_STATE]["names"] == NAMES and feats[ENV_STATE]["shape"] == [7]
