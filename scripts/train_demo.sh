@@ -2,28 +2,44 @@
 # Close the loop: record the scripted expert on a generated pick benchmark, train a LeRobot ACT
 # policy on the recording with lerobot-train, and score it against the random policy on pick_v1
 # (Wilson 95 % CIs and molmo-compare's paired test). `make train-demo` runs it; every knob is an
-# environment variable (defaults: a modest CPU run).
+# environment variable.
 #
-#   WORK=runs/train-demo          everything goes here (benchmark, runs, checkpoint, summary)
-#   HOUSES=20 EPISODES_PER_HOUSE=10 SEED=1    the training benchmark (pick_v1 is seed 0)
+#   INPUTS=state                  state: observation.state + observation.environment_state (the
+#                                 object's pose in the robot base frame: privileged ground truth,
+#                                 not a vision policy; the cameras are dropped before training);
+#                                 images: observation.state + the cameras (needs a GPU's hours)
+#   WORK=runs/train-demo-$INPUTS  everything goes here (benchmark, runs, checkpoint, summary)
+#   HOUSES EPISODES_PER_HOUSE SEED=1          the training benchmark (pick_v1 is seed 0)
 #   RES=64                        training images are rendered RES x RES (pick_v1's 224 x 224
 #                                 frames are resized to it at evaluation: policy.resize=pad)
-#   STEPS=20000 BATCH=32 CHUNK=20 ACT training; DEVICE: cuda where torch sees a GPU, else cpu
+#   STEPS BATCH CHUNK N_ACTION_STEPS          ACT training; DEVICE: cuda where torch sees a GPU, else cpu
 #   ACT_ARGS="--policy.dim_model=256 ..."     further lerobot-train flags
 #   EVAL_LIMIT=60 WORKERS=2       pick_v1 episodes scored per policy, worker processes
+#   TRAIN_THREADS=1               torch threads of lerobot-train on cpu (on 2 shared cores, 2 threads
+#                                 made a step 20x slower than 1)
+# Defaults: state, 20 x 10 episodes, 3000 steps, batch 32, chunk 20 of which 10 run, dim_model 128,
+# 2 encoder layers, lr 2e-4 (a CPU); images, 20 x 10 episodes, 20000 steps, batch 32, chunk 20 (a GPU).
 set -euo pipefail
 
 PYTHON=${PYTHON:-python}
-WORK=${WORK:-runs/train-demo}
-HOUSES=${HOUSES:-20}
-EPISODES_PER_HOUSE=${EPISODES_PER_HOUSE:-10}
+INPUTS=${INPUTS:-state}
+case "$INPUTS" in
+  state) defaults=(20 10 3000 32 20 10 "--policy.dim_model=128 --policy.dim_feedforward=512 --policy.n_heads=4
+    --policy.n_encoder_layers=2 --policy.optimizer_lr=2e-4") ;;
+  images) defaults=(20 10 20000 32 20 20 "") ;;
+  *) echo "train_demo.sh: INPUTS=$INPUTS: expected state or images" >&2; exit 2 ;;
+esac
+WORK=${WORK:-runs/train-demo-$INPUTS}
+HOUSES=${HOUSES:-${defaults[0]}}
+EPISODES_PER_HOUSE=${EPISODES_PER_HOUSE:-${defaults[1]}}
 SEED=${SEED:-1}
 RES=${RES:-64}
-STEPS=${STEPS:-20000}
-BATCH=${BATCH:-32}
+STEPS=${STEPS:-${defaults[2]}}
+BATCH=${BATCH:-${defaults[3]}}
 DEVICE=${DEVICE:-$("$PYTHON" -c 'import torch; print("cuda" if torch.cuda.is_available() else "cpu")')}
-read -r -a ACT_ARGS <<< "${ACT_ARGS:-}"
-CHUNK=${CHUNK:-20}
+read -r -a ACT_ARGS <<< "$(echo ${ACT_ARGS-${defaults[6]}})"
+CHUNK=${CHUNK:-${defaults[4]}}
+N_ACTION_STEPS=${N_ACTION_STEPS:-${defaults[5]}}
 EVAL_LIMIT=${EVAL_LIMIT:-60}
 WORKERS=${WORKERS:-2}
 export HF_HUB_OFFLINE=${HF_HUB_OFFLINE:-1} MUJOCO_GL=${MUJOCO_GL:-egl}
@@ -47,20 +63,37 @@ EOF
 fi
 
 if [ ! -f "$WORK/expert/results.json" ]; then
-  stamp "2/5 expert recordings (policy=scripted record=true end_on_success=true)"
+  stamp "2/5 expert recordings (policy=scripted record=true end_on_success=true, inputs: $INPUTS)"
   "$PYTHON" -m molmo_lerobot.cli.eval policy=scripted benchmark.path="$WORK/pick_train" record=true \
+    record_environment_state="$([ "$INPUTS" = state ] && echo true || echo false)" \
     end_on_success=true workers="$WORKERS" progress=false output_dir="$WORK/expert" \
     || [ -f "$WORK/expert/results.json" ]  # exit 1 only when no episode ran
 fi
 
+DATASET="$WORK/expert/dataset"
+if [ "$INPUTS" = state ]; then  # no camera among the inputs: drop them, so training decodes no video
+  DATASET="$WORK/expert/dataset-state"
+  if [ ! -f "$DATASET/meta/info.json" ]; then
+    cameras=$("$PYTHON" -c 'import json, sys; f = json.load(open(sys.argv[1]))["features"]
+print(repr([k for k in f if k.startswith("observation.images.")]))' "$WORK/expert/dataset/meta/info.json")
+    stamp "2/5 lerobot-edit-dataset remove_feature $cameras"
+    rm -rf "$DATASET"
+    "$PYTHON" -m lerobot.scripts.lerobot_edit_dataset --repo_id=local/pick_train-scripted \
+      --root="$WORK/expert/dataset" --new_repo_id=local/pick_train-scripted-state --new_root="$DATASET" \
+      --operation.type=remove_feature --operation.feature_names="$cameras"
+  fi
+fi
+
 CKPT="$WORK/train/checkpoints/last/pretrained_model"
 if [ ! -f "$CKPT/model.safetensors" ]; then
-  stamp "3/5 lerobot-train ACT: $STEPS steps, batch $BATCH, chunk $CHUNK, on $DEVICE"
+  stamp "3/5 lerobot-train ACT ($INPUTS): $STEPS steps, batch $BATCH, chunk $CHUNK ($N_ACTION_STEPS run), on $DEVICE"
   rm -rf "$WORK/train"
-  "$PYTHON" -m lerobot.scripts.lerobot_train --dataset.repo_id=local/pick_train-scripted \
-    --dataset.root="$WORK/expert/dataset" --dataset.video_backend=pyav --policy.type=act \
+  threads=()
+  [ "$DEVICE" = cpu ] && threads=(env OMP_NUM_THREADS="${TRAIN_THREADS:-1}")
+  "${threads[@]}" "$PYTHON" -m lerobot.scripts.lerobot_train --dataset.repo_id=local/pick_train-scripted \
+    --dataset.root="$DATASET" --dataset.video_backend=pyav --policy.type=act \
     --policy.device="$DEVICE" --policy.push_to_hub=false --policy.pretrained_backbone_weights=null \
-    --policy.chunk_size="$CHUNK" --policy.n_action_steps="$CHUNK" --policy.use_vae=false \
+    --policy.chunk_size="$CHUNK" --policy.n_action_steps="$N_ACTION_STEPS" --policy.use_vae=false \
     --steps="$STEPS" --batch_size="$BATCH" --num_workers=0 --save_freq="$STEPS" --log_freq=100 \
     --wandb.enable=false --output_dir="$WORK/train" "${ACT_ARGS[@]}"
 fi
@@ -77,7 +110,7 @@ done
 
 stamp "5/5 trained vs random on pick_v1"
 "$PYTHON" -m molmo_lerobot.cli.compare "$WORK/eval-random" "$WORK/eval-trained" | tee "$WORK/compare.txt" || true
-"$PYTHON" - "$WORK" <<'EOF' | tee "$WORK/summary.txt"
+"$PYTHON" - "$WORK" "$INPUTS" <<'EOF' | tee "$WORK/summary.txt"
 import json, sys
 from pathlib import Path
 work = Path(sys.argv[1])
@@ -88,4 +121,6 @@ for name, r in (("expert (training data)", expert), ("random", rand), ("trained"
     print(f"{name:24s} success {r['n_success']}/{r['n_valid']}  Wilson 95% CI {ci}")
 beats = trained["ci95"] is not None and rand["ci95"] is not None and trained["ci95"][0] > rand["ci95"][1]
 print(f"trained beats random with non-overlapping CIs: {'yes' if beats else 'no'}")
+print(f"policy inputs: {sys.argv[2]}" + (" (observation.state + observation.environment_state: privileged object pose, "
+                                         "no camera)" if sys.argv[2] == "state" else " (observation.state + cameras)"))
 EOF

@@ -11,6 +11,11 @@ the replay policy, the Gymnasium env and ``lerobot-eval``'s env (:mod:`molmo_ler
 * ``observation.state``: ``float32``, each move group's ``qpos`` flattened, concatenated in the
   robot's move-group order (a group's state may hold more values than its action: two fingers);
 * ``action``: ``float32``, each move group's command in the same order, sized by its move-group dimension;
+* ``observation.environment_state`` (opt-in, privileged): ``float32``, the task's environment state
+  (:meth:`molmo_lerobot.tasks.base.Task.environment_state`, e.g. pick: the object's pose in the robot
+  base frame), named by the task; an observation carries it as ``environment_state``. Only a run
+  that asks for it has it (``record_environment_state=true``, or a policy that reads it); a policy
+  that reads it sees the simulator's ground truth, so it is not a vision policy;
 * ``names``: a group's declared joint names where they fit its size, else ``<group>`` (one value)
   or ``<group>_<i>``.
 
@@ -30,6 +35,9 @@ from molmo_lerobot.errors import MolmoError
 
 IMAGE_PREFIX = "observation.images."
 STATE = "observation.state"
+ENV_STATE = "observation.environment_state"
+#: the observation key of the environment state (LeRobot's env convention names it so too)
+ENV_STATE_KEY = "environment_state"
 ACTION = "action"
 
 
@@ -96,6 +104,14 @@ def split(vector: Any, move_groups: Mapping[str, int], field: str = ACTION) -> d
     return out
 
 
+def env_state_vector(value: Any, size: int) -> np.ndarray:
+    """An observation's ``environment_state`` as the float32 feature of ``size`` values."""
+    a = np.asarray(value, dtype=np.float32).reshape(-1)
+    if a.size != size:
+        raise FeatureError(f"{ENV_STATE}: {a.size} values, expected {size}")
+    return a
+
+
 @dataclass(frozen=True)
 class FeatureMap:
     """Cameras and move groups ⇄ LeRobot features; see the module docstring."""
@@ -106,12 +122,15 @@ class FeatureMap:
     action_sizes: tuple[int, ...]
     state_names: tuple[str, ...]
     action_names: tuple[str, ...]
+    env_state_names: tuple[str, ...] = ()  # empty: no ``observation.environment_state``
 
     @classmethod
     def build(cls, move_groups: Mapping[str, int], joint_names: Mapping[str, Sequence[str]] | None = None,
-              cameras: Iterable[tuple[str, int, int]] = (), state_sizes: Mapping[str, int] | None = None) -> FeatureMap:
+              cameras: Iterable[tuple[str, int, int]] = (), state_sizes: Mapping[str, int] | None = None,
+              env_state_names: Sequence[str] = ()) -> FeatureMap:
         """The map of ``move_groups`` (group -> action dimension, in order); a group's state has
-        ``state_sizes[group]`` values (default: its action dimension)."""
+        ``state_sizes[group]`` values (default: its action dimension); ``env_state_names``: the
+        task's environment state, if the map has one."""
         joints = joint_names or {}
         sizes = state_sizes if state_sizes is not None else move_groups
         state_names: list[str] = []
@@ -124,12 +143,15 @@ class FeatureMap:
             state_sizes=tuple(int(sizes[g]) for g in move_groups),
             action_sizes=tuple(int(d) for d in move_groups.values()),
             state_names=tuple(state_names), action_names=tuple(action_names),
+            env_state_names=tuple(safe_name(n) for n in env_state_names),
         )
 
     @classmethod
     def from_observation(cls, move_groups: Mapping[str, int], joint_names: Mapping[str, Sequence[str]],
-                         camera_names: Iterable[str], obs: Mapping[str, Any]) -> FeatureMap:
-        """The map whose image and state sizes are those of an observation."""
+                         camera_names: Iterable[str], obs: Mapping[str, Any],
+                         env_state_names: Sequence[str] = ()) -> FeatureMap:
+        """The map whose image and state sizes are those of an observation; with the environment
+        state named ``env_state_names`` when the observation carries one."""
         images = obs.get("images") or {}
         cameras = []
         for cam in camera_names:
@@ -141,7 +163,14 @@ class FeatureMap:
         for group in move_groups:
             if group not in qpos:
                 raise FeatureError(f"observation qpos has no move group {group!r} (has {sorted(qpos)})")
-        return cls.build(move_groups, joint_names, cameras, {g: np.asarray(qpos[g]).size for g in move_groups})
+        names: Sequence[str] = ()
+        if obs.get(ENV_STATE_KEY) is not None:
+            names = env_state_names
+            size = np.asarray(obs[ENV_STATE_KEY]).size
+            if size != len(names):
+                raise FeatureError(f"{ENV_STATE}: {size} values, named {list(names)}")
+        return cls.build(move_groups, joint_names, cameras, {g: np.asarray(qpos[g]).size for g in move_groups},
+                         names)
 
     @property
     def move_groups(self) -> dict[str, int]:
@@ -164,11 +193,15 @@ class FeatureMap:
         return sum(self.action_sizes)
 
     def features(self) -> dict[str, dict[str, Any]]:
-        """The image, ``observation.state`` and ``action`` entries of ``LeRobotDataset.create``'s ``features``."""
+        """The image, ``observation.state``, ``observation.environment_state`` (if the map has one) and
+        ``action`` entries of ``LeRobotDataset.create``'s ``features``."""
         feats: dict[str, dict[str, Any]] = {}
         for cam, h, w in self.cameras:
             feats[image_feature(cam)] = {"dtype": "video", "shape": (h, w, 3), "names": ["height", "width", "channels"]}
         feats[STATE] = {"dtype": "float32", "shape": (self.state_dim,), "names": list(self.state_names)}
+        if self.env_state_names:
+            feats[ENV_STATE] = {"dtype": "float32", "shape": (len(self.env_state_names),),
+                                "names": list(self.env_state_names)}
         feats[ACTION] = {"dtype": "float32", "shape": (self.action_dim,), "names": list(self.action_names)}
         return feats
 
@@ -189,6 +222,15 @@ class FeatureMap:
     def state_vector(self, qpos: Mapping[str, Any]) -> np.ndarray:
         """``observation.state`` of an observation's ``qpos``."""
         return concat(qpos, self.groups, STATE, self.state_sizes)
+
+    def env_state_vector(self, obs: Mapping[str, Any]) -> np.ndarray:
+        """``observation.environment_state`` of an observation, checked against the map."""
+        if not self.env_state_names:
+            raise FeatureError(f"{ENV_STATE}: this feature map has none")
+        value = obs.get(ENV_STATE_KEY)
+        if value is None:
+            raise FeatureError(f"{ENV_STATE}: missing in this step")
+        return env_state_vector(value, len(self.env_state_names))
 
     def action_vector(self, action: Mapping[str, Any]) -> np.ndarray:
         """``action`` of a per-move-group action."""

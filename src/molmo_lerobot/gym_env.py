@@ -17,7 +17,9 @@ Observation
     ``{"pixels": {camera: uint8 (H, W, 3)}, "agent_pos": float32 (n,)}``: ``agent_pos`` is the
     ``observation.state`` of our recorded datasets (each move group's joint positions, in the
     robot's move-group order; the gripper as 0 open … 1 closed), both from one feature map
-    (:mod:`molmo_lerobot.features`, the env's ``features``).
+    (:mod:`molmo_lerobot.features`, the env's ``features``). With ``environment_state=True`` it
+    also has ``environment_state``: the task's privileged ground truth, the recorded
+    ``observation.environment_state`` (e.g. pick: the object's pose in the robot base frame).
 
 Action
     float32 ``(n,)``: the robot's move groups concatenated in that same order (the
@@ -40,7 +42,7 @@ from gymnasium import spaces
 
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.errors import MolmoError
-from molmo_lerobot.features import FeatureMap, is_wrist
+from molmo_lerobot.features import ENV_STATE_KEY, FeatureMap, is_wrist
 from molmo_lerobot.runner.episode import Episode, load_run_benchmark, open_episode
 from molmo_lerobot.runner.plan import EpisodePlanner
 
@@ -58,7 +60,8 @@ class MolmoEnv(gym.Env):
 
     def __init__(self, benchmark: str = "pick_v1", *, episode_index: int | None = None, run_seed: int = 0,
                  horizon: int | None = None, end_on_success: bool = False, timing: dict[str, float] | None = None,
-                 eval_options: dict[str, Any] | None = None, render_mode: str | None = "rgb_array") -> None:
+                 eval_options: dict[str, Any] | None = None, render_mode: str | None = "rgb_array",
+                 environment_state: bool = False) -> None:
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         self.render_mode = render_mode
@@ -67,6 +70,7 @@ class MolmoEnv(gym.Env):
                                          "timing": timing or {}})
         self.bench = load_run_benchmark(benchmark, self.context.plugins)
         self.end_on_success = bool(end_on_success)
+        self.environment_state = bool(environment_state)
         self._n = len(self.bench.episodes)
         self._pinned = None if episode_index is None else self._check_index(episode_index)
         planner = EpisodePlanner(self.context, self.bench)
@@ -93,7 +97,7 @@ class MolmoEnv(gym.Env):
         self._close_episode()
         self._episode = self._open(index)  # compiled models are cached: reopening is cheap
         self._steps, self._success_once = 0, False
-        obs = self._episode.env.observe(images=True)
+        obs = self._observe()
         self._check_layout(obs)
         return self._obs(obs), self._info(False)
 
@@ -111,7 +115,7 @@ class MolmoEnv(gym.Env):
         terminated = bool(success and self.end_on_success)
         truncated = self._steps >= ep.horizon and not terminated
         reward = ep.task.reward()
-        obs = ep.env.observe(images=True)
+        obs = self._observe()
         return (self._obs(obs), float(success if reward is None else reward), terminated, truncated,
                 self._info(success))
 
@@ -136,6 +140,16 @@ class MolmoEnv(gym.Env):
     def _open(self, index: int) -> Episode:
         return open_episode(self._plans[index], self.bench, self.context)
 
+    def _observe(self) -> dict[str, Any]:
+        ep = self._episode
+        obs = ep.env.observe(images=True)
+        if self.environment_state:
+            if not ep.task.environment_state_names:
+                raise ValueError(f"{self.bench.where(ep.index)}: environment_state=True but task type "
+                                 f"{ep.task_type.name!r} defines no environment state")
+            obs[ENV_STATE_KEY] = ep.task.environment_state()
+        return obs
+
     def _check_index(self, index: int) -> int:
         if isinstance(index, bool) or not isinstance(index, int | np.integer) or not 0 <= index < self._n:
             raise EpisodeIndexError(f"episode_index {index!r} is outside benchmark {self.bench.name!r} "
@@ -144,29 +158,36 @@ class MolmoEnv(gym.Env):
 
     def _spaces(self) -> tuple[spaces.Dict, spaces.Box]:
         #: the feature map of this env's episodes: ``agent_pos`` is its ``observation.state``, the action its ``action``
-        self.features = self._feature_map(self._episode.env.observe(images=True))
+        self.features = self._feature_map(self._observe())
         cams = self.features.camera_shapes
         pixels = spaces.Dict({c: spaces.Box(0, 255, shape, np.uint8) for c, shape in cams.items()})
         obs_space = spaces.Dict({"pixels": pixels,
                                  "agent_pos": spaces.Box(-np.inf, np.inf, (self.features.state_dim,), np.float32)})
+        if self.features.env_state_names:
+            obs_space[ENV_STATE_KEY] = spaces.Box(-np.inf, np.inf, (len(self.features.env_state_names),), np.float32)
         act_space = spaces.Box(-np.inf, np.inf, (self.features.action_dim,), np.float32)
         return obs_space, act_space
 
     def _feature_map(self, obs: dict[str, Any]) -> FeatureMap:
         env = self._episode.env
-        return FeatureMap.from_observation(env.move_groups, env.joint_names, env.camera_names, obs)
+        return FeatureMap.from_observation(env.move_groups, env.joint_names, env.camera_names, obs,
+                                           self._episode.task.environment_state_names)
 
     def _check_layout(self, obs: dict[str, Any]) -> None:
         """Every episode of one env must share the spaces (cameras, resolution, move groups)."""
         new, ours = self._feature_map(obs), self.features
-        if new.camera_shapes != ours.camera_shapes or new.move_groups != ours.move_groups:
+        if (new.camera_shapes != ours.camera_shapes or new.move_groups != ours.move_groups
+                or new.env_state_names != ours.env_state_names):
             raise ValueError(f"{self.bench.where(self._episode.index)}: cameras {new.camera_shapes} / move groups "
                              f"{new.move_groups} differ from this env's spaces "
                              f"({ours.camera_shapes} / {ours.move_groups}); pin episode_index to run it")
 
     def _obs(self, obs: dict[str, Any]) -> dict[str, Any]:
-        return {"pixels": {c: np.asarray(obs["images"][c], dtype=np.uint8) for c in self.features.camera_shapes},
-                "agent_pos": self.features.state_vector(obs["qpos"])}
+        out = {"pixels": {c: np.asarray(obs["images"][c], dtype=np.uint8) for c in self.features.camera_shapes},
+               "agent_pos": self.features.state_vector(obs["qpos"])}
+        if self.features.env_state_names:
+            out[ENV_STATE_KEY] = self.features.env_state_vector(obs)
+        return out
 
     def _info(self, success: bool) -> dict[str, Any]:
         ep = self._episode

@@ -46,6 +46,8 @@ class EpisodeInfo:
     #: the policy is a privileged scripted expert (it reads the simulator): its rollouts are demonstrations
     expert: bool = False
     extra: dict[str, Any] = field(default_factory=dict)
+    #: the task's environment state names when observations carry one (``observation.environment_state``)
+    environment_state_names: tuple[str, ...] = ()
     #: the run's asset catalog (annotations of the scene's objects), where the worker has one
     catalog: AssetCatalog | None = None
 

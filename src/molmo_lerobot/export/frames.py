@@ -1,8 +1,9 @@
 """How one rollout step becomes one LeRobot frame: the dataset schema and the frame dict.
 
-The schema is fixed by the first step of an episode: the feature map of its robot's move groups
-and its cameras at their resolution (:mod:`molmo_lerobot.features`), and whether the task
-defines a reward; so every frame of a dataset shard has exactly the same keys, shapes and names.
+The schema is fixed by the first step of an episode: the feature map of its robot's move groups,
+its cameras at their resolution and, when the observations carry it, the task's environment
+state (:mod:`molmo_lerobot.features`), and whether the task defines a reward; so every frame of
+a dataset shard has exactly the same keys, shapes and names.
 
 Every frame also carries its provenance as plain data columns, which every LeRobot edit
 (``lerobot-edit-dataset`` delete / split / merge / modify_tasks / recompute_stats) keeps:
@@ -18,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from molmo_lerobot.features import ACTION, STATE, FeatureError, FeatureMap
+from molmo_lerobot.features import ACTION, ENV_STATE, STATE, FeatureError, FeatureMap
 from molmo_lerobot.recording import EpisodeInfo
 
 EVAL_EPISODE_INDEX = "eval.episode_index"
@@ -36,7 +37,8 @@ class FrameLayout:
     @classmethod
     def from_step(cls, info: EpisodeInfo, obs: dict[str, Any], reward: float | None) -> FrameLayout:
         """Derive the schema from an episode's info and its first observation."""
-        fmap = FeatureMap.from_observation(info.move_groups, info.joint_names, info.camera_names, obs)
+        fmap = FeatureMap.from_observation(info.move_groups, info.joint_names, info.camera_names, obs,
+                                           info.environment_state_names)
         return cls(feature_map=fmap, has_reward=reward is not None, robot_type=info.extra.get("robot"))
 
     def features(self) -> dict[str, dict[str, Any]]:
@@ -56,6 +58,8 @@ class FrameLayout:
         fmap = self.feature_map
         frame: dict[str, Any] = fmap.images(obs.get("images") or {})
         frame[STATE] = fmap.state_vector(obs.get("qpos") or {})
+        if fmap.env_state_names:
+            frame[ENV_STATE] = fmap.env_state_vector(obs)
         frame[ACTION] = fmap.action_vector(action)
         if self.has_reward:
             if reward is None:

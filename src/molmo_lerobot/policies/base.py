@@ -11,6 +11,8 @@ Observation (a plain dict, so it crosses process and network boundaries unchange
       "robot_base_pose": float array (7,),                 # the robot base's world pose, same layout
       "joint_qpos": {move_group: float array},             # joints in their own units (rad, m): the gripper's
       "joint_qvel": {move_group: float array},             #   as MolmoSpaces lists them (Robotiq: 2 driver angles)
+      "environment_state": float32 array,                  # only for a policy or run that asks: the task's
+                                                           #   privileged ground truth (features.ENV_STATE)
       "prompt": str,                                       # the episode's language instruction
       "step": int,                                         # policy step index in the episode
     }
@@ -80,6 +82,9 @@ class Policy(ABC):
     #: Whether ``act`` needs camera images. Policies that do not (scripted experts) let the
     #: environment skip rendering unless a recorder asks for frames.
     needs_images: bool = True
+    #: Whether ``act`` reads ``obs["environment_state"]``, the task's privileged ground truth
+    #: (:mod:`molmo_lerobot.features`): the rollout then adds it to every observation.
+    needs_environment_state: bool = False
     #: Whether the policy reads the simulator (``ctx.env``): privileged scripted experts.
     #: The runner hands the environment to no other policy; ``molmo-serve`` refuses such a
     #: policy (a server has no simulator).

@@ -98,6 +98,7 @@ class ConventionAdapter(Policy):
     def __init__(self, inner: Policy, convention: Convention) -> None:
         self.inner, self.convention = inner, convention
         self.needs_images, self.needs_simulator = inner.needs_images, inner.needs_simulator
+        self.needs_environment_state = inner.needs_environment_state
 
     def reset(self, ctx: EpisodeContext) -> None:
         self.inner.reset(ctx)

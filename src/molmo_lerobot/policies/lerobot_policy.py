@@ -4,7 +4,9 @@ Our observation (images by camera name, ``qpos`` by move group, prompt) is mappe
 policy's feature keys as our datasets name them (:mod:`molmo_lerobot.features`): each image
 feature ``observation.images.<key>`` takes the camera named in ``cameras`` (default: the camera
 recorded as that feature), ``observation.state`` is the concatenation of the ``state`` move
-groups (default: the episode's, in the robot's order), and the prompt goes under ``task``. The
+groups (default: the episode's, in the robot's order), ``observation.environment_state`` (a
+checkpoint trained on it: privileged, see :mod:`molmo_lerobot.features`) is the observation's
+``environment_state``, which the rollout then adds, and the prompt goes under ``task``. The
 action vector is split into move groups in ``action_groups`` order (default: the episode's). With
 ``convention: molmospaces`` the state takes MolmoSpaces' joint units (the Robotiq gripper as its
 two driver angles) and the action's gripper is their 0 … 255 command.
@@ -27,7 +29,16 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from molmo_lerobot.errors import MolmoError
-from molmo_lerobot.features import IMAGE_PREFIX, STATE, camera_of, concat, split
+from molmo_lerobot.features import (
+    ENV_STATE,
+    ENV_STATE_KEY,
+    IMAGE_PREFIX,
+    STATE,
+    camera_of,
+    concat,
+    env_state_vector,
+    split,
+)
 from molmo_lerobot.hookspecs import hookimpl
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
 from molmo_lerobot.policies.convention import ConventionName, get_convention
@@ -178,6 +189,8 @@ class LeRobotPolicy(Policy):
         self.image_features = {k: tuple(f.shape) for k, f in features.items() if f.type is FeatureType.VISUAL}
         self.state_dim = features[self.cfg.state_key].shape[0] if self.cfg.state_key in features else None
         self.needs_images = bool(self.image_features)
+        self.env_state_dim = features[ENV_STATE].shape[0] if ENV_STATE in features else None
+        self.needs_environment_state = self.env_state_dim is not None
         config = self.policy.config
         self.batched = config.type in BATCHABLE_TYPES and getattr(config, "temporal_ensemble_coeff", None) is None
         self._groups: dict[str, int] = {}
@@ -341,6 +354,11 @@ class LeRobotPolicy(Policy):
                     f"{self.cfg.state_key} needs {self.state_dim} values, move groups {groups} give {state.shape[0]}"
                 )
             batch[self.cfg.state_key] = torch.from_numpy(state)
+        if self.env_state_dim is not None:
+            if obs.get(ENV_STATE_KEY) is None:
+                raise KeyError(f"policy feature {ENV_STATE!r}: the observation has no {ENV_STATE_KEY!r} "
+                               "(the episode's task defines none)")
+            batch[ENV_STATE] = torch.from_numpy(env_state_vector(obs[ENV_STATE_KEY], self.env_state_dim))
         batch[self.cfg.task_key] = obs.get("prompt", self._prompt) or self._prompt
         return batch
 

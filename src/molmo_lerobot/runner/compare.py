@@ -36,8 +36,8 @@ TRIAL_FIELDS = ("timing", "horizon", "eval_options", "mujoco")
 #: ``config`` keys that do not change an episode's trial (who runs it, where its outputs go);
 #: a difference in any other key is flagged.
 NEUTRAL_CONFIG = frozenset({"policy", "benchmark", "seed", "limit", "workers", "executor", "output_dir", "record",
-                            "record_hold_steps", "push", "resume", "progress", "hub", "wandb", "video", *TRIAL_FIELDS,
-                            "horizons", "custom_object", "camera", "robot"})
+                            "record_hold_steps", "record_environment_state", "push", "resume", "progress", "hub",
+                            "wandb", "video", *TRIAL_FIELDS, "horizons", "custom_object", "camera", "robot"})
 Z95 = 1.959963984540054
 
 

@@ -10,6 +10,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.features import ENV_STATE_KEY
 
 if TYPE_CHECKING:
     from molmo_lerobot.policies.base import Action, EpisodeContext, Policy
@@ -130,7 +131,7 @@ def advance(env: Any, task: Any, action: Action, when: str) -> bool:
 
 def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: int,
             recorders: RecorderGroup | list[Recorder], info: EpisodeInfo, policy_name: str,
-            end_on_success: bool = False) -> RolloutOutcome:
+            end_on_success: bool = False, environment_state: bool = False) -> RolloutOutcome:
     """Run one episode for up to ``horizon`` policy steps; report success at the end and at any step.
 
     A move group the policy leaves out holds its current target. The episode ends early
@@ -138,6 +139,7 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
     successful step. Images are rendered only when someone needs them: the policy at the
     steps where it is asked for a new action (chunks run open loop), recorders at the steps
     they ask for. A recorder that raises fails its output, not the episode (:class:`RecorderGroup`).
+    With ``environment_state`` every observation carries the task's (``Task.environment_state``).
     """
     from molmo_lerobot.recording import RecorderGroup
 
@@ -152,8 +154,14 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
     def record_images(step: int) -> bool:
         return recs.wants_images_at(step, horizon)
 
-    obs = env.observe(images=policy.needs_images or record_images(0))
-    obs["prompt"], obs["step"] = ctx.prompt, 0
+    def observe(step: int, images: bool) -> dict[str, Any]:
+        obs = env.observe(images=images)
+        obs["prompt"], obs["step"] = ctx.prompt, step
+        if environment_state:
+            obs[ENV_STATE_KEY] = task.environment_state()
+        return obs
+
+    obs = observe(0, policy.needs_images or record_images(0))
     queue: deque[Action] = deque()
     success = success_once = any_step = False
     ended_by, steps = "horizon", horizon
@@ -179,8 +187,7 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
         if done:
             steps = step + 1
             break
-        obs = env.observe(images=record_images(step + 1) or (policy.needs_images and not queue))
-        obs["prompt"], obs["step"] = ctx.prompt, step + 1
+        obs = observe(step + 1, record_images(step + 1) or (policy.needs_images and not queue))
     return RolloutOutcome(success=success, success_once=success_once, steps=steps, success_any_step=any_step,
                           ended_by=ended_by)
 

@@ -59,6 +59,7 @@ class EpisodeWorker:
         self.ctx = RunContext.build(job.config)
         self.timing = self.ctx.timing
         self.end_on_success = bool(job.config.get("end_on_success", False))
+        self.record_environment_state = bool(job.config.get("record_environment_state", False))
         self.policy_name = str(job.policy["name"])
         self.policy = make_policy(self.ctx.plugins, job.policy)
         cap_threads(threads)  # a policy that imported torch reads the cap now
@@ -88,6 +89,11 @@ class EpisodeWorker:
             env, task = start_episode(spec, plan.seed, task_type, self.ctx)
             try:
                 privileged = self.policy.needs_simulator
+                env_state = self.record_environment_state or self.policy.needs_environment_state
+                if env_state and not task.environment_state_names:
+                    who = ("record_environment_state=true" if self.record_environment_state
+                           else f"policy {self.policy_name!r}, which reads observation.environment_state")
+                    raise ValueError(f"task type {task_type.name!r} defines no environment state (asked for by {who})")
                 ctx = EpisodeContext(
                     spec=spec, episode_index=plan.episode_index, seed=plan.seed, prompt=prompt,
                     move_groups=dict(env.move_groups), policy_dt_s=self.timing.policy_dt_ms / 1000.0,
@@ -103,13 +109,14 @@ class EpisodeWorker:
                            "object": getattr(spec.task, "pickup_obj_name", None),
                            "benchmark": self.job.benchmark_name, "benchmark_sha256": self.job.benchmark_sha256},
                     catalog=self.ctx.catalog,
+                    environment_state_names=tuple(task.environment_state_names) if env_state else (),
                 )
                 if self.stopping:
                     raise WorkerStop
                 self._in_rollout = True
                 try:
                     outcome = rollout(env, task, self.policy, ctx, horizon, self.recorders, info, self.policy_name,
-                                      end_on_success=self.end_on_success)
+                                      end_on_success=self.end_on_success, environment_state=env_state)
                 finally:
                     self._in_rollout = False
             finally:

@@ -12,6 +12,9 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from typing import TYPE_CHECKING, Any
 
+import mujoco
+import numpy as np
+
 from molmo_lerobot.benchmark.schema import BaseTaskSpec, GenericTaskSpec
 
 if TYPE_CHECKING:
@@ -33,6 +36,33 @@ class Task(ABC):
     def reward(self) -> float | None:
         """A per-step reward, or ``None`` when the task defines none."""
         return None
+
+    #: the names of :meth:`environment_state`'s values; empty: the task defines no environment state
+    environment_state_names: tuple[str, ...] = ()
+
+    def environment_state(self) -> np.ndarray:
+        """Privileged simulator ground truth about the task's objects (LeRobot's
+        ``observation.environment_state``), named by :attr:`environment_state_names`; the same
+        names and meaning in every episode of the task type."""
+        raise NotImplementedError(f"task {type(self).__name__} defines no environment state")
+
+
+def pose_names(prefix: str) -> tuple[str, ...]:
+    """The names of a pose's 7 values: ``<prefix>_x`` … ``<prefix>_qz``."""
+    return tuple(f"{prefix}_{c}" for c in ("x", "y", "z", "qw", "qx", "qy", "qz"))
+
+
+def pose_in_base(env: Env, body: int) -> np.ndarray:
+    """``body``'s pose ``[x, y, z, qw, qx, qy, qz]`` in the robot base frame (``env.base_pose``),
+    its quaternion's sign fixed by ``qw >= 0`` (one value per orientation)."""
+    base = env.base_pose
+    inv = np.zeros(4)
+    mujoco.mju_negQuat(inv, base[3:])
+    pos, quat = np.zeros(3), np.zeros(4)
+    mujoco.mju_rotVecQuat(pos, env.data.xpos[body] - base[:3], inv)
+    mujoco.mju_mulQuat(quat, inv, env.data.xquat[body])
+    quat /= np.linalg.norm(quat)
+    return np.concatenate([pos, -quat if quat[0] < 0 else quat])
 
 
 class TaskType(ABC):

@@ -4,18 +4,22 @@ Success (MolmoSpaces' ``PickTask``, see docs/success_rules.md): the object's hei
 least ``succ_pos_threshold`` (default 0.01 m) above ``task.pickup_obj_start_pose`` (its height at
 the start when the episode gives no start pose) **and** it touches the robot and nothing else
 (contacts between top-level bodies: no table, no other object).
+
+Environment state (opt-in, privileged): the object's pose in the robot base frame, ``object_x``
+… ``object_qz`` (:func:`~molmo_lerobot.tasks.base.pose_in_base`).
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from pydantic import Field
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.molmospaces import task_aliases
 from molmo_lerobot.benchmark.schema import BaseTaskSpec, Pose7
-from molmo_lerobot.tasks.base import Task, TaskType
+from molmo_lerobot.tasks.base import Task, TaskType, pose_in_base, pose_names
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
@@ -36,6 +40,8 @@ class PickTaskSpec(BaseTaskSpec):
 
 class PickTask(Task):
     """Pick ``spec.task.pickup_obj_name``."""
+
+    environment_state_names = pose_names("object")
 
     def __init__(self, spec: EpisodeSpec, env: Env) -> None:
         name = getattr(spec.task, "pickup_obj_name", None)
@@ -66,6 +72,9 @@ class PickTask(Task):
 
     def reward(self) -> float:
         return 1.0 if self.success() else 0.0
+
+    def environment_state(self) -> np.ndarray:
+        return pose_in_base(self.env, self._object)
 
 
 class PickTaskType(TaskType):

@@ -44,7 +44,7 @@ from molmo_lerobot.benchmark.molmospaces import task_aliases
 from molmo_lerobot.benchmark.schema import Pose7, Vec4
 from molmo_lerobot.poses import frame_matrix, pose_matrix, unit_pose
 from molmo_lerobot.sim import geometry
-from molmo_lerobot.tasks.base import Task, TaskType
+from molmo_lerobot.tasks.base import Task, TaskType, pose_in_base, pose_names
 from molmo_lerobot.tasks.pick import PickTaskSpec
 
 if TYPE_CHECKING:
@@ -130,7 +130,11 @@ def weight(env: Env, body: int) -> float:
 
 
 class PickAndPlaceTask(Task):
-    """Put ``task.pickup_obj_name`` in/on ``task.place_receptacle_name`` (rule: module docstring)."""
+    """Put ``task.pickup_obj_name`` in/on ``task.place_receptacle_name`` (rule: module docstring).
+
+    Environment state: the object's and then the receptacle's pose in the robot base frame."""
+
+    environment_state_names = (*pose_names("object"), *pose_names("receptacle"))
 
     def __init__(self, spec: EpisodeSpec, env: Env) -> None:
         for field in ("pickup_obj_name", "place_receptacle_name"):
@@ -166,6 +170,9 @@ class PickAndPlaceTask(Task):
         pose = np.asarray(given, dtype=np.float64) if given else self.env.body_pose(self.receptacle_name)
         self.start_pose = pose_matrix(unit_pose(pose))
         self.supported_rel_poses = []
+
+    def environment_state(self) -> np.ndarray:
+        return np.concatenate([pose_in_base(self.env, self._object), pose_in_base(self.env, self._receptacle)])
 
     # measurements
     def _pose(self, body: int) -> np.ndarray:

@@ -1,0 +1,124 @@
+"""The opt-in, privileged ``observation.environment_state``: the task's object pose in the robot base
+frame, one vector through the feature map for the recorder, the Gymnasium env and policy=lerobot;
+recorded only when asked for; a checkpoint trained on it gets it at evaluation."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from molmo_lerobot.config import compose
+from molmo_lerobot.export.frames import FrameLayout
+from molmo_lerobot.features import ACTION, ENV_STATE, ENV_STATE_KEY, STATE, FeatureError, FeatureMap
+from molmo_lerobot.gym_env import MolmoEnv
+from molmo_lerobot.policies.base import EpisodeContext
+from molmo_lerobot.poses import pose_matrix
+from molmo_lerobot.recording import EpisodeInfo
+from molmo_lerobot.runner.evaluate import run_evaluation
+
+NAMES = ["object_x", "object_y", "object_z", "object_qw", "object_qx", "object_qy", "object_qz"]
+
+
+def _tiny_state_act(root, fmap: FeatureMap) -> str:
+    """A LeRobot ACT on ``observation.state`` + ``observation.environment_state`` only (as lerobot-train makes it)."""
+    torch = pytest.importorskip("torch")
+    from lerobot.configs.types import FeatureType, PolicyFeature
+    from lerobot.policies.act.configuration_act import ACTConfig
+    from lerobot.policies.act.modeling_act import ACTPolicy
+    from lerobot.policies.factory import make_pre_post_processors
+
+    torch.manual_seed(0)
+    inputs = {STATE: PolicyFeature(FeatureType.STATE, (fmap.state_dim,)),
+              ENV_STATE: PolicyFeature(FeatureType.ENV, (len(fmap.env_state_names),))}
+    cfg = ACTConfig(input_features=inputs, output_features={ACTION: PolicyFeature(FeatureType.ACTION,
+                                                                                  (fmap.action_dim,))},
+                    pretrained_backbone_weights=None, dim_model=16, n_heads=2, dim_feedforward=32, n_encoder_layers=1,
+                    n_decoder_layers=1, chunk_size=2, n_action_steps=2, use_vae=False, device="cpu")
+    pre, post = make_pre_post_processors(cfg, dataset_stats=None)
+    for obj in (ACTPolicy(cfg), pre, post):
+        obj.save_pretrained(root)
+    return str(root)
+
+
+@pytest.fixture(scope="module")
+def genv():
+    env = MolmoEnv("pick_v1", episode_index=3, horizon=4, environment_state=True)
+    yield env
+    env.close()
+
+
+def test_pick_state_is_the_object_pose_in_the_base_frame(genv):
+    obs, _ = genv.reset()
+    state = obs[ENV_STATE_KEY]
+    assert state.dtype == np.float32 and state.shape == (7,) and state[3] >= 0
+    assert genv.features.env_state_names == tuple(NAMES)
+    ep = genv._episode
+    world = pose_matrix(ep.env.base_pose) @ pose_matrix(state.astype(np.float64))
+    body = ep.task._object
+    np.testing.assert_allclose(world[:3, 3], ep.env.data.xpos[body], atol=1e-5)
+    np.testing.assert_allclose(world[:3, :3], ep.env.data.xmat[body].reshape(3, 3), atol=1e-5)
+
+
+def test_recorder_env_and_policy_see_the_same_vector(genv, tmp_path):
+    from molmo_lerobot.policies.lerobot_policy import LeRobotPolicy
+
+    genv.reset()
+    genv.step(genv.action_space.sample() * 0 + genv._obs(genv._observe())["agent_pos"])  # hold: a later state
+    obs = genv._observe()
+    ep = genv._episode
+    info = EpisodeInfo(episode_index=ep.index, house_index=0, seed=ep.seed, prompt=ep.prompt, task_type="pick",
+                       fps=15.0, horizon=4, camera_names=list(ep.env.camera_names), img_resolution=(224, 224),
+                       joint_names=dict(ep.env.joint_names), move_groups=dict(ep.env.move_groups),
+                       environment_state_names=ep.task.environment_state_names)
+    layout = FrameLayout.from_step(info, obs, None)
+    assert layout.feature_map == genv.features
+    assert layout.features()[ENV_STATE] == {"dtype": "float32", "shape": (7,), "names": NAMES}
+    recorded = layout.frame(obs, ep.env.observe(images=False)["qpos"], None, False, False, ep.prompt, info)[ENV_STATE]
+    np.testing.assert_array_equal(genv._obs(obs)[ENV_STATE_KEY], recorded)
+    policy = LeRobotPolicy({"name": "lerobot", "path": _tiny_state_act(tmp_path / "act", genv.features),
+                            "device": "cpu"})
+    assert policy.needs_environment_state and not policy.needs_images
+    policy.reset(EpisodeContext(spec=None, episode_index=0, seed=0, prompt=ep.prompt,
+                                move_groups=dict(ep.env.move_groups), policy_dt_s=0.066))
+    np.testing.assert_array_equal(policy._batch(obs)[ENV_STATE].numpy(), recorded)
+    with pytest.raises(KeyError, match=r"observation\.environment_state"):
+        policy._batch({k: v for k, v in obs.items() if k != ENV_STATE_KEY})
+    with pytest.raises(FeatureError, match=r"observation.environment_state: 3 values, expected 7"):
+        layout.frame({**obs, ENV_STATE_KEY: np.zeros(3)}, {}, None, False, False, "", info)
+
+
+def test_recorded_only_when_asked_and_a_state_policy_gets_it(tmp_path):
+    args = ["benchmark=pick_v1", "limit=1", "workers=1", "horizon=3", "record=true", "progress=false"]
+    run_evaluation(compose(["policy=scripted", *args, "record_environment_state=true",
+                            f"output_dir={tmp_path / 'on'}"]))
+    root = tmp_path / "on" / "dataset"
+    feats = json.loads((root / "meta" / "info.json").read_text())["features"]
+    assert feats[ENV_STATE]["names"] == NAMES and feats[ENV_STATE]["shape"] == [7]
+    frames = pd.concat(pd.read_parquet(p) for p in sorted((root / "data").rglob("*.parquet")))
+    first = frames.sort_values("frame_index").iloc[0][ENV_STATE]
+    genv = MolmoEnv("pick_v1", episode_index=0, horizon=3, environment_state=True)
+    try:  # the same trial: the env's first environment state is the recorded one
+        np.testing.assert_array_equal(genv.reset()[0][ENV_STATE_KEY], first)
+        fmap = genv.features
+    finally:
+        genv.close()
+    # a checkpoint that reads it gets it at evaluation, with no option set
+    act = _tiny_state_act(tmp_path / "act", fmap)
+    res = run_evaluation(compose([f"policy.path={act}", "policy=lerobot", "policy.device=cpu", *args,
+                                  f"output_dir={tmp_path / 'policy'}"]))
+    assert res.summary["n_errors"] == 0
+    policy_feats = json.loads((tmp_path / "policy" / "dataset" / "meta" / "info.json").read_text())["features"]
+    assert policy_feats[ENV_STATE]["names"] == NAMES  # the recording holds what the policy saw
+    run_evaluation(compose(["policy=scripted", *args, f"output_dir={tmp_path / 'off'}"]))
+    assert ENV_STATE not in json.loads((tmp_path / "off" / "dataset" / "meta" / "info.json").read_text())["features"]
+
+
+def test_a_task_without_environment_state_is_an_episode_error(tmp_path):
+    res = run_evaluation(compose(["policy=scripted", "benchmark=open_v1", "limit=1", "workers=1", "horizon=2",
+                                  "progress=false", "record_environment_state=true", f"output_dir={tmp_path}"]))
+    lines = [json.loads(x) for x in (tmp_path / "episodes.jsonl").read_text().splitlines()]
+    assert res.summary["n_errors"] == 1
+    assert "defines no environment state (asked for by record_environment_state=true)" in lines[0]["error"]
