@@ -9,7 +9,7 @@ that reaches all of it). Script:
 approach (pre-grasp 10 cm back along the approach) → insert (straight line) → close →
 articulate (via-points along the joint's arc or slide axis, each the grasp pose with the
 joint moved there, computed with the scene's own kinematics; the path ends early where IK
-no longer reaches) → release → retreat → hold.
+no longer reaches) → release → retreat (as far as IK reaches, or not at all) → hold.
 Open drives the joint to :data:`OPEN_GOAL` of its range, close to fully closed.
 """
 
@@ -128,25 +128,29 @@ class ScriptedArticulated(PhasedExpert):
              gentle: bool = False) -> None:
         """Queue IK via-points through ``poses`` (world TCP poses), ``duration`` seconds in all.
 
-        With ``partial`` the path stops at the last reachable via-point instead of failing.
+        With ``partial`` the path stops at the last reachable via-point instead of failing (and
+        queues nothing when none is reachable).
         """
         qs = [self.q_cmd]
         for T in poses:
             q = self.ik.solve(T, qs[-1], iters=IK_ITERS)
             if q is None:
-                if partial and len(qs) > 1:
+                if partial:
                     break
                 raise RuntimeError(f"scripted policy: IK failed on the way for {self.object_name!r}")
             qs.append(q)
+        if len(qs) == 1:
+            return
         self._path(qs[1:], gripper, duration * (len(qs) - 1) / len(poses), gentle)
 
-    def _line(self, T_from: np.ndarray, T_to: np.ndarray, gripper: float, duration: float, points: int = 4) -> None:
+    def _line(self, T_from: np.ndarray, T_to: np.ndarray, gripper: float, duration: float, points: int = 4,
+              partial: bool = False) -> None:
         poses = []
         for k in range(1, points + 1):
             T = T_to.copy()
             T[:3, 3] = T_from[:3, 3] + (T_to[:3, 3] - T_from[:3, 3]) * k / points
             poses.append(T)
-        self._via(poses, gripper, duration)
+        self._via(poses, gripper, duration, partial=partial)
 
     def _plan(self, phase: str) -> None:
         if phase == "approach":
@@ -174,6 +178,6 @@ class ScriptedArticulated(PhasedExpert):
             T_now = self._tcp_T()
             T_back = T_now.copy()
             T_back[:3, 3] -= PREGRASP_DISTANCE * T_now[:3, 2]
-            self._line(T_now, T_back, 0.0, 0.8, points=2)
+            self._line(T_now, T_back, 0.0, 0.8, points=2, partial=True)  # as far back as the arm reaches
         else:  # hold
             self._move(self.q_cmd, self.g_cmd, self.chunk * self.dt)
