@@ -3,9 +3,9 @@
 House ``i`` is house ``i`` of ``libero_rooms`` (:mod:`molmo_lerobot.libero.rooms`: the same room, table,
 decor and lights) with its loose objects replaced: one fixture of the ``libero_fixtures`` library
 (:mod:`molmo_lerobot.libero.fixtures`) stands on the table facing the robot, its closed handles
-:data:`FRONT` ahead of the base (an open drawer's handle then still lies where franka_droid reaches it with a level hand), and two of the
-house's own graspable objects stand at the table's sides as distractors, clear of the drawers'
-travel. Choices come from a random stream seeded by ``i`` alone.
+:data:`FRONT` ahead of the base (an open drawer's handle then still lies where franka_droid reaches
+it with a level hand), and two of the house's own graspable objects stand at the table's sides as
+distractors, clear of the drawers' travel. Choices come from a random stream seeded by ``i`` alone.
 
 Body names: the fixture is the body named by its UID, its parts and joints prefixed ``"<uid>/"``
 (joint ``libero_white_cabinet/top_level``); the distractors are free bodies named by their UIDs.
@@ -113,8 +113,8 @@ class LiberoFixtureRooms(LiberoRooms):
         kept = {obj.uid: pose for obj, pose in lay["distractors"]}
         for obj in self.objects(house_index):  # the room's loose objects: all but the distractors go
             body = world.body(obj.uid)
-            if obj.uid in kept:
-                body.pos, body.quat = kept[obj.uid][:3], kept[obj.uid][3:]
+            if obj.uid in kept:  # the frame the room attached it with takes it where this house puts it
+                body.frame.pos, body.frame.quat = kept[obj.uid][:3], kept[obj.uid][3:]
             else:
                 world.delete(body)
         _attach_fixture(world, lay["fixture"], lay["pose"])

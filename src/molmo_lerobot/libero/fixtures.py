@@ -22,13 +22,15 @@ grasps (``<uid>/<joint>`` in the grasp library) are TCP poses in the moving body
 approaches the bar from the front (local ``+y``), ``+y`` is the finger axis across the bar, at
 the bar's centre and :data:`GRASP_SPREAD` to either side where the bar is long enough, both
 finger orientations; a horizontal bar within :data:`LOW_HANDLE` of the support is approached from
-above its front instead (:data:`PITCHES`), since the lower finger of a level grasp would hit the support; the same poses serve ``franka`` and ``franka_droid`` (MolmoSpaces' unified
-TCP convention). The metadata records each fixture's licence from the distribution that ships
-its MJCF (:func:`~molmo_lerobot.libero.objects.license_of`).
+above its front instead (:data:`PITCHES`), since the lower finger of a level grasp would hit the
+support. The same poses serve ``franka`` and ``franka_droid`` (MolmoSpaces' unified TCP
+convention). The metadata records each fixture's licence from the distribution that ships its
+MJCF (:func:`~molmo_lerobot.libero.objects.license_of`).
 
 Not included: the stoves and faucets (knobs and levers are turned, not opened); the microwave
-(it loads and normalises, but the scripted expert's grip on its small door handle slips after
-about 0.2 rad, so an open_v2 episode of it would measure the expert); the window, sliding cabinet
+(it loads and normalises, but the scripted expert opened it in 1 of 17 tries: its grip on the
+small door handle slips after at most 0.2 rad, so an open_v2 episode of it would measure the
+expert); the window, sliding cabinet
 and short fridge (their MJCF needs more than normalising: zero-mass moving bodies with mesh
 collision, a non-MJCF ``<region>`` element).
 """

@@ -5,7 +5,7 @@
 (:mod:`molmo_lerobot.benchmark.generate_articulated`) in the v2 setting: per episode, a house with
 at least one joint the task may target (close: slide joints only, as v1), one joint of its fixture,
 the joint's start state in ``task.joint_start_position`` (closed for open; 95–100 % open for close),
-the robot's start pose (pick_v2's :data:`~molmo_lerobot.libero.generate.READY_ARM`, small joint jitter),
+the robot's start pose (:data:`READY_ARM`, small joint jitter),
 franka_droid with the DROID cameras (``cameras: []``, the camera system builds them). Episodes use
 MolmoSpaces' ``OpeningTask`` with ``task_type`` open/close and the v1 success threshold. Language
 names the fixture and its part from the metadata: "open the middle drawer of the yellow cabinet",
@@ -22,11 +22,16 @@ from molmo_lerobot.benchmark.generate import _r, benchmark_metadata
 from molmo_lerobot.benchmark.generate_articulated import CLOSE_KINDS, CLOSE_START, TASK_CLS, THRESHOLD
 from molmo_lerobot.libero.fixture_rooms import LiberoFixtureRooms
 from molmo_lerobot.libero.fixtures import LIBERO_FIXTURES
-from molmo_lerobot.libero.generate import CAMERA_SYSTEM, IMG_RESOLUTION, READY_ARM, ROBOT
 
 GENERATOR_VERSION = 2
 TASKS = ("open", "close")
 HORIZON_SEC = 15.0
+IMG_RESOLUTION = (224, 224)
+ROBOT = "franka_droid"
+CAMERA_SYSTEM = "FrankaDroidCameraSystem"
+#: start pose: pick_v2's (:data:`molmo_lerobot.libero.generate.READY_ARM`, which dispatches here; the TCP 0.45 m
+#: ahead of the base and 1.02 m above the floor, pointing down)
+READY_ARM = (0.0, -0.345, 0.0, -2.044, 0.0, 1.699, 0.0)
 
 
 def _joints(scene: LiberoFixtureRooms, house: int, task: str) -> list[str]:
