@@ -94,7 +94,8 @@ def test_a_library_plugin_joins_every_run_catalog_by_priority(toy_dist):
                                                    "objaverse"]
     assert [(g.name, owner) for g, owner in cat.grasp_libraries] == [
         ("builtin", "builtin"), ("toy_extra", "toy"), ("shipped", "toy"), ("articulated", "articulated"),
-        ("libero", "libero"), ("libero_fixtures", "libero_fixtures"), ("droid", "thor"), ("droid_objaverse", "objaverse")]
+        ("libero", "libero"), ("libero_fixtures", "libero_fixtures"), ("droid", "thor"),
+        ("droid_objaverse", "objaverse")]
     assert cat.annotation("toy_vase")["category"] == "vase" and cat.locate_uid("toy_vase").library == "toy"
     assert cat.get_grasps("toy_vase")[0, 2, 3] == 0.2  # a grasp type goes ahead of the grasps a library ships
     assert isinstance(cat.library("thor"), MolmoSpacesObjects)
