@@ -90,10 +90,12 @@ def test_a_library_plugin_joins_every_run_catalog_by_priority(toy_dist):
     assert record.kinds == ["asset_library", "grasp_library"]
     assert record.provides == ["asset_library:toy", "grasp_library:toy_extra"]
     cat = run.catalog
-    assert [lib.name for lib in cat.libraries] == ["builtin", "toy", "articulated", "libero", "thor", "objaverse"]
+    assert [lib.name for lib in cat.libraries] == ["builtin", "toy", "articulated", "libero", "libero_fixtures", "thor",
+                                                   "objaverse"]
     assert [(g.name, owner) for g, owner in cat.grasp_libraries] == [
         ("builtin", "builtin"), ("toy_extra", "toy"), ("shipped", "toy"), ("articulated", "articulated"),
-        ("libero", "libero"), ("droid", "thor"), ("droid_objaverse", "objaverse")]
+        ("libero", "libero"), ("libero_fixtures", "libero_fixtures"), ("droid", "thor"),
+        ("droid_objaverse", "objaverse")]
     assert cat.annotation("toy_vase")["category"] == "vase" and cat.locate_uid("toy_vase").library == "toy"
     assert cat.get_grasps("toy_vase")[0, 2, 3] == 0.2  # a grasp type goes ahead of the grasps a library ships
     assert isinstance(cat.library("thor"), MolmoSpacesObjects)

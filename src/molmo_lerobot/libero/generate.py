@@ -160,15 +160,19 @@ def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: 
 
 
 def main(argv: list[str] | None = None) -> None:
+    from molmo_lerobot.libero.generate_articulated import TASKS as ARTICULATED_TASKS
+    from molmo_lerobot.libero.generate_articulated import generate_benchmark as generate_articulated
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--task", required=True, choices=sorted(TASK_CLS))
+    parser.add_argument("--task", required=True, choices=sorted({*TASK_CLS, *ARTICULATED_TASKS}))
     parser.add_argument("--houses", type=int, required=True)
     parser.add_argument("--episodes-per-house", type=int, required=True)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--name", required=True)
     parser.add_argument("--out", required=True)
     args = parser.parse_args(argv)
-    episodes, meta = generate_benchmark(args.task, args.houses, args.episodes_per_house, args.seed, args.name)
+    generate = generate_articulated if args.task in ARTICULATED_TASKS else generate_benchmark
+    episodes, meta = generate(args.task, args.houses, args.episodes_per_house, args.seed, args.name)
     print(write_benchmark(args.out, episodes, meta))
 
 

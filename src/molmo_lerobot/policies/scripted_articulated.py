@@ -4,12 +4,13 @@ Privileged (``ctx.env``): at reset it reads the articulated object's joint and t
 grasps of that joint from the grasp library (keyed by asset UID, robot and joint; poses in
 the frame of the joint's moving body). It keeps grasps that approach away from the robot and
 takes the one whose pre-grasp, grasp and articulation path IK reaches farthest (the first
-that reaches all of it). Script:
+that reaches all of it); where IK reaches none, it holds still (a failed episode, not an error).
+Script:
 
 approach (pre-grasp 10 cm back along the approach) → insert (straight line) → close →
 articulate (via-points along the joint's arc or slide axis, each the grasp pose with the
 joint moved there, computed with the scene's own kinematics; the path ends early where IK
-no longer reaches) → release → retreat → hold.
+no longer reaches) → release → retreat (as far as IK reaches, or not at all) → hold.
 Open drives the joint to :data:`OPEN_GOAL` of its range, close to fully closed.
 """
 
@@ -77,8 +78,8 @@ class ScriptedArticulated(PhasedExpert):
         mujoco.mj_kinematics(m, d)
         return frame_matrix(d.xpos[self.body], d.xmat[self.body])
 
-    def _choose_grasp(self) -> tuple[np.ndarray, np.ndarray]:
-        """(grasp pose in the moving body's frame, pre-grasp arm q) for the first reachable candidate."""
+    def _choose_grasp(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(grasp pose in the moving body's frame, pre-grasp arm q) for the first reachable candidate, or None."""
         uid = self._uid()
         try:
             local = robot_grasps(self.catalog, uid, self.env.robot_type.name, joint=self.local_joint)
@@ -113,10 +114,7 @@ class ScriptedArticulated(PhasedExpert):
                 best = (reached, local[i], q_pre)
             if reached == PLAN_CHECKS:
                 break
-        if best is None:
-            raise RuntimeError(f"scripted policy: no reachable handle grasp on {self.object_name!r} "
-                               f"joint {self.local_joint!r}")
-        return best[1], best[2]
+        return None if best is None else (best[1], best[2])
 
     def _arc(self, grasp_local: np.ndarray, n: int) -> list[np.ndarray]:
         """World TCP poses holding ``grasp_local`` with the joint moved in ``n`` steps to its goal."""
@@ -128,29 +126,38 @@ class ScriptedArticulated(PhasedExpert):
              gentle: bool = False) -> None:
         """Queue IK via-points through ``poses`` (world TCP poses), ``duration`` seconds in all.
 
-        With ``partial`` the path stops at the last reachable via-point instead of failing.
+        With ``partial`` the path stops at the last reachable via-point instead of failing (and
+        queues nothing when none is reachable).
         """
         qs = [self.q_cmd]
         for T in poses:
             q = self.ik.solve(T, qs[-1], iters=IK_ITERS)
             if q is None:
-                if partial and len(qs) > 1:
+                if partial:
                     break
                 raise RuntimeError(f"scripted policy: IK failed on the way for {self.object_name!r}")
             qs.append(q)
+        if len(qs) == 1:
+            return
         self._path(qs[1:], gripper, duration * (len(qs) - 1) / len(poses), gentle)
 
-    def _line(self, T_from: np.ndarray, T_to: np.ndarray, gripper: float, duration: float, points: int = 4) -> None:
+    def _line(self, T_from: np.ndarray, T_to: np.ndarray, gripper: float, duration: float, points: int = 4,
+              partial: bool = False) -> None:
         poses = []
         for k in range(1, points + 1):
             T = T_to.copy()
             T[:3, 3] = T_from[:3, 3] + (T_to[:3, 3] - T_from[:3, 3]) * k / points
             poses.append(T)
-        self._via(poses, gripper, duration)
+        self._via(poses, gripper, duration, partial=partial)
 
     def _plan(self, phase: str) -> None:
         if phase == "approach":
-            self.grasp_local, q_pre = self._choose_grasp()
+            chosen = self._choose_grasp()
+            if chosen is None:  # no handle grasp IK reaches from here: the expert fails the episode, holding
+                self.phases = ["hold"]
+                self._move(self.q_cmd, self.g_cmd, self.chunk * self.dt)
+                return
+            self.grasp_local, q_pre = chosen
             self._move(q_pre, 0.0, 1.0)
         elif phase == "insert":
             T_grasp = self._body_T() @ self.grasp_local
@@ -174,6 +181,6 @@ class ScriptedArticulated(PhasedExpert):
             T_now = self._tcp_T()
             T_back = T_now.copy()
             T_back[:3, 3] -= PREGRASP_DISTANCE * T_now[:3, 2]
-            self._line(T_now, T_back, 0.0, 0.8, points=2)
+            self._line(T_now, T_back, 0.0, 0.8, points=2, partial=True)  # as far back as the arm reaches
         else:  # hold
             self._move(self.q_cmd, self.g_cmd, self.chunk * self.dt)
