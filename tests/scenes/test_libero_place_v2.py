@@ -69,27 +69,29 @@ def test_published_benchmark_validates_and_holds_its_task(name, run):
     scene = LiberoRooms()
     for ep in episodes:
         spec = parse_episode(ep, run.plugins)
-        assert spec.task_name == TASKS[task].task_type and spec.task.task_horizon_sec == TASKS[task].horizon_sec
+        assert run.plugins.task_type(spec.task_name).name == TASKS[task].task_type
+        assert spec.task.task_horizon_sec == TASKS[task].horizon_sec
         assert spec.robot.robot_name == "franka_droid" and spec.cameras == []
         house = scene.metadata(ep["house_index"])["objects"]
         pick, target = ep["task"]["pickup_obj_name"], ep["task"]["place_receptacle_name"]
         assert house[pick]["graspable"] and house[target]["receptacle"]
         said = ep["language"]["referral_expressions"]
+        what, where = said["pickup_obj_name"], said["place_receptacle_name"]
         assert said == {"pickup_obj_name": house[pick]["referring_expression"],
                         "place_receptacle_name": house[target]["referring_expression"]}
         poses = ep["scene_modifications"]["object_poses"]
         assert poses[pick] == ep["task"]["pickup_obj_start_pose"] and poses[target] == ep["task"][
             "place_receptacle_start_pose"]
         if task == "next_to":
-            assert ep["language"]["task_description"] == f"put {said['pickup_obj_name']} next to {said['place_receptacle_name']}"
+            assert ep["language"]["task_description"] == f"put {what} next to {where}"
             continue
         assert resting_radius(LIBERO_OBJECTS[pick]) <= LIBERO_OBJECTS[target].opening_radius
         word = "on" if house[target]["category"] in ("plate", "tray") else "in"
-        assert ep["language"]["task_description"] == f"put {said['pickup_obj_name']} {word} {said['place_receptacle_name']}"
+        assert ep["language"]["task_description"] == f"put {what} {word} {where}"
         if task == "color":  # the other receptacle differs from the target only in colour, and the words say which
             (other,) = ep["task"]["other_receptacle_names"]
-            assert house[other]["category"] == house[target]["category"] and house[other]["color"] != house[target]["color"]
-            assert house[target]["color"] in said["place_receptacle_name"]
+            assert house[other]["category"] == house[target]["category"]
+            assert house[other]["color"] != house[target]["color"] and house[target]["color"] in where
             assert ep["task"]["other_receptacle_start_poses"] == {other: poses[other]}
 
 
