@@ -39,6 +39,16 @@ def _files(name: str) -> tuple[list[dict], dict]:
             json.loads((root / "benchmark_metadata.json").read_text()))
 
 
+def test_receptacle_openings_come_from_the_geometry():
+    """Inside every receptacle's rim, narrower than its outside, wider for the bigger one of a kind."""
+    openings = {u: o.opening_radius for u, o in LIBERO_OBJECTS.items() if o.receptacle}
+    for uid, r in openings.items():
+        assert 0.02 < r < min(LIBERO_OBJECTS[uid].half_extents[:2]), (uid, r)
+        assert LIBERO_OBJECTS[uid].metadata()["opening_radius"] == round(r, 3)
+    assert openings["libero_white_bowl"] < openings["libero_black_bowl"] < openings["libero_basket"]
+    assert openings["libero_plate"] == openings["libero_yellow_plate"]
+
+
 @pytest.mark.parametrize("task", ["pick_and_place", "next_to", "color"])
 def test_generation_is_deterministic(task):
     scene = LiberoRooms()

@@ -163,9 +163,9 @@ def _pick_episode(scene: LiberoRooms, house: int, index: int, seed: int, task: s
 
 def _place_layout(items: list[tuple[str, float]], z: float, defaults: dict[str, list[float]], next_to: bool,
                   rng: np.random.Generator) -> dict[str, list[float]] | None:
-    """Poses for ``items`` (UID, extra free radius around it; receptacles first, then the object to pick at
-    index ``n_receptacles``) inside the workspace, footprints apart (also from the objects left at their
-    ``defaults`` poses), or None. ``next_to``: the object starts :data:`NEXT_TO_START_GAP` from the first
+    """Poses for ``items`` (UID, extra free radius around it: the receptacles, then the object to pick, then
+    its neighbours) inside the workspace, footprints apart (also from the objects left at their ``defaults``
+    poses), or None. ``next_to``: the object starts :data:`NEXT_TO_START_GAP` from the first
     receptacle, and a disc beside that receptacle, inside the workspace, is kept free for it."""
     uids = [uid for uid, _ in items]
     placed = [(pose[0], pose[1], resting_radius(LIBERO_OBJECTS[uid])) for uid, pose in defaults.items()
@@ -190,7 +190,7 @@ def _place_layout(items: list[tuple[str, float]], z: float, defaults: dict[str, 
         poses[uid] = [x, y, z + obj.half_extents[2] + 0.002, *_yaw_quat(float(rng.uniform(-math.pi, math.pi)))]
         if k == 0:
             first = (x, y, r)
-        if next_to and k == 0:  # the free spot beside the receptacle
+        if next_to and k == 0:  # the free spot beside the first receptacle
             for _ in range(50):
                 a = float(rng.uniform(-math.pi, math.pi))
                 d = r + pick_radius + NEXT_TO_SPOT_MARGIN

@@ -23,7 +23,7 @@ import importlib.metadata as md
 import math
 import os
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
 from pathlib import Path
 from xml.etree import ElementTree
 
@@ -314,7 +314,7 @@ class LiberoObject:
         corners = np.concatenate([p.corners() for p in self.primitives])
         return tuple(float(v) for v in np.max(np.abs(corners), axis=0))
 
-    @property
+    @cached_property
     def opening_radius(self) -> float:
         """Radius of the widest vertical cylinder about the body's axis that clears the collision geometry
         from 3 mm above its floor (the highest geometry on the axis) or 40 % up its height, whichever is
