@@ -1,12 +1,12 @@
 """Grasps of the ``libero`` objects, computed from their collision geometry and cached.
 
 Antipodal sampling with a gripper collision check, for the grippers of :data:`GRIPPERS`
-(``franka_droid``'s Robotiq 2F-85, its real collision meshes):
+(``franka_droid``'s Robotiq 2F-85 and ``franka``'s Panda hand, their real collision geometry, open):
 
 1. closing lines: finger axes in :data:`AZIMUTHS` horizontal directions of the resting object,
    lines on a :data:`LINE_SPACING` grid across its bounding box;
 2. along each line the solid runs of the collision primitives (gaps a finger cannot enter merged),
-   kept where the run is narrower than :data:`MAX_WIDTH` and both end faces are antipodal
+   kept where the run is narrower than the gripper's ``max_width`` and both end faces are antipodal
    (normals within :data:`FRICTION_CONE_DEG` of the closing axis);
 3. approach directions perpendicular to the finger axis, from straight down to horizontal
    (:data:`APPROACH_TILTS_DEG`), the TCP (the pads' pinch point) at the run's middle;
@@ -24,6 +24,8 @@ layout) and read from there afterwards.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
 
@@ -40,16 +42,12 @@ FRICTION_CONE_DEG = 20.0
 APPROACH_TILTS_DEG = (0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0, 90.0, -90.0)
 SURFACE_SPACING = 0.004
 MAX_GRASPS = 96
-#: widest grip (m): the Robotiq 2F-85's stroke less a margin
-MAX_WIDTH = 0.075
 #: gaps narrower than this along a closing line are bridged (no finger fits in)
 MIN_FINGER_GAP = 0.02
 #: clearance kept between the object's surface and the open gripper
 HAND_CLEARANCE = 0.002
 #: how far back along the approach the open gripper's path is checked (the pre-grasp distance and more)
 APPROACH_SWEEP = 0.15
-#: the pads' sweep while closing: half width (x), open position (|y|) and half length along the approach
-PAD_HALF_WIDTH, OPEN_PAD_Y, PAD_HALF_LENGTH = 0.011, 0.044, 0.02
 
 
 def grasp_dir() -> Path:
@@ -161,17 +159,60 @@ def _candidates(prims, max_width: float) -> list[tuple[float, np.ndarray, np.nda
     return out
 
 
+@dataclass(frozen=True)
+class Gripper:
+    """A robot's gripper as the grasp search sees it: ``build`` gives its root body (with everything
+    below it) and the TCP site's name; ``open_qpos`` the joint positions that open it (joints not named
+    stay at their reference); ``max_width`` the widest grip (m, the stroke less a margin); the pads'
+    sweep while closing: half width (x), open position (|y|) and half length along the approach (m)."""
+
+    build: Callable[[], tuple[mujoco.MjsBody, str]]
+    max_width: float
+    pad_half_width: float
+    open_pad_y: float
+    pad_half_length: float
+    open_qpos: dict[str, float] = field(default_factory=dict)
+
+
+def _droid_gripper() -> tuple[mujoco.MjsBody, str]:
+    from molmo_lerobot.robots.franka_droid import load_droid_spec
+
+    return load_droid_spec().body("gripper/base"), "gripper/grasp_site"
+
+
+def _panda_hand() -> tuple[mujoco.MjsBody, str]:
+    from molmo_lerobot.robots.franka import load_franka_spec
+
+    return load_franka_spec().body("panda0_link7"), "tcp"  # the hand and fingers hang from link 7
+
+
+#: robots whose grasps this library computes
+GRIPPERS = {
+    "franka_droid": Gripper(_droid_gripper, max_width=0.075, pad_half_width=0.011, open_pad_y=0.044,
+                            pad_half_length=0.02),
+    "franka": Gripper(_panda_hand, max_width=0.07, pad_half_width=0.01, open_pad_y=0.04, pad_half_length=0.02,
+                      open_qpos={"finger_joint1": 0.04, "finger_joint2": 0.04}),
+}
+
+
+def gripper(robot: str) -> Gripper:
+    if robot not in GRIPPERS:
+        raise ValueError(f"libero grasps: no gripper model for robot {robot!r} (have {sorted(GRIPPERS)})")
+    return GRIPPERS[robot]
+
+
 @cache
 def hand_boxes(robot: str) -> np.ndarray:
     """``(K, 2, 3)`` lower/upper corners of every collision geom of ``robot``'s open gripper, as boxes
     aligned with its TCP frame, each swept :data:`APPROACH_SWEEP` back along the approach (the way in)."""
-    if robot not in GRIPPERS:
-        raise ValueError(f"libero grasps: no gripper model for robot {robot!r} (have {sorted(GRIPPERS)})")
-    body, site = GRIPPERS[robot]()
+    hand = gripper(robot)
+    body, site = hand.build()
     world = mujoco.MjSpec()
     world.worldbody.add_body(name="hand").add_frame().attach_body(body, "", "")
     model = world.compile()
     data = mujoco.MjData(model)
+    for joint, q in hand.open_qpos.items():
+        data.qpos[model.jnt_qposadr[model.joint(joint).id]] = q
     mujoco.mj_forward(model, data)
     sid = model.site(site).id
     R, p = data.site_xmat[sid].reshape(3, 3), data.site_xpos[sid]
@@ -183,9 +224,11 @@ def hand_boxes(robot: str) -> np.ndarray:
         if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
             mid = model.geom_dataid[g]
             local = model.mesh_vert[model.mesh_vertadr[mid]:model.mesh_vertadr[mid] + model.mesh_vertnum[mid]]
-        else:  # boxes (pads): their corners; other primitives by their bounding sphere
+        else:  # boxes (pads) and capsules (Panda fingers): their boxes' corners; others by their bounding sphere
             signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).T.reshape(-1, 3)
+            r, h = model.geom_size[g][:2]
             local = signs * (model.geom_size[g] if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX
+                             else [r, r, r + h] if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE
                              else model.geom_rbound[g])
         pts = (data.geom_xpos[g] + local @ gR.T - p) @ R
         lo, hi = pts.min(0), pts.max(0)
@@ -194,27 +237,18 @@ def hand_boxes(robot: str) -> np.ndarray:
     return np.array(boxes)
 
 
-def _droid_gripper() -> tuple[mujoco.MjsBody, str]:
-    from molmo_lerobot.robots.franka_droid import load_droid_spec
-
-    return load_droid_spec().body("gripper/base"), "gripper/grasp_site"
-
-
-#: robots whose grasps this library computes -> (their gripper's root body, TCP site name)
-GRIPPERS = {"franka_droid": _droid_gripper}
-
-
 def _collides(cloud: np.ndarray, T: np.ndarray, width: float, robot: str) -> bool:
     """Whether the open gripper at TCP pose ``T`` (object frame), on its way in, or its pads closing
     from the open stroke onto the grip of ``width``, hit a surface point of the object."""
     p = (cloud - T[:3, 3]) @ T[:3, :3]
-    boxes = hand_boxes(robot)
+    boxes, hand = hand_boxes(robot), gripper(robot)
     c = HAND_CLEARANCE
     hit = (p[:, None, :] >= boxes[None, :, 0] - c) & (p[:, None, :] <= boxes[None, :, 1] + c)
     if np.any(np.all(hit, axis=2)):
         return True
     x, y, z = np.abs(p[:, 0]), np.abs(p[:, 1]), p[:, 2]
-    closing = (x <= PAD_HALF_WIDTH) & (y >= width / 2 + c) & (y <= OPEN_PAD_Y) & (np.abs(z) <= PAD_HALF_LENGTH)
+    closing = ((x <= hand.pad_half_width) & (y >= width / 2 + c) & (y <= hand.open_pad_y)
+               & (np.abs(z) <= hand.pad_half_length))
     return bool(np.any(closing))
 
 
@@ -228,7 +262,7 @@ def compute_grasps(uid: str, robot: str) -> np.ndarray:
     com, _ = obj.inertial()
     cloud = surface_points(prims)
     ranked = []
-    for width, centre, y, u in _candidates(prims, MAX_WIDTH):
+    for width, centre, y, u in _candidates(prims, gripper(robot).max_width):
         for tilt in APPROACH_TILTS_DEG:
             t = math.radians(tilt)
             approach = math.cos(t) * np.array([0.0, 0.0, -1.0]) + math.sin(t) * u

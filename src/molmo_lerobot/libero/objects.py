@@ -23,7 +23,7 @@ import importlib.metadata as md
 import math
 import os
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
 from pathlib import Path
 from xml.etree import ElementTree
 
@@ -43,6 +43,7 @@ DEFAULT_TEXTURE_SIZE = 512
 FRICTION = (1.0, 0.005, 0.0001)
 CONDIM = 4
 COLLISION_GROUP = 3
+_OPENING_STEP = 0.002
 
 _UP = (1.0, 0.0, 0.0, 0.0)
 _STAND = (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0)  # +90° about x: the authored +y becomes +z
@@ -313,6 +314,26 @@ class LiberoObject:
         corners = np.concatenate([p.corners() for p in self.primitives])
         return tuple(float(v) for v in np.max(np.abs(corners), axis=0))
 
+    @cached_property
+    def opening_radius(self) -> float:
+        """Radius of the widest vertical cylinder about the body's axis that clears the collision geometry
+        from 3 mm above its floor (the highest geometry on the axis) or 40 % up its height, whichever is
+        higher, to its top (2 mm steps): an object whose footprint radius is at most this passes the rim of
+        a receptacle (bowl, plate, basket, tray) and rests inside it."""
+        hz = self.half_extents[2]
+        axis = np.array([[0.0, 0.0, z] for z in np.linspace(-hz, hz, 200)])
+        on_axis = np.any([p.contains(axis) for p in self.primitives], axis=0)
+        floor = float(axis[on_axis, 2].max()) if on_axis.any() else -hz
+        heights = np.linspace(min(max(floor + 0.003, -0.2 * hz), hz), hz, 5)
+        ring = np.array([[math.cos(a), math.sin(a), 0.0] for a in np.linspace(0.0, 2 * math.pi, 90, endpoint=False)])
+        radius = 0.0
+        while radius < max(self.half_extents[:2]):
+            points = np.concatenate([ring * (radius + _OPENING_STEP) + [0.0, 0.0, z] for z in heights])
+            if any(p.contains(points).any() for p in self.primitives):
+                break
+            radius += _OPENING_STEP
+        return radius
+
     def inertial(self) -> tuple[np.ndarray, np.ndarray]:
         """Centre of mass and inertia tensor: :attr:`mass` spread over the primitives by volume."""
         prims = self.primitives
@@ -326,7 +347,8 @@ class LiberoObject:
         return com, inertia
 
     def metadata(self) -> dict:
-        """MolmoSpaces' asset metadata fields, plus colour, material, receptacle, source and licence."""
+        """MolmoSpaces' asset metadata fields, plus colour, material, receptacle (with its
+        :attr:`opening_radius`), graspable, source and licence."""
         hx, hy, hz = self.half_extents
         words = self.name.split()
         return {
@@ -343,6 +365,7 @@ class LiberoObject:
             "color": self.color,
             "material": self.material,
             "receptacle": self.receptacle,
+            **({"opening_radius": round(self.opening_radius, 3)} if self.receptacle else {}),
             "graspable": self.graspable,
             "source": f"{PACKAGE}/assets/{self.source}",
             "license": license_of(self.xml_path),
