@@ -15,17 +15,22 @@
 #   STEPS BATCH CHUNK N_ACTION_STEPS          ACT training; DEVICE: cuda where torch sees a GPU, else cpu
 #   ACT_ARGS="--policy.dim_model=256 ..."     further lerobot-train flags
 #   EVAL_LIMIT=60 WORKERS=2       pick_v1 episodes scored per policy, worker processes
+#   HOLD_STEPS=40                 record_hold_steps of the expert recordings: steps kept after its first
+#                                 success, so the policy sees the object held (state; images: 10)
+#   END_ON_SUCCESS=true           both policies' pick_v1 episodes end at their first success (MolmoSpaces'
+#                                 evaluation convention, end_on_success); false: judged at the horizon
 #   TRAIN_THREADS=1               torch threads of lerobot-train on cpu (on 2 shared cores, 2 threads
 #                                 made a step 20x slower than 1)
-# Defaults: state, 20 x 10 episodes, 3000 steps, batch 32, chunk 20 of which 10 run, dim_model 128,
-# 2 encoder layers, lr 2e-4 (a CPU); images, 20 x 10 episodes, 20000 steps, batch 32, chunk 20 (a GPU).
+# Defaults: state, 20 x 10 episodes, 10000 steps, batch 32, chunk 20 with temporal ensembling (a new
+# chunk every step, coefficient 0.01), dim_model 128, 2 encoder layers, lr 2e-4 (a CPU); images,
+# 20 x 10 episodes, 20000 steps, batch 32, chunk 20 (a GPU).
 set -euo pipefail
 
 PYTHON=${PYTHON:-python}
 INPUTS=${INPUTS:-state}
 case "$INPUTS" in
-  state) defaults=(20 10 3000 32 20 10 "--policy.dim_model=128 --policy.dim_feedforward=512 --policy.n_heads=4
-    --policy.n_encoder_layers=2 --policy.optimizer_lr=2e-4") ;;
+  state) defaults=(20 10 10000 32 20 1 "--policy.dim_model=128 --policy.dim_feedforward=512 --policy.n_heads=4
+    --policy.n_encoder_layers=2 --policy.optimizer_lr=2e-4 --policy.temporal_ensemble_coeff=0.01") ;;
   images) defaults=(20 10 20000 32 20 20 "") ;;
   *) echo "train_demo.sh: INPUTS=$INPUTS: expected state or images" >&2; exit 2 ;;
 esac
@@ -41,6 +46,8 @@ read -r -a ACT_ARGS <<< "$(echo ${ACT_ARGS-${defaults[6]}})"
 CHUNK=${CHUNK:-${defaults[4]}}
 N_ACTION_STEPS=${N_ACTION_STEPS:-${defaults[5]}}
 EVAL_LIMIT=${EVAL_LIMIT:-60}
+HOLD_STEPS=${HOLD_STEPS:-$([ "$INPUTS" = state ] && echo 40 || echo 10)}
+END_ON_SUCCESS=${END_ON_SUCCESS:-true}
 WORKERS=${WORKERS:-2}
 export HF_HUB_OFFLINE=${HF_HUB_OFFLINE:-1} MUJOCO_GL=${MUJOCO_GL:-egl}
 
@@ -66,7 +73,7 @@ if [ ! -f "$WORK/expert/results.json" ]; then
   stamp "2/5 expert recordings (policy=scripted record=true end_on_success=true, inputs: $INPUTS)"
   "$PYTHON" -m molmo_lerobot.cli.eval policy=scripted benchmark.path="$WORK/pick_train" record=true \
     record_environment_state="$([ "$INPUTS" = state ] && echo true || echo false)" \
-    end_on_success=true workers="$WORKERS" progress=false output_dir="$WORK/expert" \
+    record_hold_steps="$HOLD_STEPS" end_on_success=true workers="$WORKERS" progress=false output_dir="$WORK/expert" \
     || [ -f "$WORK/expert/results.json" ]  # exit 1 only when no episode ran
 fi
 
@@ -105,7 +112,7 @@ for policy in random trained; do
   args=(policy=random)
   [ "$policy" = trained ] && args=(policy=lerobot policy.path="$CKPT" policy.device="$DEVICE")
   "$PYTHON" -m molmo_lerobot.cli.eval "${args[@]}" benchmark=pick_v1 limit="$EVAL_LIMIT" workers="$WORKERS" \
-    progress=false output_dir="$out" || [ -f "$out/results.json" ]
+    end_on_success="$END_ON_SUCCESS" progress=false output_dir="$out" || [ -f "$out/results.json" ]
 done
 
 stamp "5/5 trained vs random on pick_v1"
