@@ -41,6 +41,8 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.benchmark.generate import _r, _yaw_quat, benchmark_metadata, write_benchmark
+from molmo_lerobot.libero.generate_articulated import TASKS as ARTICULATED_TASKS
+from molmo_lerobot.libero.generate_articulated import generate_benchmark as generate_articulated
 from molmo_lerobot.libero.objects import LIBERO_OBJECTS
 from molmo_lerobot.libero.rooms import REGION_X, REGION_Y, LiberoRooms, resting_radius
 from molmo_lerobot.sim.env import PHYSICS_OPTIONS
@@ -371,9 +373,6 @@ def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: 
 
 
 def main(argv: list[str] | None = None) -> None:
-    from molmo_lerobot.libero.generate_articulated import TASKS as ARTICULATED_TASKS
-    from molmo_lerobot.libero.generate_articulated import generate_benchmark as generate_articulated
-
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", required=True, choices=sorted({*TASKS, *ARTICULATED_TASKS}))
     parser.add_argument("--houses", type=int, required=True)
