@@ -119,6 +119,22 @@ def _layout(house: int, target: str, others: list[str], z: float, defaults: dict
     return poses
 
 
+def _episode_fields(scene: LiberoRooms, house: int, rng: np.random.Generator, arm: np.ndarray,
+                    settled: dict[str, list[float]]) -> dict[str, Any]:
+    """What every v2 episode holds before its task: house, scene, the episode seed (drawn from ``rng``
+    now), franka_droid's start pose ``arm``, the DROID cameras and the settled object poses."""
+    return {
+        "house_index": house,
+        "scene_dataset": scene.name,
+        "data_split": "val",
+        "seed": int(rng.integers(2**31 - 1)),
+        "robot": {"robot_name": ROBOT, "init_qpos": {"arm": [_r(q) for q in arm], "gripper": [0.0]}},
+        "img_resolution": list(IMG_RESOLUTION),
+        "cameras": [],
+        "scene_modifications": {"added_objects": {}, "object_poses": settled, "removed_objects": []},
+    }
+
+
 def _pick_episode(scene: LiberoRooms, house: int, index: int, seed: int, task: str) -> dict[str, Any]:
     rng = np.random.default_rng([seed, house, index, 0x2])
     meta = scene.metadata(house)
@@ -141,14 +157,7 @@ def _pick_episode(scene: LiberoRooms, house: int, index: int, seed: int, task: s
     arm = np.asarray(READY_ARM) + rng.uniform(-0.05, 0.05, 7)
     phrase = objects[target]["referring_expression"]
     return {
-        "house_index": house,
-        "scene_dataset": scene.name,
-        "data_split": "val",
-        "seed": int(rng.integers(2**31 - 1)),
-        "robot": {"robot_name": ROBOT, "init_qpos": {"arm": [_r(q) for q in arm], "gripper": [0.0]}},
-        "img_resolution": list(IMG_RESOLUTION),
-        "cameras": [],
-        "scene_modifications": {"added_objects": {}, "object_poses": settled, "removed_objects": []},
+        **_episode_fields(scene, house, rng, arm, settled),
         "task": {
             "task_cls": TASKS["pick"].task_cls,
             "task_type": "pick",
@@ -300,14 +309,7 @@ def _place_episode(scene: LiberoRooms, house: int, index: int, seed: int, task: 
         spec["other_receptacle_start_poses"] = {u: settled[u] for u in in_scene[1:]}
     spec["task_horizon_sec"] = kind.horizon_sec
     return {
-        "house_index": house,
-        "scene_dataset": scene.name,
-        "data_split": "val",
-        "seed": int(rng.integers(2**31 - 1)),
-        "robot": {"robot_name": ROBOT, "init_qpos": {"arm": [_r(q) for q in arm], "gripper": [0.0]}},
-        "img_resolution": list(IMG_RESOLUTION),
-        "cameras": [],
-        "scene_modifications": {"added_objects": {}, "object_poses": settled, "removed_objects": []},
+        **_episode_fields(scene, house, rng, arm, settled),
         "task": spec,
         "task_relevant_objects": [pick, *in_scene] if task == "color" else [pick, target],
         "language": {"task_description": instruction,
