@@ -2,9 +2,10 @@
 
 It picks exactly as :class:`~molmo_lerobot.policies.scripted_pick.ScriptedPick` (grasp choice,
 approach, descend, close, lift), then carries the object with the hand's orientation
-fixed: up to a height that clears every object on the table, straight across to above
-the goal, straight down, opens the gripper, and retreats upwards. Each phase is planned
-from the current simulator state (where the object really sits in the hand).
+fixed: up to a height that clears every object on the table (lower where the arm cannot
+reach that high), straight across to above the goal, straight down, opens the gripper, and
+retreats upwards. Each phase is planned from the current simulator state (where the object
+really sits in the hand).
 
 Goal: for ``pick_and_place`` / ``pick_and_place_color`` the object's bottom
 :data:`DROP_CLEARANCE` above the receptacle's rim, centred over it; for
@@ -32,6 +33,8 @@ SET_DOWN_CLEARANCE = 0.006
 #: clearance kept above every other object while carrying
 CARRY_CLEARANCE = 0.04
 RETREAT_HEIGHT = 0.12
+#: fractions of the clearing lift tried, in order, when the arm cannot carry the object at the full one
+LOWER_CARRY = (0.75, 0.5, 0.25, 0.0)
 NEXT_TO_GAP = 0.02
 #: smallest accepted XY gap between the set-down object and any other object
 NEIGHBOUR_CLEARANCE = 0.025
@@ -134,6 +137,27 @@ class ScriptedPlace(ScriptedPick):
         self._line(T_over, T_down, self.q_cmd, 1.0, 1.0)
         self._move(self.q_cmd, 1.0, 0.2)  # settle
 
+    def _lift_and_carry(self, T_now: np.ndarray, lift: float, offset: np.ndarray) -> None:
+        """Queue the lift by ``lift`` and the carry to above the goal and down onto it; the wrist may not
+        reach the goal with the hand's yaw unchanged, so turns of it are tried."""
+        T_up = T_now.copy()
+        T_up[2, 3] += lift
+        if lift > 1e-3:
+            self._line(T_now, T_up, self.q_cmd, 1.0, max(0.3, 4 * lift))
+        for turn in (0.0, np.pi, np.pi / 2, -np.pi / 2):
+            goal = self._goal_xy(turn)
+            Rz = np.array([[np.cos(turn), -np.sin(turn), 0.0], [np.sin(turn), np.cos(turn), 0.0], [0, 0, 1]])
+            rotated = Rz @ offset
+            T_over = T_up.copy()
+            T_over[:3, :3] = Rz @ T_up[:3, :3]
+            T_over[:2, 3] = goal - rotated[:2]
+            T_down = T_over.copy()
+            T_down[2, 3] = self.goal_bottom + self.below - rotated[2]
+            if self._try(self._carry_and_lower, T_up, T_over, T_down):
+                self.T_down = T_down
+                return
+        raise RuntimeError(f"scripted policy: IK cannot carry {self.target!r} to {self.receptacle!r}")
+
     def _try(self, plan: Any, *args: Any, **kwargs: Any) -> bool:
         """Queue ``plan(*args)``; on an IK failure undo what it queued and return False."""
         state = (len(self.queue), self.q_cmd.copy(), self.g_cmd)
@@ -157,22 +181,9 @@ class ScriptedPlace(ScriptedPick):
             self.goal_bottom = rec_lo + SET_DOWN_CLEARANCE if self.next_to else rec_hi + DROP_CLEARANCE
             tops = max([z_extent(env, o)[1] for o in self._others()] + [rec_hi])
             lift = max(0.0, tops + CARRY_CLEARANCE - bottom)
-            T_up = T_now.copy()
-            T_up[2, 3] += lift
-            if lift > 1e-3:
-                self._line(T_now, T_up, self.q_cmd, 1.0, max(0.3, 4 * lift))
-            # the wrist may not reach the goal with the hand's yaw unchanged: try turning it
-            for turn in (0.0, np.pi, np.pi / 2, -np.pi / 2):
-                goal = self._goal_xy(turn)
-                Rz = np.array([[np.cos(turn), -np.sin(turn), 0.0], [np.sin(turn), np.cos(turn), 0.0], [0, 0, 1]])
-                rotated = Rz @ offset
-                T_over = T_up.copy()
-                T_over[:3, :3] = Rz @ T_up[:3, :3]
-                T_over[:2, 3] = goal - rotated[:2]
-                T_down = T_over.copy()
-                T_down[2, 3] = self.goal_bottom + self.below - rotated[2]
-                if self._try(self._carry_and_lower, T_up, T_over, T_down):
-                    self.T_down = T_down
+            # too high for the arm with the hand's orientation kept: carry lower (less clearance) rather than give up
+            for scale in (1.0, *LOWER_CARRY):
+                if self._try(self._lift_and_carry, T_now, lift * scale, offset):
                     break
             else:
                 raise RuntimeError(f"scripted policy: IK cannot carry {self.target!r} to {self.receptacle!r}")
