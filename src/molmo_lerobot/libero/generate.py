@@ -7,8 +7,9 @@ task type, horizon and episode function.
 
 ``pick``: per episode a house, the object to pick (a graspable one), a collision-free layout of it and
 two or three of the house's other objects inside the robot's workspace (the rest stay where the house
-puts them, and the layout keeps clear of them too), the robot's start pose (:data:`READY_ARM`, the
-gripper 0.27 m above the table pointing down, small joint jitter). The layout is then settled: the
+puts them, and the layout keeps clear of them too), the robot's start pose
+(:data:`~molmo_lerobot.libero.episode_fields.READY_ARM`, the gripper 0.27 m above the table pointing
+down, small joint jitter). The layout is then settled: the
 house (without the robot) is simulated for :data:`SETTLE_S` and the resting poses are what the episode
 records; a layout in which anything moved more than :data:`MAX_SETTLE_SHIFT` is drawn again.
 
@@ -41,6 +42,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.benchmark.generate import _r, _yaw_quat, benchmark_metadata, write_benchmark
+from molmo_lerobot.libero.episode_fields import CAMERA_SYSTEM, episode_fields, start_arm
 from molmo_lerobot.libero.generate_articulated import TASKS as ARTICULATED_TASKS
 from molmo_lerobot.libero.generate_articulated import generate_benchmark as generate_articulated
 from molmo_lerobot.libero.objects import LIBERO_OBJECTS
@@ -48,11 +50,6 @@ from molmo_lerobot.libero.rooms import REGION_X, REGION_Y, LiberoRooms, resting_
 from molmo_lerobot.sim.env import PHYSICS_OPTIONS
 
 GENERATOR_VERSION = 2
-IMG_RESOLUTION = (224, 224)
-ROBOT = "franka_droid"
-CAMERA_SYSTEM = "FrankaDroidCameraSystem"
-#: TCP 0.45 m ahead of the base, 1.02 m above the floor, pointing down (IK on franka_droid on its pedestal)
-READY_ARM = (0.0, -0.345, 0.0, -2.044, 0.0, 1.699, 0.0)
 #: free space between footprints in the workspace, and more around the object to pick (the open hand)
 MIN_GAP = 0.04
 PICK_CLEARANCE = 0.07
@@ -119,22 +116,6 @@ def _layout(house: int, target: str, others: list[str], z: float, defaults: dict
     return poses
 
 
-def _episode_fields(scene: LiberoRooms, house: int, rng: np.random.Generator, arm: np.ndarray,
-                    settled: dict[str, list[float]]) -> dict[str, Any]:
-    """What every v2 episode holds before its task: house, scene, the episode seed (drawn from ``rng``
-    now), franka_droid's start pose ``arm``, the DROID cameras and the settled object poses."""
-    return {
-        "house_index": house,
-        "scene_dataset": scene.name,
-        "data_split": "val",
-        "seed": int(rng.integers(2**31 - 1)),
-        "robot": {"robot_name": ROBOT, "init_qpos": {"arm": [_r(q) for q in arm], "gripper": [0.0]}},
-        "img_resolution": list(IMG_RESOLUTION),
-        "cameras": [],
-        "scene_modifications": {"added_objects": {}, "object_poses": settled, "removed_objects": []},
-    }
-
-
 def _pick_episode(scene: LiberoRooms, house: int, index: int, seed: int, task: str) -> dict[str, Any]:
     rng = np.random.default_rng([seed, house, index, 0x2])
     meta = scene.metadata(house)
@@ -154,10 +135,10 @@ def _pick_episode(scene: LiberoRooms, house: int, index: int, seed: int, task: s
             break
     else:
         raise RuntimeError(f"libero_rooms house {house}: no layout for {target!r} settles within {MAX_SETTLE_SHIFT} m")
-    arm = np.asarray(READY_ARM) + rng.uniform(-0.05, 0.05, 7)
+    arm = start_arm(rng)
     phrase = objects[target]["referring_expression"]
     return {
-        **_episode_fields(scene, house, rng, arm, settled),
+        **episode_fields(scene.name, house, rng, arm, settled),
         "task": {
             "task_cls": TASKS["pick"].task_cls,
             "task_type": "pick",
@@ -283,7 +264,7 @@ def _place_episode(scene: LiberoRooms, house: int, index: int, seed: int, task: 
                            f"the neighbours settles within {MAX_SETTLE_SHIFT} m")
     in_scene, pick, settled = found
     target = in_scene[0]
-    arm = np.asarray(READY_ARM) + rng.uniform(-0.05, 0.05, 7)
+    arm = start_arm(rng)
     phrase = objects[pick]["referring_expression"]
     where = objects[target]["referring_expression"]
     spec: dict[str, Any] = {
@@ -309,7 +290,7 @@ def _place_episode(scene: LiberoRooms, house: int, index: int, seed: int, task: 
         spec["other_receptacle_start_poses"] = {u: settled[u] for u in in_scene[1:]}
     spec["task_horizon_sec"] = kind.horizon_sec
     return {
-        **_episode_fields(scene, house, rng, arm, settled),
+        **episode_fields(scene.name, house, rng, arm, settled),
         "task": spec,
         "task_relevant_objects": [pick, *in_scene] if task == "color" else [pick, target],
         "language": {"task_description": instruction,

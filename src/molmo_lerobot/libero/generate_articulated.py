@@ -5,7 +5,7 @@
 (:mod:`molmo_lerobot.benchmark.generate_articulated`) in the v2 setting: per episode, a house with
 at least one joint the task may target (close: slide joints only, as v1), one joint of its fixture,
 the joint's start state in ``task.joint_start_position`` (closed for open; 95–100 % open for close),
-the robot's start pose (:data:`READY_ARM`, small joint jitter),
+the robot's start pose (:data:`~molmo_lerobot.libero.episode_fields.READY_ARM`, small joint jitter),
 franka_droid with the DROID cameras (``cameras: []``, the camera system builds them). Episodes use
 MolmoSpaces' ``OpeningTask`` with ``task_type`` open/close and the v1 success threshold. Language
 names the fixture and its part from the metadata: "open the middle drawer of the yellow cabinet",
@@ -20,18 +20,13 @@ import numpy as np
 
 from molmo_lerobot.benchmark.generate import _r, benchmark_metadata
 from molmo_lerobot.benchmark.generate_articulated import CLOSE_KINDS, CLOSE_START, TASK_CLS, THRESHOLD
+from molmo_lerobot.libero.episode_fields import CAMERA_SYSTEM, episode_fields, start_arm
 from molmo_lerobot.libero.fixture_rooms import LiberoFixtureRooms
 from molmo_lerobot.libero.fixtures import LIBERO_FIXTURES
 
 GENERATOR_VERSION = 2
 TASKS = ("open", "close")
 HORIZON_SEC = 15.0
-IMG_RESOLUTION = (224, 224)
-ROBOT = "franka_droid"
-CAMERA_SYSTEM = "FrankaDroidCameraSystem"
-#: start pose: pick_v2's (:data:`molmo_lerobot.libero.generate.READY_ARM`, which dispatches here; the TCP 0.45 m
-#: ahead of the base and 1.02 m above the floor, pointing down)
-READY_ARM = (0.0, -0.345, 0.0, -2.044, 0.0, 1.699, 0.0)
 
 
 def _joints(scene: LiberoFixtureRooms, house: int, task: str) -> list[str]:
@@ -55,17 +50,10 @@ def _episode(scene: LiberoFixtureRooms, house: int, index: int, seed: int, task:
     joint = candidates[int(rng.integers(len(candidates)))]
     info = fx.joint(joint)
     start = 0.0 if task == "open" else info.open_q * float(rng.uniform(*CLOSE_START))
-    arm = np.asarray(READY_ARM) + rng.uniform(-0.05, 0.05, 7)
+    arm = start_arm(rng)
     words = phrase(fx.uid, joint)
     return {
-        "house_index": house,
-        "scene_dataset": scene.name,
-        "data_split": "val",
-        "seed": int(rng.integers(2**31 - 1)),
-        "robot": {"robot_name": ROBOT, "init_qpos": {"arm": [_r(q) for q in arm], "gripper": [0.0]}},
-        "img_resolution": list(IMG_RESOLUTION),
-        "cameras": [],
-        "scene_modifications": {"added_objects": {}, "object_poses": {}, "removed_objects": []},
+        **episode_fields(scene.name, house, rng, arm, {}),
         "task": {
             "task_cls": TASK_CLS,
             "task_type": task,
