@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import av
 import numpy as np
 import pytest
@@ -125,3 +129,33 @@ def test_settings_defaults_follow_the_codec():
 def test_bad_settings_name_the_key(block, match):
     with pytest.raises(VideoConfigError, match=match):
         VideoSettings.from_config(block)
+
+
+_SCHEDULING_CHECK = """
+import numpy as np, os, tempfile, time
+from pathlib import Path
+from molmo_lerobot.export.video import CameraStreamEncoder, VideoSettings
+def policies():
+    return {os.sched_getscheduler(int(t)) for t in os.listdir("/proc/self/task")}
+settings = VideoSettings.from_config({})  # the probe encodes a frame
+enc = CameraStreamEncoder(15, settings.encoder_config(), 30, 1)
+enc.start_episode(["observation.images.exo"], Path(tempfile.mkdtemp()))
+for _ in range(5):
+    enc.feed_frame("observation.images.exo", np.zeros((48, 64, 3), np.uint8))
+time.sleep(0.5)
+seen = policies()  # with the encoder's threads running
+enc.finish_episode()
+print(sorted(seen | policies()), os.SCHED_OTHER)
+"""
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0 or not os.path.isdir("/proc/self/task"),
+                    reason="only root (on Linux) can be switched to real-time scheduling")
+def test_recording_as_root_leaves_no_thread_real_time():
+    """SVT-AV1 run as root makes the thread that starts an encoder, and its own threads, SCHED_FIFO at
+    top priority; a recording worker then starved the supervisor and every process on its cores."""
+    out = subprocess.run([sys.executable, "-c", _SCHEDULING_CHECK], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "SVT_LOG": "0"})
+    assert out.returncode == 0, out.stderr[-2000:]
+    policies, other = out.stdout.strip().rsplit(" ", 1)
+    assert policies == f"[{other}]", f"thread scheduling policies seen: {policies} (SCHED_OTHER is {other})"

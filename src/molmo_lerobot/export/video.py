@@ -21,6 +21,8 @@ threads) turned into LeRobot's ``RGBEncoderConfig``; codec options are LeRobot's
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import io
 import os
 import queue
@@ -52,6 +54,34 @@ H264_DEFAULTS: dict[str, Any] = {"crf": 18, "preset": "veryfast"}
 #: SVT-AV1 prints its configuration banner (a dozen lines) to stderr for every stream it opens,
 #: reading ``SVT_LOG`` once, at its first encoder: errors only, unless the user set it.
 os.environ.setdefault("SVT_LOG", "1")
+
+
+_CAP_SYS_NICE = 23
+_CAPABILITY_VERSION_3 = 0x20080522
+
+
+class _CapHeader(ctypes.Structure):
+    _fields_ = (("version", ctypes.c_uint32), ("pid", ctypes.c_int))
+
+
+class _CapData(ctypes.Structure):
+    _fields_ = (("effective", ctypes.c_uint32), ("permitted", ctypes.c_uint32), ("inheritable", ctypes.c_uint32))
+
+
+def forgo_realtime() -> None:
+    """Drop ``CAP_SYS_NICE`` from the calling thread, and so from the threads it starts (Linux keeps
+    capabilities per thread). SVT-AV1 (LeRobot's default codec), run as root, switches the thread that
+    starts an encoder and every thread it starts to real-time ``SCHED_FIFO`` at top priority: a
+    recording worker then starves the run's supervisor and every other process on its cores. Without
+    the capability its request fails and the encoder runs at ordinary priority. No-op elsewhere."""
+    with contextlib.suppress(OSError, AttributeError):
+        libc = ctypes.CDLL(None, use_errno=True)
+        header, data = _CapHeader(_CAPABILITY_VERSION_3, 0), (_CapData * 2)()
+        if libc.capget(ctypes.byref(header), data) != 0 or not data[0].effective & (1 << _CAP_SYS_NICE):
+            return
+        data[0].effective &= ~(1 << _CAP_SYS_NICE)
+        data[0].permitted &= ~(1 << _CAP_SYS_NICE)
+        libc.capset(ctypes.byref(header), data)
 
 
 class VideoConfigError(ConfigError):
@@ -102,13 +132,36 @@ class VideoSettings:
         config = self.encoder_config()  # LeRobot checks codec name, pixel format and options
         frame = av.VideoFrame.from_ndarray(np.zeros((64, 64, 3), np.uint8), format="rgb24")
         try:
-            with av.open(io.BytesIO(), "w", format="mp4") as container:
-                stream = add_video_stream(container, config, self.encoder_threads, 15, 64, 64)
-                container.mux(stream.encode(frame))
-                container.mux(stream.encode())
+            _in_encoder_thread(lambda: self._encode_one(config, frame))
         except Exception as exc:
             raise VideoConfigError(f"video: vcodec={self.vcodec!r} (encoder {config.vcodec}) cannot encode on "
                                    f"this machine: {exc}") from None
+
+
+    def _encode_one(self, config: RGBEncoderConfig, frame: Any) -> None:
+        with av.open(io.BytesIO(), "w", format="mp4") as container:
+            stream = add_video_stream(container, config, self.encoder_threads, 15, 64, 64)
+            container.mux(stream.encode(frame))
+            container.mux(stream.encode())
+
+
+def _in_encoder_thread(work: Any) -> None:
+    """Run ``work()`` in a thread of its own that cannot become real-time (:func:`forgo_realtime`);
+    re-raise what it raised."""
+    failure: list[BaseException] = []
+
+    def run() -> None:
+        forgo_realtime()
+        try:
+            work()
+        except BaseException as exc:
+            failure.append(exc)
+
+    thread = threading.Thread(target=run, name="encode-probe", daemon=True)
+    thread.start()
+    thread.join()
+    if failure:
+        raise failure[0]
 
 
 def add_video_stream(container: Any, config: RGBEncoderConfig, threads: int | None, fps: int,
@@ -180,6 +233,7 @@ class _CameraStream(threading.Thread):
         self.cancelled = False
 
     def run(self) -> None:
+        forgo_realtime()
         container = stream = None
         while (frame := self.frames.get()) is not None:
             if self.error is not None or self.cancelled:
