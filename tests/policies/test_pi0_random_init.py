@@ -32,8 +32,11 @@ def obs(seed: int) -> dict:
 
 
 def test_random_pi0_answers_a_served_batch_of_two(tmp_path):
+    from lerobot.policies.pi0 import modeling_pi0
+
     path = save_random_pi0(tmp_path / "pi0", size="small")
     assert read_dims(path) == ("pi0", SIZES["small"])
+    assert modeling_pi0.get_gemma_config("gemma_2b").width == 2048  # LeRobot's own sizes again after the build
     assert json.loads((path / "config.json").read_text())["type"] == "pi0"
     pre = json.loads((path / "policy_preprocessor.json").read_text())
     step = next(s for s in pre["steps"] if s["registry_name"] == "tokenizer_processor")
