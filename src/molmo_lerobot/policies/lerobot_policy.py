@@ -246,23 +246,47 @@ class LeRobotPolicy(Policy):
     @classmethod
     def act_batch(cls, policies: list[Policy], observations: list[Observation]) -> list[Action | Exception]:
         """One forward for every client whose queue is empty; see the class docstring."""
-        import torch
-
         forks: list[LeRobotPolicy] = policies  # type: ignore[assignment]
         results: list[Any] = [None] * len(forks)
-        todo: list[tuple[int, dict[str, Any]]] = []
-        for i, (p, obs) in enumerate(zip(forks, observations, strict=True)):
+        todo: list[int] = []
+        for i, p in enumerate(forks):
             if p._queue is None:
                 results[i] = TypeError("act_batch needs forks of a LeRobotPolicy (LeRobotPolicy.fork)")
             elif p.cfg.mode == "step" and p._queue:
                 results[i] = p._to_action(p._queue.popleft()[None])
             else:
-                try:
-                    todo.append((i, p._batch(obs)))
-                except Exception as exc:  # a bad observation fails its own request only
-                    results[i] = exc
+                todo.append(i)
+        chunks = cls.predict_batch([forks[i] for i in todo], [observations[i] for i in todo])
+        for i, actions in zip(todo, chunks, strict=True):
+            p = forks[i]
+            if isinstance(actions, Exception):
+                results[i] = actions
+                continue
+            try:
+                if p.cfg.mode == "step":
+                    p._queue.extend(actions)  # type: ignore[union-attr]
+                    results[i] = p._to_action(p._queue.popleft()[None])  # type: ignore[union-attr]
+                else:
+                    results[i] = p._to_action(actions)
+            except Exception as exc:
+                results[i] = exc
+        return results
+
+    @staticmethod
+    def predict_batch(policies: list[LeRobotPolicy], observations: list[Observation]) -> list[np.ndarray | Exception]:
+        """Each observation's unnormalized chunk (H, A) from one forward of the first policy's model
+        (instances of one model: forks); a bad observation gets its exception, the others still run."""
+        import torch
+
+        results: list[Any] = [None] * len(policies)
+        todo: list[tuple[int, dict[str, Any]]] = []
+        for i, (p, obs) in enumerate(zip(policies, observations, strict=True)):
+            try:
+                todo.append((i, p._batch(obs)))
+            except Exception as exc:  # a bad observation fails its own request only
+                results[i] = exc
         if todo:
-            lead = forks[todo[0][0]]
+            lead = policies[todo[0][0]]
             batch = {key: (torch.stack([b[key] for _, b in todo]) if torch.is_tensor(value)
                            else [b[key] for _, b in todo])
                      for key, value in todo[0][1].items()}
@@ -270,17 +294,8 @@ class LeRobotPolicy(Policy):
                 chunk = lead.policy.predict_action_chunk(lead.preprocessor(batch))
                 n = getattr(lead.policy.config, "n_action_steps", None)
                 chunk = lead.postprocessor(chunk[:, :n] if n else chunk)
-            chunks = chunk.detach().to("cpu", torch.float32).numpy()
-            for (i, _), actions in zip(todo, chunks, strict=True):
-                p = forks[i]
-                try:
-                    if p.cfg.mode == "step":
-                        p._queue.extend(actions)  # type: ignore[union-attr]
-                        results[i] = p._to_action(p._queue.popleft()[None])  # type: ignore[union-attr]
-                    else:
-                        results[i] = p._to_action(actions)
-                except Exception as exc:
-                    results[i] = exc
+            for (i, _), actions in zip(todo, chunk.detach().to("cpu", torch.float32).numpy(), strict=True):
+                results[i] = actions
         return results
 
     def act(self, obs: Observation) -> Action:

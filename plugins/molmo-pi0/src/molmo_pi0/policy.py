@@ -5,6 +5,7 @@ Which checkpoints each preset fits: :mod:`molmo_pi0.droid`.
 
 from __future__ import annotations
 
+import copy
 from typing import Any, Literal
 
 import numpy as np
@@ -36,6 +37,9 @@ class Pi0Config(DroidConfig):
     inprocess_state: list[str] = Field(default_factory=lambda: ["arm", "gripper"])
     checkpoint: str | None = None  # the served checkpoint (name or path), recorded and checked against action_mode
     end_on_success: bool = True    # read by the run (top-level end_on_success follows it), not by the policy
+    serve: bool = False            # policy.serve*: read by the run (one molmo-serve for its workers), not by the policy
+    serve_max_batch: int | None = Field(default=None, ge=1)
+    serve_batch_timeout_ms: float = Field(default=50.0, ge=0)
 
 
 class Pi0RemotePolicy(Policy):
@@ -82,21 +86,29 @@ class Pi0InProcessPolicy(Policy):
 
     Its inputs follow the checkpoint's LeRobot features (``inprocess_cameras``, ``inprocess_state``);
     the preset's action side (``action_mode``, ``open_loop_horizon``, ``gripper``) applies as remote.
+    A checkpoint of :mod:`molmo_pi0.random_init` at a scaled size is built at its recorded size.
+    Served (``policy.serve=true``, ``molmo-serve``), clients are forks of one model and their
+    requests run as one batched forward (:meth:`act_batch`).
     """
 
     def __init__(self, cfg: dict[str, Any]) -> None:
         self.cfg: Pi0Config = parse_config(cfg, Pi0Config)
         check_checkpoint(self.cfg.path, self.cfg.action_mode)
         from molmo_lerobot.policies.lerobot_policy import LeRobotPolicy
+        from molmo_pi0.random_init import read_dims, scaled_architecture
 
         try:
-            self.inner = LeRobotPolicy({
-                "name": "pi0", "path": self.cfg.path, "device": self.cfg.device, "mode": "chunk",
-                "cameras": self.cfg.inprocess_cameras, "state": self.cfg.inprocess_state, "verify_weights": True,
-            })
+            kind, dims = read_dims(self.cfg.path) or ("pi0", None)  # type: ignore[arg-type]
+            with scaled_architecture(kind, dims):
+                self.inner = LeRobotPolicy({
+                    "name": "pi0", "path": self.cfg.path, "device": self.cfg.device, "mode": "chunk",
+                    "cameras": self.cfg.inprocess_cameras, "state": self.cfg.inprocess_state,
+                    "verify_weights": True,
+                })
         except ImportError as exc:
             raise ImportError(f"policy=pi0 policy.path=… needs `pip install molmo-pi0[inprocess]` ({exc})") from exc
         self.needs_images = self.inner.needs_images
+        self.batched = self.inner.batched
         self._ctx: EpisodeContext | None = None
 
     def reset(self, ctx: EpisodeContext) -> None:
@@ -105,9 +117,41 @@ class Pi0InProcessPolicy(Policy):
 
     def act(self, obs: Observation) -> Action:
         assert self._ctx is not None, "reset() must be called before act()"
-        raw = self.inner.predict(obs)
+        return self._actions(self.inner.predict(obs), obs)
+
+    def _actions(self, raw: np.ndarray, obs: Observation) -> Action:
         arm = np.asarray(obs["qpos"]["arm"], dtype=np.float64)
-        return droid_actions(raw, arm, self.cfg, self._ctx.policy_dt_s, f"pi0 checkpoint {self.cfg.path!r}")
+        return droid_actions(raw, arm, self.cfg, self._ctx.policy_dt_s,  # type: ignore[union-attr]
+                             f"pi0 checkpoint {self.cfg.path!r}")
+
+    def fork(self) -> Pi0InProcessPolicy | None:
+        """A client of the same model (its own episode state), for batched serving."""
+        inner = self.inner.fork()
+        if inner is None:
+            return None
+        twin = copy.copy(self)
+        twin.inner, twin._ctx = inner, None
+        return twin
+
+    @classmethod
+    def act_batch(cls, policies: list[Policy], observations: list[Observation]) -> list[Action | Exception]:
+        """One forward of the shared model for all clients; each answer mapped as :meth:`act` maps it."""
+        from molmo_lerobot.policies.lerobot_policy import LeRobotPolicy
+
+        forks: list[Pi0InProcessPolicy] = policies  # type: ignore[assignment]
+        raws = LeRobotPolicy.predict_batch([p.inner for p in forks], observations)
+        results: list[Action | Exception] = []
+        for p, obs, raw in zip(forks, observations, raws, strict=True):
+            if isinstance(raw, Exception):
+                results.append(raw)
+            elif p._ctx is None:
+                results.append(RuntimeError("reset() must be called before act()"))
+            else:
+                try:
+                    results.append(p._actions(raw, obs))
+                except Exception as exc:  # one client's bad answer fails its own request only
+                    results.append(exc)
+        return results
 
     def close(self) -> None:
         self.inner.close()
