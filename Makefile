@@ -18,6 +18,8 @@ $(VENV): pyproject.toml $(PLUGINS)
 	test -x $(PY) || $(PYTHON312) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip 2>&1 | grep -v "^WARNING: Location" || true
 	$(PY) -m pip install -q -e ".[test,ray,training,viz]" $(foreach p,$(dir $(PLUGINS)),-e ./$(p)) 2>&1 | grep -v "^WARNING: Location"; test $${PIPESTATUS[0]} -eq 0
+	@# molmo-pi0's in-process mode (LeRobot's PI0/PI0.5: transformers), so its random-init checkpoint test runs
+	$(PY) -m pip install -q -e "./plugins/molmo-pi0[inprocess]" 2>&1 | grep -v "^WARNING: Location"; test $${PIPESTATUS[0]} -eq 0
 	@# franka_droid reads robosuite's Robotiq 2F-85 MJCF and meshes from its install path and never
 	@# imports it, so none of its own requirements are wanted (one pins an old mink).
 	$(PY) -m pip install -q --no-deps "robosuite>=1.5,<1.6" 2>&1 | grep -v "^WARNING: Location"; test $${PIPESTATUS[0]} -eq 0
