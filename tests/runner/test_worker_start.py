@@ -107,7 +107,7 @@ def test_preload_lists_keep_order_and_start_with_the_worker_environment():
     modules = preload_modules(["plugin_a", "numpy"], ["torch", "plugin_a"])
     assert modules[:len(BASE_PRELOAD)] == list(BASE_PRELOAD) and modules[0] == "molmo_lerobot.runner.worker_env"
     assert modules[len(BASE_PRELOAD):] == ["plugin_a", "torch"]
-    with pytest.raises(ValueError, match="executor.start_method: expected one of"):
+    with pytest.raises(ValueError, match=r"executor\.start_method: expected one of"):
         ProcessTransport("fork")
 
 

@@ -88,11 +88,11 @@ def _worker_main(conn: Connection, job: WorkerJob, worker_id: str, started_at: f
 
 
 def _exit_when_orphaned() -> None:
-    """Stop this worker gracefully (then for sure) once its parent process has gone (the
-    supervisor, or with ``forkserver`` the server, which ends with the supervisor)."""
-    parent = os.getppid()
-    while os.getppid() == parent:
-        time.sleep(0.5)
+    """Stop this worker gracefully (then for sure) once the supervisor process that started it
+    has gone. That is its parent with ``spawn``; with ``forkserver`` its parent is the server,
+    which lives while any worker does, so the supervisor's end is read from multiprocessing's
+    parent sentinel (a pipe only the supervisor writes to: it reads EOF once the supervisor is gone)."""
+    wait([mp.parent_process().sentinel])
     os.kill(os.getpid(), signal.SIGTERM)
     time.sleep(ORPHAN_GRACE_S)
     os._exit(1)
