@@ -36,6 +36,7 @@ from molmo_lerobot.results import EpisodeResult, summarize
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
 from molmo_lerobot.runner.forkserver import worker_preload
+from molmo_lerobot.runner.placement import check_devices
 from molmo_lerobot.runner.plan import EpisodePlan, EpisodePlanner
 from molmo_lerobot.runner.progress import Progress
 from molmo_lerobot.runner.run_config import RunConfig, episode_work_problem
@@ -87,7 +88,11 @@ def _make_executor(cfg: dict[str, Any]) -> Any:
     if ex["name"] == "local":
         from molmo_lerobot.runner.local import LocalExecutor
 
-        return LocalExecutor(int(cfg["workers"]), start_method=ex.get("start_method", "forkserver"), **common)
+        try:
+            check_devices(ex)  # read by each worker, checked here
+            return LocalExecutor(int(cfg["workers"]), start_method=ex.get("start_method", "forkserver"), **common)
+        except ValueError as exc:
+            raise RunError(str(exc)) from None
     if ex["name"] == "ray":
         from molmo_lerobot.runner.ray_executor import RayExecutor
 

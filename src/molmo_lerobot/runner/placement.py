@@ -97,6 +97,12 @@ def _devices(value: Any, key: str) -> list[int] | None:
     return list(value)
 
 
+def check_devices(executor: Mapping[str, Any]) -> None:
+    """Raise ``ValueError`` naming the key if ``executor.egl_devices`` or ``cuda_devices`` is not a device list."""
+    _devices(executor.get("egl_devices"), "egl_devices")
+    _devices(executor.get("cuda_devices"), "cuda_devices")
+
+
 def place(slot: int, gpus: Sequence[Gpu], env: Mapping[str, str], executor: Mapping[str, Any],
           policy_device: str | None) -> Placement:
     """Worker ``slot``'s placement on a box with ``gpus`` (:func:`nvidia_gpus`), given its
