@@ -132,3 +132,33 @@ def test_startup_report_and_summary():
     summary = startup_summary({"w1g0": {"launch_s": 3.0}, "w0g0": {"launch_s": 1.0, "renderer_s": 1.0}})
     assert list(summary["workers"]) == ["w0g0", "w1g0"]
     assert summary["median"] == {"launch_s": 2.0, "renderer_s": 1.0}
+
+
+def _library_work(conn):
+    import cv2
+    import numpy as np
+    import torch
+
+    image = np.random.default_rng(0).random((1000, 1000, 3), dtype=np.float32)
+    blurred = cv2.GaussianBlur(cv2.resize(image, (1500, 1500)), (9, 9), 0)
+    x = torch.ones(300, 300)
+    conn.send((blurred.shape, float((x @ x)[0, 0])))
+
+
+@pytest.mark.slow
+def test_thread_pools_of_preloaded_policy_libraries_work_in_a_forked_worker():
+    """LeRobot's import leaves the server with idle thread pools (OpenCV's, jemalloc's): a forked worker
+    still runs OpenCV's and torch's parallel kernels (a deadlock here would time out)."""
+    pytest.importorskip("lerobot")
+    server = PreloadedForkServer(["molmo_lerobot.runner.worker_env", "torch", "cv2", "lerobot.policies.factory"])
+    try:
+        server.start()
+        parent, child = multiprocessing.get_context("forkserver").Pipe()
+        proc = server.process(_library_work, (child,), name="libraries")
+        proc.start()
+        child.close()
+        assert parent.poll(300), "the forked worker hung in a library's thread pool"
+        assert parent.recv() == ((1500, 1500, 3), 300.0)
+        proc.join(30)
+    finally:
+        server.stop()

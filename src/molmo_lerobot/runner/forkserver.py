@@ -13,6 +13,11 @@ started by exec (never a fork of the supervisor, whatever the supervisor holds) 
 modules; importing torch creates no CUDA context and importing MuJoCo no EGL display (each is
 created by a worker's first use). Every worker checks this when it starts
 (:func:`inherited_gpu_state`) and refuses to run otherwise.
+
+The server forks from its main thread; importing LeRobot leaves it idle library thread pools
+(OpenCV's, jemalloc's, OpenBLAS's), which re-initialise in a forked child: a forked worker runs
+OpenCV's and torch's parallel kernels (``tests/runner/test_worker_start.py``, slow). A policy whose
+libraries cannot be forked that way runs with ``executor.start_method=spawn``.
 """
 
 from __future__ import annotations

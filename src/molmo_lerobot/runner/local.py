@@ -51,7 +51,7 @@ START_METHODS = ("forkserver", "spawn")
 ORPHAN_GRACE_S = 10.0
 
 
-def _worker_main(conn: Connection, job: WorkerJob, worker_id: str, started_at: float, preload: list[str]) -> None:
+def _worker_main(conn: Connection, job: WorkerJob, worker_id: str, started_at: float) -> None:
     launch_s = time.time() - started_at  # process start, and for spawn the imports of unpickling this job
     inherited = inherited_gpu_state()
     os.environ.setdefault("MUJOCO_GL", "egl")
@@ -63,8 +63,9 @@ def _worker_main(conn: Connection, job: WorkerJob, worker_id: str, started_at: f
         if inherited:
             raise RuntimeError(f"worker process started holding {inherited} of its parent (it must create its own)")
         with startup.phase("imports_s"):  # already there when forked from the fork server
-            for module in preload:
-                importlib.import_module(module)
+            for module in job.preload:
+                with contextlib.suppress(ImportError):  # as the fork server: whoever needs it says why
+                    importlib.import_module(module)
         worker = EpisodeWorker(job, worker_id, startup)
     except Exception as exc:
         conn.send((INIT_ERROR, f"{type(exc).__name__}: {exc}"))
@@ -79,7 +80,7 @@ def _worker_main(conn: Connection, job: WorkerJob, worker_id: str, started_at: f
             if worker.first_done and not reported:
                 reported = True
                 conn.send((STARTUP, startup.report()))
-                print(f"{worker_id} start-up (s): {json.dumps(startup.report())}", flush=True)
+                print(f"{worker_id} start-up (s): {json.dumps(startup.report())}", flush=True)  # to its log
     except (WorkerStop, EOFError, BrokenPipeError, ConnectionResetError):
         pass  # asked to stop, or the supervisor is gone: close our outputs and exit quietly
     finally:
@@ -121,7 +122,7 @@ class ProcessTransport(Transport):
 
     def start(self, worker_id: str, job: WorkerJob) -> _Worker:
         parent, child = self.ctx.Pipe()
-        args = (child, job, worker_id, time.time(), job.preload)
+        args = (child, job, worker_id, time.time())
         if self.start_method == "forkserver":
             if self.server is None:
                 self.server = PreloadedForkServer(job.preload)
