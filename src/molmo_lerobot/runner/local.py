@@ -76,11 +76,11 @@ def _worker_main(conn: Connection, job: WorkerJob, worker_id: str, started_at: f
     try:
         while not worker.stopping and (item := conn.recv()) is not None:
             result = worker.run(item)
-            conn.send((RESULT, result.to_dict()))
-            if worker.first_done and not reported:
+            if worker.first_done and not reported:  # before the result: the run may end with it
                 reported = True
                 conn.send((STARTUP, startup.report()))
                 print(f"{worker_id} start-up (s): {json.dumps(startup.report())}", flush=True)  # to its log
+            conn.send((RESULT, result.to_dict()))
     except (WorkerStop, EOFError, BrokenPipeError, ConnectionResetError):
         pass  # asked to stop, or the supervisor is gone: close our outputs and exit quietly
     finally:

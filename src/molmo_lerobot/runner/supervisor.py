@@ -47,7 +47,7 @@ from molmo_lerobot.runner.worker import WorkerJob
 log = logging.getLogger(__name__)
 
 #: Events a transport reports for one worker, in the order they happened (``STARTUP``: where its
-#: start-up went, seconds per phase, once after its first episode; transports may omit it).
+#: start-up went, seconds per phase, once, just before its first episode's result; transports may omit it).
 READY, INIT_ERROR, RESULT, DEAD, STARTUP = "ready", "init_error", "result", "dead", "startup"
 Event = tuple[str, Any]
 
