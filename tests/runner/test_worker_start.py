@@ -112,12 +112,15 @@ def test_preload_lists_keep_order_and_start_with_the_worker_environment():
 
 
 def test_a_worker_refuses_gpu_state_it_did_not_create(monkeypatch):
-    assert inherited_gpu_state() is None  # this test process never rendered or used CUDA
-    cuda = types.SimpleNamespace(is_initialized=lambda: True)
+    cuda = types.SimpleNamespace(is_initialized=lambda: False)
+    egl = types.SimpleNamespace(EGL_DISPLAY=None)
     monkeypatch.setitem(sys.modules, "torch", types.SimpleNamespace(cuda=cuda))
+    monkeypatch.setitem(sys.modules, "mujoco.egl", egl)
+    assert inherited_gpu_state() is None
+    cuda.is_initialized = lambda: True
     assert inherited_gpu_state() == "a CUDA context"
     cuda.is_initialized = lambda: False
-    monkeypatch.setitem(sys.modules, "mujoco.egl", types.SimpleNamespace(EGL_DISPLAY=object()))
+    egl.EGL_DISPLAY = object()
     assert inherited_gpu_state() == "an EGL display"
 
 
