@@ -10,7 +10,7 @@ PYTHON312 ?= $(shell scripts/find-python312.sh)
 # Plugin distributions to install; the example plugin is installed by its own test instead.
 PLUGINS := $(filter-out plugins/molmo-example-%,$(wildcard plugins/*/pyproject.toml))
 
-.PHONY: eval test test-all perf parity train-demo clean
+.PHONY: eval test test-all perf perf-gpu parity train-demo clean
 
 $(VENV): pyproject.toml $(PLUGINS)
 	@test -n "$(PYTHON312)" || { echo "Python 3.12 not found (PATH or pyenv)"; exit 1; }
@@ -42,6 +42,11 @@ test-all: $(VENV)
 
 perf: $(VENV)
 	$(PY) -m pytest -q -s -m perf tests/perf
+
+# The same tables on a machine with an NVIDIA GPU: policies on cuda, MuJoCo rendering through EGL on the GPU.
+perf-gpu: $(VENV)
+	@nvidia-smi -L >/dev/null 2>&1 || { echo "perf-gpu: no NVIDIA GPU here (nvidia-smi -L failed); make perf runs on CPU"; exit 1; }
+	MOLMO_PERF_DEVICE=cuda MUJOCO_GL=egl $(PY) -m pytest -q -s -m perf tests/perf
 
 # Differential tests against MolmoSpaces' own code, in its own venv (docs/parity.md).
 PARITY_VENV := .parity-venv

@@ -73,11 +73,18 @@ def test_report_has_a_thumbnail_and_first_success_per_episode_without_recording(
 
 
 def test_workers_do_not_change_outcomes(two_worker_run, tmp_path):
+    """Nor does how workers start: two forked from the preloaded fork server (the default) against
+    one spawned; each reports where its start-up went."""
     out2, _ = two_worker_run
     res1 = run_evaluation(compose(["policy=scripted", "workers=1", "limit=4", f"output_dir={tmp_path / 'w1'}",
-                                   "progress=false"]))
+                                   "progress=false", "executor.start_method=spawn"]))
     assert _outcomes(_episodes(tmp_path / "w1")) == _outcomes(_episodes(out2))
     assert [r.success for r in res1.episodes] == [r["success"] for r in _episodes(out2)]
+    phases = {"launch_s", "imports_s", "context_s", "policy_s", "first_scene_s", "renderer_s", "ready_s", "total_s"}
+    forked = json.loads((out2 / "results.json").read_text())["startup"]
+    assert set(forked["workers"]) == {"w0g0", "w1g0"} and set(forked["median"]) >= phases
+    spawned = res1.summary["startup"]["workers"]["w0g0"]
+    assert spawned["imports_s"] > 10 * forked["workers"]["w1g0"]["imports_s"]  # the fork server had them
 
 
 def test_seed_changes_episode_seeds_only_where_asked(two_worker_run, tmp_path):

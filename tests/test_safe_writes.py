@@ -228,6 +228,7 @@ ALLOWED = {
     ("export/video.py", "av.open(str(self.path), 'w')"): "a new file in a fresh mkdtemp dir inside LeRobot's own "
                                                          "temp dir of a shard that fileio made",
     ("resources/archive.py", "open(out, 'wb')"): "``out`` is a descriptor opened O_NOFOLLOW at a walked dir fd",
+    ("runner/forkserver.py", "open(w, 'wb'"): "``w`` is the fork server's pipe to a new worker, not a path",
     ("resources/remotes.py", "shutil.copytree(local_dir, staging)"): "copytree makes the new staging dir "
                                                                      "itself, in a parent fileio made",
 }

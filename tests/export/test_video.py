@@ -11,7 +11,13 @@ import numpy as np
 import pytest
 from lerobot.datasets.compute_stats import RunningQuantileStats
 
-from molmo_lerobot.export.video import CameraStreamEncoder, PixelStats, VideoConfigError, VideoSettings
+from molmo_lerobot.export.video import (
+    CameraStreamEncoder,
+    PixelStats,
+    VideoConfigError,
+    VideoSettings,
+    pick_auto_codec,
+)
 
 KEYS = ["observation.images.exo", "observation.images.wrist"]
 
@@ -108,6 +114,20 @@ def test_a_codec_this_machine_cannot_run_fails_before_the_run():
     # PyAV ships NVENC, so LeRobot accepts it (and vcodec=auto may pick it); without a GPU it cannot open
     with pytest.raises(VideoConfigError, match="video: vcodec='h264_nvenc'"):  # refused by the probe or LeRobot
         VideoSettings.from_config({"vcodec": "h264_nvenc"})
+
+
+def test_auto_picks_nvenc_where_it_encodes_else_the_cpu_default():
+    assert pick_auto_codec(lambda codec: codec == "h264_nvenc") == "h264_nvenc"
+    assert pick_auto_codec(lambda codec: False) == "libsvtav1"
+    tried = []
+    pick_auto_codec(lambda codec: tried.append(codec) or False)
+    assert tried == ["h264_nvenc"]
+    # on this machine: NVENC only where it encodes (a GPU with NVENC: not an H100 or A100), else AV1
+    settings = VideoSettings.from_config({"vcodec": "auto", "g": 4})
+    nvenc = VideoSettings(vcodec="h264_nvenc").encodes()
+    assert settings.vcodec == ("h264_nvenc" if nvenc else "libsvtav1") and settings.g == 4
+    if not __import__("torch").cuda.is_available():
+        assert settings.vcodec == "libsvtav1"
 
 
 def test_settings_defaults_follow_the_codec():

@@ -14,6 +14,8 @@ from molmo_lerobot.cli.eval import main
         (["benchmark=nope"], "unknown benchmark 'nope'"),
         (["wokers=3"], "Could not override 'wokers'"),
         (["executor=slurm"], "unknown executor 'slurm'"),
+        (["executor.start_method=fork"], "executor.start_method: expected one of ['forkserver', 'spawn'], got 'fork'"),
+        (["executor.egl_devices=0"], "executor.egl_devices: expected a list of device indices or null, got 0"),
         (["workers=0"], "workers must be at least 1, got 0"),
         (["+horizons.pick=soon"], "horizons.pick: expected a positive number of seconds, got 'soon'"),
         (["+horizons.pick=-2"], "horizons.pick: expected a positive number of seconds, got -2"),

@@ -29,6 +29,7 @@ import queue
 import shutil
 import tempfile
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -47,8 +48,14 @@ from molmo_lerobot.hookspecs import ConfigError
 #: files 28 % larger and a third of the encoding CPU (1.8 against 5.4 ms per frame of two
 #: cameras, ``tests/perf/test_video_codecs.py``). AV1 stays the default: LeRobot's
 #: ``aggregate_datasets`` merges only datasets whose ``video.codec`` agree, and LeRobot records AV1.
-#: Other codecs (``auto`` included) get LeRobot's own defaults.
+#: Other codecs get LeRobot's own defaults.
 H264_DEFAULTS: dict[str, Any] = {"crf": 18, "preset": "veryfast"}
+
+#: ``vcodec=auto``: the first of these that encodes a test frame here (NVENC needs an NVIDIA GPU
+#: with its driver), else the CPU default. LeRobot's own ``auto`` picks any hardware encoder
+#: FFmpeg was built with, runnable or not.
+AUTO_CODECS = ("h264_nvenc",)
+CPU_DEFAULT_CODEC = "libsvtav1"
 
 
 #: SVT-AV1 prints its configuration banner (a dozen lines) to stderr for every stream it opens,
@@ -109,9 +116,19 @@ class VideoSettings:
             value = block.get(key)
             if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
                 raise VideoConfigError(f"video.{key}: expected a positive integer or null, got {value!r}")
+        if block.get("vcodec") == "auto":
+            block["vcodec"] = pick_auto_codec(lambda vcodec: cls(**{**block, "vcodec": vcodec}).encodes())
         settings = cls(**block)
         settings.probe()
         return settings
+
+    def encodes(self) -> bool:
+        """Whether these settings encode a test frame on this machine."""
+        try:
+            self.probe()
+        except VideoConfigError:
+            return False
+        return True
 
     def encoder_config(self) -> RGBEncoderConfig:
         """LeRobot's ``RGBEncoderConfig`` for these settings (raises :class:`VideoConfigError`)."""
@@ -137,7 +154,6 @@ class VideoSettings:
             raise VideoConfigError(f"video: vcodec={self.vcodec!r} (encoder {config.vcodec}) cannot encode on "
                                    f"this machine: {exc}") from None
 
-
     def _encode_one(self, config: RGBEncoderConfig, frame: Any) -> None:
         with av.open(io.BytesIO(), "w", format="mp4") as container:
             stream = add_video_stream(container, config, self.encoder_threads, 15, 64, 64)
@@ -162,6 +178,11 @@ def _in_encoder_thread(work: Any) -> None:
     thread.join()
     if failure:
         raise failure[0]
+
+
+def pick_auto_codec(encodes: Callable[[str], bool]) -> str:
+    """``vcodec=auto``: the first of :data:`AUTO_CODECS` that ``encodes``, else :data:`CPU_DEFAULT_CODEC`."""
+    return next((codec for codec in AUTO_CODECS if encodes(codec)), CPU_DEFAULT_CODEC)
 
 
 def add_video_stream(container: Any, config: RGBEncoderConfig, threads: int | None, fps: int,

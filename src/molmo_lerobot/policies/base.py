@@ -140,3 +140,6 @@ class PolicyType:
     #: and a non-native one wraps the policy: it acts on that convention's view of each observation
     #: and returns that convention's actions (:class:`~molmo_lerobot.policies.convention.ConventionAdapter`).
     conventions: bool = False
+    #: Modules its policies import when built (lazily, past the factory's own module): a worker's
+    #: fork server imports them once for every worker (``executor.start_method=forkserver``).
+    preload: tuple[str, ...] = ()

@@ -401,4 +401,4 @@ def make_lerobot_policy(cfg: dict[str, Any]) -> Policy:
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
     return [PolicyType("lerobot", make_lerobot_policy, "any LeRobot pretrained policy (policy.path=…)",
-                       conventions=True)]
+                       conventions=True, preload=("torch", "lerobot.policies.factory"))]

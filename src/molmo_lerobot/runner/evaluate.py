@@ -35,12 +35,14 @@ from molmo_lerobot.paths import data_path
 from molmo_lerobot.results import EpisodeResult, summarize
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
+from molmo_lerobot.runner.forkserver import worker_preload
+from molmo_lerobot.runner.placement import check_devices
 from molmo_lerobot.runner.plan import EpisodePlan, EpisodePlanner
 from molmo_lerobot.runner.progress import Progress
 from molmo_lerobot.runner.run_config import RunConfig, episode_work_problem
 from molmo_lerobot.runner.run_directory import RunDirectory
 from molmo_lerobot.runner.supervisor import RunInterrupted
-from molmo_lerobot.runner.worker import WorkerJob
+from molmo_lerobot.runner.worker import WorkerJob, startup_summary
 from molmo_lerobot.serving.run_server import ServeError, served_policy
 
 if TYPE_CHECKING:
@@ -86,7 +88,11 @@ def _make_executor(cfg: dict[str, Any]) -> Any:
     if ex["name"] == "local":
         from molmo_lerobot.runner.local import LocalExecutor
 
-        return LocalExecutor(int(cfg["workers"]), start_method=ex.get("start_method", "spawn"), **common)
+        try:
+            check_devices(ex)  # read by each worker, checked here
+            return LocalExecutor(int(cfg["workers"]), start_method=ex.get("start_method", "forkserver"), **common)
+        except ValueError as exc:
+            raise RunError(str(exc)) from None
     if ex["name"] == "ray":
         from molmo_lerobot.runner.ray_executor import RayExecutor
 
@@ -129,13 +135,15 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
                        "evaluate")
 
     t0 = time.perf_counter()
+    startups: dict[str, dict[str, float]] = {}  # worker id -> where its start-up went
     results = _run_plans(cfg, ctx, bench, plans, {r.episode_index: _complete(r, plans) for r in done}, run_dir,
-                         executor, recorders)
+                         executor, recorders, startups)
     ordered = [results[i] for i in sorted(results)]
     summary = summarize(
         ordered, **run_info, thresholds=thresholds, versions=_versions(), workers=cfg["workers"],
         executor=(cfg.get("executor") or {}).get("name", "local"), output_dir=str(run_dir.path),
         started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=cfg,
+        startup=startup_summary(startups),
     )
     scored = run_dir.write_scored(ordered, summary)  # the score, before any export
     failed = finalize_run(run_dir.path, ordered, summary, recorders, run_finalizers(cfg))
@@ -204,9 +212,10 @@ def _complete(result: EpisodeResult, plans: dict[int, EpisodePlan]) -> EpisodeRe
 
 def _run_plans(cfg: dict[str, Any], ctx: RunContext, bench: Benchmark, plans: dict[int, EpisodePlan],
                results: dict[int, EpisodeResult], run_dir: RunDirectory, executor: Any,
-               recorders: list[Any]) -> dict[int, EpisodeResult]:
+               recorders: list[Any], startups: dict[str, dict[str, float]]) -> dict[int, EpisodeResult]:
     """Record the plans that cannot run and run the others on ``executor``, each result appended to
-    ``episodes.jsonl`` as it comes; ``results`` (those done before a resume) gains every episode."""
+    ``episodes.jsonl`` as it comes; ``results`` (those done before a resume) gains every episode,
+    ``startups`` each worker's start-up breakdown."""
     todo = [p for p in plans.values() if p.error is None and p.episode_index not in results]
     progress = Progress(len(plans), len(results), f"{bench.name} · {cfg['policy']['name']}", run_dir.path,
                         enabled=bool(cfg.get("progress", True)),
@@ -228,10 +237,12 @@ def _run_plans(cfg: dict[str, Any], ctx: RunContext, bench: Benchmark, plans: di
                 try:  # policy.serve=true: one local policy server for the run, the workers its clients
                     with served_policy(ctx.portable_config(), int(cfg["workers"]), run_dir.path,
                                        threads=cfg.get("worker_threads", 1)) as worker_policy:
+                        factories = recorders + progress.factories()
                         job = WorkerJob(config=ctx.portable_config(), policy=worker_policy,
                                         output_dir=str(run_dir.path), benchmark_name=bench.name,
-                                        benchmark_sha256=bench.sha256, recorders=recorders + progress.factories())
-                        executor.run(job, todo, record)
+                                        benchmark_sha256=bench.sha256, recorders=factories,
+                                        preload=worker_preload(ctx, worker_policy, factories))
+                        executor.run(job, todo, record, startups.__setitem__)
                 except ServeError as exc:
                     raise RunError(str(exc)) from None
                 except RunInterrupted as exc:

@@ -1,4 +1,11 @@
-"""Process transport: each worker is a local process (spawn or forkserver) with its own pipe.
+"""Process transport: each worker is a local process with its own pipe.
+
+``start_method`` ``forkserver`` (the default where the platform has it) forks every worker from the
+run's :class:`~molmo_lerobot.runner.forkserver.PreloadedForkServer`, which imported MuJoCo, the
+harness, the plugins and the policy's libraries once; ``spawn`` starts each worker as a fresh
+interpreter that imports them itself. Both import the same modules before building the worker, and
+both give the same per-episode outcomes; each worker reports where its start-up went
+(:class:`~molmo_lerobot.runner.worker.Startup`, in its log and the run's ``results.json``).
 
 :class:`LocalExecutor` is the :class:`~molmo_lerobot.runner.supervisor.Supervisor` over it.
 A worker ignores SIGINT (the supervisor decides when workers stop); SIGTERM aborts its running
@@ -9,6 +16,8 @@ same way, then exits, so none is left running without one.
 from __future__ import annotations
 
 import contextlib
+import importlib
+import json
 import multiprocessing as mp
 import os
 import signal
@@ -18,30 +27,59 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
+from molmo_lerobot.runner.forkserver import PreloadedForkServer, inherited_gpu_state
 from molmo_lerobot.runner.plan import EpisodePlan
 from molmo_lerobot.runner.progress import redirect_worker_output
-from molmo_lerobot.runner.supervisor import DEAD, INIT_ERROR, READY, RESULT, Event, Supervisor, Transport, exit_reason
-from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob, WorkerStop
+from molmo_lerobot.runner.supervisor import (
+    DEAD,
+    INIT_ERROR,
+    READY,
+    RESULT,
+    STARTUP,
+    Event,
+    Supervisor,
+    Transport,
+    WorkerStartError,
+    exit_reason,
+)
+from molmo_lerobot.runner.worker import EpisodeWorker, Startup, WorkerJob, WorkerStop
+
+#: How worker processes start (see the module docstring)
+START_METHODS = ("forkserver", "spawn")
 
 #: Seconds an orphaned worker has to stop gracefully before it exits regardless.
 ORPHAN_GRACE_S = 10.0
 
 
-def _worker_main(conn: Connection, job: WorkerJob, worker_id: str) -> None:
+def _worker_main(conn: Connection, job: WorkerJob, worker_id: str, started_at: float) -> None:
+    launch_s = time.time() - started_at  # process start, and for spawn the imports of unpickling this job
+    inherited = inherited_gpu_state()
     os.environ.setdefault("MUJOCO_GL", "egl")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     redirect_worker_output(job.output_dir, worker_id)  # library prints go to logs/, not through the bar
     threading.Thread(target=_exit_when_orphaned, daemon=True).start()
+    startup = Startup(launch_s=launch_s)
     try:
-        worker = EpisodeWorker(job, worker_id)
+        if inherited:
+            raise RuntimeError(f"worker process started holding {inherited} of its parent (it must create its own)")
+        with startup.phase("imports_s"):  # already there when forked from the fork server
+            for module in job.preload:
+                with contextlib.suppress(ImportError):  # as the fork server: whoever needs it says why
+                    importlib.import_module(module)
+        worker = EpisodeWorker(job, worker_id, startup)
     except Exception as exc:
         conn.send((INIT_ERROR, f"{type(exc).__name__}: {exc}"))
         return
     signal.signal(signal.SIGTERM, lambda signum, frame: worker.request_stop())
     conn.send((READY, None))
+    reported = False
     try:
         while not worker.stopping and (item := conn.recv()) is not None:
             result = worker.run(item)
+            if worker.first_done and not reported:  # before the result: the run may end with it
+                reported = True
+                conn.send((STARTUP, startup.report()))
+                print(f"{worker_id} start-up (s): {json.dumps(startup.report())}", flush=True)  # to its log
             conn.send((RESULT, result.to_dict()))
     except (WorkerStop, EOFError, BrokenPipeError, ConnectionResetError):
         pass  # asked to stop, or the supervisor is gone: close our outputs and exit quietly
@@ -51,11 +89,11 @@ def _worker_main(conn: Connection, job: WorkerJob, worker_id: str) -> None:
 
 
 def _exit_when_orphaned() -> None:
-    """Stop this worker gracefully (then for sure) once its parent process has gone (the
-    supervisor, or with ``forkserver`` the server, which ends with the supervisor)."""
-    parent = os.getppid()
-    while os.getppid() == parent:
-        time.sleep(0.5)
+    """Stop this worker gracefully (then for sure) once the supervisor process that started it
+    has gone. That is its parent with ``spawn``; with ``forkserver`` its parent is the server,
+    which lives while any worker does, so the supervisor's end is read from multiprocessing's
+    parent sentinel (a pipe only the supervisor writes to: it reads EOF once the supervisor is gone)."""
+    wait([mp.parent_process().sentinel])
     os.kill(os.getpid(), signal.SIGTERM)
     time.sleep(ORPHAN_GRACE_S)
     os._exit(1)
@@ -70,18 +108,41 @@ class _Worker:
 
 
 class ProcessTransport(Transport):
-    """Workers as local processes of ``start_method`` (``spawn`` or ``forkserver``)."""
+    """Workers as local processes of ``start_method``: ``forkserver`` (forked from the run's
+    preloaded fork server, started with the first worker) or ``spawn``."""
 
-    def __init__(self, start_method: str = "spawn") -> None:
+    def __init__(self, start_method: str = "forkserver") -> None:
+        if start_method not in START_METHODS:
+            raise ValueError(f"executor.start_method: expected one of {list(START_METHODS)}, got {start_method!r}")
+        if start_method == "forkserver" and start_method not in mp.get_all_start_methods():
+            start_method = "spawn"  # the platform has no fork server
+        self.start_method = start_method
         self.ctx = mp.get_context(start_method)
+        self.server: PreloadedForkServer | None = None
 
     def start(self, worker_id: str, job: WorkerJob) -> _Worker:
         parent, child = self.ctx.Pipe()
-        proc = self.ctx.Process(target=_worker_main, args=(child, job, worker_id),
-                                name=f"molmo-{worker_id}", daemon=True)
-        proc.start()
-        child.close()
+        args = (child, job, worker_id, time.time())
+        if self.start_method == "forkserver":
+            if self.server is None:
+                self.server = PreloadedForkServer(job.preload)
+                self.server.start()
+            proc = self.server.process(_worker_main, args, name=f"molmo-{worker_id}")
+        else:
+            proc = self.ctx.Process(target=_worker_main, args=args, name=f"molmo-{worker_id}", daemon=True)
+        try:
+            proc.start()
+        except (OSError, EOFError) as exc:  # the fork server died (a preloaded module crashed it)
+            raise WorkerStartError(f"the worker fork server could not start worker {worker_id} ({exc!r}); "
+                                   "executor.start_method=spawn starts workers without it") from None
+        finally:
+            child.close()
         return _Worker(proc, parent)
+
+    def close(self) -> None:
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
 
     def submit(self, handle: _Worker, item: EpisodePlan) -> None:
         with contextlib.suppress(OSError):  # it died: its sentinel says so
@@ -139,5 +200,5 @@ class ProcessTransport(Transport):
 class LocalExecutor(Supervisor):
     """The supervisor over worker processes: ``LocalExecutor(workers, start_method, timeout_s=…)``."""
 
-    def __init__(self, workers: int, start_method: str = "spawn", **options: Any) -> None:
+    def __init__(self, workers: int, start_method: str = "forkserver", **options: Any) -> None:
         super().__init__(ProcessTransport(start_method), workers, **options)

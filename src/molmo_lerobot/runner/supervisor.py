@@ -46,8 +46,9 @@ from molmo_lerobot.runner.worker import WorkerJob
 
 log = logging.getLogger(__name__)
 
-#: Events a transport reports for one worker, in the order they happened.
-READY, INIT_ERROR, RESULT, DEAD = "ready", "init_error", "result", "dead"
+#: Events a transport reports for one worker, in the order they happened (``STARTUP``: where its
+#: start-up went, seconds per phase, once, just before its first episode's result; transports may omit it).
+READY, INIT_ERROR, RESULT, DEAD, STARTUP = "ready", "init_error", "result", "dead", "startup"
 Event = tuple[str, Any]
 
 
@@ -148,11 +149,14 @@ class Supervisor:
         self.stop_timeout_s = stop_timeout_s
         self.close_timeout_s = close_timeout_s
 
-    def run(self, job: WorkerJob, items: list[EpisodePlan], on_result: Callable[[EpisodeResult], None]) -> None:
-        """Run every item; each ends in exactly one ``on_result`` call unless the run is interrupted."""
+    def run(self, job: WorkerJob, items: list[EpisodePlan], on_result: Callable[[EpisodeResult], None],
+            on_startup: Callable[[str, dict[str, float]], None] | None = None) -> None:
+        """Run every item; each ends in exactly one ``on_result`` call unless the run is interrupted.
+        ``on_startup(worker_id, phases)`` gets each worker's start-up breakdown (``STARTUP``)."""
         if not items:
             return
         self._job, self._on_result = job, on_result
+        self._on_startup = on_startup
         self._position = {item.episode_index: k for k, item in enumerate(items)}
         self._pending: dict[int, EpisodePlan] = dict(enumerate(items))  # by run-order position
         self._attempts: dict[int, int] = {}
@@ -207,6 +211,9 @@ class Supervisor:
                 slot.ready, slot.since, self._any_ready = True, time.monotonic(), True
             elif kind == RESULT:
                 self._report(slot, EpisodeResult.from_dict(payload))
+            elif kind == STARTUP:
+                if self._on_startup is not None:
+                    self._on_startup(slot.worker_id, payload)
             elif kind == INIT_ERROR:
                 if not self._any_ready:
                     raise WorkerStartError(f"worker could not start: {payload}")

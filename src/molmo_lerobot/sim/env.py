@@ -26,6 +26,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import time
 import warnings
 from collections import OrderedDict
 from collections.abc import Sequence
@@ -249,6 +250,8 @@ class Env:
         self._renderer: mujoco.Renderer | None = None
         self._depth_renderer: mujoco.Renderer | None = None
         self._seg_renderer: mujoco.Renderer | None = None
+        #: seconds spent creating renderers (each an OpenGL context and the model's GPU upload)
+        self.renderer_setup_s = 0.0
         self._view = self.camera_view_options()
         self.seed: int | None = None
         self.rng = np.random.default_rng()
@@ -380,7 +383,10 @@ class Env:
 
     def _make_renderer(self) -> mujoco.Renderer:
         width, height = self.spec.img_resolution
-        return mujoco.Renderer(self.model, height=int(height), width=int(width))
+        t0 = time.perf_counter()
+        renderer = mujoco.Renderer(self.model, height=int(height), width=int(width))
+        self.renderer_setup_s += time.perf_counter() - t0
+        return renderer
 
     def render(self, camera: str) -> np.ndarray:
         """RGB uint8 image (H, W, 3) from ``camera``; the renderer is created once and reused."""
