@@ -48,7 +48,7 @@ from molmo_lerobot.protocol.codec import CodecError, allowed_dtype, packb, unpac
 RING = 2  #: frames in a client's observation segment
 ALIGN = 64  #: every array starts on a cache line
 MAX_NDIM = 8
-MAX_HEADER_BYTES = 1 << 20  #: a control message (the map, without the arrays)
+MAX_HEADER_BYTES = 1 << 16  #: a control message (the map, without the arrays; a prompt is at most 8192 characters)
 _DESC = "__shm__"
 _SEALS = fcntl.F_SEAL_SHRINK | fcntl.F_SEAL_GROW | fcntl.F_SEAL_SEAL if hasattr(fcntl, "F_SEAL_SHRINK") else 0
 
