@@ -119,6 +119,7 @@ class Segment:
         if self.fd is not None:
             os.close(self.fd)
             self.fd = None
+        self.frame_bytes = 0
 
 
 class Mapping:
@@ -277,12 +278,14 @@ class ShmPolicyClient:
         return self._sock is not None
 
     def close(self) -> None:
+        """Close the connection and both segments' maps (a later request reconnects with new ones)."""
         if self._actions is not None:
             self._actions.close()
             self._actions = None
         if self._sock is not None:
             self._sock.close()
             self._sock = None
+        self._obs.close()
 
     def __enter__(self) -> ShmPolicyClient:
         if self._sock is None:
@@ -291,7 +294,6 @@ class ShmPolicyClient:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-        self._obs.close()
 
     def reset(self, **info: Any) -> dict[str, Any]:
         """``{"endpoint": "reset", **info}``: the server resets this connection's policy."""

@@ -126,8 +126,10 @@ def served_policy(config: dict[str, Any], workers: int, output_dir: str | Path |
         if kind != "ready":
             raise ServeError(f"policy.serve: the policy server did not start: {value}")
         started = True
-        where = {"transport": "shm", "socket": value} if transport == "shm" else {"host": "127.0.0.1", "port": value}
-        yield {"name": "remote", **where, "timeout_s": 600.0, "connect_timeout_s": 60.0}
+        # a local server refusing connections has died (it never restarts): episodes fail fast
+        where = ({"transport": "shm", "socket": value, "connect_timeout_s": 5.0} if transport == "shm"
+                 else {"host": "127.0.0.1", "port": value, "connect_timeout_s": 60.0})
+        yield {"name": "remote", **where, "timeout_s": 600.0}
     finally:
         proc.terminate()  # SIGTERM: the server closes its connections, sends its statistics and exits
         stats = _stats(parent, 30) if started else None
