@@ -7,7 +7,11 @@ from __future__ import annotations
 
 import json
 import multiprocessing as mp
+import os
+import signal
 import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -81,6 +85,37 @@ def test_served_unbatched_run_is_bit_identical_to_in_process(act_dir, tmp_path):
                           "policy.serve_max_batch=1", f"policy.serve_transport={transport}")
         assert [outcome(e) for e in served.episodes] == [outcome(e) for e in local.episodes]
         np.testing.assert_array_equal(actions(served), actions(local))
+
+
+@pytest.mark.slow
+def test_a_killed_shm_server_costs_infrastructure_errors_that_resume_reruns(act_dir, tmp_path):
+    """kill -9 of the run's server once an episode is recorded: the episodes it leaves are
+    infrastructure errors of one line; ``resume=true`` (a new server) gives the in-process outcomes."""
+    local = evaluate(act_dir, tmp_path / "local", "workers=1", "limit=3")
+    out, killed = tmp_path / "shm", threading.Event()
+
+    def kill_the_server_after_an_episode() -> None:
+        deadline = time.monotonic() + 600
+        while not killed.is_set() and time.monotonic() < deadline:
+            if (out / "episodes.jsonl").exists() and (out / "episodes.jsonl").read_text().strip():
+                for proc in mp.active_children():
+                    if proc.name == "molmo-serve":
+                        os.kill(proc.pid, signal.SIGKILL)
+                        killed.set()
+            time.sleep(0.02)
+
+    killer = threading.Thread(target=kill_the_server_after_an_episode, daemon=True)
+    killer.start()
+    evaluate(act_dir, out, "workers=1", "limit=3", "policy.serve=true", "policy.serve_transport=shm")
+    killed.set()
+    killer.join()
+    rows = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    lost = [r for r in rows if r["error"]]
+    assert lost and all(r["error_kind"] == "infrastructure" and "\n" not in r["error"] for r in lost)
+    assert not (out / STATS_FILE).exists()  # the killed server sent no statistics
+    resumed = evaluate(act_dir, out, "workers=1", "limit=3", "policy.serve=true", "policy.serve_transport=shm",
+                       "resume=true")
+    assert [outcome(e) for e in resumed.episodes] == [outcome(e) for e in local.episodes]
 
 
 def test_a_server_that_cannot_start_fails_the_run_with_one_line(tmp_path):
