@@ -91,7 +91,7 @@ class Segment:
             offsets.append(total)
             total += -(-arr.nbytes // ALIGN) * ALIGN
         if total > self.frame_bytes:
-            self._grow(max(total + total // 4, 4096))
+            self._grow(-(-max(total + total // 4, 4096) // ALIGN) * ALIGN)  # frames start aligned too
         assert self.map is not None
         base = frame * self.frame_bytes
         for arr, off in zip(arrays, offsets, strict=True):
