@@ -1,19 +1,23 @@
-"""Throughput with a learned policy (issue 17 item 4): episodes/min for a tiny ACT (random init,
-no pretrained backbone, 224² exterior camera, chunks of 4 run open loop) on pick_v1 with 1, 2 and 4 workers — in process
-(a model per worker), served (one ``molmo-serve`` for the run, one request per forward) and
-served+batched (requests from the workers batched into one forward) — from one run, plus the
-batch sizes the server saw. Outcomes are asserted identical per episode across the three modes;
-nothing is asserted about speed.
+"""Throughput with a learned policy (issue 17 item 4, issue 28 item 2): episodes/min for a tiny ACT
+(random init, no pretrained backbone, 224² exterior camera, chunks of 4 run open loop) on pick_v1
+with 1, 2 and 4 workers — in process (a model per worker), served (one policy server for the run,
+one request per forward) and served+batched (requests from the workers batched into one forward),
+each served mode over websockets (``molmo-serve``'s protocol) and over shared memory (``shm``, the
+local default) — from one run, plus the batch sizes the server saw and, per worker count, the
+ratio of served+batched(shm) to in process, excluding start-up (episode time only) and wall.
+Outcomes are asserted identical per episode across the modes; nothing is asserted about speed.
 
 ``pytest -m perf -s tests/perf/test_serving_throughput.py``; knobs: ``MOLMO_PERF_WORKERS``
 (1,2,4), ``MOLMO_PERF_EPISODES`` (8), ``MOLMO_PERF_HORIZON`` (30 steps), ``MOLMO_PERF_DEVICE``
-(auto: cuda when present), ``MOLMO_PERF_BATCH_TIMEOUT_MS``. Rows are appended to ``runs/perf.jsonl``.
+(auto: cuda when present), ``MOLMO_PERF_BATCH_TIMEOUT_MS``, ``MOLMO_PERF_MODES`` (all; a comma
+list of the mode names below). Rows are appended to ``runs/perf.jsonl``.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -33,20 +37,24 @@ EPISODES = int(os.environ.get("MOLMO_PERF_EPISODES", "8"))
 HORIZON = int(os.environ.get("MOLMO_PERF_HORIZON", "30"))
 DEVICE = os.environ.get("MOLMO_PERF_DEVICE", "auto")
 BATCH_TIMEOUT_MS = os.environ.get("MOLMO_PERF_BATCH_TIMEOUT_MS")  # default: policy.serve_batch_timeout_ms
+_BATCHED = ["policy.serve=true"] + ([f"policy.serve_batch_timeout_ms={BATCH_TIMEOUT_MS}"] if BATCH_TIMEOUT_MS else [])
 MODES = {
     "in-process": [],
-    "served": ["policy.serve=true", "policy.serve_max_batch=1"],
-    "served+batched": ["policy.serve=true"] + ([f"policy.serve_batch_timeout_ms={BATCH_TIMEOUT_MS}"]
-                                               if BATCH_TIMEOUT_MS else []),
+    "served(ws)": ["policy.serve=true", "policy.serve_max_batch=1", "policy.serve_transport=websocket"],
+    "served+batched(ws)": [*_BATCHED, "policy.serve_transport=websocket"],
+    "served(shm)": ["policy.serve=true", "policy.serve_max_batch=1", "policy.serve_transport=shm"],
+    "served+batched(shm)": [*_BATCHED, "policy.serve_transport=shm"],
 }
+SELECTED = os.environ.get("MOLMO_PERF_MODES", ",".join(MODES)).split(",")
 
 
 def test_throughput_in_process_vs_served_vs_batched(tmp_path):
     act = save_tiny_act(tmp_path / "act", image_hw=(224, 224))
     rows, outcomes = [], {}
     for workers in WORKERS:
-        for mode, extra in MODES.items():
-            out = tmp_path / f"{mode}-{workers}"
+        for mode in ["in-process", *(m for m in SELECTED if m != "in-process")]:
+            extra = MODES[mode]
+            out = tmp_path / f"{re.sub(r'[^a-z]+', '-', mode)}{workers}"
             cfg = compose(["policy=lerobot", f"policy.path={act}", f"policy.device={DEVICE}", "policy.mode=chunk",
                            "+policy.cameras.exterior=observation.images.front", "benchmark=pick_v1",
                            f"limit={EPISODES}", f"horizon={HORIZON}", f"workers={workers}", f"output_dir={out}",
@@ -65,13 +73,16 @@ def test_throughput_in_process_vs_served_vs_batched(tmp_path):
     one = base[WORKERS[0]]["eps_per_min"]
     print(f"\ntiny ACT on pick_v1, {EPISODES} episodes x {HORIZON} steps, device={DEVICE}, "
           f"batch timeout {BATCH_TIMEOUT_MS or 'default'} ms")
-    print(f"{'mode':>15} {'workers':>7} {'wall s':>8} {'eps/min':>8} {'excl. start':>11} {'vs in-proc':>10} "
-          f"{'vs w=1':>7}  batch sizes (size: batches)")
+    print(f"{'mode':>19} {'workers':>7} {'wall s':>8} {'eps/min':>8} {'excl. start':>11} {'vs in-proc':>10} "
+          f"{'excl. vs':>8} {'vs w=1':>7}  batch sizes (size: batches)")
     for r in rows:
-        vs_in = r["eps_per_min"] / base[r["workers"]]["eps_per_min"]
-        print(f"{r['mode']:>15} {r['workers']:>7} {r['wall_s']:>8.1f} {r['eps_per_min']:>8.2f} "
-              f"{r['eps_per_min_excl_startup'] or 0:>11.2f} {vs_in:>10.2f} {r['eps_per_min'] / one:>7.2f}  "
-              f"{r['batch_sizes'] or '-'}")
+        b = base[r["workers"]]
+        r["vs_in_process_wall"] = round(r["eps_per_min"] / b["eps_per_min"], 3)
+        r["vs_in_process_excl_startup"] = (round(r["eps_per_min_excl_startup"] / b["eps_per_min_excl_startup"], 3)
+                                           if r["eps_per_min_excl_startup"] and b["eps_per_min_excl_startup"] else None)
+        print(f"{r['mode']:>19} {r['workers']:>7} {r['wall_s']:>8.1f} {r['eps_per_min']:>8.2f} "
+              f"{r['eps_per_min_excl_startup'] or 0:>11.2f} {r['vs_in_process_wall']:>10.2f} "
+              f"{r['vs_in_process_excl_startup'] or 0:>8.2f} {r['eps_per_min'] / one:>7.2f}  {r['batch_sizes'] or '-'}")
     Path("runs").mkdir(exist_ok=True)
     with open("runs/perf.jsonl", "a") as f:
         for r in rows:

@@ -1,12 +1,17 @@
 """``molmo-eval … policy=lerobot policy.serve=true`` (issue 17 item 2): one local server for the run,
 every worker its client; the run's results equal in-process evaluation for a deterministic policy
-(a tiny random-init ACT reading the exterior camera)."""
+(a tiny random-init ACT reading the exterior camera), over websockets and over shared memory
+(issue 28 item 2)."""
 
 from __future__ import annotations
 
 import json
 import multiprocessing as mp
+import os
+import signal
 import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -53,27 +58,64 @@ def outcome(e) -> tuple:
     return (e.episode_index, e.success, e.success_once, e.steps, e.seed, e.error)
 
 
-def test_served_batched_run_equals_in_process(act_dir, tmp_path):
+def test_served_batched_runs_equal_in_process_over_both_transports(act_dir, tmp_path):
+    """In process, served over websockets and served over shared memory (``auto`` on Linux): the
+    same outcomes per episode, the same actions up to batched rounding."""
     local = evaluate(act_dir, tmp_path / "local", "workers=1")
-    batched = evaluate(act_dir, tmp_path / "batched", "workers=2", "policy.serve=true",
-                       "policy.serve_batch_timeout_ms=50")
     assert local.summary["n_errors"] == 0 and len(local.episodes) == 2
-    assert [outcome(e) for e in batched.episodes] == [outcome(e) for e in local.episodes]
-    assert batched.summary["policy"]["name"] == "lerobot" and batched.summary["policy"]["serve"] is True
-    stats = json.loads((tmp_path / "batched" / STATS_FILE).read_text())
-    assert stats["batching"] and stats["max_batch"] == 2 and stats["served"] > 0
-    # one forward for several workers' requests rounds differently from one per request
-    np.testing.assert_allclose(actions(batched), actions(local), rtol=1e-4, atol=1e-5)
-    assert not mp.active_children()  # the server process was stopped and reaped
+    for transport in ("websocket", "auto"):
+        out = tmp_path / transport
+        batched = evaluate(act_dir, out, "workers=2", "policy.serve=true", "policy.serve_batch_timeout_ms=50",
+                           f"policy.serve_transport={transport}")
+        assert [outcome(e) for e in batched.episodes] == [outcome(e) for e in local.episodes], transport
+        assert batched.summary["policy"]["name"] == "lerobot" and batched.summary["policy"]["serve"] is True
+        stats = json.loads((out / STATS_FILE).read_text())
+        assert stats["transport"] == {"websocket": "websocket", "auto": "shm"}[transport]
+        assert stats["batching"] and stats["max_batch"] == 2 and stats["served"] > 0
+        # one forward for several workers' requests rounds differently from one per request
+        np.testing.assert_allclose(actions(batched), actions(local), rtol=1e-4, atol=1e-5)
+        assert not mp.active_children()  # the server process was stopped and reaped
 
 
 @pytest.mark.slow
 def test_served_unbatched_run_is_bit_identical_to_in_process(act_dir, tmp_path):
     local = evaluate(act_dir, tmp_path / "local", "workers=1", "limit=3")
-    served = evaluate(act_dir, tmp_path / "served", "workers=3", "limit=3", "policy.serve=true",
-                      "policy.serve_max_batch=1")
-    assert [outcome(e) for e in served.episodes] == [outcome(e) for e in local.episodes]
-    np.testing.assert_array_equal(actions(served), actions(local))
+    for transport in ("websocket", "shm"):
+        served = evaluate(act_dir, tmp_path / transport, "workers=3", "limit=3", "policy.serve=true",
+                          "policy.serve_max_batch=1", f"policy.serve_transport={transport}")
+        assert [outcome(e) for e in served.episodes] == [outcome(e) for e in local.episodes]
+        np.testing.assert_array_equal(actions(served), actions(local))
+
+
+@pytest.mark.slow
+def test_a_killed_shm_server_costs_infrastructure_errors_that_resume_reruns(act_dir, tmp_path):
+    """kill -9 of the run's server once an episode is recorded: the episodes it leaves are
+    infrastructure errors of one line; ``resume=true`` (a new server) gives the in-process outcomes."""
+    local = evaluate(act_dir, tmp_path / "local", "workers=1", "limit=3")
+    out, killed = tmp_path / "shm", threading.Event()
+
+    def kill_the_server_after_an_episode() -> None:
+        deadline = time.monotonic() + 600
+        while not killed.is_set() and time.monotonic() < deadline:
+            if (out / "episodes.jsonl").exists() and (out / "episodes.jsonl").read_text().strip():
+                for proc in mp.active_children():
+                    if proc.name == "molmo-serve":
+                        os.kill(proc.pid, signal.SIGKILL)
+                        killed.set()
+            time.sleep(0.02)
+
+    killer = threading.Thread(target=kill_the_server_after_an_episode, daemon=True)
+    killer.start()
+    evaluate(act_dir, out, "workers=1", "limit=3", "policy.serve=true", "policy.serve_transport=shm")
+    killed.set()
+    killer.join()
+    rows = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    lost = [r for r in rows if r["error"]]
+    assert lost and all(r["error_kind"] == "infrastructure" and "\n" not in r["error"] for r in lost)
+    assert not (out / STATS_FILE).exists()  # the killed server sent no statistics
+    resumed = evaluate(act_dir, out, "workers=1", "limit=3", "policy.serve=true", "policy.serve_transport=shm",
+                       "resume=true")
+    assert [outcome(e) for e in resumed.episodes] == [outcome(e) for e in local.episodes]
 
 
 def test_a_server_that_cannot_start_fails_the_run_with_one_line(tmp_path):

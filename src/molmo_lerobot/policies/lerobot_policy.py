@@ -70,6 +70,7 @@ class LeRobotPolicyConfig(BaseModel):
     serve: bool = False
     serve_max_batch: int | None = Field(default=None, ge=1)
     serve_batch_timeout_ms: float = Field(default=50.0, ge=0)
+    serve_transport: Literal["auto", "shm", "websocket"] = "auto"
     convention: ConventionName = "native"
 
 

@@ -8,12 +8,14 @@ reconnects are the pi0 client's (:class:`~molmo_lerobot.protocol.client.PolicyCl
 connection lost between episodes is re-opened at the next reset, one lost mid-episode fails
 that episode (the served policy's episode state is gone). ``policy.convention=molmospaces``
 sends MolmoSpaces' observation layout instead and reads MolmoSpaces' actions back
-(:mod:`molmo_lerobot.policies.convention`).
+(:mod:`molmo_lerobot.policies.convention`). ``policy.transport=shm policy.socket=@…`` talks to a
+server on this machine over shared memory instead (:mod:`molmo_lerobot.protocol.shm`; what
+``policy.serve=true`` hands its workers), with the same messages and the same behaviour.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -22,6 +24,7 @@ from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Pol
 from molmo_lerobot.policies.convention import ConventionName, get_convention
 from molmo_lerobot.policies.lerobot_policy import parse_config
 from molmo_lerobot.protocol.client import PolicyClient, PolicyConnectionError
+from molmo_lerobot.protocol.shm import ShmPolicyClient
 
 
 class RemotePolicyConfig(BaseModel):
@@ -37,6 +40,8 @@ class RemotePolicyConfig(BaseModel):
     connect_timeout_s: float = Field(default=60.0, ge=0)
     max_message_bytes: int = Field(default=64 * 2**20, ge=1024)
     convention: ConventionName = "native"
+    transport: Literal["websocket", "shm"] = "websocket"
+    socket: str | None = None  # with transport=shm: the server's socket address (@name: abstract)
 
 
 class RemotePolicy(Policy):
@@ -45,9 +50,17 @@ class RemotePolicy(Policy):
     def __init__(self, cfg: dict[str, Any]) -> None:
         self.cfg: RemotePolicyConfig = parse_config(cfg, RemotePolicyConfig)
         self.convention = get_convention(self.cfg.convention)
-        self.client = PolicyClient(self.cfg.host, self.cfg.port, timeout_s=self.cfg.timeout_s,
-                                   connect_timeout_s=self.cfg.connect_timeout_s,
-                                   max_message_bytes=self.cfg.max_message_bytes, api_key=self.cfg.api_key)
+        self.client: PolicyClient | ShmPolicyClient
+        if self.cfg.transport == "shm":
+            if not self.cfg.socket:
+                raise ValueError("policy=remote: policy.transport=shm needs policy.socket (the server's address)")
+            self.client = ShmPolicyClient(self.cfg.socket, timeout_s=self.cfg.timeout_s,
+                                          connect_timeout_s=self.cfg.connect_timeout_s,
+                                          max_message_bytes=self.cfg.max_message_bytes)
+        else:
+            self.client = PolicyClient(self.cfg.host, self.cfg.port, timeout_s=self.cfg.timeout_s,
+                                       connect_timeout_s=self.cfg.connect_timeout_s,
+                                       max_message_bytes=self.cfg.max_message_bytes, api_key=self.cfg.api_key)
         metadata = self.client.connect()
         if metadata.get("server") != "molmo-serve":
             self.client.close()

@@ -30,7 +30,10 @@ class CodecError(MolmoError, ValueError):
     """A value cannot be encoded, or a received message is not a valid protocol message."""
 
 
-def _dtype(name: Any) -> np.dtype:
+def allowed_dtype(name: Any) -> np.dtype:
+    """The dtype ``name`` (a ``dtype.str`` or a dtype) if in :data:`ALLOWED_DTYPES`, else :class:`CodecError`."""
+    if isinstance(name, np.dtype):
+        name = name.str
     if isinstance(name, bytes):
         name = name.decode("ascii", "replace")
     if not isinstance(name, str):
@@ -60,7 +63,7 @@ def _field(obj: dict, name: str) -> Any:
 
 def _decode(obj: dict) -> Any:
     if obj.get(b"__ndarray__", obj.get(_ARRAY)) is True:
-        dtype = _dtype(_field(obj, "dtype"))
+        dtype = allowed_dtype(_field(obj, "dtype"))
         data, shape = _field(obj, "data"), _field(obj, "shape")
         if not isinstance(data, bytes):
             raise CodecError(f"array data must be bytes, got {type(data).__name__}")
@@ -71,7 +74,7 @@ def _decode(obj: dict) -> Any:
             raise CodecError(f"array of shape {list(shape)} and dtype {dtype} needs {expected} bytes, got {len(data)}")
         return np.ndarray(buffer=data, dtype=dtype, shape=tuple(shape))  # bytes buffer: read-only
     if obj.get(b"__npgeneric__", obj.get(_GENERIC)) is True:
-        dtype = _dtype(_field(obj, "dtype"))
+        dtype = allowed_dtype(_field(obj, "dtype"))
         try:
             return dtype.type(_field(obj, "data"))
         except (TypeError, ValueError, OverflowError) as exc:

@@ -1,17 +1,21 @@
-"""``policy.serve=true``: one local ``molmo-serve`` for a whole run, every worker its client.
+"""``policy.serve=true``: one local policy server for a whole run, every worker its client.
 
 The policy is loaded once, in a server process of its own, instead of once per worker (GPU
 memory once), and requests from the workers are batched (``max_batch`` defaults to the
-number of workers). Workers get ``policy=remote`` pointed at it. The server's statistics
-(requests served, batch sizes seen) are written to ``<output_dir>/serve_stats.json``.
+number of workers). Workers get ``policy=remote`` pointed at it. ``policy.serve_transport``
+picks how they talk: ``shm`` (shared memory, :mod:`molmo_lerobot.serving.shm_server`: no
+serialisation; workers on this machine only), ``websocket`` (``molmo-serve``'s openpi-compatible
+protocol) or ``auto`` (``shm`` for the local executor where the platform has it, else
+``websocket``). The server's statistics (transport, requests served, batch sizes seen) are
+written to ``<output_dir>/serve_stats.json``.
 """
 
 from __future__ import annotations
 
 import contextlib
-import http.client
 import json
 import multiprocessing as mp
+import sys
 import time
 from collections.abc import Iterator
 from multiprocessing.connection import Connection
@@ -21,12 +25,29 @@ from typing import Any
 from molmo_lerobot.cpu_threads import cap_threads
 from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.fileio import atomic_write
+from molmo_lerobot.protocol import shm
 
 STATS_FILE = "serve_stats.json"
 
 
 class ServeError(MolmoError, RuntimeError):
     """The run's policy server could not start."""
+
+
+def serve_transport(policy_cfg: dict[str, Any], executor: str) -> str:
+    """``shm`` or ``websocket``: ``policy.serve_transport``, ``auto`` resolved for ``executor``."""
+    requested = policy_cfg.get("serve_transport") or "auto"
+    if requested == "websocket":
+        return requested
+    if requested == "shm" and executor != "local":
+        raise ServeError(f"policy.serve_transport=shm needs executor=local (workers on the server's machine), "
+                         f"not executor={executor}; use serve_transport=websocket or auto")
+    if requested == "shm" and not shm.available():
+        raise ServeError(f"policy.serve_transport=shm needs Linux (memfd with seals); this is {sys.platform}: "
+                         "use serve_transport=websocket or auto")
+    if requested not in ("shm", "auto"):
+        raise ServeError(f"policy.serve_transport={requested!r}: expected auto, shm or websocket")
+    return "shm" if executor == "local" and shm.available() else "websocket"
 
 
 def serve_options(policy_cfg: dict[str, Any], workers: int) -> dict[str, Any] | None:
@@ -38,27 +59,36 @@ def serve_options(policy_cfg: dict[str, Any], workers: int) -> dict[str, Any] | 
             "max_clients": max(8, workers + 2), "first_request_timeout_s": 600.0, "idle_timeout_s": 3600.0}
 
 
-def _serve(config: dict[str, Any], options: dict[str, Any], threads: int | None, conn: Connection) -> None:
-    """Server process: rebuild the run's context from its ``config``, build the server, report its
-    port (or the error), serve until SIGTERM."""
+def _serve(config: dict[str, Any], transport: str, options: dict[str, Any], threads: int | None,
+           conn: Connection) -> None:
+    """Server process: rebuild the run's context from its ``config``, build the server, report where
+    it listens (or the error), serve until SIGTERM, then send its statistics."""
     from molmo_lerobot.context import RunContext
-    from molmo_lerobot.serving.server import build_server
+    from molmo_lerobot.serving.server import PolicyServer, build_server
+    from molmo_lerobot.serving.shm_server import ShmPolicyServer
 
     cap_threads(threads)  # as many as each in-process worker would use: the same rounding
     try:
-        server = build_server(RunContext.build(config).plugins, config["policy"], host="127.0.0.1", port=0, **options)
-        server.run(ready=lambda srv: conn.send(("ready", srv.port)))
+        cls, where = (ShmPolicyServer, {}) if transport == "shm" else (PolicyServer, {"host": "127.0.0.1", "port": 0})
+        server = build_server(RunContext.build(config).plugins, config["policy"], cls, **where, **options)
+        server.run(ready=lambda srv: conn.send(
+            ("ready", srv.address if isinstance(srv, ShmPolicyServer) else srv.port)))
     except BaseException as exc:  # reported to the run, which fails with this line
         with contextlib.suppress(OSError):
             text = str(exc).strip()
             conn.send(("error", f"{type(exc).__name__}: {text.splitlines()[0] if text else ''}"))
+        return
+    with contextlib.suppress(OSError):
+        conn.send(("stats", server.stats()))
 
 
-def fetch_stats(port: int) -> dict[str, Any] | None:
-    with contextlib.suppress(OSError, ValueError, http.client.HTTPException):
-        conn = http.client.HTTPConnection("127.0.0.1", port, timeout=5)
-        conn.request("GET", "/stats")
-        return json.loads(conn.getresponse().read())
+def _stats(conn: Connection, timeout_s: float) -> dict[str, Any] | None:
+    """The statistics the stopping server sends (None if it died without)."""
+    with contextlib.suppress(OSError, EOFError):
+        while conn.poll(timeout_s):
+            kind, value = conn.recv()
+            if kind == "stats":
+                return value
     return None
 
 
@@ -74,12 +104,14 @@ def served_policy(config: dict[str, Any], workers: int, output_dir: str | Path |
     if options is None:
         yield policy_cfg
         return
+    transport = serve_transport(policy_cfg, (config.get("executor") or {}).get("name", "local"))
     ctx = mp.get_context("spawn")
     parent, child = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_serve, args=(config, options, threads, child), name="molmo-serve", daemon=True)
+    proc = ctx.Process(target=_serve, args=(config, transport, options, threads, child), name="molmo-serve",
+                       daemon=True)
     proc.start()
     child.close()
-    port = None
+    started = False
     try:
         deadline = time.monotonic() + start_timeout_s
         while not parent.poll(0.2):
@@ -93,14 +125,17 @@ def served_policy(config: dict[str, Any], workers: int, output_dir: str | Path |
                              f"(exit code {proc.exitcode})") from None
         if kind != "ready":
             raise ServeError(f"policy.serve: the policy server did not start: {value}")
-        port = int(value)
-        yield {"name": "remote", "host": "127.0.0.1", "port": port, "timeout_s": 600.0, "connect_timeout_s": 60.0}
+        started = True
+        # a local server refusing connections has died (it never restarts): episodes fail fast
+        where = ({"transport": "shm", "socket": value, "connect_timeout_s": 5.0} if transport == "shm"
+                 else {"host": "127.0.0.1", "port": value, "connect_timeout_s": 60.0})
+        yield {"name": "remote", **where, "timeout_s": 600.0}
     finally:
-        stats = fetch_stats(port) if port is not None else None
+        proc.terminate()  # SIGTERM: the server closes its connections, sends its statistics and exits
+        stats = _stats(parent, 30) if started else None
         if stats is not None and output_dir is not None:
             atomic_write(Path(output_dir, STATS_FILE), json.dumps({**stats, **options}, indent=2) + "\n",
                          root=output_dir)
-        proc.terminate()  # SIGTERM: the server closes its connections and exits
         proc.join(30)
         if proc.is_alive():
             proc.kill()

@@ -72,7 +72,7 @@ class PolicyNotServable(MolmoError, ValueError):
 
 @dataclass(eq=False)
 class _Client:
-    ws: ServerConnection
+    ws: Any  # the connection (a websocket, or a socket of a subclass's transport)
     since: float = field(default_factory=time.monotonic)  # last activity (connect or a finished request)
     policy: Policy | None = None
     busy: bool = False
@@ -80,6 +80,7 @@ class _Client:
     cycle: float | None = None  # the client's usual time between an answer and its next request
     acting: bool = False  # its last request was an observation (not a reset)
     queued: bool = False  # its observation waits in the batch queue
+    needs_reset: bool = True  # its policy is reset before its first observation unless asked first
 
     def expected(self, now: float, batch_timeout_s: float) -> bool:
         """Whether this client's next observation is due soon: worth holding a batch open for."""
@@ -99,6 +100,8 @@ class _Pending:
 
 class PolicyServer:
     """An asyncio websocket server for the policies ``factory()`` builds (see the module docstring)."""
+
+    transport = "websocket"
 
     def __init__(
         self,
@@ -148,7 +151,7 @@ class PolicyServer:
         self._infer_slots: asyncio.Semaphore | None = None
         self._pending: list[_Pending] = []
         self._wake: asyncio.Event | None = None
-        self._server: Server | None = None
+        self._server: Server | None = None  # the websocket listener
         self._stop: asyncio.Event | None = None
 
     @property
@@ -157,7 +160,7 @@ class PolicyServer:
         return sum(not c.evicted for c in self._clients)
 
     def stats(self) -> dict[str, Any]:
-        return {"served": self.served, "active": self.active, "evictions": self.evictions,
+        return {"transport": self.transport, "served": self.served, "active": self.active, "evictions": self.evictions,
                 "batching": self.batching, "max_batch": self.max_batch,
                 "batch_sizes": {str(k): v for k, v in sorted(self.batch_sizes.items())}}
 
@@ -178,27 +181,15 @@ class PolicyServer:
         self._stop = asyncio.Event()
         self._wake = asyncio.Event()
         batcher = asyncio.create_task(self._batcher()) if self.batching else None
-        server = await serve(
-            self._handle,
-            self.host,
-            self.port,
-            compression=None,
-            max_size=2 * self.max_message_bytes,
-            max_queue=2,
-            ping_interval=None,
-            process_request=self._process_request,
-        )
-        self._server = server
-        self.port = server.sockets[0].getsockname()[1]
-        log.info("serving policy on ws://%s:%d%s", self.host, self.port,
+        await self._open()
+        log.info("serving policy on %s%s", self.endpoint,
                  f" (batches of up to {self.max_batch})" if self.batching else "")
         if ready is not None:
             ready(self)
         await self._stop.wait()
         log.info("shutting down: closing %d connection(s)", self.active)
-        server.close()  # stop accepting; close connections with 1001 (going away)
         try:
-            await asyncio.wait_for(server.wait_closed(), self.shutdown_timeout_s)
+            await asyncio.wait_for(self._shut(), self.shutdown_timeout_s)
             if batcher is not None:
                 batcher.cancel()
             if not self._proto_handed_out:
@@ -207,6 +198,24 @@ class PolicyServer:
         except TimeoutError:
             log.warning("policy calls still running after %g s; not waiting for them", self.shutdown_timeout_s)
             self._pool.shutdown(wait=False, cancel_futures=True)
+
+    @property
+    def endpoint(self) -> str:
+        """Where clients connect."""
+        return f"ws://{self.host}:{self.port}"
+
+    async def _open(self) -> None:
+        """Start accepting connections."""
+        self._server = await serve(self._handle, self.host, self.port, compression=None,
+                                   max_size=2 * self.max_message_bytes, max_queue=2, ping_interval=None,
+                                   process_request=self._process_request)
+        self.port = self._server.sockets[0].getsockname()[1]
+
+    async def _shut(self) -> None:
+        """Stop accepting; close the connections (1001, going away) and wait for their handlers."""
+        assert self._server is not None
+        self._server.close()
+        await self._server.wait_closed()
 
     def request_stop(self) -> None:
         """Ask :meth:`serve` to shut down (call from the event loop thread)."""
@@ -286,9 +295,7 @@ class PolicyServer:
             log.debug("client %s gone", ws.remote_address)
 
     async def _session(self, client: _Client) -> None:
-        ws, policy = client.ws, client.policy
-        assert policy is not None
-        needs_reset = True
+        ws = client.ws
         timeout = self.first_request_timeout_s
         prev_total_ms = None
         while True:
@@ -302,22 +309,11 @@ class PolicyServer:
             start = time.perf_counter()
             gap = time.monotonic() - client.since
             try:
-                request = self._decode(frame)
-                if request.get("endpoint") == RESET_ENDPOINT:
-                    client.acting = False
-                    await self._call(policy.reset, episode_context(request))
-                    needs_reset = False
+                answer = await self._answer(client, self._decode(frame), gap)
+                if answer is None:
                     await ws.send(packb({"endpoint": RESET_ENDPOINT, "ok": True}))
                     continue
-                check_observation(request)
-                if client.acting:
-                    client.cycle = gap if client.cycle is None else 0.7 * client.cycle + 0.3 * gap
-                client.acting = True
-                if needs_reset:
-                    await self._call(policy.reset, episode_context(request))
-                    needs_reset = False
-                action, infer_ms = await self._act(client, request)
-                payload = self._encode(action, infer_ms, prev_total_ms)
+                payload = self._encode(*answer, prev_total_ms)
             except ConnectionClosed:
                 raise
             except RequestError as exc:
@@ -332,6 +328,24 @@ class PolicyServer:
             await ws.send(payload)
             self.served += 1
             prev_total_ms = 1000 * (time.perf_counter() - start)
+
+    async def _answer(self, client: _Client, request: dict[str, Any], gap: float) -> tuple[Action, float] | None:
+        """Serve one decoded request of ``client``, ``gap`` s after its previous answer: a reset
+        (None), or an observation (the action and the inference time in ms)."""
+        assert client.policy is not None
+        if request.get("endpoint") == RESET_ENDPOINT:
+            client.acting = False
+            await self._call(client.policy.reset, episode_context(request))
+            client.needs_reset = False
+            return None
+        check_observation(request)
+        if client.acting:
+            client.cycle = gap if client.cycle is None else 0.7 * client.cycle + 0.3 * gap
+        client.acting = True
+        if client.needs_reset:
+            await self._call(client.policy.reset, episode_context(request))
+            client.needs_reset = False
+        return await self._act(client, request)
 
     def _decode(self, frame: str | bytes) -> dict[str, Any]:
         if isinstance(frame, str):
@@ -477,14 +491,16 @@ def serve_in_thread(server: PolicyServer, start_timeout_s: float = 30.0) -> Iter
 
 
 #: ``policy.serve*`` switches of a run (see serving/run_server.py), not the policy's own options
-RUN_SERVING_KEYS = frozenset({"serve", "serve_max_batch", "serve_batch_timeout_ms"})
+RUN_SERVING_KEYS = frozenset({"serve", "serve_max_batch", "serve_batch_timeout_ms", "serve_transport"})
 
 
-def build_server(plugins: Plugins, policy_cfg: dict[str, Any], **options: Any) -> PolicyServer:
-    """The server for the policy plugin ``policy_cfg`` names in ``plugins`` (built when the server starts)."""
+def build_server(plugins: Plugins, policy_cfg: dict[str, Any], server_cls: type[PolicyServer] = PolicyServer,
+                 **options: Any) -> PolicyServer:
+    """The server (a ``server_cls``: the websocket one, or a subclass's transport) for the policy
+    plugin ``policy_cfg`` names in ``plugins`` (built when the server starts)."""
     from molmo_lerobot import __version__
     from molmo_lerobot.policies.factory import make_policy
 
     cfg = {k: v for k, v in policy_cfg.items() if k not in RUN_SERVING_KEYS}
     metadata = {"server": "molmo-serve", "version": __version__, "policy": cfg.get("name")}
-    return PolicyServer(lambda: make_policy(plugins, cfg), metadata=metadata, **options)
+    return server_cls(lambda: make_policy(plugins, cfg), metadata=metadata, **options)
