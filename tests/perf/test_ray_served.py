@@ -15,10 +15,16 @@ its cores: the figures show the routing and the head's cost, not a real multi-ma
 results, Ray's driver threads, finalizers) per episode: one head core saturates at
 ``60000 / head_cpu_ms_per_episode`` episodes/min (docs/scaling.md). ``bytes_to_workers`` and
 ``bytes_from_workers`` are what crosses between the head and a worker per episode (the pickled plan,
-the result). Outcomes are asserted equal per episode across modes; nothing is asserted about speed.
+the result); ``dataset_bytes_per_episode`` what a recording worker writes to the output directory
+(a shared file system on a real cluster). Outcomes are asserted equal per episode across modes;
+nothing is asserted about speed.
+
+A second test measures the head's *marginal* CPU per episode (two run sizes, without and with
+recording), the figure docs/scaling.md turns into the number of nodes one head can feed.
 
 ``pytest -m perf -s tests/perf/test_ray_served.py``; knobs ``MOLMO_PERF_EPISODES`` (8),
-``MOLMO_PERF_HORIZON`` (30 steps). Rows are appended to ``runs/perf.jsonl``.
+``MOLMO_PERF_HORIZON`` (30 steps), ``MOLMO_PERF_HEAD_EPISODES`` (4,12). Rows are appended to
+``runs/perf.jsonl``.
 """
 
 from __future__ import annotations
@@ -58,6 +64,14 @@ def _cpu_self() -> float:
     return ru.ru_utime + ru.ru_stime
 
 
+def _dataset_bytes(out: Path, episodes: int) -> int | None:
+    """Bytes of the recorded dataset per episode (what workers write to the shared output directory)."""
+    root = out / "dataset"
+    if not root.is_dir():
+        return None
+    return sum(p.stat().st_size for p in root.rglob("*") if p.is_file()) // episodes
+
+
 def _bytes_per_episode(cfg, res) -> tuple[int, int]:
     """Pickled size of an episode's plan (head → worker) and of its result (worker → head)."""
     from molmo_lerobot.benchmark.load import load_benchmark
@@ -74,45 +88,56 @@ def _bytes_per_episode(cfg, res) -> tuple[int, int]:
     return plan, result
 
 
-def test_ray_per_node_servers_vs_one_box(tmp_path):
+@pytest.fixture(scope="module")
+def two_nodes():
+    """A two-node cluster on this machine (one CPU each), joined by this process; its start-up seconds."""
     import ray
     from ray.cluster_utils import Cluster
 
-    act = save_tiny_act(tmp_path / "act", image_hw=(224, 224))
     t0 = time.perf_counter()
     cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
     cluster.add_node(num_cpus=1)
     cluster.wait_for_nodes()
     ray.init(address=cluster.address, logging_level="WARNING")
-    cluster_s = time.perf_counter() - t0
-    rows, outcomes, sizes = [], {}, None
     try:
-        for mode, (workers, extra) in MODES.items():
-            out = tmp_path / mode.replace(" ", "_")
-            cfg = compose(["policy=lerobot", f"policy.path={act}", "policy.device=cpu", "policy.mode=chunk",
-                           "+policy.cameras.exterior=observation.images.front", "benchmark=pick_v1",
-                           f"limit={EPISODES}", f"horizon={HORIZON}", f"workers={workers}", f"output_dir={out}",
-                           "progress=false", *extra])
-            cpu0 = _cpu_self()
-            res = run_evaluation(cfg)
-            head_cpu = _cpu_self() - cpu0
-            outcomes[mode] = [(e.episode_index, e.success, e.success_once, e.steps, e.error) for e in res.episodes]
-            wall = res.summary["wall_time_s"]
-            busy = sum(e.duration_s or 0.0 for e in res.episodes) / workers
-            stats = json.loads((out / STATS_FILE).read_text()) if (out / STATS_FILE).exists() else {}
-            per_node = ({nid[:8]: {"served": s["served"], "batch_sizes": s["batch_sizes"]}
-                         for nid, s in stats["nodes"].items()} if "nodes" in stats else None)
-            rows.append({"mode": mode, "workers": workers, "episodes": len(res.episodes), "wall_s": round(wall, 2),
-                         "eps_per_min": round(60 * len(res.episodes) / wall, 2),
-                         "eps_per_min_excl_startup": round(60 * len(res.episodes) / busy, 2) if busy else None,
-                         "head_cpu_ms_per_episode": round(1000 * head_cpu / len(res.episodes), 1),
-                         "batch_sizes": stats.get("batch_sizes"), "per_node": per_node,
-                         "errors": res.summary["n_errors"]})
-            if sizes is None:
-                sizes = _bytes_per_episode(cfg, res)
+        yield time.perf_counter() - t0
     finally:
         ray.shutdown()
         cluster.shutdown()
+
+
+def _act_run(act: str, out: Path, workers: int, limit: int, *extra: str):
+    return compose(["policy=lerobot", f"policy.path={act}", "policy.device=cpu", "policy.mode=chunk",
+                    "+policy.cameras.exterior=observation.images.front", "benchmark=pick_v1", f"limit={limit}",
+                    f"horizon={HORIZON}", f"workers={workers}", f"output_dir={out}", "progress=false", *extra])
+
+
+def test_ray_per_node_servers_vs_one_box(two_nodes, tmp_path):
+    act = save_tiny_act(tmp_path / "act", image_hw=(224, 224))
+    cluster_s = two_nodes
+    run_evaluation(_act_run(act, tmp_path / "warm-up", 1, 1))  # the head's first-run imports counted nowhere
+    rows, outcomes, sizes = [], {}, None
+    for mode, (workers, extra) in MODES.items():
+        out = tmp_path / mode.replace(" ", "_")
+        cfg = _act_run(act, out, workers, EPISODES, *extra)
+        cpu0 = _cpu_self()
+        res = run_evaluation(cfg)
+        head_cpu = _cpu_self() - cpu0
+        outcomes[mode] = [(e.episode_index, e.success, e.success_once, e.steps, e.error) for e in res.episodes]
+        wall = res.summary["wall_time_s"]
+        busy = sum(e.duration_s or 0.0 for e in res.episodes) / workers
+        stats = json.loads((out / STATS_FILE).read_text()) if (out / STATS_FILE).exists() else {}
+        per_node = ({nid[:8]: {"served": s["served"], "batch_sizes": s["batch_sizes"]}
+                     for nid, s in stats["nodes"].items()} if "nodes" in stats else None)
+        rows.append({"mode": mode, "workers": workers, "episodes": len(res.episodes), "wall_s": round(wall, 2),
+                     "eps_per_min": round(60 * len(res.episodes) / wall, 2),
+                     "eps_per_min_excl_startup": round(60 * len(res.episodes) / busy, 2) if busy else None,
+                     "head_cpu_ms_per_episode": round(1000 * head_cpu / len(res.episodes), 1),
+                     "dataset_bytes_per_episode": _dataset_bytes(out, len(res.episodes)),
+                     "batch_sizes": stats.get("batch_sizes"), "per_node": per_node,
+                     "errors": res.summary["n_errors"]})
+        if sizes is None:
+            sizes = _bytes_per_episode(cfg, res)
     base = rows[0]["eps_per_min"]
     print(f"\ntiny ACT on pick_v1, {EPISODES} episodes x {HORIZON} steps, CPU; 2-node local cluster started in "
           f"{cluster_s:.1f} s; per episode {sizes[0]} B plan to the worker, {sizes[1]} B result back")
@@ -132,3 +157,35 @@ def test_ray_per_node_servers_vs_one_box(tmp_path):
     assert all(r["errors"] == 0 for r in rows)
     two = next(r for r in rows if r["mode"] == "ray 2 nodes")
     assert len(two["per_node"]) == 2 and all(n["served"] > 0 for n in two["per_node"].values())
+
+
+def test_head_cost_per_episode(two_nodes, tmp_path):
+    """The head's marginal CPU per episode, ``(cpu(N) - cpu(M)) / (N - M)`` for M and N episodes
+    (``MOLMO_PERF_HEAD_EPISODES``, 4,12) of ``ray 2 nodes`` with the random policy served, without
+    and with recording: where one head core saturates (docs/scaling.md)."""
+    m, n = (int(k) for k in os.environ.get("MOLMO_PERF_HEAD_EPISODES", "4,12").split(","))
+
+    def head_cpu(out: Path, limit: int, *extra: str) -> float:
+        cfg = compose(["policy=random", "benchmark=pick_v1", f"limit={limit}", f"horizon={HORIZON}", "workers=2",
+                       "executor=ray", "+policy.serve=true", f"output_dir={out}", "progress=false", *extra])
+        cpu0 = _cpu_self()
+        res = run_evaluation(cfg)
+        assert res.summary["n_errors"] == 0
+        return _cpu_self() - cpu0
+
+    head_cpu(tmp_path / "warm-up", 1, "record=true")
+    rows = []
+    for record in (False, True):
+        cpus = {k: head_cpu(tmp_path / f"r{int(record)}-{k}", k, f"record={str(record).lower()}") for k in (m, n)}
+        per = (cpus[n] - cpus[m]) / (n - m)
+        rows.append({"record": record, "episodes": [m, n], "head_cpu_s": [round(cpus[m], 2), round(cpus[n], 2)],
+                     "head_cpu_ms_per_episode": round(1000 * per, 1),
+                     "head_fixed_cpu_s": round(cpus[m] - m * per, 2),
+                     "head_saturates_eps_per_min": round(60 / per) if per > 0 else None})
+    print(f"\nhead CPU per episode, ray 2 nodes, random policy served, {HORIZON} steps:")
+    for r in rows:
+        print(json.dumps(r))
+    Path("runs").mkdir(exist_ok=True)
+    with open("runs/perf.jsonl", "a") as f:
+        for r in rows:
+            f.write(json.dumps({"benchmark": "ray_served_head_cost", "horizon": HORIZON, **r}) + "\n")
