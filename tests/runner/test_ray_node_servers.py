@@ -47,17 +47,17 @@ def test_server_nodes_are_the_alive_nodes_with_room_for_a_worker():
 
 def test_each_node_serves_its_own_workers_and_outcomes_equal_in_process(two_nodes, small_bench, tmp_path,
                                                                        eval_config, outcomes):
-    common = ["policy=random", f"horizon={HORIZON}", "limit=4"]
+    common = ["policy=random", f"horizon={HORIZON}", "limit=2"]  # one episode for each worker
     run_evaluation(eval_config(small_bench, tmp_path / "local", *common, "workers=1"))
     served = run_evaluation(eval_config(small_bench, tmp_path / "ray", *common, "workers=2", "executor=ray",
                                         "+policy.serve=true"))
     assert outcomes(tmp_path / "ray") == outcomes(tmp_path / "local")
-    assert served.summary["n_errors"] == 0 and len(outcomes(tmp_path / "local")) == 4
+    assert served.summary["n_errors"] == 0 and len(outcomes(tmp_path / "local")) == 2
     stats = json.loads((tmp_path / "ray" / STATS_FILE).read_text())
     nodes = stats["nodes"]
     assert stats["servers"] == len(nodes) == 2 and stats["servers_died"] == 0
-    # one worker per node (one CPU each): each server answered its own node's worker only
-    assert sorted(n["served"] for n in nodes.values()) == [4, 4] and stats["served"] == 4 * 2
+    # one worker per node (one CPU each), one episode each: each server answered its own node's worker only
+    assert [n["served"] for n in nodes.values()] == [2, 2] and stats["served"] == 2 * 2
     assert sorted((n["num_gpus"], n["gpu_ids"]) for n in nodes.values()) == [(0, []), (1, ["0"])]
     assert all(n["alive"] and n["active"] == 0 for n in nodes.values())
 
