@@ -234,9 +234,12 @@ def _run_plans(cfg: dict[str, Any], ctx: RunContext, bench: Benchmark, plans: di
                 if plan.error is not None and plan.episode_index not in results:
                     record(plan.failed(plan.error))
             if todo:
-                try:  # policy.serve=true: one local policy server for the run, the workers its clients
-                    with served_policy(ctx.portable_config(), int(cfg["workers"]), run_dir.path,
-                                       threads=cfg.get("worker_threads", 1)) as worker_policy:
+                # policy.serve=true: one local policy server for the run, the workers its clients;
+                # executor=ray serves one per node instead (RayExecutor.served_policy)
+                serve = getattr(executor, "served_policy", served_policy)
+                try:
+                    with serve(ctx.portable_config(), int(cfg["workers"]), run_dir.path,
+                               threads=cfg.get("worker_threads", 1)) as worker_policy:
                         factories = recorders + progress.factories()
                         job = WorkerJob(config=ctx.portable_config(), policy=worker_policy,
                                         output_dir=str(run_dir.path), benchmark_name=bench.name,

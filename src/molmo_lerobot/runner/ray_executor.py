@@ -7,13 +7,20 @@ the episode's own error handling is a worker death to the supervisor.
 ``address=None`` starts a local cluster with ``num_cpus=workers`` (shut down at the end);
 ``"auto"`` or ``"ray://…"`` joins a running one. A Ray session that is already initialized in
 this process is used as is and left running.
+
+With ``policy.serve=true`` the run uses :meth:`RayExecutor.served_policy` instead of the one
+local server: a policy server per node (:mod:`molmo_lerobot.serving.ray_servers`), and each
+simulator actor becomes the client of the server on its own node.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
-from dataclasses import dataclass
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 from molmo_lerobot.runner.plan import EpisodePlan
@@ -29,17 +36,24 @@ from molmo_lerobot.runner.supervisor import (
     WorkerStartError,
 )
 from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob
+from molmo_lerobot.serving.ray_servers import CLIENT_CONFIG, node_servers
+from molmo_lerobot.serving.run_server import serve_options
 
 
 class SimulatorActor:
-    """Body of one Ray actor: an :class:`EpisodeWorker`, or the reason it could not start."""
+    """Body of one Ray actor: an :class:`EpisodeWorker`, or the reason it could not start.
 
-    def __init__(self, job: WorkerJob, worker_id: str) -> None:
+    ``ports`` (policy.serve): the port of the policy server of each node, by node id; the
+    worker's ``policy=remote`` connects to the one on the node the actor was placed on."""
+
+    def __init__(self, job: WorkerJob, worker_id: str, ports: dict[str, int] | None = None) -> None:
         os.environ.setdefault("MUJOCO_GL", "egl")
         redirect_worker_output(job.output_dir, worker_id)  # library prints go to logs/, not through the bar
         self.worker: EpisodeWorker | None = None
         self.init_error: str | None = None
         try:
+            if ports is not None:
+                job = replace(job, policy={**job.policy, "port": _own_port(ports)})
             self.worker = EpisodeWorker(job, worker_id)
         except Exception as exc:
             self.init_error = f"{type(exc).__name__}: {exc}"
@@ -57,6 +71,16 @@ class SimulatorActor:
     def close(self) -> None:
         if self.worker is not None:
             self.worker.close()
+
+
+def _own_port(ports: dict[str, int]) -> int:
+    import ray
+
+    node = ray.get_runtime_context().get_node_id()
+    if node not in ports:
+        raise RuntimeError(f"policy.serve: no policy server on Ray node {node[:12]} (servers start on the nodes "
+                           "alive when the run starts)")
+    return ports[node]
 
 
 @dataclass
@@ -81,11 +105,19 @@ class RayTransport(Transport):
         self.num_gpus_per_worker = num_gpus_per_worker
         self._owned = False
         self._actor_cls: Any = None
+        self.ports: dict[str, int] | None = None  # policy.serve: each node's server
+        self._held = False  # the served policy's servers still need the cluster
 
     def open(self, workers: int) -> None:
         import ray
 
         self._actor_cls = ray.remote(SimulatorActor)
+        self.join(workers)
+
+    def join(self, workers: int) -> None:
+        """Start or join the cluster unless this process is connected to one."""
+        import ray
+
         if ray.is_initialized():
             return
         os.environ.setdefault("MUJOCO_GL", "egl")  # local-cluster workers inherit the driver's environment
@@ -102,13 +134,24 @@ class RayTransport(Transport):
     def close(self) -> None:
         import ray
 
-        if self._owned:
+        if self._owned and not self._held:
             ray.shutdown()
             self._owned = False
 
+    @contextlib.contextmanager
+    def held(self, workers: int) -> Iterator[None]:
+        """The cluster joined (started) now and kept until the end of the block, not of the run."""
+        self.join(workers)
+        self._held = True
+        try:
+            yield
+        finally:
+            self._held = False
+            self.close()
+
     def start(self, worker_id: str, job: WorkerJob) -> _Actor:
         actor = self._actor_cls.options(max_restarts=0, max_task_retries=0, num_cpus=self.num_cpus_per_worker,
-                                        num_gpus=self.num_gpus_per_worker).remote(job, worker_id)
+                                        num_gpus=self.num_gpus_per_worker).remote(job, worker_id, self.ports)
         return _Actor(actor, actor.ready.remote())
 
     def submit(self, handle: _Actor, item: EpisodePlan) -> None:
@@ -194,3 +237,21 @@ class RayExecutor(Supervisor):
                  num_cpus_per_worker: float = 1.0, num_gpus_per_worker: float = 0.0, **options: Any) -> None:
         super().__init__(RayTransport(address, include_dashboard, num_cpus_per_worker, num_gpus_per_worker),
                          workers, **options)
+
+    @contextlib.contextmanager
+    def served_policy(self, config: dict[str, Any], workers: int, output_dir: str | Path | None = None,
+                      threads: int | None = 1) -> Iterator[dict[str, Any]]:
+        """:func:`~molmo_lerobot.serving.run_server.served_policy` on the cluster: with ``policy.serve``
+        one server per node (``serve_stats.json`` by node) and each actor routed to its own node's."""
+        options = serve_options(config["policy"], workers)
+        if options is None:
+            yield config["policy"]
+            return
+        t = self.transport
+        with t.held(workers), node_servers(config, options, threads, output_dir, t.num_cpus_per_worker,
+                                           t.num_gpus_per_worker) as ports:
+            t.ports = ports
+            try:
+                yield dict(CLIENT_CONFIG)  # the port is each node's (SimulatorActor)
+            finally:
+                t.ports = None
