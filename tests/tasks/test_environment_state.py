@@ -1,6 +1,7 @@
 """The opt-in, privileged ``observation.environment_state``: pick's object pose in the robot base
-frame, its half extents and the TCP-to-object vector, one vector through the feature map for the recorder, the Gymnasium env and policy=lerobot;
-recorded only when asked for; a checkpoint trained on it gets it at evaluation."""
+frame, its half extents and the TCP-to-object vector, one vector through the feature map for the
+recorder, the Gymnasium env and policy=lerobot; recorded only when asked for; a checkpoint trained
+on it gets it at evaluation."""
 
 from __future__ import annotations
 
