@@ -49,6 +49,9 @@ EVAL_LIMIT=${EVAL_LIMIT:-60}
 HOLD_STEPS=${HOLD_STEPS:-$([ "$INPUTS" = state ] && echo 40 || echo 10)}
 END_ON_SUCCESS=${END_ON_SUCCESS:-true}
 WORKERS=${WORKERS:-2}
+# ACT leaves a feature type its normalization_mapping does not name as it is, and its default names no
+# ENV: the object's position would reach the network in raw metres (one centimetre = 0.01)
+NORMALIZATION=${NORMALIZATION:-'{"VISUAL":"MEAN_STD","STATE":"MEAN_STD","ENV":"MEAN_STD","ACTION":"MEAN_STD"}'}
 export HF_HUB_OFFLINE=${HF_HUB_OFFLINE:-1} MUJOCO_GL=${MUJOCO_GL:-egl}
 
 mkdir -p "$WORK"
@@ -101,6 +104,7 @@ if [ ! -f "$CKPT/model.safetensors" ]; then
     --dataset.root="$DATASET" --dataset.video_backend=pyav --policy.type=act \
     --policy.device="$DEVICE" --policy.push_to_hub=false --policy.pretrained_backbone_weights=null \
     --policy.chunk_size="$CHUNK" --policy.n_action_steps="$N_ACTION_STEPS" --policy.use_vae=false \
+    --policy.normalization_mapping="$NORMALIZATION" \
     --steps="$STEPS" --batch_size="$BATCH" --num_workers=0 --save_freq="$STEPS" --log_freq=100 \
     --wandb.enable=false --output_dir="$WORK/train" "${ACT_ARGS[@]}"
 fi
