@@ -4,15 +4,19 @@
 # (Wilson 95 % CIs and molmo-compare's paired test). `make train-demo` runs it; every knob is an
 # environment variable.
 #
-#   INPUTS=state                  state: observation.state + observation.environment_state (the
-#                                 object's pose in the robot base frame: privileged ground truth,
-#                                 not a vision policy; the cameras are dropped before training);
+#   INPUTS=state                  state: observation.state + observation.environment_state (pick's:
+#                                 the object's pose in the robot base frame, its half extents, the
+#                                 TCP-to-object vector; privileged ground truth, not a vision policy;
+#                                 the cameras are dropped before training);
 #                                 images: observation.state + the cameras (needs a GPU's hours)
 #   WORK=runs/train-demo-$INPUTS  everything goes here (benchmark, runs, checkpoint, summary)
 #   HOUSES EPISODES_PER_HOUSE SEED=1          the training benchmark (pick_v1 is seed 0)
 #   RES=64                        training images are rendered RES x RES (pick_v1's 224 x 224
 #                                 frames are resized to it at evaluation: policy.resize=pad)
 #   STEPS BATCH CHUNK N_ACTION_STEPS          ACT training; DEVICE: cuda where torch sees a GPU, else cpu
+#   SAVE_FREQ=$STEPS              checkpoint every SAVE_FREQ steps (checkpoints/last is the newest)
+#   NORMALIZATION='{..."ENV":"MEAN_STD"...}'  ACT's normalization_mapping; ACT's own default names no ENV
+#                                 and so feeds observation.environment_state in raw metres
 #   ACT_ARGS="--policy.dim_model=256 ..."     further lerobot-train flags
 #   EVAL_LIMIT=60 WORKERS=2       pick_v1 episodes scored per policy, worker processes
 #   HOLD_STEPS=40                 record_hold_steps of the expert recordings: steps kept after its first
@@ -105,7 +109,7 @@ if [ ! -f "$CKPT/model.safetensors" ]; then
     --policy.device="$DEVICE" --policy.push_to_hub=false --policy.pretrained_backbone_weights=null \
     --policy.chunk_size="$CHUNK" --policy.n_action_steps="$N_ACTION_STEPS" --policy.use_vae=false \
     --policy.normalization_mapping="$NORMALIZATION" \
-    --steps="$STEPS" --batch_size="$BATCH" --num_workers=0 --save_freq="$STEPS" --log_freq=100 \
+    --steps="$STEPS" --batch_size="$BATCH" --num_workers=0 --save_freq="${SAVE_FREQ:-$STEPS}" --log_freq=100 \
     --wandb.enable=false --output_dir="$WORK/train" "${ACT_ARGS[@]}"
 fi
 
