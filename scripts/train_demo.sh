@@ -25,15 +25,15 @@
 #                                 evaluation convention, end_on_success); false: judged at the horizon
 #   TRAIN_THREADS=1               torch threads of lerobot-train on cpu (on 2 shared cores, 2 threads
 #                                 made a step 20x slower than 1)
-# Defaults: state, 20 x 10 episodes, 10000 steps, batch 32, chunk 20 with temporal ensembling (a new
-# chunk every step, coefficient 0.01), dim_model 128, 2 encoder layers, lr 2e-4 (a CPU); images,
-# 20 x 10 episodes, 20000 steps, batch 32, chunk 20 (a GPU).
+# Defaults: state, 30 x 10 episodes, 10000 steps, batch 32, chunk 20 with temporal ensembling (a new
+# chunk every step, coefficient 0.01), dim_model 128, 2 encoder layers, lr 2e-4, every input and the
+# action mean/std-normalised (a CPU); images, 20 x 10 episodes, 20000 steps, batch 32, chunk 20 (a GPU).
 set -euo pipefail
 
 PYTHON=${PYTHON:-python}
 INPUTS=${INPUTS:-state}
 case "$INPUTS" in
-  state) defaults=(20 10 10000 32 20 1 "--policy.dim_model=128 --policy.dim_feedforward=512 --policy.n_heads=4
+  state) defaults=(30 10 10000 32 20 1 "--policy.dim_model=128 --policy.dim_feedforward=512 --policy.n_heads=4
     --policy.n_encoder_layers=2 --policy.optimizer_lr=2e-4 --policy.temporal_ensemble_coeff=0.01") ;;
   images) defaults=(20 10 20000 32 20 20 "") ;;
   *) echo "train_demo.sh: INPUTS=$INPUTS: expected state or images" >&2; exit 2 ;;
