@@ -4,15 +4,19 @@
 # (Wilson 95 % CIs and molmo-compare's paired test). `make train-demo` runs it; every knob is an
 # environment variable.
 #
-#   INPUTS=state                  state: observation.state + observation.environment_state (the
-#                                 object's pose in the robot base frame: privileged ground truth,
-#                                 not a vision policy; the cameras are dropped before training);
+#   INPUTS=state                  state: observation.state + observation.environment_state (pick's:
+#                                 the object's pose in the robot base frame, its half extents, the
+#                                 TCP-to-object vector; privileged ground truth, not a vision policy;
+#                                 the cameras are dropped before training);
 #                                 images: observation.state + the cameras (needs a GPU's hours)
 #   WORK=runs/train-demo-$INPUTS  everything goes here (benchmark, runs, checkpoint, summary)
 #   HOUSES EPISODES_PER_HOUSE SEED=1          the training benchmark (pick_v1 is seed 0)
 #   RES=64                        training images are rendered RES x RES (pick_v1's 224 x 224
 #                                 frames are resized to it at evaluation: policy.resize=pad)
 #   STEPS BATCH CHUNK N_ACTION_STEPS          ACT training; DEVICE: cuda where torch sees a GPU, else cpu
+#   SAVE_FREQ=$STEPS              checkpoint every SAVE_FREQ steps (checkpoints/last is the newest)
+#   NORMALIZATION='{..."ENV":"MEAN_STD"...}'  ACT's normalization_mapping; ACT's own default names no ENV
+#                                 and so feeds observation.environment_state in raw metres
 #   ACT_ARGS="--policy.dim_model=256 ..."     further lerobot-train flags
 #   EVAL_LIMIT=60 WORKERS=2       pick_v1 episodes scored per policy, worker processes
 #   HOLD_STEPS=40                 record_hold_steps of the expert recordings: steps kept after its first
@@ -21,15 +25,15 @@
 #                                 evaluation convention, end_on_success); false: judged at the horizon
 #   TRAIN_THREADS=1               torch threads of lerobot-train on cpu (on 2 shared cores, 2 threads
 #                                 made a step 20x slower than 1)
-# Defaults: state, 20 x 10 episodes, 10000 steps, batch 32, chunk 20 with temporal ensembling (a new
-# chunk every step, coefficient 0.01), dim_model 128, 2 encoder layers, lr 2e-4 (a CPU); images,
-# 20 x 10 episodes, 20000 steps, batch 32, chunk 20 (a GPU).
+# Defaults: state, 30 x 10 episodes, 10000 steps, batch 32, chunk 20 with temporal ensembling (a new
+# chunk every step, coefficient 0.01), dim_model 128, 2 encoder layers, lr 2e-4, every input and the
+# action mean/std-normalised (a CPU); images, 20 x 10 episodes, 20000 steps, batch 32, chunk 20 (a GPU).
 set -euo pipefail
 
 PYTHON=${PYTHON:-python}
 INPUTS=${INPUTS:-state}
 case "$INPUTS" in
-  state) defaults=(20 10 10000 32 20 1 "--policy.dim_model=128 --policy.dim_feedforward=512 --policy.n_heads=4
+  state) defaults=(30 10 10000 32 20 1 "--policy.dim_model=128 --policy.dim_feedforward=512 --policy.n_heads=4
     --policy.n_encoder_layers=2 --policy.optimizer_lr=2e-4 --policy.temporal_ensemble_coeff=0.01") ;;
   images) defaults=(20 10 20000 32 20 20 "") ;;
   *) echo "train_demo.sh: INPUTS=$INPUTS: expected state or images" >&2; exit 2 ;;
@@ -49,6 +53,9 @@ EVAL_LIMIT=${EVAL_LIMIT:-60}
 HOLD_STEPS=${HOLD_STEPS:-$([ "$INPUTS" = state ] && echo 40 || echo 10)}
 END_ON_SUCCESS=${END_ON_SUCCESS:-true}
 WORKERS=${WORKERS:-2}
+# ACT leaves a feature type its normalization_mapping does not name as it is, and its default names no
+# ENV: the object's position would reach the network in raw metres (one centimetre = 0.01)
+NORMALIZATION=${NORMALIZATION:-'{"VISUAL":"MEAN_STD","STATE":"MEAN_STD","ENV":"MEAN_STD","ACTION":"MEAN_STD"}'}
 export HF_HUB_OFFLINE=${HF_HUB_OFFLINE:-1} MUJOCO_GL=${MUJOCO_GL:-egl}
 
 mkdir -p "$WORK"
@@ -101,7 +108,8 @@ if [ ! -f "$CKPT/model.safetensors" ]; then
     --dataset.root="$DATASET" --dataset.video_backend=pyav --policy.type=act \
     --policy.device="$DEVICE" --policy.push_to_hub=false --policy.pretrained_backbone_weights=null \
     --policy.chunk_size="$CHUNK" --policy.n_action_steps="$N_ACTION_STEPS" --policy.use_vae=false \
-    --steps="$STEPS" --batch_size="$BATCH" --num_workers=0 --save_freq="$STEPS" --log_freq=100 \
+    --policy.normalization_mapping="$NORMALIZATION" \
+    --steps="$STEPS" --batch_size="$BATCH" --num_workers=0 --save_freq="${SAVE_FREQ:-$STEPS}" --log_freq=100 \
     --wandb.enable=false --output_dir="$WORK/train" "${ACT_ARGS[@]}"
 fi
 

@@ -25,12 +25,15 @@ def test_train_demo_state_recipe_runs_at_toy_size(tmp_path):
     work = tmp_path / "demo"
     recorded = json.loads((work / "expert" / "dataset" / "meta" / "info.json").read_text())["features"]
     assert recorded["observation.environment_state"]["names"][:3] == ["object_x", "object_y", "object_z"]
+    assert recorded["observation.environment_state"]["names"][-3:] == [f"tcp_to_object_{c}" for c in "xyz"]
     trained_on = json.loads((work / "expert" / "dataset-state" / "meta" / "info.json").read_text())["features"]
     assert not [k for k in trained_on if k.startswith("observation.images.")]
     assert "observation.environment_state" in trained_on
     ckpt = work / "train" / "checkpoints" / "last" / "pretrained_model"
     inputs = json.loads((ckpt / "config.json").read_text())["input_features"]
     assert sorted(inputs) == ["observation.environment_state", "observation.state"]
+    config = json.loads((ckpt / "config.json").read_text())
+    assert config["normalization_mapping"]["ENV"] == "MEAN_STD"  # ACT's default leaves it in raw metres
     evaluated = json.loads((work / "eval-trained" / "results.json").read_text())
     assert evaluated["n_errors"] == 0 and evaluated["n_valid"] == 1  # the policy got its environment state
     summary = (work / "summary.txt").read_text().splitlines()

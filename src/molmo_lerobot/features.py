@@ -13,9 +13,10 @@ the replay policy, the Gymnasium env and ``lerobot-eval``'s env (:mod:`molmo_ler
 * ``action``: ``float32``, each move group's command in the same order, sized by its move-group dimension;
 * ``observation.environment_state`` (opt-in, privileged): ``float32``, the task's environment state
   (:meth:`molmo_lerobot.tasks.base.Task.environment_state`, e.g. pick: the object's pose in the robot
-  base frame), named by the task; an observation carries it as ``environment_state``. Only a run
-  that asks for it has it (``record_environment_state=true``, or a policy that reads it); a policy
-  that reads it sees the simulator's ground truth, so it is not a vision policy;
+  base frame, its half extents and the TCP-to-object vector), named by the task; an observation
+  carries it as ``environment_state``. Only a run that asks for it has it
+  (``record_environment_state=true``, or a policy that reads it); a policy that reads it sees the
+  simulator's ground truth, so it is not a vision policy;
 * ``names``: a group's declared joint names where they fit its size, else ``<group>`` (one value)
   or ``<group>_<i>``.
 

@@ -19,7 +19,8 @@ Observation
     robot's move-group order; the gripper as 0 open … 1 closed), both from one feature map
     (:mod:`molmo_lerobot.features`, the env's ``features``). With ``environment_state=True`` it
     also has ``environment_state``: the task's privileged ground truth, the recorded
-    ``observation.environment_state`` (e.g. pick: the object's pose in the robot base frame).
+    ``observation.environment_state`` (e.g. pick: the object's pose in the robot base frame, its
+    size, the TCP-to-object vector).
 
 Action
     float32 ``(n,)``: the robot's move groups concatenated in that same order (the

@@ -1,6 +1,7 @@
-"""The opt-in, privileged ``observation.environment_state``: the task's object pose in the robot base
-frame, one vector through the feature map for the recorder, the Gymnasium env and policy=lerobot;
-recorded only when asked for; a checkpoint trained on it gets it at evaluation."""
+"""The opt-in, privileged ``observation.environment_state``: pick's object pose in the robot base
+frame, its half extents and the TCP-to-object vector, one vector through the feature map for the
+recorder, the Gymnasium env and policy=lerobot; recorded only when asked for; a checkpoint trained
+on it gets it at evaluation."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
 from molmo_lerobot.config import compose
 from molmo_lerobot.export.frames import FrameLayout
 from molmo_lerobot.features import ACTION, ENV_STATE, ENV_STATE_KEY, STATE, FeatureError, FeatureMap
@@ -19,7 +21,8 @@ from molmo_lerobot.poses import pose_matrix
 from molmo_lerobot.recording import EpisodeInfo
 from molmo_lerobot.runner.evaluate import run_evaluation
 
-NAMES = ["object_x", "object_y", "object_z", "object_qw", "object_qx", "object_qy", "object_qz"]
+NAMES = ["object_x", "object_y", "object_z", "object_qw", "object_qx", "object_qy", "object_qz",
+         "object_half_x", "object_half_y", "object_half_z", "tcp_to_object_x", "tcp_to_object_y", "tcp_to_object_z"]
 
 
 def _tiny_state_act(root, fmap: FeatureMap) -> str:
@@ -50,16 +53,21 @@ def genv():
     env.close()
 
 
-def test_pick_state_is_the_object_pose_in_the_base_frame(genv):
+def test_pick_state_is_the_object_pose_size_and_offset_in_the_base_frame(genv):
     obs, _ = genv.reset()
     state = obs[ENV_STATE_KEY]
-    assert state.dtype == np.float32 and state.shape == (7,) and state[3] >= 0
+    assert state.dtype == np.float32 and state.shape == (13,) and state[3] >= 0
     assert genv.features.env_state_names == tuple(NAMES)
     ep = genv._episode
-    world = pose_matrix(ep.env.base_pose) @ pose_matrix(state.astype(np.float64))
+    base = pose_matrix(ep.env.base_pose)
+    world = base @ pose_matrix(state[:7].astype(np.float64))
     body = ep.task._object
     np.testing.assert_allclose(world[:3, 3], ep.env.data.xpos[body], atol=1e-5)
     np.testing.assert_allclose(world[:3, :3], ep.env.data.xmat[body].reshape(3, 3), atol=1e-5)
+    # the half extents are the builtin object's own (a turned object keeps them: its own frame)
+    np.testing.assert_allclose(state[7:10], BUILTIN_OBJECTS[ep.task.object_name].half_extents, atol=1e-6)
+    tcp = ep.env.data.site_xpos[ep.env.robot.tcp_site]
+    np.testing.assert_allclose(base[:3, :3] @ state[10:], ep.env.data.xpos[body] - tcp, atol=1e-5)
 
 
 def test_recorder_env_and_policy_see_the_same_vector(genv, tmp_path):
@@ -75,7 +83,7 @@ def test_recorder_env_and_policy_see_the_same_vector(genv, tmp_path):
                        environment_state_names=ep.task.environment_state_names)
     layout = FrameLayout.from_step(info, obs, None)
     assert layout.feature_map == genv.features
-    assert layout.features()[ENV_STATE] == {"dtype": "float32", "shape": (7,), "names": NAMES}
+    assert layout.features()[ENV_STATE] == {"dtype": "float32", "shape": (13,), "names": NAMES}
     recorded = layout.frame(obs, ep.env.observe(images=False)["qpos"], None, False, False, ep.prompt, info)[ENV_STATE]
     np.testing.assert_array_equal(genv._obs(obs)[ENV_STATE_KEY], recorded)
     policy = LeRobotPolicy({"name": "lerobot", "path": _tiny_state_act(tmp_path / "act", genv.features),
@@ -86,7 +94,7 @@ def test_recorder_env_and_policy_see_the_same_vector(genv, tmp_path):
     np.testing.assert_array_equal(policy._batch(obs)[ENV_STATE].numpy(), recorded)
     with pytest.raises(KeyError, match=r"observation\.environment_state"):
         policy._batch({k: v for k, v in obs.items() if k != ENV_STATE_KEY})
-    with pytest.raises(FeatureError, match=r"observation.environment_state: 3 values, expected 7"):
+    with pytest.raises(FeatureError, match=r"observation.environment_state: 3 values, expected 13"):
         layout.frame({**obs, ENV_STATE_KEY: np.zeros(3)}, {}, None, False, False, "", info)
 
 
@@ -96,7 +104,7 @@ def test_recorded_only_when_asked_and_a_state_policy_gets_it(tmp_path):
                             f"output_dir={tmp_path / 'on'}"]))
     root = tmp_path / "on" / "dataset"
     feats = json.loads((root / "meta" / "info.json").read_text())["features"]
-    assert feats[ENV_STATE]["names"] == NAMES and feats[ENV_STATE]["shape"] == [7]
+    assert feats[ENV_STATE]["names"] == NAMES and feats[ENV_STATE]["shape"] == [13]
     frames = pd.concat(pd.read_parquet(p) for p in sorted((root / "data").rglob("*.parquet")))
     first = frames.sort_values("frame_index").iloc[0][ENV_STATE]
     genv = MolmoEnv("pick_v1", episode_index=0, horizon=3, environment_state=True)

@@ -120,6 +120,18 @@ def body_aabb(model: mujoco.MjModel, data: mujoco.MjData, body: int) -> tuple[np
     return aabb(model, data, geoms)
 
 
+def half_extents_in_body(model: mujoco.MjModel, data: mujoco.MjData, body: int) -> np.ndarray:
+    """Half extents (3,) of the box around ``body``'s subtree's collision geoms (visible ones where it
+    has none; each as :func:`geom_points` bounds it) along ``body``'s own axes; zeros without geoms."""
+    bodies = subtree(model, body)
+    geoms = body_geoms(model, bodies, visible_only=False, collision_only=True) or body_geoms(model, bodies)
+    if not geoms:
+        return np.zeros(3)
+    world = np.concatenate([geom_points(model, data, g) for g in geoms])
+    local = (world - data.xpos[body]) @ data.xmat[body].reshape(3, 3)
+    return (local.max(0) - local.min(0)) / 2
+
+
 def xy_rect(centre: np.ndarray, size: np.ndarray) -> Polygon:
     """The XY rectangle of an AABB."""
     return box(centre[0] - size[0] / 2, centre[1] - size[1] / 2, centre[0] + size[0] / 2, centre[1] + size[1] / 2)

@@ -52,6 +52,14 @@ def pose_names(prefix: str) -> tuple[str, ...]:
     return tuple(f"{prefix}_{c}" for c in ("x", "y", "z", "qw", "qx", "qy", "qz"))
 
 
+def vector_in_base(env: Env, v: np.ndarray) -> np.ndarray:
+    """World vector ``v`` in the robot base frame's axes (``env.base_pose``)."""
+    inv, out = np.zeros(4), np.zeros(3)
+    mujoco.mju_negQuat(inv, env.base_pose[3:])
+    mujoco.mju_rotVecQuat(out, np.asarray(v, dtype=np.float64), inv)
+    return out
+
+
 def pose_in_base(env: Env, body: int) -> np.ndarray:
     """``body``'s pose ``[x, y, z, qw, qx, qy, qz]`` in the robot base frame (``env.base_pose``),
     its quaternion's sign fixed by ``qw >= 0`` (one value per orientation)."""

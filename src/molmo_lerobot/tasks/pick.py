@@ -5,8 +5,12 @@ least ``succ_pos_threshold`` (default 0.01 m) above ``task.pickup_obj_start_pose
 the start when the episode gives no start pose) **and** it touches the robot and nothing else
 (contacts between top-level bodies: no table, no other object).
 
-Environment state (opt-in, privileged): the object's pose in the robot base frame, ``object_x``
-… ``object_qz`` (:func:`~molmo_lerobot.tasks.base.pose_in_base`).
+Environment state (opt-in, privileged; robosuite's object state): the object's pose in the robot
+base frame, ``object_x`` … ``object_qz`` (:func:`~molmo_lerobot.tasks.base.pose_in_base`), the
+half extents of its bounding box in its own frame, ``object_half_x`` … ``object_half_z`` (which
+grasp fits: a brick and a block of one height differ only here), and the vector from the robot's
+TCP to the object in the base frame, ``tcp_to_object_x`` … ``tcp_to_object_z`` (how far the
+gripper still has to go).
 """
 
 from __future__ import annotations
@@ -19,7 +23,8 @@ from pydantic import Field
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.molmospaces import task_aliases
 from molmo_lerobot.benchmark.schema import BaseTaskSpec, Pose7
-from molmo_lerobot.tasks.base import Task, TaskType, pose_in_base, pose_names
+from molmo_lerobot.sim import geometry
+from molmo_lerobot.tasks.base import Task, TaskType, pose_in_base, pose_names, vector_in_base
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
@@ -41,7 +46,8 @@ class PickTaskSpec(BaseTaskSpec):
 class PickTask(Task):
     """Pick ``spec.task.pickup_obj_name``."""
 
-    environment_state_names = pose_names("object")
+    environment_state_names = (*pose_names("object"), *(f"object_half_{c}" for c in "xyz"),
+                               *(f"tcp_to_object_{c}" for c in "xyz"))
 
     def __init__(self, spec: EpisodeSpec, env: Env) -> None:
         name = getattr(spec.task, "pickup_obj_name", None)
@@ -53,10 +59,12 @@ class PickTask(Task):
         self._object = env.body_id(name, "task.pickup_obj_name")
         self.object_bodies = env.subtree_bodies(name)
         self.start_height: float | None = None
+        self.half_extents: np.ndarray | None = None
 
     def setup(self) -> None:
         start = getattr(self.env.spec.task, "pickup_obj_start_pose", None)
         self.start_height = float(start[2]) if start else float(self.env.data.xpos[self._object][2])
+        self.half_extents = geometry.half_extents_in_body(self.env.model, self.env.data, self._object)
 
     def lift(self) -> float:
         """Height gained since ``setup`` (metres)."""
@@ -74,7 +82,11 @@ class PickTask(Task):
         return 1.0 if self.success() else 0.0
 
     def environment_state(self) -> np.ndarray:
-        return pose_in_base(self.env, self._object)
+        if self.half_extents is None:
+            raise RuntimeError("PickTask.setup() must run before environment_state()")
+        d = self.env.data
+        to_object = vector_in_base(self.env, d.xpos[self._object] - d.site_xpos[self.env.robot.tcp_site])
+        return np.concatenate([pose_in_base(self.env, self._object), self.half_extents, to_object])
 
 
 class PickTaskType(TaskType):
