@@ -22,7 +22,7 @@ import molmo_lerobot
 PROCESS_CACHES = {
     ("molmo_lerobot.sim.env", "_MODEL_CACHE"):
         "compiled MuJoCo models keyed by everything that defines them (a compile cache, the same for every run)",
-    ("molmo_lerobot.resources.index", "_codec"): "a zstd codec per process (re-created after fork)",
+    ("molmo_lerobot.resources.index", "_codecs"): "a zstd codec per thread and process (never shared by two threads)",
     ("molmo_lerobot.resources.index", "_ENVS"): "LMDB allows one open handle per environment and process",
     ("molmo_lerobot.resources.index", "_ENVS_PID"): "the process the LMDB handles belong to (reset after fork)",
     ("molmo_lerobot.resources.index", "globals()"): "drops the zstd codec in a forked child",

@@ -7,6 +7,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 from molmo_lerobot.resources import ResourceManager, pack
@@ -65,3 +66,20 @@ def test_kill_9_during_install_then_reinstall_is_complete(src_tree, tmp_path):
     assert res.extracted == n - finished and res.present == finished
     assert mgr.is_complete("objects/big@1") and mgr.verify() == []
     assert not any((tmp_path / "cache" / ".molmo" / "objects" / "big" / "1" / "tmp").iterdir())
+
+
+
+def test_each_thread_decodes_the_index_with_its_own_zstd_context():
+    """python-zstandard's contexts must never be used by two threads at once; concurrent installs
+    decoded index entries through one shared context and the process died (segmentation fault)."""
+    from molmo_lerobot.resources.index import _get_codec
+
+    seen = []
+    threads = [threading.Thread(target=lambda: seen.append(_get_codec())) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len({id(codec) for codec in seen}) == 4 and _get_codec() not in seen
+    raw = _get_codec().encode({"files": {"a/b.bin": [1, "x"]}})
+    assert all(codec.decode(raw) == {"files": {"a/b.bin": [1, "x"]}} for codec in seen)

@@ -41,7 +41,8 @@ def _key(prefix: bytes, text: str) -> bytes:
 
 
 class _Codec:
-    """Per-process zstd contexts (recreated after fork)."""
+    """zstd contexts for one thread of one process: python-zstandard's must never be used by two
+    threads at once (concurrent archive installs shared one and crashed the process)."""
 
     def __init__(self) -> None:
         self.pid = os.getpid()
@@ -55,17 +56,19 @@ class _Codec:
         return json.loads(self.d.decompress(raw))
 
 
-_codec: _Codec | None = None
+class _ThreadCodec(threading.local):
+    codec: _Codec | None = None
+
+
+_codecs = _ThreadCodec()
 
 
 def _get_codec() -> _Codec:
-    global _codec
-    if _codec is None or _codec.pid != os.getpid():
-        _codec = _Codec()
-    return _codec
-
-
-os.register_at_fork(after_in_child=lambda: globals().update(_codec=None))
+    """The calling thread's codec (a new one after a fork)."""
+    codec = _codecs.codec
+    if codec is None or codec.pid != os.getpid():
+        codec = _codecs.codec = _Codec()
+    return codec
 
 _ENVS: dict[str, tuple[lmdb.Environment, tuple[int, int]]] = {}
 _ENVS_PID = os.getpid()
