@@ -22,10 +22,8 @@ import molmo_lerobot
 PROCESS_CACHES = {
     ("molmo_lerobot.sim.env", "_MODEL_CACHE"):
         "compiled MuJoCo models keyed by everything that defines them (a compile cache, the same for every run)",
-    ("molmo_lerobot.resources.index", "_codecs"): "a zstd codec per thread and process (never shared by two threads)",
     ("molmo_lerobot.resources.index", "_ENVS"): "LMDB allows one open handle per environment and process",
     ("molmo_lerobot.resources.index", "_ENVS_PID"): "the process the LMDB handles belong to (reset after fork)",
-    ("molmo_lerobot.resources.index", "globals()"): "drops the zstd codec in a forked child",
     ("molmo_lerobot.robots.franka", "_base_xml"): "constant MJCF text read from the installed package",
     ("molmo_lerobot.robots.franka_droid", "_registry_xml"): "constant MJCF text built from the installed package",
     ("molmo_lerobot.libero.objects", "_file_owners"):
