@@ -72,8 +72,9 @@ def test_served_batched_runs_equal_in_process_over_both_transports(act_dir, tmp_
         stats = json.loads((out / STATS_FILE).read_text())
         assert stats["transport"] == {"websocket": "websocket", "auto": "shm"}[transport]
         assert stats["batching"] and stats["max_batch"] == 2 and stats["served"] > 0
-        # one forward for several workers' requests rounds differently from one per request
-        np.testing.assert_allclose(actions(batched), actions(local), rtol=1e-4, atol=1e-5)
+        # one forward for several workers' requests rounds differently from one per request (float32), and
+        # which requests share a forward depends on timing; the difference compounds over the steps
+        np.testing.assert_allclose(actions(batched), actions(local), rtol=1e-3, atol=2e-4)
         assert not mp.active_children()  # the server process was stopped and reaped
 
 
