@@ -174,8 +174,11 @@ print(sorted(seen | policies()), os.SCHED_OTHER)
 def test_recording_as_root_leaves_no_thread_real_time():
     """SVT-AV1 run as root makes the thread that starts an encoder, and its own threads, SCHED_FIFO at
     top priority; a recording worker then starved the supervisor and every process on its cores."""
+    # the child starts at ordinary priority whatever this process was left at (an earlier test's
+    # encoder, LeRobot's own, may have made it real-time: children inherit the policy)
     out = subprocess.run([sys.executable, "-c", _SCHEDULING_CHECK], capture_output=True, text=True, timeout=120,
-                         env={**os.environ, "SVT_LOG": "0"})
+                         env={**os.environ, "SVT_LOG": "0"},
+                         preexec_fn=lambda: os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0)))
     assert out.returncode == 0, out.stderr[-2000:]
     policies, other = out.stdout.strip().rsplit(" ", 1)
     assert policies == f"[{other}]", f"thread scheduling policies seen: {policies} (SCHED_OTHER is {other})"
