@@ -178,16 +178,22 @@ async def _recv(conn: socket.socket) -> tuple[bytes, list[int], int] | None:
         try:
             data, fds, flags, _ = socket.recv_fds(conn, MAX_HEADER_BYTES, 1)
         except (BlockingIOError, InterruptedError):
-            ready = loop.create_future()
-            loop.add_reader(conn.fileno(), ready.set_result, None)
-            try:
-                await ready
-            finally:
-                loop.remove_reader(conn.fileno())
+            await _until(loop.add_reader, loop.remove_reader, conn)
             continue
         except OSError:
             return None
         return None if not data and not fds else (data, fds, flags)
+
+
+async def _until(watch: Any, unwatch: Any, conn: socket.socket) -> None:
+    """Wait until the event loop reports ``conn`` ready (``watch``/``unwatch``: the loop's
+    ``add_reader``/``remove_reader`` or ``add_writer``/``remove_writer``)."""
+    ready = asyncio.get_running_loop().create_future()
+    watch(conn.fileno(), ready.set_result, None)
+    try:
+        await ready
+    finally:
+        unwatch(conn.fileno())
 
 
 async def _send(conn: socket.socket, message: dict[str, Any], fd: int | None = None) -> bool:
@@ -198,11 +204,6 @@ async def _send(conn: socket.socket, message: dict[str, Any], fd: int | None = N
             send(conn, message, fd)
             return True
         except (BlockingIOError, InterruptedError):
-            ready = loop.create_future()
-            loop.add_writer(conn.fileno(), ready.set_result, None)
-            try:
-                await ready
-            finally:
-                loop.remove_writer(conn.fileno())
+            await _until(loop.add_writer, loop.remove_writer, conn)
         except OSError:
             return False
