@@ -38,6 +38,22 @@ def test_lerobot_imports_the_plugin_and_names_features_as_our_datasets():
         vec.close()
 
 
+def test_environment_state_reaches_a_lerobot_policy_as_observation_environment_state():
+    from lerobot.envs.utils import preprocess_observation
+
+    cfg = EnvConfig.get_choice_class("molmo")(task="pick_v1", horizon=5, environment_state=True)
+    assert cfg.features_map["environment_state"] == "observation.environment_state"
+    assert cfg.features["environment_state"].shape == (13,)
+    vec = cfg.create_envs(n_envs=1)["molmo"][0]
+    try:
+        obs, _ = vec.reset(seed=[0])
+        batch = preprocess_observation(obs)
+    finally:
+        vec.close()
+    assert tuple(batch["observation.environment_state"].shape) == (1, 13)
+    assert tuple(batch["observation.state"].shape) == (1, cfg.features["agent_pos"].shape[0])
+
+
 @pytest.mark.slow
 def test_lerobot_eval_matches_molmo_eval_per_episode(tmp_path):
     """ACT trained for 2 steps on a record=true run: lerobot-eval (any-step success, LeRobot's

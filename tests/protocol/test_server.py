@@ -61,7 +61,8 @@ def client(server, **kw) -> PolicyClient:
 
 def test_metadata_first_then_actions_per_client_state(server):
     a, b = client(server), client(server)
-    assert a.connect() == {"policy": "counting", "needs_images": True, "batched": False}
+    assert a.connect() == {"policy": "counting", "needs_images": True, "needs_environment_state": False,
+                           "batched": False}
     b.connect()
     for _ in range(3):
         out = a.infer(OBS)

@@ -120,6 +120,10 @@ def test_recorded_only_when_asked_and_a_state_policy_gets_it(tmp_path):
     assert res.summary["n_errors"] == 0
     policy_feats = json.loads((tmp_path / "policy" / "dataset" / "meta" / "info.json").read_text())["features"]
     assert policy_feats[ENV_STATE]["names"] == NAMES  # the recording holds what the policy saw
+    served = run_evaluation(compose([f"policy.path={act}", "policy=lerobot", "policy.device=cpu", *args[:-2],
+                                     "policy.serve=true", "progress=false", f"output_dir={tmp_path / 'served'}"]))
+    assert served.summary["n_errors"] == 0  # the served policy is sent the state too
+    assert [e.success for e in served.episodes] == [e.success for e in res.episodes]
     run_evaluation(compose(["policy=scripted", *args, f"output_dir={tmp_path / 'off'}"]))
     assert ENV_STATE not in json.loads((tmp_path / "off" / "dataset" / "meta" / "info.json").read_text())["features"]
 

@@ -68,6 +68,8 @@ class RemotePolicy(Policy):
                              f"{sorted(metadata)[:8]}); for an openpi server use policy=pi0")
         self.served = str(metadata.get("policy"))
         self.needs_images = bool(metadata.get("needs_images", True))
+        #: a served policy trained on ``observation.environment_state`` gets it sent, as in process
+        self.needs_environment_state = bool(metadata.get("needs_environment_state", False))
         self._connects = -1
 
     def reset(self, ctx: EpisodeContext) -> None:

@@ -176,6 +176,8 @@ class PolicyServer:
                                     "served; run it in the evaluation process instead (molmo-eval policy=…)")
         self.batching = self.max_batch > 1 and bool(getattr(self._proto, "batched", False))
         self.metadata.setdefault("needs_images", bool(getattr(self._proto, "needs_images", True)))
+        self.metadata.setdefault("needs_environment_state", bool(getattr(self._proto, "needs_environment_state",
+                                                                         False)))
         self.metadata.setdefault("batched", self.batching)
         self._infer_slots = asyncio.Semaphore(self.max_concurrency)
         self._stop = asyncio.Event()

@@ -7,7 +7,9 @@ benchmark directory). Observation and action features are named as in our ``reco
 ``lerobot-train`` on such a dataset evaluates here without mapping flags. ``--seed=0`` runs the
 benchmark's episodes in order; ``--seed=S`` starts at episode ``S mod N`` (see
 ``molmo_lerobot.gym_env``). LeRobot's ``pc_success`` counts an episode as a success if any step
-succeeded: that is ``success_once`` in ``molmo-eval``'s episodes.jsonl.
+succeeded: that is ``success_once`` in ``molmo-eval``'s episodes.jsonl. ``--env.environment_state=true``
+adds the task's ground truth as ``observation.environment_state`` (what ``record_environment_state=true``
+records and ``molmo-eval`` passes to a policy trained on it).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from typing import Any
 from lerobot.configs.types import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
 
-from molmo_lerobot.features import ACTION, STATE, image_feature
+from molmo_lerobot.features import ACTION, ENV_STATE, ENV_STATE_KEY, STATE, image_feature
 
 
 @EnvConfig.register_subclass("molmo")
@@ -32,6 +34,8 @@ class MolmoEnvConfig(EnvConfig):
     #: policy steps per episode (default: as molmo-eval resolves it per task)
     horizon: int | None = None
     end_on_success: bool = False
+    #: add ``environment_state`` (-> ``observation.environment_state``) to every observation
+    environment_state: bool = False
     timing: dict[str, float] = field(default_factory=dict)
     features: dict[str, PolicyFeature] = field(default_factory=dict)
     features_map: dict[str, str] = field(default_factory=dict)
@@ -48,6 +52,9 @@ class MolmoEnvConfig(EnvConfig):
         self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(fmap.action_dim,)),
                          "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(fmap.state_dim,))}
         self.features_map = {ACTION: ACTION, "agent_pos": STATE}
+        if fmap.env_state_names:
+            self.features[ENV_STATE_KEY] = PolicyFeature(type=FeatureType.ENV, shape=(len(fmap.env_state_names),))
+            self.features_map[ENV_STATE_KEY] = ENV_STATE
         for cam, shape in fmap.camera_shapes.items():
             key = f"pixels/{cam}"
             self.features[key] = PolicyFeature(type=FeatureType.VISUAL, shape=shape)
@@ -56,7 +63,8 @@ class MolmoEnvConfig(EnvConfig):
     @property
     def gym_kwargs(self) -> dict[str, Any]:
         return {"benchmark": self.task, "run_seed": self.run_seed, "horizon": self.horizon,
-                "end_on_success": self.end_on_success, "timing": dict(self.timing) or None}
+                "end_on_success": self.end_on_success, "timing": dict(self.timing) or None,
+                "environment_state": self.environment_state}
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, Any]]:
         """One vector env of ``n_envs`` copies (a benchmark path is no valid gym id, so no ``gym.make``)."""
