@@ -8,7 +8,9 @@ ratio of served+batched(shm) to in process, excluding start-up (episode time onl
 Outcomes are asserted identical per episode across the modes; nothing is asserted about speed.
 
 ``pytest -m perf -s tests/perf/test_serving_throughput.py``; knobs: ``MOLMO_PERF_WORKERS``
-(1,2,4), ``MOLMO_PERF_EPISODES`` (8), ``MOLMO_PERF_HORIZON`` (30 steps), ``MOLMO_PERF_DEVICE``
+(1,2,4), ``MOLMO_PERF_EPISODES`` (8; past pick_v1's 60 a pick benchmark of that many episodes is
+generated, 10 houses as pick_v1, so ``MOLMO_PERF_EPISODES=200`` gives the issue's 200-episode figure),
+``MOLMO_PERF_HORIZON`` (30 steps), ``MOLMO_PERF_DEVICE``
 (auto: cuda when present), ``MOLMO_PERF_BATCH_TIMEOUT_MS``, ``MOLMO_PERF_MODES`` (all; a comma
 list of the mode names below). Rows are appended to ``runs/perf.jsonl``.
 """
@@ -27,6 +29,7 @@ pytest.importorskip("torch")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
 from test_lerobot_policy import save_tiny_act
 
+from molmo_lerobot.benchmark.generate import generate_benchmark, write_benchmark
 from molmo_lerobot.config import compose
 from molmo_lerobot.runner.evaluate import run_evaluation
 from molmo_lerobot.serving.run_server import STATS_FILE
@@ -46,17 +49,29 @@ MODES = {
     "served+batched(shm)": [*_BATCHED, "policy.serve_transport=shm"],
 }
 SELECTED = os.environ.get("MOLMO_PERF_MODES", ",".join(MODES)).split(",")
+PICK_V1_EPISODES = 60
+
+
+def _pick_benchmark(tmp_path: Path) -> list[str]:
+    """pick_v1, or a pick benchmark from pick_v1's generator and seed with 10 houses x ceil(EPISODES / 10)
+    episodes when EPISODES exceed pick_v1 (``limit`` then takes the first EPISODES)."""
+    if EPISODES <= PICK_V1_EPISODES:
+        return ["benchmark=pick_v1"]
+    episodes, meta = generate_benchmark("pick", 10, -(-EPISODES // 10), 0, "pick_perf")
+    return ["benchmark=pick_v1", "benchmark.name=pick_perf",
+            f"benchmark.path={write_benchmark(tmp_path / 'pick_perf', episodes, meta)}"]
 
 
 def test_throughput_in_process_vs_served_vs_batched(tmp_path):
     act = save_tiny_act(tmp_path / "act", image_hw=(224, 224))
+    benchmark = _pick_benchmark(tmp_path)
     rows, outcomes = [], {}
     for workers in WORKERS:
         for mode in ["in-process", *(m for m in SELECTED if m != "in-process")]:
             extra = MODES[mode]
             out = tmp_path / f"{re.sub(r'[^a-z]+', '-', mode)}{workers}"
             cfg = compose(["policy=lerobot", f"policy.path={act}", f"policy.device={DEVICE}", "policy.mode=chunk",
-                           "+policy.cameras.exterior=observation.images.front", "benchmark=pick_v1",
+                           "+policy.cameras.exterior=observation.images.front", *benchmark,
                            f"limit={EPISODES}", f"horizon={HORIZON}", f"workers={workers}", f"output_dir={out}",
                            "progress=false", *extra])
             res = run_evaluation(cfg)
@@ -71,7 +86,8 @@ def test_throughput_in_process_vs_served_vs_batched(tmp_path):
                          "batch_sizes": stats.get("batch_sizes"), "errors": res.summary["n_errors"]})
     base = {r["workers"]: r for r in rows if r["mode"] == "in-process"}
     one = base[WORKERS[0]]["eps_per_min"]
-    print(f"\ntiny ACT on pick_v1, {EPISODES} episodes x {HORIZON} steps, device={DEVICE}, "
+    name = "pick_v1" if len(benchmark) == 1 else "a generated pick benchmark"
+    print(f"\ntiny ACT on {name}, {EPISODES} episodes x {HORIZON} steps, device={DEVICE}, "
           f"batch timeout {BATCH_TIMEOUT_MS or 'default'} ms")
     print(f"{'mode':>19} {'workers':>7} {'wall s':>8} {'eps/min':>8} {'excl. start':>11} {'vs in-proc':>10} "
           f"{'excl. vs':>8} {'vs w=1':>7}  batch sizes (size: batches)")
