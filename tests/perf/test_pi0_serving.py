@@ -40,11 +40,12 @@ import pytest
 
 pytest.importorskip("torch")
 pytest.importorskip("transformers")
+from perf_rows import run_rates
+
 from molmo_lerobot.config import compose
 from molmo_lerobot.cpu_threads import cap_threads
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.runner.evaluate import run_evaluation
-from molmo_lerobot.serving.run_server import STATS_FILE
 from molmo_pi0.plugin import make_pi0_policy
 from molmo_pi0.random_init import save_random_pi0
 
@@ -131,14 +132,8 @@ def _throughput_rows(path: str, tmp_path: Path) -> list[dict]:
                        "benchmark=pick_v1", f"limit={EPISODES}", f"horizon={HORIZON}", f"workers={WORKERS}",
                        f"output_dir={out}", "progress=false", *extra])
         res = run_evaluation(cfg)
-        wall = res.summary["wall_time_s"]
-        busy = sum(e.duration_s or 0.0 for e in res.episodes) / WORKERS
-        stats = json.loads((out / STATS_FILE).read_text()) if (out / STATS_FILE).exists() else {}
-        rows.append({"mode": mode, "workers": WORKERS, "episodes": len(res.episodes), "wall_s": round(wall, 2),
-                     "eps_per_min": round(60 * len(res.episodes) / wall, 2),
-                     "eps_per_min_excl_startup": round(60 * len(res.episodes) / busy, 2) if busy else None,
-                     "requests": stats.get("served"), "batch_sizes": stats.get("batch_sizes"),
-                     "errors": res.summary["n_errors"]})
+        row, stats = run_rates(res, WORKERS, out)
+        rows.append({"mode": mode, **row, "requests": stats.get("served"), "batch_sizes": stats.get("batch_sizes")})
     return rows
 
 

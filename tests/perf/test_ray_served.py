@@ -41,11 +41,11 @@ import pytest
 
 pytest.importorskip("torch")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
+from perf_rows import run_rates
 from test_lerobot_policy import save_tiny_act
 
 from molmo_lerobot.config import compose
 from molmo_lerobot.runner.evaluate import run_evaluation
-from molmo_lerobot.serving.run_server import STATS_FILE
 
 pytestmark = pytest.mark.perf
 EPISODES = int(os.environ.get("MOLMO_PERF_EPISODES", "8"))
@@ -124,18 +124,12 @@ def test_ray_per_node_servers_vs_one_box(two_nodes, tmp_path):
         res = run_evaluation(cfg)
         head_cpu = _cpu_self() - cpu0
         outcomes[mode] = [(e.episode_index, e.success, e.success_once, e.steps, e.error) for e in res.episodes]
-        wall = res.summary["wall_time_s"]
-        busy = sum(e.duration_s or 0.0 for e in res.episodes) / workers
-        stats = json.loads((out / STATS_FILE).read_text()) if (out / STATS_FILE).exists() else {}
+        row, stats = run_rates(res, workers, out)
         per_node = ({nid[:8]: {"served": s["served"], "batch_sizes": s["batch_sizes"]}
                      for nid, s in stats["nodes"].items()} if "nodes" in stats else None)
-        rows.append({"mode": mode, "workers": workers, "episodes": len(res.episodes), "wall_s": round(wall, 2),
-                     "eps_per_min": round(60 * len(res.episodes) / wall, 2),
-                     "eps_per_min_excl_startup": round(60 * len(res.episodes) / busy, 2) if busy else None,
-                     "head_cpu_ms_per_episode": round(1000 * head_cpu / len(res.episodes), 1),
+        rows.append({"mode": mode, **row, "head_cpu_ms_per_episode": round(1000 * head_cpu / len(res.episodes), 1),
                      "dataset_bytes_per_episode": _dataset_bytes(out, len(res.episodes)),
-                     "batch_sizes": stats.get("batch_sizes"), "per_node": per_node,
-                     "errors": res.summary["n_errors"]})
+                     "batch_sizes": stats.get("batch_sizes"), "per_node": per_node})
         if sizes is None:
             sizes = _bytes_per_episode(cfg, res)
     base = rows[0]["eps_per_min"]

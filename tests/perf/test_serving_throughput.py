@@ -27,12 +27,12 @@ import pytest
 
 pytest.importorskip("torch")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
+from perf_rows import run_rates
 from test_lerobot_policy import save_tiny_act
 
 from molmo_lerobot.benchmark.generate import generate_benchmark, write_benchmark
 from molmo_lerobot.config import compose
 from molmo_lerobot.runner.evaluate import run_evaluation
-from molmo_lerobot.serving.run_server import STATS_FILE
 
 pytestmark = pytest.mark.perf
 WORKERS = [int(w) for w in os.environ.get("MOLMO_PERF_WORKERS", "1,2,4").split(",")]
@@ -77,13 +77,8 @@ def test_throughput_in_process_vs_served_vs_batched(tmp_path):
             res = run_evaluation(cfg)
             outcomes[(mode, workers)] = [(e.episode_index, e.success, e.success_once, e.steps, e.error)
                                          for e in res.episodes]
-            wall = res.summary["wall_time_s"]
-            busy = sum(e.duration_s or 0.0 for e in res.episodes) / workers
-            stats = json.loads((out / STATS_FILE).read_text()) if (out / STATS_FILE).exists() else {}
-            rows.append({"mode": mode, "workers": workers, "episodes": len(res.episodes), "wall_s": round(wall, 2),
-                         "eps_per_min": round(60 * len(res.episodes) / wall, 2),
-                         "eps_per_min_excl_startup": round(60 * len(res.episodes) / busy, 2) if busy else None,
-                         "batch_sizes": stats.get("batch_sizes"), "errors": res.summary["n_errors"]})
+            row, stats = run_rates(res, workers, out)
+            rows.append({"mode": mode, **row, "batch_sizes": stats.get("batch_sizes")})
     base = {r["workers"]: r for r in rows if r["mode"] == "in-process"}
     one = base[WORKERS[0]]["eps_per_min"]
     name = "pick_v1" if len(benchmark) == 1 else "a generated pick benchmark"
