@@ -1,5 +1,6 @@
-"""What every throughput table under tests/perf/ reports for one run: wall-clock and start-up-free
-episode rates, and the policy server's statistics when the run served its policy."""
+"""What the throughput tables under tests/perf/ share: a run's wall-clock and start-up-free episode
+rates, the policy server's statistics when the run served its policy, and appending rows to
+``runs/perf.jsonl``."""
 
 from __future__ import annotations
 
@@ -22,3 +23,11 @@ def run_rates(res: Any, workers: int, out: Path) -> tuple[dict[str, Any], dict[s
     return {"workers": workers, "episodes": n, "wall_s": round(wall, 2), "eps_per_min": round(60 * n / wall, 2),
             "eps_per_min_excl_startup": round(60 * n / busy, 2) if busy else None,
             "errors": res.summary["n_errors"]}, stats
+
+
+def append_rows(benchmark: str, rows: list[dict[str, Any]], **common: Any) -> None:
+    """Append each row to ``runs/perf.jsonl`` as ``{"benchmark": benchmark, **common, **row}``."""
+    Path("runs").mkdir(exist_ok=True)
+    with open("runs/perf.jsonl", "a") as f:
+        for r in rows:
+            f.write(json.dumps({"benchmark": benchmark, **common, **r}) + "\n")

@@ -28,7 +28,6 @@ requests of 8 actions). Needs ``molmo-pi0[inprocess]`` (transformers). Rows are 
 
 from __future__ import annotations
 
-import json
 import os
 import resource
 import statistics
@@ -40,7 +39,7 @@ import pytest
 
 pytest.importorskip("torch")
 pytest.importorskip("transformers")
-from perf_rows import run_rates
+from perf_rows import append_rows, run_rates
 
 from molmo_lerobot.config import compose
 from molmo_lerobot.cpu_threads import cap_threads
@@ -161,11 +160,7 @@ def test_pi0_latency_memory_and_served_throughput(tmp_path):
         print(f"{r['mode']:>15} {r['wall_s']:>8.1f} {r['eps_per_min']:>8.2f} "
               f"{r['eps_per_min_excl_startup'] or 0:>11.2f} "
               f"{r['eps_per_min'] / throughput[0]['eps_per_min']:>9.2f}  {r['batch_sizes'] or '-'}")
-    Path("runs").mkdir(exist_ok=True)
     common = {"policy": KIND, "size": SIZE, "dtype": DTYPE, "device_requested": DEVICE}
-    with open("runs/perf.jsonl", "a") as f:
-        for r in latency:
-            f.write(json.dumps({"benchmark": "pi0_serving_latency", **common, **r}) + "\n")
-        for r in throughput:
-            f.write(json.dumps({"benchmark": "pi0_serving_throughput", **common, "horizon": HORIZON, **r}) + "\n")
+    append_rows("pi0_serving_latency", latency, **common)
+    append_rows("pi0_serving_throughput", throughput, **common, horizon=HORIZON)
     assert all(r["errors"] == 0 for r in throughput)

@@ -41,7 +41,7 @@ import pytest
 
 pytest.importorskip("torch")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
-from perf_rows import run_rates
+from perf_rows import append_rows, run_rates
 from test_lerobot_policy import save_tiny_act
 
 from molmo_lerobot.config import compose
@@ -141,11 +141,8 @@ def test_ray_per_node_servers_vs_one_box(two_nodes, tmp_path):
         print(f"{r['mode']:>21} {r['workers']:>7} {r['wall_s']:>7.1f} {r['eps_per_min']:>8.2f} "
               f"{r['eps_per_min_excl_startup'] or 0:>11.2f} {r['eps_per_min'] / base:>7.2f} "
               f"{r['head_cpu_ms_per_episode']:>10.1f}  {r['per_node'] or r['batch_sizes'] or '-'}")
-    Path("runs").mkdir(exist_ok=True)
-    with open("runs/perf.jsonl", "a") as f:
-        for r in rows:
-            f.write(json.dumps({"benchmark": "ray_served", "horizon": HORIZON, "cluster_start_s": round(cluster_s, 2),
-                                "bytes_to_workers": sizes[0], "bytes_from_workers": sizes[1], **r}) + "\n")
+    append_rows("ray_served", rows, horizon=HORIZON, cluster_start_s=round(cluster_s, 2), bytes_to_workers=sizes[0],
+                bytes_from_workers=sizes[1])
     reference = outcomes["local in-process"]
     assert all(o == reference for o in outcomes.values()), "per-episode outcomes differ between modes"
     assert all(r["errors"] == 0 for r in rows)
@@ -179,7 +176,4 @@ def test_head_cost_per_episode(two_nodes, tmp_path):
     print(f"\nhead CPU per episode, ray 2 nodes, random policy served, {HORIZON} steps:")
     for r in rows:
         print(json.dumps(r))
-    Path("runs").mkdir(exist_ok=True)
-    with open("runs/perf.jsonl", "a") as f:
-        for r in rows:
-            f.write(json.dumps({"benchmark": "ray_served_head_cost", "horizon": HORIZON, **r}) + "\n")
+    append_rows("ray_served_head_cost", rows, horizon=HORIZON)

@@ -17,7 +17,6 @@ list of the mode names below). Rows are appended to ``runs/perf.jsonl``.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import sys
@@ -27,7 +26,7 @@ import pytest
 
 pytest.importorskip("torch")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
-from perf_rows import run_rates
+from perf_rows import append_rows, run_rates
 from test_lerobot_policy import save_tiny_act
 
 from molmo_lerobot.benchmark.generate import generate_benchmark, write_benchmark
@@ -94,10 +93,7 @@ def test_throughput_in_process_vs_served_vs_batched(tmp_path):
         print(f"{r['mode']:>19} {r['workers']:>7} {r['wall_s']:>8.1f} {r['eps_per_min']:>8.2f} "
               f"{r['eps_per_min_excl_startup'] or 0:>11.2f} {r['vs_in_process_wall']:>10.2f} "
               f"{r['vs_in_process_excl_startup'] or 0:>8.2f} {r['eps_per_min'] / one:>7.2f}  {r['batch_sizes'] or '-'}")
-    Path("runs").mkdir(exist_ok=True)
-    with open("runs/perf.jsonl", "a") as f:
-        for r in rows:
-            f.write(json.dumps({"benchmark": "serving_throughput", "horizon": HORIZON, "device": DEVICE, **r}) + "\n")
+    append_rows("serving_throughput", rows, horizon=HORIZON, device=DEVICE)
     reference = outcomes[("in-process", WORKERS[0])]
     assert all(o == reference for o in outcomes.values()), "per-episode outcomes differ between modes"
     assert all(r["errors"] == 0 for r in rows)

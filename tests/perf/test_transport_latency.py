@@ -10,15 +10,14 @@ their ratio; nothing is asserted about speed.
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
+from perf_rows import append_rows
 
 from molmo_lerobot.protocol import shm
 from molmo_lerobot.protocol.client import PolicyClient
@@ -92,8 +91,4 @@ def test_round_trip_websocket_vs_shared_memory():
         print(f"{name:>10}: median {rows[-1]['median_us']:8.1f} us   p90 {rows[-1]['p90_us']:8.1f} us")
     ratio = rows[0]["median_us"] / rows[1]["median_us"]
     print(f"websocket / shm (median): {ratio:.2f}x")
-    Path("runs").mkdir(exist_ok=True)
-    with open("runs/perf.jsonl", "a") as f:
-        for r in rows:
-            f.write(json.dumps({"benchmark": "transport_latency", "image_side": SIDE, "cameras": CAMERAS,
-                                "requests": REQUESTS, **r}) + "\n")
+    append_rows("transport_latency", rows, image_side=SIDE, cameras=CAMERAS, requests=REQUESTS)
