@@ -40,7 +40,7 @@ def validate_repo_id(repo_id: str) -> str:
     from huggingface_hub.utils import HFValidationError
     from huggingface_hub.utils import validate_repo_id as hf_validate
 
-    from molmo_lerobot.assets.namespaces import parse_dataset_id
+    from molmo_lerobot.namespaces import parse_dataset_id
 
     try:
         namespace, _ = parse_dataset_id(repo_id)
