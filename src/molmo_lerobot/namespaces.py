@@ -29,6 +29,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import posixpath
 import re
 import shutil
 import uuid
@@ -89,7 +90,7 @@ def namespace_hierarchy(namespace: str | None) -> Iterator[str]:
         return
     parts = namespace.split("/")
     for i in range(len(parts)):
-        yield "/".join(parts[: i + 1])
+        yield posixpath.join(*parts[: i + 1])  # as Minari's os.path.join (``/ab`` gives ``""``, ``ab``)
 
 
 def is_dataset_dir(path: Path) -> bool:
