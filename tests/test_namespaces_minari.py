@@ -114,7 +114,8 @@ def _run_sequences(tmp_path, monkeypatch, seeds: range) -> None:
                                                       if k or v is not None}, (seq, op, args)
         shutil.rmtree(mroot, ignore_errors=True)
         shutil.rmtree(oroot, ignore_errors=True)
-    print(f"\nminari differential: {sum(counts.values())} calls in {len(seeds)} sequences: {dict(sorted(counts.items()))}; "
+    print(f"\nminari differential: {sum(counts.values())} calls in {len(seeds)} sequences: "
+          f"{dict(sorted(counts.items()))}; "
           f"outcomes {dict(outcomes)}")
     assert all(counts[op] > len(seeds) for op in calls)
     assert outcomes["raise"] > 10 * len(seeds) and outcomes["warn"] > len(seeds)

@@ -131,7 +131,8 @@ class DatasetStore:
         return None
 
     def is_namespace(self, namespace: str) -> bool:
-        return (self.path(namespace) / NAMESPACE_METADATA_FILENAME).is_file() and self._inside_dataset(namespace) is None
+        metadata = self.path(namespace) / NAMESPACE_METADATA_FILENAME
+        return metadata.is_file() and self._inside_dataset(namespace) is None
 
     def is_dataset(self, dataset_id: str) -> bool:
         parse_dataset_id(dataset_id)
@@ -384,7 +385,8 @@ class HubRemote:
         local = (store.path(namespace) / NAMESPACE_METADATA_FILENAME).read_bytes()
         ops = []
         if path_in_repo:
-            ops.append(CommitOperationAdd(NAMESPACE_METADATA_FILENAME, self._registered(repo_id, "namespaces", namespace)))
+            registered = self._registered(repo_id, "namespaces", namespace)
+            ops.append(CommitOperationAdd(NAMESPACE_METADATA_FILENAME, registered))
         ops.append(CommitOperationAdd(_join(path_in_repo, NAMESPACE_METADATA_FILENAME), local))
         self.api.create_commit(repo_id, ops, repo_type="dataset", commit_message=f"namespace {namespace}")
 
@@ -402,7 +404,8 @@ class HubRemote:
                for rel, entry in sorted(fileio.walk(source).items())
                if entry[0] == "f" and not any(p.startswith(".") for p in rel.split("/"))]
         if path_in_repo and self._read_json(repo_id, NAMESPACE_METADATA_FILENAME) is not None:
-            ops.append(CommitOperationAdd(NAMESPACE_METADATA_FILENAME, self._registered(repo_id, "datasets", dataset_id)))
+            registered = self._registered(repo_id, "datasets", dataset_id)
+            ops.append(CommitOperationAdd(NAMESPACE_METADATA_FILENAME, registered))
         commit = self.api.create_commit(repo_id, ops, repo_type="dataset", commit_message=f"dataset {dataset_id}")
         with contextlib.suppress(RevisionNotFoundError):
             self.api.delete_tag(repo_id, tag=CODEBASE_VERSION, repo_type="dataset")
@@ -412,7 +415,8 @@ class HubRemote:
         repo_id, path_in_repo = self._repo(namespace)
         data = self._read_json(repo_id, _join(path_in_repo, NAMESPACE_METADATA_FILENAME))
         if data is None:
-            raise NamespaceError(f"namespace {namespace!r} has no {NAMESPACE_METADATA_FILENAME} in {repo_id} on the Hub")
+            raise NamespaceError(f"namespace {namespace!r} has no {NAMESPACE_METADATA_FILENAME} in {repo_id} "
+                                 "on the Hub")
         store._write(f"{namespace}/{NAMESPACE_METADATA_FILENAME}", _dump(data))
 
     def download_dataset(self, dataset_id: str, store: DatasetStore) -> Path:
