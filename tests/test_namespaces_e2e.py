@@ -59,7 +59,8 @@ def test_a_recording_goes_into_its_namespace_and_loads(store, tmp_path):
 def test_bad_dataset_ids_are_one_line_before_any_run(store, bad):
     with pytest.raises(RunConfigError) as err:
         RunConfig.of(compose([*TINY, f"dataset_id={bad}"]))
-    assert len(err.value.problems) == 1 and err.value.problems[0].startswith(f"dataset_id: malformed dataset id {bad!r}")
+    (line,) = err.value.problems
+    assert line.startswith(f"dataset_id: malformed dataset id {bad!r}")
 
 
 def test_molmo_eval_refuses_a_bad_dataset_id_with_one_line_and_exit_2(store, tmp_path):
@@ -91,13 +92,18 @@ def test_two_runs_recorded_listed_pushed_pulled_and_loaded(store, tmp_path, hub_
     assert "namespace  molmo/evals/pick_v1" in listed
     remote = subprocess.run([*cli, "list", "--remote", "hf://molmo-test"], capture_output=True, text=True, env=env,
                             check=True).stdout.splitlines()
-    assert remote == ["# hf://molmo-test", "namespace  molmo", "namespace  molmo/evals", "namespace  molmo/evals/pick_v1",
+    assert remote == ["# hf://molmo-test", "namespace  molmo", "namespace  molmo/evals",
+                      "namespace  molmo/evals/pick_v1",
                       "dataset    molmo/evals/pick_v1/random", "dataset    molmo/evals/pick_v1/scripted"]
     # runs are found again by their dataset ids
     compare = subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.compare", "molmo/evals/pick_v1/scripted",
                               "molmo/evals/pick_v1/random", "--json"], capture_output=True, text=True, env=env)
     assert compare.returncode == 0, compare.stderr
     assert json.loads(compare.stdout)["n_shared"] == 1
+    # resume finds the run by its dataset id and replaces its own recording in the store and on the Hub
+    again = run_evaluation(compose([*TINY, "resume=true", "dataset_id=molmo/evals/pick_v1/scripted", "push=true",
+                                    "hub.remote=hf://molmo-test"]))
+    assert again.output_dir.resolve() == runs["scripted"].resolve() and again.summary["push"]["ok"]
     # a fresh home: namespace metadata, then both datasets pulled and loaded
     monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(tmp_path / "fresh"))
     monkeypatch.setenv("MOLMO_DATASETS_REMOTE", "hf://molmo-test")

@@ -5,6 +5,7 @@ class, warning) and leave the same files. Minari writes under ``MINARI_DATASETS_
 
 from __future__ import annotations
 
+import json
 import random
 import warnings
 from collections import Counter
@@ -147,3 +148,34 @@ def test_deliberate_differences(tmp_path, monkeypatch):
     (tmp_path / "o" / "ns" / "ds" / "meta" / "info.json").write_text("{}")
     with pytest.raises(ours.NamespaceError, match="collides with the dataset 'ns/ds'"):
         ours.create_namespace("ns/ds")
+
+
+def test_the_hub_layout_is_minaris(tmp_path, monkeypatch, hub_standin):
+    """Minari's own Hugging Face storage and ours upload the same nested namespaces (parents first) to the
+    Hub stand-in: the same repos, files and namespace metadata; each lists the other's namespaces."""
+    def repos(owner):  # read from the stand-in's store: Minari writes into the client's cached files
+        out = {}
+        for (kind, repo_id), repo in hub_standin.repos.items():
+            if kind == "dataset" and repo_id.startswith(owner + "/"):
+                for path, (sha256, *_) in repo.files("main").items():
+                    data = json.loads(hub_standin.blob(sha256).read_bytes())
+                    out[(repo_id.split("/", 1)[1], path)] = {k: sorted(v) if isinstance(v, list) else v
+                                                             for k, v in data.items()}
+        return out
+
+    for env, root in (("MINARI_DATASETS_PATH", tmp_path / "m"), ("MOLMO_DATASETS_PATH", tmp_path / "o")):
+        monkeypatch.setenv(env, str(root))
+    for create in (minari_ns.create_namespace, ours.create_namespace):
+        create("molmo/evals/pick", description="pick runs", owner="me")
+        create("molmo/other")
+        create("solo_ns", description="top only")
+    monkeypatch.setenv("MINARI_REMOTE", "hf://minari-side")
+    monkeypatch.setenv("MOLMO_DATASETS_REMOTE", "hf://ours-side")
+    for namespace in ("molmo/evals/pick", "molmo/other", "solo_ns"):
+        minari_ns.upload_namespace(namespace, token="unused")
+        ours.upload_namespace(namespace)
+    assert repos("ours-side") == repos("minari-side") and len(repos("ours-side")) == 5
+    assert sorted(ours.list_remote_namespaces()) == sorted(minari_ns.list_remote_namespaces())
+    monkeypatch.setenv("MOLMO_DATASETS_REMOTE", "hf://minari-side")  # ours reads what Minari uploaded
+    assert sorted(ours.list_remote_namespaces()) == ["molmo", "molmo/evals", "molmo/evals/pick", "molmo/other",
+                                                     "solo_ns"]
