@@ -133,3 +133,33 @@ def test_hub_namespaces_and_datasets_round_trip(home, tmp_path, hub_standin, mon
     assert not [p for p in clean.root.iterdir() if p.name.startswith(".")]
     with pytest.raises(NamespaceError, match="'molmo/nope' is not on the Hub"):
         ns.download_namespace_metadata("molmo/nope")
+
+
+def test_molmo_datasets_cli(tmp_path, capsys, monkeypatch):
+    from molmo_lerobot.cli.datasets import main
+
+    monkeypatch.delenv("MOLMO_DATASETS_REMOTE", raising=False)
+    monkeypatch.delenv("MOLMO_DATASETS_PATH", raising=False)
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["--help"])
+    assert exit_.value.code == 0 and "molmo-datasets" in capsys.readouterr().out  # argparse, no Hydra
+    root = ["--root", str(tmp_path / "store")]
+    assert main([*root, "create", "molmo/evals", "--description", "eval runs", "--set", "n=3"]) == 0
+    assert main([*root, "show", "molmo/evals"]) == 0
+    assert json.loads(capsys.readouterr().out) == {"n": 3, "description": "eval runs"}
+    _fake_dataset(tmp_path / "store" / "molmo" / "evals" / "run-a")
+    assert main([*root, "list"]) == 0
+    assert capsys.readouterr().out.splitlines()[1:] == ["namespace  molmo", "namespace  molmo/evals",
+                                                        "dataset    molmo/evals/run-a"]
+    assert main([*root, "delete", "molmo/evals"]) == 2
+    assert capsys.readouterr().err == ("molmo-datasets: error: namespace 'molmo/evals' is not empty (it holds "
+                                       "run-a); delete its datasets and namespaces first\n")
+    assert main([*root, "delete-dataset", "molmo/evals/run-a"]) == 0
+    assert main([*root, "delete", "molmo/evals"]) == 0
+    assert main([*root, "delete", "molmo/evals"]) == 0
+    assert capsys.readouterr().err == "molmo-datasets: warning: namespace 'molmo/evals' does not exist in " \
+                                      f"{tmp_path / 'store'}\n"
+    assert main([*root, "update", "x"]) == 2
+    assert main([*root, "push", "molmo"]) == 2  # no remote configured
+    assert "no remote" in capsys.readouterr().err

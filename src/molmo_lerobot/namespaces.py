@@ -319,14 +319,14 @@ def _join(*parts: str) -> str:
 class HubRemote:
     """Namespaces and datasets of the Hub user or organisation ``owner`` (the remote ``hf://<owner>``)."""
 
-    def __init__(self, owner: str, token: str | None = None) -> None:
+    def __init__(self, owner: str, token: str | None = None, private: bool = False) -> None:
         from huggingface_hub import HfApi
 
-        self.owner = owner
+        self.owner, self.private = owner, private  # ``private``: repos this remote creates
         self.api = HfApi(token=token)
 
     @classmethod
-    def from_remote(cls, remote: str | None = None, token: str | None = None) -> HubRemote:
+    def from_remote(cls, remote: str | None = None, token: str | None = None, private: bool = False) -> HubRemote:
         """``remote`` (``hf://<owner>``), else ``$MOLMO_DATASETS_REMOTE``."""
         remote = remote or os.environ.get("MOLMO_DATASETS_REMOTE")
         if not remote:
@@ -334,7 +334,7 @@ class HubRemote:
         kind, _, owner = remote.partition("://")
         if kind != "hf" or not owner or "/" in owner:
             raise NamespaceError(f"remote {remote!r}: expected hf://<user or org>")
-        return cls(owner, token)
+        return cls(owner, token, private)
 
     def _repo(self, ident: str) -> tuple[str, str]:
         top, rest = _decompose(ident)
@@ -381,7 +381,7 @@ class HubRemote:
         from huggingface_hub import CommitOperationAdd
 
         repo_id, path_in_repo = self._repo(namespace)
-        self.api.create_repo(repo_id, repo_type="dataset", exist_ok=True)
+        self.api.create_repo(repo_id, repo_type="dataset", private=self.private, exist_ok=True)
         local = (store.path(namespace) / NAMESPACE_METADATA_FILENAME).read_bytes()
         ops = []
         if path_in_repo:
@@ -399,7 +399,7 @@ class HubRemote:
 
         repo_id, path_in_repo = self._repo(dataset_id)
         source = store.path(dataset_id)
-        self.api.create_repo(repo_id, repo_type="dataset", exist_ok=True)
+        self.api.create_repo(repo_id, repo_type="dataset", private=self.private, exist_ok=True)
         ops = [CommitOperationAdd(_join(path_in_repo, rel), str(source / rel))
                for rel, entry in sorted(fileio.walk(source).items())
                if entry[0] == "f" and not any(p.startswith(".") for p in rel.split("/"))]
@@ -514,14 +514,14 @@ def upload_namespace(namespace: str, token: str | None = None, *, store: Dataset
 
 
 def upload_dataset(dataset_id: str, token: str | None = None, *, store: DatasetStore | None = None,
-                   remote: str | None = None) -> None:
+                   remote: str | None = None, private: bool = False) -> None:
     """Upload a stored dataset: its namespace chain first (as :func:`upload_namespace`), then the dataset.
     A dataset id already on the Hub is uploaded again (a resumed run's new recording replaces it)."""
     store = store or DatasetStore()
     if not store.is_dataset(dataset_id):
         raise NamespaceError(f"dataset {dataset_id!r} is not in {store.root}")
     namespace, _ = parse_dataset_id(dataset_id)
-    hub = HubRemote.from_remote(remote, token)
+    hub = HubRemote.from_remote(remote, token, private)  # ``private``: the repo, if this creates it
     if namespace is not None:
         remote_namespaces = set(hub.list_namespaces())
         for parent in namespace_hierarchy(namespace):

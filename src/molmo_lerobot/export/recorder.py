@@ -134,7 +134,7 @@ class LeRobotRecorderFactory(RecorderFactory):
     def _store(self, output_dir: Path, root: Path | None, summary: dict[str, Any]) -> None:
         """Copy the dataset into the store as ``dataset_id`` (the run directory keeps its own: ``resume`` and
         the report read it there), then, with ``push=true``, upload it with its namespace chain."""
-        from molmo_lerobot.namespaces import DatasetStore, HubRemote, upload_dataset
+        from molmo_lerobot.namespaces import DatasetStore, upload_dataset
 
         store = DatasetStore(self.store_root)
         if root is None:
@@ -149,8 +149,7 @@ class LeRobotRecorderFactory(RecorderFactory):
         if self.push:
             target = f"{self.remote}/{self.dataset_id}"
             try:
-                HubRemote.from_remote(self.remote)
-                upload_dataset(self.dataset_id, store=store, remote=self.remote)
+                upload_dataset(self.dataset_id, store=store, remote=self.remote, private=self.private)
                 error = None
             except Exception as exc:  # a push must never cost the local results
                 from molmo_lerobot.export.hub import _mask
