@@ -114,6 +114,13 @@ def test_hub_namespaces_and_datasets_round_trip(home, tmp_path, hub_standin, mon
     assert ns.list_remote_datasets() == ["molmo/evals/run-a"]
     with pytest.warns(UserWarning, match="already on the Hub"):
         ns.upload_namespace("molmo/evals")
+    # uploaded again (a resumed run's new recording): the files it no longer has go
+    (store.path("molmo/evals/run-a") / "data" / "file-000.parquet").unlink()
+    (store.path("molmo/evals/run-a") / "data" / "file-001.parquet").write_bytes(b"new")
+    ns.upload_dataset("molmo/evals/run-a")
+    files = {f.rfilename for f in HfApi().dataset_info("molmo-test/molmo").siblings}
+    assert "evals/run-a/data/file-001.parquet" in files and "evals/run-a/data/file-000.parquet" not in files
+    assert "evals/namespace_metadata.json" in files
     # a clean home: one namespace's metadata (only that one, as Minari)
     monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(tmp_path / "clean"))
     ns.download_namespace_metadata("molmo/evals")

@@ -391,9 +391,9 @@ class HubRemote:
         self.api.create_commit(repo_id, ops, repo_type="dataset", commit_message=f"namespace {namespace}")
 
     def upload_dataset(self, dataset_id: str, store: DatasetStore) -> None:
-        """One commit: the dataset's files under its folder and its registration in the repo root; then
-        LeRobot's codebase-version tag on that commit."""
-        from huggingface_hub import CommitOperationAdd
+        """One commit: the dataset's files under its folder (files of an earlier upload that it no longer has
+        deleted) and its registration in the repo root; then LeRobot's codebase-version tag on that commit."""
+        from huggingface_hub import CommitOperationAdd, CommitOperationDelete
         from huggingface_hub.errors import RevisionNotFoundError
         from lerobot.datasets.dataset_metadata import CODEBASE_VERSION
 
@@ -403,6 +403,11 @@ class HubRemote:
         ops = [CommitOperationAdd(_join(path_in_repo, rel), str(source / rel))
                for rel, entry in sorted(fileio.walk(source).items())
                if entry[0] == "f" and not any(p.startswith(".") for p in rel.split("/"))]
+        new = {op.path_in_repo for op in ops}
+        prefix = f"{path_in_repo}/" if path_in_repo else ""
+        ops += [CommitOperationDelete(path) for path in self.api.list_repo_files(repo_id, repo_type="dataset")
+                if path.startswith(prefix) and path not in new and not path.startswith(".")
+                and not (not path_in_repo and path.endswith(NAMESPACE_METADATA_FILENAME))]
         if path_in_repo and self._read_json(repo_id, NAMESPACE_METADATA_FILENAME) is not None:
             registered = self._registered(repo_id, "datasets", dataset_id)
             ops.append(CommitOperationAdd(NAMESPACE_METADATA_FILENAME, registered))
