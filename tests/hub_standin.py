@@ -5,6 +5,7 @@ commits (``{path: blob}``) with branches and tags, blobs stored content-addresse
 directory. It answers what ``HfApi`` / ``hf_hub_download`` / ``snapshot_download`` and
 LeRobot's ``push_to_hub`` / ``LeRobotDataset(repo_id)`` call:
 
+- ``GET /api/{type}s`` (``author``, ``search``: ``HfApi.list_datasets`` & co, one page)
 - ``POST /api/repos/create``, ``DELETE /api/repos/delete``, ``GET /api/agent-harnesses`` (empty),
   ``POST /api/validate-yaml`` (accepts every card)
 - ``GET /api/{type}s/{repo}[/revision/{rev}]`` (repo info with ``sha`` and ``siblings``)
@@ -278,6 +279,11 @@ class _Handler(BaseHTTPRequestHandler):
             hub.repo(body.get("type") or "model", repo_id)
             del hub.repos[(body.get("type") or "model", repo_id)]
             return self._send(200, {})
+        if len(segs) == 1 and segs[0] in REPO_TYPES and self.command == "GET":  # list_datasets(author=, search=)
+            author, search = query.get("author"), query.get("search")
+            return self._send(200, [self._info(r, "main") for (kind, rid), r in sorted(hub.repos.items())
+                                    if kind == REPO_TYPES[segs[0]] and (not author or rid.split("/")[0] == author)
+                                    and (not search or search in rid.split("/", 1)[1])])
         if len(segs) < 3 or segs[0] not in REPO_TYPES:
             raise HubError(404, f"unknown API route /api/{'/'.join(segs)}")
         repo = hub.repo(REPO_TYPES[segs[0]], f"{unquote(segs[1])}/{unquote(segs[2])}")

@@ -231,6 +231,8 @@ ALLOWED = {
     ("runner/forkserver.py", "open(w, 'wb'"): "``w`` is the fork server's pipe to a new worker, not a path",
     ("resources/remotes.py", "shutil.copytree(local_dir, staging)"): "copytree makes the new staging dir "
                                                                      "itself, in a parent fileio made",
+    ("namespaces.py", "shutil.copytree(source, staging / 'dataset'"): "copytree makes the new directory itself, "
+                                                                      "in a staging dir fileio made in the store",
 }
 
 

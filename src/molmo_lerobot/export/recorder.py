@@ -15,6 +15,7 @@ and ``results.json`` into it, and pushes to the Hub when ``push=true``.
 from __future__ import annotations
 
 import logging
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,7 +41,7 @@ def validate_repo_id(repo_id: str) -> str:
     from huggingface_hub.utils import HFValidationError
     from huggingface_hub.utils import validate_repo_id as hf_validate
 
-    from molmo_lerobot.assets.namespaces import parse_dataset_id
+    from molmo_lerobot.namespaces import parse_dataset_id
 
     try:
         namespace, _ = parse_dataset_id(repo_id)
@@ -77,6 +78,11 @@ class LeRobotRecorderFactory(RecorderFactory):
     video: VideoSettings = field(default_factory=VideoSettings)
     #: an expert's recording ends this many steps after its first success (None: the whole rollout)
     hold_steps: int | None = 10
+    #: ``dataset_id=ns/sub/name``: the merged dataset is also copied into the dataset store (``store_root``),
+    #: and ``push=true`` uploads it there with its namespaces (``remote``: ``hf://<owner>``)
+    dataset_id: str | None = None
+    store_root: str | None = None
+    remote: str | None = None
 
     @classmethod
     def from_config(cls, cfg: dict[str, Any]) -> LeRobotRecorderFactory:
@@ -86,7 +92,8 @@ class LeRobotRecorderFactory(RecorderFactory):
         hub = cfg.get("hub") or {}
         push = bool(cfg.get("push"))
         repo_id = hub.get("repo_id")
-        if push and not repo_id:
+        dataset_id, store_root, remote = _store_target(cfg, push)
+        if push and not repo_id and dataset_id is None:
             raise RecordConfigError("push=true needs hub.repo_id=<namespace>/<name>")
         if repo_id:
             validate_repo_id(str(repo_id))
@@ -97,7 +104,8 @@ class LeRobotRecorderFactory(RecorderFactory):
             raise RecordConfigError(f"record_hold_steps: expected a non-negative integer or null, got {hold!r}")
         return cls(repo_id=str(repo_id), policy_dt_ms=float(cfg["timing"]["policy_dt_ms"]), benchmark=bench,
                    policy=policy, push=push, private=bool(hub.get("private", False)),
-                   video=VideoSettings.from_config(cfg.get("video")), hold_steps=hold)
+                   video=VideoSettings.from_config(cfg.get("video")), hold_steps=hold, dataset_id=dataset_id,
+                   store_root=store_root, remote=remote)
 
     @property
     def fps(self) -> int:
@@ -116,10 +124,39 @@ class LeRobotRecorderFactory(RecorderFactory):
 
         quiet_libraries()
         root = merge_shards(Path(output_dir), results, summary, self)
-        if self.push:
+        if self.dataset_id is not None:
+            self._store(Path(output_dir), root, summary)
+        elif self.push:
             error = (push_dataset(root, self.repo_id, private=self.private) if root is not None
                      else "no episode finished without error, so there is no dataset to push")
             summary["push"] = {"repo_id": self.repo_id, "ok": error is None, "error": error}
+
+    def _store(self, output_dir: Path, root: Path | None, summary: dict[str, Any]) -> None:
+        """Copy the dataset into the store as ``dataset_id`` (the run directory keeps its own: ``resume`` and
+        the report read it there), then, with ``push=true``, upload it with its namespace chain."""
+        from molmo_lerobot.namespaces import DatasetStore, upload_dataset
+
+        store = DatasetStore(self.store_root)
+        if root is None:
+            raise RuntimeError(f"dataset_id {self.dataset_id!r}: no episode finished without error, so there is "
+                               "no dataset to store")
+        bench = summary.get("benchmark") or {}
+        store.add_dataset(self.dataset_id, root, {
+            "benchmark": {"name": bench.get("name"), "sha256": bench.get("sha256")}, "policy": self.policy,
+            "success_rate": summary.get("success_rate"), "n_success": summary.get("n_success"),
+            "n_episodes": summary.get("n_episodes"), "run_id": output_dir.resolve().name,
+            "started_at": summary.get("started_at"), "lerobot_repo_id": self.repo_id}, run_dir=output_dir)
+        if self.push:
+            target = f"{self.remote}/{self.dataset_id}"
+            try:
+                upload_dataset(self.dataset_id, store=store, remote=self.remote, private=self.private)
+                error = None
+            except Exception as exc:  # a push must never cost the local results
+                from molmo_lerobot.export.hub import _mask
+
+                error = (_mask(f"{type(exc).__name__}: {exc}").splitlines() or [type(exc).__name__])[0]
+                log.warning("push of %s to %s failed; local files are intact: %s", self.dataset_id, target, error)
+            summary["push"] = {"repo_id": target, "ok": error is None, "error": error}
 
     def missing(self, output_dir: Path, results: list[EpisodeResult]) -> set[int]:
         """Resume: the episodes that finished without error but are neither in ``output_dir/dataset``
@@ -129,6 +166,31 @@ class LeRobotRecorderFactory(RecorderFactory):
 
         stored = stored_episodes(Path(output_dir), results)
         return {r.episode_index for r in results if r.error is None and r.episode_index not in stored}
+
+
+def _store_target(cfg: dict[str, Any], push: bool) -> tuple[str | None, str | None, str | None]:
+    """``(dataset_id, store root, remote)`` of a ``dataset_id=`` run, checked before any output: a valid id
+    that is free in the store (or this run's own recording, on ``resume``), and a remote to push to."""
+    from molmo_lerobot.namespaces import DatasetStore, HubRemote, NamespaceError
+
+    dataset_id = cfg.get("dataset_id")
+    if dataset_id is None:
+        return None, None, None
+    store = DatasetStore()
+    remote = (cfg.get("hub") or {}).get("remote") or os.environ.get("MOLMO_DATASETS_REMOTE")
+    if (cfg.get("hub") or {}).get("repo_id"):
+        raise RecordConfigError(f"dataset_id {dataset_id!r} and hub.repo_id both say where the dataset goes; "
+                                "set one (dataset_id pushes to hub.remote)")
+    try:
+        store.check_new_dataset(str(dataset_id), cfg.get("output_dir") if cfg.get("resume") else None)
+        if push:
+            if not remote:
+                raise NamespaceError(f"dataset_id {dataset_id!r} with push=true needs hub.remote=hf://<user or org> "
+                                     "(or $MOLMO_DATASETS_REMOTE)")
+            HubRemote.from_remote(remote)
+    except NamespaceError as exc:
+        raise RecordConfigError(str(exc)) from None
+    return str(dataset_id), str(store.root), remote
 
 
 def quiet_libraries() -> None:

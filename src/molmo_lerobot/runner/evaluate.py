@@ -112,6 +112,9 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     if cfg.get("push") and not cfg.get("record"):
         print("molmo-eval: push=true records the dataset it pushes (record=true)", file=sys.stderr)
         cfg["record"] = True
+    cfg["record"] = bool(cfg.get("record") or cfg.get("dataset_id"))  # dataset_id stores what it records
+    if cfg.get("resume") and cfg.get("dataset_id") and not cfg.get("output_dir"):
+        cfg["output_dir"] = str(_stored_run_dir(cfg["dataset_id"]))  # resume the run that recorded it
     try:  # workers rebuild the same context (plugin pins, MolmoSpaces data) from its portable config
         ctx = RunContext.build(cfg)
     except (SettingsError, AssetError, GraspError) as exc:
@@ -154,6 +157,15 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
         raise ExportError(f"export failed after the run was scored ({'; '.join(failed)}); the score stands: "
                           f"{summary['n_success']}/{summary['n_episodes']} successes in {run_dir.results_file}")
     return EvalResults(summary=summary, episodes=ordered, output_dir=run_dir.path)
+
+
+def _stored_run_dir(dataset_id: str) -> Path:
+    from molmo_lerobot.namespaces import DatasetStore, NamespaceError
+
+    try:
+        return DatasetStore().run_dir(dataset_id)
+    except NamespaceError as exc:
+        raise RunError(f"cannot resume dataset_id={dataset_id}: {exc}; pass output_dir=") from None
 
 
 def _plan_run(planner: EpisodePlanner, indices: list[int]) -> tuple[dict[int, EpisodePlan], dict[str, Any]]:

@@ -185,6 +185,7 @@ class PluginsConfig(_Section):
 class HubConfig(_Section):
     repo_id: str | None = None  # the recorder checks it (push=true)
     private: bool = False
+    remote: str | None = None  # push=true with dataset_id: hf://<owner>; the recorder checks it
 
 
 class WandbConfig(_Section):
@@ -222,6 +223,17 @@ def _policy(value: Any) -> Any:
     return value
 
 
+def _dataset_id(value: Any) -> Any:
+    from molmo_lerobot.namespaces import NamespaceError, parse_dataset_id
+
+    if value is not None:
+        try:
+            parse_dataset_id(value)
+        except NamespaceError as exc:
+            raise _problem(f"{{key}}: {exc}") from None
+    return value
+
+
 class RunConfig(_OpenSection):
     """``conf/eval.yaml``, typed; fields in the composed config's order (its defaults list first).
 
@@ -253,6 +265,7 @@ class RunConfig(_OpenSection):
     record_hold_steps: Any = 10  # the recorder checks it (record=true)
     record_environment_state: Flag = False
     push: Flag = False
+    dataset_id: Annotated[str | None, BeforeValidator(_dataset_id)] = None
     resume: Flag = False
     horizon: Annotated[int | None, _rule(
         _optional(lambda v: _is_int(v) and 1 <= v <= MAX_HORIZON_STEPS),

@@ -1,0 +1,130 @@
+"""``molmo-datasets``: the dataset store's namespaces and datasets, local and on the Hub
+(:mod:`molmo_lerobot.namespaces`, Minari's namespace API).
+
+  molmo-datasets list [PREFIX] [--remote [hf://OWNER]]
+  molmo-datasets show|create|update|delete NAMESPACE [--description D] [--set KEY=VALUE ...]
+  molmo-datasets delete-dataset DATASET_ID
+  molmo-datasets push|pull ID [--remote hf://OWNER] [--force]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import warnings
+
+_EPILOG = """the store: --root, else $MOLMO_DATASETS_PATH, else $MOLMO_LEROBOT_HOME/datasets, else
+~/.cache/molmo_lerobot/datasets; the Hub remote: --remote, else $MOLMO_DATASETS_REMOTE (hf://<user or org>;
+the top namespace is the dataset repo <owner>/<top>, the rest folders in it). Record into the store with
+molmo-eval record=true dataset_id=ns/sub/name; load with LeRobotDataset(ID, root=<store>/ID)."""
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="molmo-datasets", description="Organise, list, share and fetch recorded "
+                                "eval datasets by namespace (Minari's namespace API).", epilog=_EPILOG)
+    p.add_argument("--root", help="the local dataset store (default: see below)")
+    sub = p.add_subparsers(dest="command", required=True)
+    ls = sub.add_parser("list", help="namespaces and datasets, local or (--remote) on the Hub")
+    ls.add_argument("prefix", nargs="?", help="only datasets under this namespace")
+    ls.add_argument("--remote", nargs="?", const="", help="list the Hub's (hf://OWNER, default $MOLMO_DATASETS_REMOTE)")
+    for name, text in (("show", "print a namespace's metadata"), ("create", "create a namespace (and its parents)"),
+                       ("update", "replace a namespace's metadata"), ("delete", "delete an empty namespace")):
+        c = sub.add_parser(name, help=text)
+        c.add_argument("namespace")
+        if name in ("create", "update"):
+            c.add_argument("--description")
+            c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                           help="more metadata (VALUE as JSON when it parses, else text)")
+    d = sub.add_parser("delete-dataset", help="remove a dataset from the store")
+    d.add_argument("dataset_id")
+    for name, text in (("push", "upload a namespace (parents first) or a dataset (with its namespaces)"),
+                       ("pull", "download a namespace's metadata or a dataset (with its namespaces' metadata)")):
+        c = sub.add_parser(name, help=text)
+        c.add_argument("id", help="a namespace or a dataset id")
+        c.add_argument("--remote", help="hf://OWNER (default $MOLMO_DATASETS_REMOTE)")
+        c.add_argument("--force", action="store_true", help="pull: replace what is stored locally")
+    return p
+
+
+def _metadata(pairs: list[str]) -> dict:
+    out = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key:
+            raise SystemExit(f"molmo-datasets: error: --set {pair!r}: expected KEY=VALUE")
+        try:
+            out[key] = json.loads(value)
+        except ValueError:
+            out[key] = value
+    return out
+
+
+def _run(args: argparse.Namespace) -> None:
+    from molmo_lerobot import namespaces as ns
+
+    store = ns.DatasetStore()
+    if args.command == "list":
+        if args.remote is not None:
+            hub = ns.HubRemote.from_remote(args.remote or None)
+            names, datasets = sorted(set(hub.list_namespaces())), hub.list_datasets(args.prefix)
+            where = f"hf://{hub.owner}"
+        else:
+            names, datasets, where = store.list_local_namespaces(), store.list_local_datasets(args.prefix), store.root
+        print(f"# {where}")
+        for name in names:
+            print(f"namespace  {name}")
+        for dataset_id in datasets:
+            meta = datasets[dataset_id] if isinstance(datasets, dict) else {}
+            score = f"  success {meta['success_rate']:.3f} ({meta.get('n_episodes')} episodes)" \
+                if isinstance(meta.get("success_rate"), float | int) else ""
+            policy = f"  {meta.get('benchmark', {}).get('name')} · {meta['policy']}" if meta.get("policy") else ""
+            print(f"dataset    {dataset_id}{policy}{score}")
+    elif args.command == "show":
+        print(json.dumps(store.get_namespace_metadata(args.namespace), indent=2))
+    elif args.command == "create":
+        store.create_namespace(args.namespace, args.description, **_metadata(args.set))
+    elif args.command == "update":
+        store.update_namespace_metadata(args.namespace, args.description, **_metadata(args.set))
+    elif args.command == "delete":
+        store.delete_namespace(args.namespace)
+    elif args.command == "delete-dataset":
+        store.delete_dataset(args.dataset_id)
+    elif args.command == "push":
+        if store.is_namespace(args.id):
+            ns.upload_namespace(args.id, store=store, remote=args.remote)
+        else:
+            ns.upload_dataset(args.id, store=store, remote=args.remote)
+    elif args.command == "pull":
+        hub = ns.HubRemote.from_remote(args.remote)
+        if args.id in hub.list_namespaces():
+            ns.download_namespace_metadata(args.id, args.force, store=store, remote=args.remote)
+        else:
+            print(ns.download_dataset(args.id, args.force, store=store, remote=args.remote))
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    if args.root:
+        os.environ["MOLMO_DATASETS_PATH"] = args.root
+    from molmo_lerobot.namespaces import NamespaceError
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)
+        try:
+            _run(args)
+        except NamespaceError as exc:
+            print(f"molmo-datasets: error: {exc}", file=sys.stderr)
+            return 2
+        except OSError as exc:
+            print(f"molmo-datasets: error: {type(exc).__name__}: {exc}".splitlines()[0], file=sys.stderr)
+            return 1
+    for w in caught:
+        if issubclass(w.category, UserWarning):
+            print(f"molmo-datasets: warning: {w.message}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
