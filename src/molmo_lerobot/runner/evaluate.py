@@ -12,6 +12,7 @@ simulates, is recorded with its task type, prompt, horizon and where that horizo
 from __future__ import annotations
 
 import contextlib
+import difflib
 import platform
 import re
 import sys
@@ -32,6 +33,7 @@ from molmo_lerobot.errors import ExportError, RunError
 from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import SettingsError
 from molmo_lerobot.paths import data_path
+from molmo_lerobot.plugins import PluginError
 from molmo_lerobot.results import EpisodeResult, summarize
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
@@ -82,6 +84,26 @@ def resolve_benchmark_path(bench_cfg: dict[str, Any]) -> Path:
     return data_path("benchmarks") / str(bench_cfg["name"])
 
 
+def option_problems(cfg: dict[str, Any], ctx: RunContext) -> list[str]:
+    """The run options only the installed plugins can check, one line each naming its key: the
+    policy's own options (its ``PolicyType.check``), ``camera.system``, ``horizons.<task type>``."""
+    policy = ctx.plugins.policy(str(cfg["policy"]["name"]))
+    out = list(policy.check(cfg["policy"])) if getattr(policy, "check", None) else []
+    system = (cfg.get("camera") or {}).get("system")
+    if system is not None:
+        try:
+            ctx.plugins.camera_system(system)
+        except PluginError as exc:
+            out.append(f"camera.system: {str(exc).splitlines()[0]}")
+    task_types = ctx.plugins.names("task")
+    for task in cfg.get("horizons") or {}:
+        if task not in task_types:
+            close = difflib.get_close_matches(str(task), task_types, n=1)
+            out.append(f"horizons.{task}: no task type {task!r}" + (f"; did you mean horizons.{close[0]}?" if close
+                                                                      else f" (task types: {', '.join(task_types)})"))
+    return out
+
+
 def _make_executor(cfg: dict[str, Any]) -> Any:
     ex = cfg.get("executor") or {"name": "local"}
     common = dict(timeout_s=float(cfg.get("episode_timeout_s", 900)), retries=int(cfg.get("episode_retries", 1)))
@@ -117,7 +139,9 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     except (SettingsError, AssetError, GraspError) as exc:
         raise RunError(f"cannot set up MolmoSpaces data: {exc}") from None
     policy_name = str(cfg["policy"]["name"])
-    ctx.plugins.policy(policy_name)  # unknown or broken policy plugin: fail before any work
+    problems = option_problems(cfg, ctx)  # unknown or broken policy plugin: fail before any work
+    if problems:
+        raise RunError("\n".join(problems))
     recorders = ctx.plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
     executor = _make_executor(cfg)
     bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]), ctx.plugins)
