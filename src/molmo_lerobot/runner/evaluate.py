@@ -15,6 +15,7 @@ import contextlib
 import difflib
 import platform
 import re
+import subprocess
 import sys
 import time
 from dataclasses import dataclass
@@ -71,6 +72,23 @@ def _versions() -> dict[str, str]:
         with contextlib.suppress(metadata.PackageNotFoundError):
             out[dist] = metadata.version(dist)
     return out
+
+
+def code_version() -> dict[str, str | None]:
+    """This project's code: its package version and, in a git checkout, the commit (``run.json``'s
+    ``code``; a resume refuses other code)."""
+    try:
+        version: str | None = metadata.version("molmo-lerobot")
+    except metadata.PackageNotFoundError:
+        version = None
+    root = Path(__file__).resolve().parents[3]  # src/molmo_lerobot/runner/ -> the checkout
+    commit = None
+    if (root / ".git").exists():
+        with contextlib.suppress(OSError, subprocess.SubprocessError):
+            done = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                                  timeout=10, check=False)
+            commit = done.stdout.strip() if done.returncode == 0 and done.stdout.strip() else None
+    return {"version": version, "commit": commit}
 
 
 def safe_name(name: str) -> str:
@@ -149,6 +167,8 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     run_dir = RunDirectory(Path(cfg.get("output_dir") or Path("runs") / f"{safe_name(bench.name)}-"
                                 f"{safe_name(policy_name)}-{started:%Y%m%d-%H%M%S}"))
     cfg["output_dir"] = str(run_dir.path)
+    if cfg.get("resume") and cfg.get("limit") is None:  # a resume keeps the run's limit unless given a new one
+        cfg["limit"] = run_dir.recorded_limit()
     planner = EpisodePlanner(ctx, bench)
     plans, thresholds = _plan_run(planner, list(range(len(bench.episodes)))[:cfg.get("limit")])
     run_info = _run_info(cfg, ctx, planner)
@@ -217,7 +237,9 @@ def _run_info(cfg: dict[str, Any], ctx: RunContext, planner: EpisodePlanner) -> 
                       "path": str(bench.path)},
         "policy": cfg["policy"], "policy_checkpoint": policy_checkpoints(cfg["policy"]), "seed": cfg["seed"],
         "limit": cfg.get("limit"), "horizon": cfg.get("horizon"),
-        "timing": cfg["timing"], "mujoco": mujoco.__version__,
+        "timing": cfg["timing"], "mujoco": mujoco.__version__, "code": code_version(),
+        "recording": ({key: cfg.get(key) for key in ("record_environment_state", "record_hold_steps", "video")}
+                      if cfg.get("record") else None),
         "eval_options": {"horizons": planner.horizons, "custom_object": cfg.get("custom_object"),
                          "camera": cfg.get("camera"), "robot": cfg.get("robot"),
                          "end_on_success": bool(cfg.get("end_on_success", False)),
