@@ -189,6 +189,10 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
         started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=cfg,
         startup=startup_summary(startups),
     )
+    odd = summary["start_warnings"]
+    if odd:
+        print(f"molmo-eval: warning: {len(odd)} episode{'s' * (len(odd) != 1)} started oddly (results.json "
+              f"start_warnings), e.g. episode {odd[0]['episode_index']}: {odd[0]['warnings'][0]}", file=sys.stderr)
     scored = run_dir.write_scored(ordered, summary)  # the score, before any export
     failed = finalize_run(run_dir.path, ordered, summary, recorders, run_finalizers(cfg))
     if failed:
