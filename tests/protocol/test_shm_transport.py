@@ -264,6 +264,6 @@ def test_a_shape_whose_size_would_wrap_is_a_transport_error(shape):
     import mmap
 
     buf = mmap.mmap(-1, 64)
-    with pytest.raises(shm.ShmTransportError, match="does not fit the 64-byte frame|outside the 64-byte frame"):
+    with pytest.raises(shm.ShmTransportError, match=r"does not fit the 64-byte frame|outside the 64-byte frame"):
         shm._views({"__shm__": [0, "<f8", shape]}, buf, 0, 64)
     buf.close()

@@ -147,7 +147,7 @@ def _scene_metadata(scene: Any, episode: EpisodeSpec) -> Any:
         return None
     try:
         return metadata(episode.house_index)
-    except Exception:  # noqa: BLE001 - data not installed here, a house out of range: the preflight reports those
+    except Exception:  # data not installed here, a house out of range: the preflight reports those
         return None
 
 

@@ -195,7 +195,7 @@ def _mjcf_file(value: Any) -> Any:
         raise _problem(f"{{key}}: {path} is not an MJCF file (its root element is <{root}>, not <mujoco>)")
     try:
         mujoco.MjSpec.from_file(str(path)).compile()
-    except Exception as exc:  # noqa: BLE001 - MuJoCo raises ValueError or its own errors; any is a bad file
+    except Exception as exc:  # MuJoCo raises ValueError or its own errors; any is a bad file
         text = str(exc).strip().splitlines()
         raise _problem(f"{{key}}: {path} is not an MJCF model MuJoCo loads ({text[0] if text else type(exc).__name__})"
                        ) from None

@@ -34,7 +34,7 @@ RUN_FILE = "run.json"
 EPISODES_FILE = "episodes.jsonl"
 RESULTS_FILE = "results.json"
 
-#: ``run.json`` fields a resume must find unchanged (``recording`` is checked on its own: see :meth:`RunDirectory._reopen`)
+#: ``run.json`` fields a resume must find unchanged (``recording``: see :func:`_check_recording`)
 RUN_IDENTITY = ("benchmark", "policy", "policy_checkpoint", "seed", "horizon", "timing", "mujoco", "eval_options",
                 "code")
 #: ``episodes.jsonl`` fields a record must have, with their JSON types
