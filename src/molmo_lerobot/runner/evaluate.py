@@ -102,7 +102,7 @@ def resolve_benchmark_path(bench_cfg: dict[str, Any]) -> Path:
     return data_path("benchmarks") / str(bench_cfg["name"])
 
 
-def option_problems(cfg: dict[str, Any], ctx: RunContext) -> list[str]:
+def plugin_option_problems(cfg: dict[str, Any], ctx: RunContext) -> list[str]:
     """The run options only the installed plugins can check, one line each naming its key: the
     policy's own options (its ``PolicyType.check``), ``camera.system``, ``horizons.<task type>``."""
     policy = ctx.plugins.policy(str(cfg["policy"]["name"]))
@@ -157,7 +157,7 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     except (SettingsError, AssetError, GraspError) as exc:
         raise RunError(f"cannot set up MolmoSpaces data: {exc}") from None
     policy_name = str(cfg["policy"]["name"])
-    problems = option_problems(cfg, ctx)  # unknown or broken policy plugin: fail before any work
+    problems = plugin_option_problems(cfg, ctx)  # unknown or broken policy plugin: fail before any work
     if problems:
         raise RunError("\n".join(problems))
     recorders = ctx.plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
