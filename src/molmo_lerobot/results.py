@@ -102,6 +102,10 @@ def summarize(results: list[EpisodeResult], **context: Any) -> dict[str, Any]:
         {"episode_index": r.episode_index, "error": r.error, "error_kind": r.error_kind}
         for r in results if r.error is not None
     ]
+    summary["start_warnings"] = [  # episodes MolmoSpaces runs as they are, with an odd start (Task.start_warnings)
+        {"episode_index": r.episode_index, "warnings": r.extra["start_warnings"]}
+        for r in results if r.extra.get("start_warnings")
+    ]
     summary["output_errors"] = [
         {"episode_index": r.episode_index, "errors": r.output_errors} for r in results if r.output_errors
     ]

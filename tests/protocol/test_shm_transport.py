@@ -256,3 +256,14 @@ def test_clients_in_step_are_batched_as_over_websockets():
         for t in threads:
             t.join(30)
         assert srv.served == 6 and srv.stats()["batch_sizes"].get("2", 0) >= 1
+
+
+@pytest.mark.parametrize("shape", [[1 << 32, 1 << 32], [1 << 62, 4], [0, 1 << 70], [3, 1 << 61, 8]])
+def test_a_shape_whose_size_would_wrap_is_a_transport_error(shape):
+    """int64 products of these shapes wrap to 0 or a small number: the size is checked without wrapping."""
+    import mmap
+
+    buf = mmap.mmap(-1, 64)
+    with pytest.raises(shm.ShmTransportError, match=r"does not fit the 64-byte frame|outside the 64-byte frame"):
+        shm._views({"__shm__": [0, "<f8", shape]}, buf, 0, 64)
+    buf.close()

@@ -123,10 +123,12 @@ def test_resume_with_a_smaller_limit_keeps_every_episode(faulty_policy, small_be
     assert json.loads((out / "run.json").read_text())["limit"] == 6
     with pytest.raises(RunError, match="limit=5"):
         run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=5", "resume=true")))
-    res = run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "resume=true")))  # limit=null: all
+    res = run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "resume=true")))  # keeps limit=6
+    assert res.summary["n_episodes"] == 6 and len(_rows(out)) == 6
+    res = run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=8", "resume=true")))
     assert res.summary["n_episodes"] == 8 and len(_rows(out)) == 8
-    with pytest.raises(RunError, match=r"with limit=3: it was started with limit=null \(8 episodes recorded\).*use "
-                                       r"limit=null"):
+    with pytest.raises(RunError, match=r"with limit=3: it was started with limit=8 \(8 episodes recorded\).*use "
+                                       r"limit=8 or larger \(or leave limit out to keep 8\)"):
         run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=3", "resume=true")))
     assert len(_rows(out)) == 8
 

@@ -117,7 +117,7 @@ def test_push_or_pull_follows_the_side_the_robot_starts_on(plugins, episodes):
     ({"door_body_name": "nope"}, "task.door_body_name: no body 'nope'"),
     ({"door_body_name": "door/handle_pos"}, "task.door_body_name: 'door/handle_pos' has no hinge"),
     ({"articulated_joint_range": [0.5, 0.5]}, "task.articulated_joint_range: empty range"),
-    ({"articulated_joint_reset_state": []}, "task.articulated_joint_reset_state: empty list"),
+    ({"articulated_joint_reset_state": []}, r"articulated_joint_reset_state\n  Value error, expected at least 1 value"),
 ])
 def test_bad_specs_name_the_field(plugins, episodes, update, message):
     with pytest.raises(ValueError, match=message):
@@ -132,3 +132,28 @@ def test_validation_errors_name_file_episode_and_field(plugins, episodes, tmp_pa
         load_benchmark(path, plugins)
     message = str(err.value)
     assert "doors.json" in message and "episode 1" in message and "task.door_openness_threshold" in message
+
+
+@pytest.mark.parametrize(("update", "expected"), [
+    ({"articulated_joint_reset_state": [100.0]},
+     ["task.articulated_joint_reset_state: 100 is outside the range", "is outside articulated_joint_range",
+      "succeeds at step 0"]),
+    ({"articulated_joint_range": [DOOR_RANGE, 0.0]},
+     ["task.articulated_joint_range: [1.5708, 0] is reversed", "succeeds at step 0"]),
+])
+def test_a_start_molmospaces_accepts_but_is_odd_is_marked(plugins, episodes, update, expected):
+    """MolmoSpaces sets the reset state and judges the episode's range unchecked (their DoorOpeningTask):
+    such an episode runs, its task's start_warnings say why it is odd."""
+    spec, env, task = _setup(plugins, episodes[0], **update)
+    try:
+        assert task.success()  # what a random policy was scored on
+        assert len(task.start_warnings) == len(expected)
+        for warning, text in zip(task.start_warnings, expected, strict=True):
+            assert text in warning
+        warned = plugins.task_type(spec.task_name).spec_problems(spec, lambda: None)
+        assert warned and all(p.warning for p in warned)  # molmo-bench validate warns of them from the file
+    finally:
+        env.close()
+    _, env, task = _setup(plugins, episodes[0])
+    assert task.start_warnings == ()
+    env.close()

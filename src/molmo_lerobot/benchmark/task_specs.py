@@ -11,22 +11,36 @@ providing it takes precedence. Any other task is a :class:`GenericTaskSpec`.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Annotated, Any
 
-from pydantic import Field
+from pydantic import AfterValidator, Field, Strict
 
 from molmo_lerobot.benchmark import molmospaces
 from molmo_lerobot.benchmark.schema import TASK_MODEL, BaseTaskSpec, EpisodeSpec, FiniteList, GenericTaskSpec, Pose7
 from molmo_lerobot.plugins import PluginConflict, PluginError, Plugins
 
 
+def _count(low: int, high: int, what: str) -> AfterValidator:
+    """A list of ``low``..``high`` values, or ``None``."""
+    def check(values: list[float] | None) -> list[float] | None:
+        if values is not None and not low <= len(values) <= high:
+            raise ValueError(f"expected {what}, got {len(values)} values")
+        return values
+    return AfterValidator(check)
+
+
+#: a JSON number (``"0.5"`` or ``true`` is no threshold)
+StrictNumber = Annotated[float, Strict()]
+
+
 class DoorOpeningTaskSpec(BaseTaskSpec):
     """Open a door to at least ``door_openness_threshold`` of its joint range."""
 
-    door_body_name: str
-    articulated_joint_range: FiniteList | None = None
-    articulated_joint_reset_state: FiniteList | None = None
-    door_openness_threshold: float = Field(default=0.67, ge=0, le=1)  # opening fraction
+    door_body_name: Annotated[str, Field(min_length=1)]
+    articulated_joint_range: Annotated[FiniteList | None, _count(2, 2, "[closed, open]: 2 values")] = None
+    #: MolmoSpaces reads the first value (the hinge's start)
+    articulated_joint_reset_state: Annotated[FiniteList | None, _count(1, 1 << 20, "at least 1 value")] = None
+    door_openness_threshold: StrictNumber = Field(default=0.67, ge=0, le=1)  # opening fraction
 
 
 class NavToObjTaskSpec(BaseTaskSpec):
@@ -36,7 +50,7 @@ class NavToObjTaskSpec(BaseTaskSpec):
     pickup_obj_candidates: list[str] | None = None
     pickup_obj_start_pose: Pose7 | None = None
     receptacle_name: str | None = None
-    succ_pos_threshold: float = Field(default=1.5, ge=0)  # metres
+    succ_pos_threshold: StrictNumber = Field(default=1.5, ge=0)  # metres
 
 
 #: MolmoSpaces task types no plugin here provides yet -> their reference spec models.

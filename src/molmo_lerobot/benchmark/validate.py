@@ -47,8 +47,11 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, scenes: SceneContex
         out.append(Problem(file, message, index, field, warning=True))
 
     task_report = warning if molmospaces.known_task_name(episode.task.task_cls, episode.task.task_type) else problem
-    _lookup(plugins, "task_type", episode.task_name, "task.task_type" if _by_type(episode) else "task.task_cls",
-            task_report)
+    task_type = _lookup(plugins, "task_type", episode.task_name,
+                        "task.task_type" if _by_type(episode) else "task.task_cls", task_report)
+    contradiction = _task_type_contradiction(episode, plugins, task_type)
+    if contradiction:
+        problem("task.task_type", contradiction)
 
     robot = _lookup(plugins, "robot", episode.robot.robot_name, "robot.robot_name", warning, "robot",
                     "install a robot plugin that provides it")
@@ -105,7 +108,47 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, scenes: SceneContex
 
     if not episode.language.task_description.strip():
         problem("language.task_description", "empty task description")
+    spec_problems = getattr(task_type, "spec_problems", None)  # TaskType's; a duck-typed plugin may lack it
+    if spec_problems is not None and not contradiction:
+        def metadata() -> Any:
+            return _scene_metadata(scene, episode) if scene is not None and not reason else None
+
+        for p in spec_problems(episode, metadata):
+            (warning if p.warning else problem)(p.field, p.message)
     return out
+
+
+def _task_type_contradiction(episode: EpisodeSpec, plugins: Plugins, task_type: Any) -> str | None:
+    """Why ``task.task_type`` contradicts ``task.task_cls`` (another task type, or not one the shared
+    class has), or ``None``; a ``task_type`` no plugin knows (MolmoSpaces' own names) is left alone."""
+    cls, given = episode.task.task_cls, episode.task.task_type
+    if not given or task_type is None:
+        return None
+    shared = molmospaces.SHARED_TASK_CLS.get(cls)
+    if shared is not None:
+        return None if given in shared else (f"{given!r} is not a task type of task_cls {cls!r} "
+                                             f"(one of {', '.join(shared)})")
+    try:
+        named = plugins.task_type(given)
+    except PluginConflict:
+        raise
+    except PluginError:
+        return None
+    if named.name != task_type.name:
+        return (f"{given!r} contradicts task_cls {cls!r}, which is task type {task_type.name!r}; "
+                "fix one of them")
+    return None
+
+
+def _scene_metadata(scene: Any, episode: EpisodeSpec) -> Any:
+    """The episode's house metadata where its scene dataset gives it cheaply, else ``None``."""
+    metadata = getattr(scene, "metadata", None)
+    if metadata is None:
+        return None
+    try:
+        return metadata(episode.house_index)
+    except Exception:  # data not installed here, a house out of range: the preflight reports those
+        return None
 
 
 def _by_type(episode: EpisodeSpec) -> bool:

@@ -51,6 +51,10 @@ def camera_option_problems(camera: Any) -> list[str]:
     system = camera.get("system")
     if use_eval is True and system is not None and system not in EVAL_NAMES:
         out.append(f"camera.eval=true uses {FrankaEvalCameraSystem.name}; it conflicts with camera.system={system}")
+    randomization = camera.get("randomization", 0)
+    if not (isinstance(randomization, int) and not isinstance(randomization, bool) and 0 <= randomization <= 3):
+        out.append(f"camera.randomization: expected a level 0-3 (0: off), got {randomization!r}")
+    out.extend(_override_problems(camera.get("overrides")))
     evaluating = use_eval is True or system in EVAL_NAMES
     if level and not evaluating and not out:
         out.append("camera.rand_level applies to MolmoSpaces' eval cameras: add camera.eval=true")
@@ -60,4 +64,23 @@ def camera_option_problems(camera: Any) -> list[str]:
                        "replace: use camera.rand_level (or camera.eval=false)")
         if camera.get("overrides"):
             out.append("camera.overrides edits the episode's recorded cameras, which the eval cameras replace")
+    return out
+
+
+def _override_problems(overrides: Any) -> list[str]:
+    """``camera.overrides``: ``{camera: {field: value}}`` with finite numbers and a field of view in (0, 180)."""
+    if not overrides:
+        return []
+    if not isinstance(overrides, Mapping) or not all(isinstance(v, Mapping) for v in overrides.values()):
+        return [f"camera.overrides: expected {{camera: {{field: value}}}}, got {overrides!r}"]
+    out = []
+    for name, fields in overrides.items():
+        for field, value in fields.items():
+            key = f"camera.overrides.{name}.{field}"
+            numbers = value if isinstance(value, list | tuple) else [value]
+            if any(isinstance(v, float) and not math.isfinite(v) for v in numbers):
+                out.append(f"{key}: expected finite numbers, got {value!r}")
+            elif field == "fov" and not (isinstance(value, int | float) and not isinstance(value, bool)
+                                         and 0 < value < 180):
+                out.append(f"{key}: expected a field of view in (0, 180) degrees, got {value!r}")
     return out

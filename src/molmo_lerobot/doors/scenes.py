@@ -29,6 +29,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
+from molmo_lerobot.libero import install_check
 from molmo_lerobot.libero.objects import assets_root, texture_file
 from molmo_lerobot.sim.scenes import SceneDataset
 
@@ -103,6 +104,10 @@ class DoorRooms(SceneDataset):
 
     name = "door_rooms"
     aliases = ()
+
+    def install_problem(self) -> str | None:
+        """A broken file of the installed LIBERO asset library (:mod:`molmo_lerobot.libero.install_check`)."""
+        return install_check.install_problem()
 
     def n_houses(self) -> int:
         return N_HOUSES

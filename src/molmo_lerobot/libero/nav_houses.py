@@ -26,6 +26,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
+from molmo_lerobot.libero import install_check
 from molmo_lerobot.libero.objects import LIBERO_OBJECTS, LiberoObject, assets_root, texture_file
 from molmo_lerobot.sim.scenes import SceneDataset, attach_mjcf
 
@@ -183,6 +184,10 @@ class NavHouses(SceneDataset):
     """Multi-room houses with furniture and LIBERO objects for ``nav_to_obj`` (module docstring)."""
 
     name = "nav_houses"
+
+    def install_problem(self) -> str | None:
+        """A broken file of the installed LIBERO asset library (:mod:`molmo_lerobot.libero.install_check`)."""
+        return install_check.install_problem()
 
     def n_houses(self) -> int:
         return N_HOUSES

@@ -33,6 +33,7 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.assets.libraries import AssetLibraryType
+from molmo_lerobot.libero import install_check
 from molmo_lerobot.libero.library import LIBERO_LIBRARY_TYPE
 from molmo_lerobot.libero.objects import LIBERO_OBJECTS, LiberoObject, assets_root, texture_file
 from molmo_lerobot.sim.scenes import SceneDataset, attach_mjcf
@@ -164,6 +165,10 @@ class LiberoRooms(SceneDataset):
 
     name = "libero_rooms"
     aliases = ()
+
+    def install_problem(self) -> str | None:
+        """A broken file of the installed LIBERO asset library (:mod:`molmo_lerobot.libero.install_check`)."""
+        return install_check.install_problem()
 
     def n_houses(self) -> int:
         return N_HOUSES

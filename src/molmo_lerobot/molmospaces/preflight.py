@@ -2,9 +2,10 @@
 
 :func:`preflight` checks, under the run's context (its plugins, MolmoSpaces settings and asset
 catalog), each episode's task type, robot, scene dataset (and its scene file and added objects),
-and camera system (for ``cameras: []``). It returns one line naming what is missing, where it
-looked and how to get it — or ``None`` when the run can go ahead. It changes nothing but the
-assets dir (scenes installed on demand are fetched).
+and camera system (for ``cameras: []``), and, once per scene dataset, the installed files it reads
+in place (``SceneDataset.install_problem``: the LIBERO asset distributions). It returns one
+line naming what is missing, where it looked and how to get it — or ``None`` when the run can go
+ahead. It changes nothing but the assets dir (scenes installed on demand are fetched).
 """
 
 from __future__ import annotations
@@ -59,6 +60,24 @@ def _missing(spec: Any, ctx: RunContext, camera_system: str | None) -> tuple[str
     return None
 
 
+def _install_problem(bench: Any, ctx: RunContext, indices: list[int]) -> str | None:
+    """A fault of the installed files a scene dataset of these episodes reads in place (its
+    ``install_problem``, once per dataset), or ``None``."""
+    from molmo_lerobot.plugins import PluginError
+
+    names = dict.fromkeys(bench.episodes[i].scene_dataset for i in indices)
+    for name in names:
+        try:
+            scene = ctx.plugins.scene_dataset(name)
+        except PluginError:
+            continue  # reported per episode below
+        check = getattr(scene, "install_problem", None)
+        problem = check() if check is not None else None
+        if problem:
+            return f"cannot simulate scene dataset {name!r}: {problem}"
+    return None
+
+
 def preflight(bench: Any, ctx: RunContext, indices: Iterable[int], skip: Iterable[int] = ()) -> str | None:
     """One line saying why the run cannot simulate (and how to fix it), or ``None``.
 
@@ -66,6 +85,9 @@ def preflight(bench: Any, ctx: RunContext, indices: Iterable[int], skip: Iterabl
     """
     camera_system = (ctx.config.get("camera") or {}).get("system")
     skipped = set(skip)
+    broken = _install_problem(bench, ctx, [i for i in indices if i not in skipped])
+    if broken:
+        return broken
     reasons: dict[tuple[str, str, str], list[int]] = {}
     for i in indices:
         if i in skipped:

@@ -40,6 +40,7 @@ into a per-episode error that names the policy, the move group and what was wron
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -143,3 +144,26 @@ class PolicyType:
     #: Modules its policies import when built (lazily, past the factory's own module): a worker's
     #: fork server imports them once for every worker (``executor.start_method=forkserver``).
     preload: tuple[str, ...] = ()
+    #: ``check(config)``: the ``policy`` config's problems, one line each naming its key
+    #: (``policy.chunk: ...``), checked before any run directory is made; ``None``: none checked
+    #: up front (the factory checks its config when a worker builds the policy).
+    check: Callable[[dict[str, Any]], list[str]] | None = None
+
+
+#: Most action steps one chunk may hold (``policy.chunk``): past it a chunk allocates gigabytes.
+MAX_CHUNK = 10_000
+
+
+def option_problems(config: dict[str, Any], bounds: dict[str, tuple[float, float, bool]]) -> list[str]:
+    """Problems of ``config``'s numeric options: ``bounds`` maps a key to ``(low, high, integer)``;
+    an absent key takes the policy's default and is not checked."""
+    out = []
+    for key, (low, high, integer) in bounds.items():
+        if key not in config:
+            continue
+        value = config[key]
+        kind = "an integer" if integer else "a number"
+        ok = (isinstance(value, int) if integer else isinstance(value, int | float)) and not isinstance(value, bool)
+        if not (ok and math.isfinite(value) and low <= value <= high):
+            out.append(f"policy.{key}: expected {kind} in {low:g}..{high:g}, got {value!r}")
+    return out

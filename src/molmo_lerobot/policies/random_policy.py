@@ -7,12 +7,21 @@ generator seeded by the episode seed, so episodes replay exactly.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
+from molmo_lerobot.policies.base import (
+    MAX_CHUNK,
+    Action,
+    EpisodeContext,
+    Observation,
+    Policy,
+    PolicyType,
+    option_problems,
+)
 
 
 class RandomPolicy(Policy):
@@ -47,6 +56,12 @@ def make_random(config: dict[str, Any]) -> RandomPolicy:
     return RandomPolicy(config)
 
 
+def random_config_problems(config: dict[str, Any]) -> list[str]:
+    """``scale`` (radians per joint, at most a half turn) and ``chunk`` bounded."""
+    return option_problems(config, {"scale": (0.0, math.pi, False), "chunk": (1, MAX_CHUNK, True)})
+
+
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
-    return [PolicyType(name="random", factory=make_random, description="random joint targets near the current pose")]
+    return [PolicyType(name="random", factory=make_random, description="random joint targets near the current pose",
+                       check=random_config_problems)]

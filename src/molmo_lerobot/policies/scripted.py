@@ -9,7 +9,15 @@ from __future__ import annotations
 from typing import Any
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
+from molmo_lerobot.policies.base import (
+    MAX_CHUNK,
+    Action,
+    EpisodeContext,
+    Observation,
+    Policy,
+    PolicyType,
+    option_problems,
+)
 from molmo_lerobot.policies.scripted_articulated import ScriptedArticulated
 from molmo_lerobot.policies.scripted_pick import ScriptedPick
 from molmo_lerobot.policies.scripted_place import ScriptedPlace
@@ -63,7 +71,13 @@ def molmo_experts() -> list[PolicyType]:
                        description="grasp the handle, move it along the joint")]
 
 
+def scripted_config_problems(config: dict[str, Any]) -> list[str]:
+    """The experts' ``chunk`` (steps per action chunk) and ``speed`` (rad/s) bounded."""
+    return option_problems(config, {"chunk": (1, MAX_CHUNK, True), "speed": (1e-3, 100.0, False)})
+
+
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
     return [PolicyType(name="scripted", factory=ScriptedExpert,
-                       description="privileged expert of each episode's task type (IK + grasp library)")]
+                       description="privileged expert of each episode's task type (IK + grasp library)",
+                       check=scripted_config_problems)]

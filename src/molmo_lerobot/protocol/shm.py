@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import math
 import mmap
 import os
 import secrets
@@ -187,7 +188,9 @@ def _views(tree: Any, buf: mmap.mmap, base: int, size: int) -> Any:
         if (not isinstance(shape, list) or len(shape) > MAX_NDIM
                 or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in shape)):
             raise ShmTransportError(f"array shape must be at most {MAX_NDIM} non-negative ints, got {shape!r:.60}")
-        nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+        if any(s > size for s in shape):  # no side of an array in the frame is longer than the frame
+            raise ShmTransportError(f"array shape {shape!r:.60} does not fit the {size}-byte frame")
+        nbytes = math.prod(shape) * dtype.itemsize  # Python ints: a huge shape cannot wrap to a small size
         if isinstance(offset, bool) or not isinstance(offset, int) or offset < 0 or offset + nbytes > size:
             raise ShmTransportError(f"array of {nbytes} bytes at offset {offset!r:.20} is outside the "
                                     f"{size}-byte frame")

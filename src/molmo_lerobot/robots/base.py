@@ -162,15 +162,21 @@ class ArmGripperHandle(RobotHandle):
         """Write the actuator targets for ``closed`` (0 … 1)."""
 
 
+#: The largest pedestal side (metres): MolmoSpaces' are under 1 m; a kilometre-wide box breaks the physics.
+MAX_BASE_SIZE_M = 5.0
+
+
 def parse_base_size(value: object) -> tuple[float, float, float] | None:
-    """A ``base_size`` as given (``null`` or three positive sizes in metres); ``ValueError`` otherwise."""
+    """A ``base_size`` as given (``null`` or three positive sizes in metres, each at most
+    :data:`MAX_BASE_SIZE_M`); ``ValueError`` otherwise."""
     if value is None:
         return None
     numbers = isinstance(value, list | tuple) and all(
         isinstance(v, int | float) and not isinstance(v, bool) for v in value)
     size = tuple(float(v) for v in value) if numbers else ()  # type: ignore[union-attr]
-    if len(size) != 3 or not all(math.isfinite(v) and v > 0 for v in size):
-        raise ValueError(f"base_size must be null or three positive sizes in metres [x, y, z], got {value!r}")
+    if len(size) != 3 or not all(math.isfinite(v) and 0 < v <= MAX_BASE_SIZE_M for v in size):
+        raise ValueError(f"base_size must be null or three positive sizes in metres [x, y, z] "
+                         f"(each at most {MAX_BASE_SIZE_M:g}), got {value!r}")
     return size  # type: ignore[return-value]
 
 

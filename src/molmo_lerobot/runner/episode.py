@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.errors import InfrastructureError, MolmoError, describe
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
@@ -100,13 +100,30 @@ def open_episode(plan: EpisodePlan, bench: Benchmark, ctx: RunContext) -> Episod
     return Episode(plan, spec, env, task, task_type)
 
 
+def install_failure(exc: Exception, spec: EpisodeSpec, ctx: RunContext) -> Exception:
+    """``exc``, raised building ``spec``'s scene, as an :class:`InfrastructureError` when the scene
+    dataset's installed files are broken now (``resume=true`` reruns the episode once they are
+    repaired), else ``exc`` itself."""
+    try:
+        check = getattr(ctx.plugins.scene_dataset(spec.scene_dataset), "install_problem", None)
+        problem = check() if check is not None else None
+    except Exception:
+        return exc
+    if problem is None:
+        return exc
+    return InfrastructureError(f"{problem} (the scene failed to build: {describe(exc)})")
+
+
 def start_episode(spec: EpisodeSpec, seed: int, task_type: TaskType, ctx: RunContext) -> tuple[Env, Task]:
     """The episode's environment under the run ``ctx`` (its timing and camera options), reset with
     ``seed``, and its task (not yet set up). The worker's rollout and :func:`open_episode` both
     start episodes here."""
     from molmo_lerobot.runner.episode_env import build_env
 
-    env = build_env(spec, ctx.timing, ctx, ctx.config.get("camera"))
+    try:
+        env = build_env(spec, ctx.timing, ctx, ctx.config.get("camera"))
+    except Exception as exc:
+        raise install_failure(exc, spec, ctx) from exc
     try:
         env.reset(seed)
         return env, task_type.create(spec, env)

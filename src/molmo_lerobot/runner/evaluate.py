@@ -12,8 +12,10 @@ simulates, is recorded with its task type, prompt, horizon and where that horizo
 from __future__ import annotations
 
 import contextlib
+import difflib
 import platform
 import re
+import subprocess
 import sys
 import time
 from dataclasses import dataclass
@@ -32,6 +34,7 @@ from molmo_lerobot.errors import ExportError, RunError
 from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import SettingsError
 from molmo_lerobot.paths import data_path
+from molmo_lerobot.plugins import PluginError
 from molmo_lerobot.results import EpisodeResult, summarize
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
@@ -71,6 +74,23 @@ def _versions() -> dict[str, str]:
     return out
 
 
+def code_version() -> dict[str, str | None]:
+    """This project's code: its package version and, in a git checkout, the commit (``run.json``'s
+    ``code``; a resume refuses other code)."""
+    try:
+        version: str | None = metadata.version("molmo-lerobot")
+    except metadata.PackageNotFoundError:
+        version = None
+    root = Path(__file__).resolve().parents[3]  # src/molmo_lerobot/runner/ -> the checkout
+    commit = None
+    if (root / ".git").exists():
+        with contextlib.suppress(OSError, subprocess.SubprocessError):
+            done = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                                  timeout=10, check=False)
+            commit = done.stdout.strip() if done.returncode == 0 and done.stdout.strip() else None
+    return {"version": version, "commit": commit}
+
+
 def safe_name(name: str) -> str:
     """``name`` as one harmless path component (no separators, no leading dot)."""
     return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._-")[:100] or "unnamed"
@@ -80,6 +100,26 @@ def resolve_benchmark_path(bench_cfg: dict[str, Any]) -> Path:
     if bench_cfg.get("path"):
         return Path(bench_cfg["path"]).expanduser()
     return data_path("benchmarks") / str(bench_cfg["name"])
+
+
+def plugin_option_problems(cfg: dict[str, Any], ctx: RunContext) -> list[str]:
+    """The run options only the installed plugins can check, one line each naming its key: the
+    policy's own options (its ``PolicyType.check``), ``camera.system``, ``horizons.<task type>``."""
+    policy = ctx.plugins.policy(str(cfg["policy"]["name"]))
+    out = list(policy.check(cfg["policy"])) if getattr(policy, "check", None) else []
+    system = (cfg.get("camera") or {}).get("system")
+    if system is not None:
+        try:
+            ctx.plugins.camera_system(system)
+        except PluginError as exc:
+            out.append(f"camera.system: {str(exc).splitlines()[0]}")
+    task_types = ctx.plugins.names("task")
+    for task in cfg.get("horizons") or {}:
+        if task not in task_types:
+            close = difflib.get_close_matches(str(task), task_types, n=1)
+            out.append(f"horizons.{task}: no task type {task!r}" + (f"; did you mean horizons.{close[0]}?" if close
+                                                                      else f" (task types: {', '.join(task_types)})"))
+    return out
 
 
 def _make_executor(cfg: dict[str, Any]) -> Any:
@@ -120,7 +160,9 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     except (SettingsError, AssetError, GraspError) as exc:
         raise RunError(f"cannot set up MolmoSpaces data: {exc}") from None
     policy_name = str(cfg["policy"]["name"])
-    ctx.plugins.policy(policy_name)  # unknown or broken policy plugin: fail before any work
+    problems = plugin_option_problems(cfg, ctx)  # unknown or broken policy plugin: fail before any work
+    if problems:
+        raise RunError("\n".join(problems))
     recorders = ctx.plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
     executor = _make_executor(cfg)
     bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]), ctx.plugins)
@@ -128,6 +170,8 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     run_dir = RunDirectory(Path(cfg.get("output_dir") or Path("runs") / f"{safe_name(bench.name)}-"
                                 f"{safe_name(policy_name)}-{started:%Y%m%d-%H%M%S}"))
     cfg["output_dir"] = str(run_dir.path)
+    if cfg.get("resume") and cfg.get("limit") is None:  # a resume keeps the run's limit unless given a new one
+        cfg["limit"] = run_dir.recorded_limit()
     planner = EpisodePlanner(ctx, bench)
     plans, thresholds = _plan_run(planner, list(range(len(bench.episodes)))[:cfg.get("limit")])
     run_info = _run_info(cfg, ctx, planner)
@@ -148,6 +192,10 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
         started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=cfg,
         startup=startup_summary(startups),
     )
+    odd = summary["start_warnings"]
+    if odd:
+        print(f"molmo-eval: warning: {len(odd)} episode{'s' * (len(odd) != 1)} started oddly (results.json "
+              f"start_warnings), e.g. episode {odd[0]['episode_index']}: {odd[0]['warnings'][0]}", file=sys.stderr)
     scored = run_dir.write_scored(ordered, summary)  # the score, before any export
     failed = finalize_run(run_dir.path, ordered, summary, recorders, run_finalizers(cfg))
     if failed:
@@ -205,7 +253,9 @@ def _run_info(cfg: dict[str, Any], ctx: RunContext, planner: EpisodePlanner) -> 
                       "path": str(bench.path)},
         "policy": cfg["policy"], "policy_checkpoint": policy_checkpoints(cfg["policy"]), "seed": cfg["seed"],
         "limit": cfg.get("limit"), "horizon": cfg.get("horizon"),
-        "timing": cfg["timing"], "mujoco": mujoco.__version__,
+        "timing": cfg["timing"], "mujoco": mujoco.__version__, "code": code_version(),
+        "recording": ({key: cfg.get(key) for key in ("record_environment_state", "record_hold_steps", "video")}
+                      if cfg.get("record") else None),
         "eval_options": {"horizons": planner.horizons, "custom_object": cfg.get("custom_object"),
                          "camera": cfg.get("camera"), "robot": cfg.get("robot"),
                          "end_on_success": bool(cfg.get("end_on_success", False)),

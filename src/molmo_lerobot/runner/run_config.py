@@ -25,6 +25,7 @@ import copy
 import math
 from collections.abc import Callable, Mapping
 from typing import Annotated, Any
+from xml.etree import ElementTree
 
 from pydantic import (
     BaseModel,
@@ -45,6 +46,14 @@ from molmo_lerobot.sim.env import CONTROL_MODES, Timing
 MAX_HORIZON_STEPS = 100_000
 #: Most physics steps (``mj_step``) one episode may ask for: horizon x ctrl ticks x substeps.
 MAX_PHYSICS_STEPS = 2_000_000
+#: Bounds of the run's other numeric options (past them a run only wastes the machine or never ends)
+MAX_EPISODE_RETRIES = 10
+MAX_WORKER_THREADS = 1024
+MAX_EPISODE_TIMEOUT_S = 7 * 24 * 3600
+MAX_SERVE_BATCH = 4096
+MAX_SERVE_BATCH_TIMEOUT_MS = 60_000
+MAX_VIDEO_CRF = 63  # libsvtav1's range (0-63); h264/hevc stop at 51 and the encoder says so
+SERVE_TRANSPORTS = ("auto", "shm", "websocket")
 
 
 class RunConfigError(MolmoError, ValueError):
@@ -92,6 +101,9 @@ def _optional(ok: Callable[[Any], bool]) -> Callable[[Any], bool]:
 Flag = Annotated[bool, _rule(lambda v: isinstance(v, bool), "{key}: expected true or false, got {got}")]
 Seconds = Annotated[int | float, _rule(lambda v: _is_number(v) and v > 0,
                                        "{key}: expected a positive number of seconds, got {got}")]
+TimeoutSeconds = Annotated[int | float, _rule(lambda v: _is_number(v) and 0 < v <= MAX_EPISODE_TIMEOUT_S,
+                                              "{key}: expected a positive number of seconds (at most "
+                                              f"{MAX_EPISODE_TIMEOUT_S:,}: a week), got {{got}}")]
 Millis = Annotated[int | float, _rule(lambda v: _is_number(v) and v > 0,
                                       "{key}: expected a positive number of milliseconds, got {got}")]
 TaskSeconds = Annotated[int | float, _rule(lambda v: _is_number(v) and 0 < v <= MAX_TASK_HORIZON_SEC,
@@ -162,8 +174,36 @@ class RobotConfig(_Section):
     base_size: Annotated[str | list[int | float] | None, BeforeValidator(_base_size)] = "default"
 
 
+def _mjcf_file(value: Any) -> Any:
+    """``custom_object.path``: a file MuJoCo loads as an MJCF model (checked once, before any episode)."""
+    if value is None:
+        return value
+    if not isinstance(value, str) or not value:
+        raise _problem(f"{{key}}: expected the path of an MJCF file (or null), got {value!r}")
+    from pathlib import Path
+
+    import mujoco
+
+    path = Path(value).expanduser()
+    if not path.is_file():
+        raise _problem(f"{{key}}: no MJCF file at {path}")
+    try:  # MuJoCo prints its own warnings for a file that is not XML: refuse those first
+        root = ElementTree.parse(path).getroot().tag
+    except (ElementTree.ParseError, OSError, UnicodeDecodeError) as exc:
+        raise _problem(f"{{key}}: {path} is not an MJCF file (not XML: {exc})") from None
+    if root != "mujoco":
+        raise _problem(f"{{key}}: {path} is not an MJCF file (its root element is <{root}>, not <mujoco>)")
+    try:
+        mujoco.MjSpec.from_file(str(path)).compile()
+    except Exception as exc:  # MuJoCo raises ValueError or its own errors; any is a bad file
+        text = str(exc).strip().splitlines()
+        raise _problem(f"{{key}}: {path} is not an MJCF model MuJoCo loads ({text[0] if text else type(exc).__name__})"
+                       ) from None
+    return value
+
+
 class CustomObjectConfig(_Section):
-    path: str | None = None
+    path: Annotated[str | None, BeforeValidator(_mjcf_file)] = None
     name: str = "custom_object"
     description: str | None = None
 
@@ -199,7 +239,8 @@ class VideoConfig(_Section):
 
     vcodec: str = "libsvtav1"
     crf: Annotated[int | float | None,
-                   _rule(_optional(_is_number), "{key}: expected a number or null, got {got}")] = None
+                   _rule(_optional(lambda v: _is_number(v) and 0 <= v <= MAX_VIDEO_CRF),
+                         f"{{key}}: expected a number in 0..{MAX_VIDEO_CRF} or null, got {{got}}")] = None
     g: int | None = 2
     preset: Annotated[int | str | None, _rule(lambda v: v is None or isinstance(v, str) or _is_int(v),
                                               "{key}: expected a preset name, a number or null, got {got}")] = None
@@ -220,6 +261,9 @@ class ExecutorConfig(_OpenSection):
 def _policy(value: Any) -> Any:
     if not (isinstance(value, Mapping) and isinstance(value.get("name"), str) and value["name"]):
         raise _problem(f"{{key}}: expected a mapping with a name (policy=<name>), got {value!r}")
+    problems = serve_problems(value)
+    if problems:
+        raise _problem("\n".join(problems))
     return value
 
 
@@ -232,6 +276,26 @@ def _dataset_id(value: Any) -> Any:
         except NamespaceError as exc:
             raise _problem(f"{{key}}: {exc}") from None
     return value
+
+
+def serve_problems(policy: Mapping[str, Any]) -> list[str]:
+    """Problems of the run's serving keys in ``policy`` (``policy.serve=true``; any policy may be served)."""
+    out = []
+    serve = policy.get("serve", False)
+    if not isinstance(serve, bool):
+        out.append(f"policy.serve: expected true or false, got {serve!r}")
+    batch = policy.get("serve_max_batch")
+    if not (batch is None or (_is_int(batch) and 1 <= batch <= MAX_SERVE_BATCH)):
+        out.append(f"policy.serve_max_batch: expected an integer in 1..{MAX_SERVE_BATCH} "
+                   f"(or null: the number of workers), got {batch!r}")
+    wait = policy.get("serve_batch_timeout_ms", 50.0)
+    if not (_is_number(wait) and 0 <= wait <= MAX_SERVE_BATCH_TIMEOUT_MS):
+        out.append(f"policy.serve_batch_timeout_ms: expected milliseconds in 0..{MAX_SERVE_BATCH_TIMEOUT_MS}, "
+                   f"got {wait!r}")
+    transport = policy.get("serve_transport", "auto")
+    if transport not in SERVE_TRANSPORTS:
+        out.append(f"policy.serve_transport: expected one of {', '.join(SERVE_TRANSPORTS)}, got {transport!r}")
+    return out
 
 
 class RunConfig(_OpenSection):
@@ -253,14 +317,16 @@ class RunConfig(_OpenSection):
     molmospaces: MolmoSpacesConfig = MolmoSpacesConfig()
     workers: Annotated[int, BeforeValidator(_workers)] = 2
     worker_threads: Annotated[int | None, _rule(
-        _optional(lambda v: _is_int(v) and v >= 1),
-        "{key}: expected a positive integer (or null for the libraries' default), got {got}")] = 1
+        _optional(lambda v: _is_int(v) and 1 <= v <= MAX_WORKER_THREADS),
+        f"{{key}}: expected an integer in 1..{MAX_WORKER_THREADS} (or null for the libraries' default), "
+        "got {got}")] = 1
     limit: Annotated[int | None, _rule(
         _optional(lambda v: _is_int(v) and v >= 1),
         "{key}: expected a positive integer (or null for every episode), got {got}")] = None
     seed: Annotated[int, _rule(_is_int, "{key}: expected an integer, got {got}")] = 0
-    output_dir: Annotated[str | None, _rule(_optional(lambda v: isinstance(v, str)),
-                                            "{key}: expected a path, got {got}")] = None
+    output_dir: Annotated[str | None, _rule(_optional(lambda v: isinstance(v, str) and v.strip() != ""),
+                                            "{key}: expected a path (or null for runs/<benchmark>-<policy>-"
+                                            "<time>), got {got}")] = None
     record: Flag = False
     record_hold_steps: Any = 10  # the recorder checks it (record=true)
     record_environment_state: Flag = False
@@ -270,9 +336,9 @@ class RunConfig(_OpenSection):
     horizon: Annotated[int | None, _rule(
         _optional(lambda v: _is_int(v) and 1 <= v <= MAX_HORIZON_STEPS),
         f"{{key}}: expected a whole number of policy steps in 1..{MAX_HORIZON_STEPS} (or null), got {{got}}")] = None
-    episode_timeout_s: Seconds = 900
-    episode_retries: Annotated[int, _rule(lambda v: _is_int(v) and v >= 0,
-                                          "{key}: expected a non-negative integer, got {got}")] = 1
+    episode_timeout_s: TimeoutSeconds = 900
+    episode_retries: Annotated[int, _rule(lambda v: _is_int(v) and 0 <= v <= MAX_EPISODE_RETRIES,
+                                          f"{{key}}: expected an integer in 0..{MAX_EPISODE_RETRIES}, got {{got}}")] = 1
     progress: Flag = True
     progress_interval_s: Annotated[int | float | None, _rule(
         _optional(lambda v: _is_number(v) and v > 0), "{key}: expected a positive number of seconds, got {got}")] = 30
@@ -291,6 +357,14 @@ class RunConfig(_OpenSection):
             problem = episode_work_problem(self.horizon, self.timing.model_dump(), "horizon")
             if problem:
                 raise _problem(problem)
+        return self
+
+    @model_validator(mode="after")
+    def _shm_is_local(self) -> RunConfig:
+        executor = self.executor.name
+        if self.policy.get("serve") and self.policy.get("serve_transport") == "shm" and executor != "local":
+            raise _problem(f"policy.serve_transport=shm needs executor=local (workers on the server's machine), "
+                           f"not executor={executor}; use policy.serve_transport=websocket or auto")
         return self
 
     @classmethod

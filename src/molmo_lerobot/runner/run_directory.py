@@ -1,7 +1,8 @@
 """A run's output directory: the files the runner owns there, and how a resume reads them back.
 
-``run.json`` says what the run is (benchmark, policy, seed, timing, options); a resume must
-match it. ``episodes.jsonl`` gets each finished episode appended durably (flushed and fsynced)
+``run.json`` says what the run is (benchmark, policy, seed, timing, options, recording options,
+the code's version and commit); a resume must match it, and is refused with one line naming the
+first key that differs. ``episodes.jsonl`` gets each finished episode appended durably (flushed and fsynced)
 as it completes; a write that fails (full disk) is cut back to the last whole record, so the
 file always parses. ``results.json``, the score, is written atomically only once every episode
 is accounted for: a directory without it holds a partial run, and a resume removes it before
@@ -9,7 +10,10 @@ running anything. ``resume=true`` on the same directory runs again the episodes 
 recorded, recorded with an infrastructure error (worker died, full disk, policy server gone),
 with an output that was not written, or absent from a recorder's output (the dataset of a
 killed run); it never drops a recorded episode (a larger ``limit`` extends the run, a smaller
-one is refused). What the finalizers write (``dataset/``, ``report.html``) is theirs.
+one is refused, none keeps the recorded one). A run recorded with ``record=true`` resumes only
+with the same recording options (``dataset/`` would mix encodings or lack the new episodes);
+one run without may resume recorded (the dataset gets every episode it lacks). What the
+finalizers write (``dataset/``, ``report.html``) is theirs.
 """
 
 from __future__ import annotations
@@ -30,8 +34,9 @@ RUN_FILE = "run.json"
 EPISODES_FILE = "episodes.jsonl"
 RESULTS_FILE = "results.json"
 
-#: ``run.json`` fields a resume must find unchanged
-RUN_IDENTITY = ("benchmark", "policy", "policy_checkpoint", "seed", "horizon", "timing", "mujoco", "eval_options")
+#: ``run.json`` fields a resume must find unchanged (``recording``: see :func:`_check_recording`)
+RUN_IDENTITY = ("benchmark", "policy", "policy_checkpoint", "seed", "horizon", "timing", "mujoco", "eval_options",
+                "code")
 #: ``episodes.jsonl`` fields a record must have, with their JSON types
 _RECORD_TYPES: dict[str, tuple[type, ...]] = {
     "episode_index": (int,), "house_index": (int, type(None)), "task_cls": (str, type(None)), "success": (bool,),
@@ -63,6 +68,15 @@ class RunDirectory:
                         f"kept in {EPISODES_FILE} (fix it, then rerun with resume=true)")
 
     # Starting -------------------------------------------------------------------------------
+    def recorded_limit(self) -> int | None:
+        """The ``limit`` a run already in this directory was started with (``None``: none, or no run)."""
+        try:
+            previous = json.loads(self.run_file.read_text())
+        except (OSError, ValueError, RecursionError):
+            return None
+        limit = previous.get("limit") if isinstance(previous, dict) else None
+        return limit if isinstance(limit, int) and not isinstance(limit, bool) and limit >= 1 else None
+
     def open(self, run_info: dict[str, Any], resume: bool, recorders: list[Any]) -> list[EpisodeResult]:
         """Create the directory for the run ``run_info`` describes (or reopen it on ``resume``) and
         return the episodes already done that stand."""
@@ -96,8 +110,12 @@ class RunDirectory:
         current = json.loads(json.dumps(run_info))  # compare as stored (JSON turns int keys into strings)
         for key in RUN_IDENTITY:
             if previous.get(key) != current.get(key):
-                raise RunError(f"cannot resume {out}: its {key} differs from this run's "
-                               f"({previous.get(key)!r} vs {current.get(key)!r})")
+                where, was, now = _first_difference(previous.get(key), current.get(key), key)
+                hint = ("; finish it with the code that started it, or start a new output_dir" if key == "code"
+                        else "")
+                raise RunError(f"cannot resume {out}: its {key} differs from this run's ({where}: {_short(was)} vs "
+                               f"{_short(now)}){hint}")
+        _check_recording(out, previous.get("recording"), current.get("recording"))
         done = _read_episodes(self.episodes_file)
         old, new = previous.get("limit"), current["limit"]
         if new is not None and (old is None or new < old):
@@ -105,13 +123,18 @@ class RunDirectory:
             raise RunError(f"cannot resume {out} with limit={new}: it was started with limit={shown} "
                            f"({recorded} episode{'s' * (recorded != 1)} recorded) and a resume never drops recorded "
                            + ("episodes; use limit=null" if old is None else
-                              f"episodes; use limit={old} or larger (or limit=null)"))
+                              f"episodes; use limit={old} or larger (or leave limit out to keep {old})"))
         rerun = self._incomplete(done, recorders)
         if rerun:
             print(f"molmo-eval: resume runs {len(rerun)} recorded episodes again ({sorted(rerun)[:10]}"
                   f"{' …' if len(rerun) > 10 else ''}): infrastructure errors, outputs not written or not in the "
                   "dataset", file=sys.stderr)
             done = [r for r in done if r.episode_index not in rerun]
+        total = current["benchmark"]["n_episodes"]
+        planned = total if new is None else min(new, total)
+        print(f"molmo-eval: resume {out}: {len(done)} of {planned} episodes recorded stand, running the other "
+              f"{planned - len(done)} (limit={'null' if new is None else new}"
+              f"{' as recorded' if new == old else f', was {old}'}, of {total} in the benchmark)", file=sys.stderr)
         fileio.remove(self.results_file, root=out)  # partial again until every episode is accounted for
         atomic_write(self.episodes_file, "".join(json.dumps(r.to_dict()) + "\n" for r in done), root=out)
         if new != old:  # a larger limit extends the run
@@ -180,10 +203,40 @@ class EpisodeLog:
         os.close(self.fd)
 
 
+def _check_recording(out: Path, previous: Any, current: Any) -> None:
+    """A recorded run resumes only with its recording options (``run.json``'s ``recording``);
+    a run recorded nothing may start recording (the dataset gets every episode it lacks)."""
+    if previous is None or previous == current:
+        return
+    if current is None:
+        raise RunError(f"cannot resume {out} with record=false: it was started with record=true and its dataset/ "
+                       "would lack the episodes run now; resume with record=true (and its recording options)")
+    where, was, now = _first_difference(previous, current, "")
+    raise RunError(f"cannot resume {out}: its recording option {where} differs from this run's ({_short(was)} vs "
+                   f"{_short(now)}); one dataset has one set of recording options: resume with "
+                   f"{where}={was if isinstance(was, str) else _short(was)}, or start a new output_dir")
+
+
+def _first_difference(a: Any, b: Any, where: str) -> tuple[str, Any, Any]:
+    """The dotted key of the first leaf where ``a`` and ``b`` differ, and its two values."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        for key in [*a, *(k for k in b if k not in a)]:
+            if a.get(key) != b.get(key):
+                return _first_difference(a.get(key), b.get(key), f"{where}.{key}" if where else str(key))
+    return where, a, b
+
+
+def _short(value: Any, limit: int = 80) -> str:
+    """``value`` as JSON, cut to ``limit`` characters (a whole policy config is no error message)."""
+    text = json.dumps(value, sort_keys=True)
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
 def _read_episodes(path: Path) -> list[EpisodeResult]:
     """Episodes persisted in ``episodes.jsonl`` so far. A torn last line (killed mid-write) is dropped,
     its episode rerun; any other unreadable record stops the resume with its line number."""
     done: dict[int, EpisodeResult] = {}
+    first_line: dict[int, int] = {}
     if not path.exists():
         return []
     text = path.read_text(errors="replace")
@@ -202,7 +255,11 @@ def _read_episodes(path: Path) -> list[EpisodeResult]:
             raise RunError(f"cannot resume: {path}:{lineno}: corrupt episode record ({why}); "
                            "delete that line to rerun its episode")
         r = EpisodeResult.from_dict(data)
+        if r.episode_index in done:
+            raise RunError(f"cannot resume: {path}:{lineno}: episode {r.episode_index} is recorded twice (also line "
+                           f"{first_line[r.episode_index]}); delete the line that is wrong")
         done[r.episode_index] = r
+        first_line[r.episode_index] = lineno
     return list(done.values())
 
 

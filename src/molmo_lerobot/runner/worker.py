@@ -190,7 +190,8 @@ class EpisodeWorker:
                 success=outcome.success, success_once=outcome.success_once, steps=outcome.steps,
                 seed=plan.seed, task_type=task_type.name, prompt=prompt, horizon=horizon,
                 extra={"ended_by": outcome.ended_by, "end_on_success": self.end_on_success,
-                       "success_any_step": outcome.success_any_step, "camera_system": env.camera_system},
+                       "success_any_step": outcome.success_any_step, "camera_system": env.camera_system,
+                       **({"start_warnings": list(odd)} if (odd := getattr(task, "start_warnings", ())) else {})},
             )
         except (Exception, KeyboardInterrupt, SystemExit) as exc:
             result = plan.failed(describe(exc), error_kind(exc))

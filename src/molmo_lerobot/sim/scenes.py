@@ -51,6 +51,12 @@ class SceneDataset(ABC):
     def metadata(self, house_index: int) -> dict[str, Any]:
         """House description, JSON-ready. At least ``objects``: ``{body_name: {"asset_id": uid, ...}}``."""
 
+    def install_problem(self) -> str | None:
+        """One line naming a fault of the installed files the dataset reads in place (and how to
+        repair it), or ``None``; checked once per run before any worker starts, and again when an
+        episode's scene fails to build (a fault then is infrastructure, not the episode's)."""
+        return None
+
     # Per episode (datasets whose houses depend on more than the index override these) ----------
     def build_episode(self, spec: EpisodeSpec, ctx: SceneContext) -> mujoco.MjSpec:
         """The world spec of ``spec``'s house (default: :meth:`build` of its ``house_index``)."""

@@ -10,6 +10,8 @@ expert: experts register for the task types they serve (hook ``molmo_experts``).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import mujoco
@@ -36,6 +38,11 @@ class Task(ABC):
     def reward(self) -> float | None:
         """A per-step reward, or ``None`` when the task defines none."""
         return None
+
+    #: what is odd about the episode's start that MolmoSpaces accepts as it is (a joint started
+    #: outside its range, a task already solved at the start): recorded in the episode's result
+    #: (``start_warnings``) and listed in ``results.json``; set when the task is created
+    start_warnings: tuple[str, ...] = ()
 
     #: the names of :meth:`environment_state`'s values; empty: the task defines no environment state
     environment_state_names: tuple[str, ...] = ()
@@ -73,6 +80,15 @@ def pose_in_base(env: Env, body: int) -> np.ndarray:
     return np.concatenate([pos, -quat if quat[0] < 0 else quat])
 
 
+@dataclass(frozen=True)
+class SpecProblem:
+    """A problem of an episode's ``field`` a task type finds; a ``warning`` does not stop it running."""
+
+    field: str
+    message: str
+    warning: bool = False
+
+
 class TaskType(ABC):
     """A task plugin's descriptor."""
 
@@ -86,6 +102,12 @@ class TaskType(ABC):
     @abstractmethod
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
         """The success thresholds this episode is judged by (reported in results.json)."""
+
+    def spec_problems(self, spec: EpisodeSpec, scene_metadata: Callable[[], Mapping[str, Any] | None]
+                      ) -> list[SpecProblem]:
+        """What only this task type can tell is wrong with ``spec`` before any simulation
+        (``scene_metadata()``: its house's metadata, ``None`` where not at hand); none by default."""
+        return []
 
     @abstractmethod
     def create(self, spec: EpisodeSpec, env: Env) -> Task:

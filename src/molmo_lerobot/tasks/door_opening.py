@@ -10,7 +10,12 @@ benchmark schema, accepted unchanged).
 * Success: openness ≥ ``task.door_openness_threshold`` (0.67) in the current state; reward: 1.0
   (their ``door_open_reward``) times success.
 * Start state: the hinge at ``task.articulated_joint_reset_state[0]`` (0.0 where absent), applied
-  when the task is created, right after the environment reset.
+  when the task is created, right after the environment reset. MolmoSpaces sets it and judges the
+  episode's range without checking either (``DoorOpeningTask.__init__``, ``get_door_open_percentage``),
+  so a start outside the hinge's range, a reversed ``articulated_joint_range`` or a door already
+  open past the threshold at the start runs here too, marked: the task's ``start_warnings`` (in
+  the episode's result and ``results.json``), and ``molmo-bench validate`` warns of those the
+  file alone shows (:meth:`DoorOpeningTaskType.spec_problems`).
 * Prompt: "Push the door open" when turning the hinge 0.5 rad further carries the handle away from
   the robot base (``task.robot_base_pose``), else "Pull the door open" (their
   ``check_if_pushing_door``; they measure the grasp pose derived from the handle, a few centimetres
@@ -19,6 +24,7 @@ benchmark schema, accepted unchanged).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 import mujoco
@@ -28,7 +34,7 @@ from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.molmospaces import task_aliases
 from molmo_lerobot.benchmark.task_specs import DoorOpeningTaskSpec
 from molmo_lerobot.sim.geometry import subtree
-from molmo_lerobot.tasks.base import Task, TaskType
+from molmo_lerobot.tasks.base import SpecProblem, Task, TaskType
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
@@ -93,16 +99,12 @@ class DoorOpeningTask(Task):
         m = env.model
         self.hinge = door_hinge(m, self.door)
         self.qadr = int(m.jnt_qposadr[self.hinge])
-        given = t.articulated_joint_range
-        if given is not None and len(given) != 2:
-            raise ValueError(f"task.articulated_joint_range: needs 2 values [closed, open], got {len(given)}")
+        given = t.articulated_joint_range  # [closed, open] when given (its spec model checks the count)
         self.range = tuple(float(v) for v in (given if given is not None else m.jnt_range[self.hinge]))
         if self.range[1] == self.range[0]:
             raise ValueError(f"task.articulated_joint_range: empty range {list(self.range)}")
         self.threshold = float(t.door_openness_threshold)
         reset = t.articulated_joint_reset_state
-        if reset is not None and len(reset) == 0:
-            raise ValueError("task.articulated_joint_reset_state: empty list")
         self.start = float(reset[0]) if reset is not None else 0.0
         self.pushing = False
 
@@ -113,6 +115,15 @@ class DoorOpeningTask(Task):
         d.qvel[m.jnt_dofadr[self.hinge]] = 0.0
         mujoco.mj_forward(m, d)
         self.pushing = is_pushing(m, d, self.door, np.asarray(self.env.spec.task.robot_base_pose[:3]))
+        warnings = [f"{field}: {what}" for field, what in start_warnings(self.range, self.start, self.threshold)]
+        lo, hi = (float(v) for v in m.jnt_range[self.hinge])
+        if m.jnt_limited[self.hinge] and not lo - 1e-9 <= self.start <= hi + 1e-9:
+            warnings.insert(0, f"task.articulated_joint_reset_state: {self.start:g} is outside the range "
+                               f"[{lo:g}, {hi:g}] of hinge {m.joint(self.hinge).name!r}")
+        if self.success() and not any("step 0" in w for w in warnings):
+            warnings.append(f"the door starts open past the threshold (openness {self.openness():.2f} >= "
+                            f"{self.threshold:g}): the episode succeeds at step 0")
+        self.start_warnings = tuple(warnings)
 
     def setup(self) -> None:
         """Nothing to remember: the rule depends on the current hinge state only."""
@@ -133,6 +144,24 @@ class DoorOpeningTask(Task):
         return OPEN_REWARD * float(self.success())
 
 
+def start_warnings(joint_range: tuple[float, float] | list[float] | None, start: float,
+                   threshold: float) -> list[tuple[str, str]]:
+    """``(field, what)`` the episode's own numbers show is odd about its start (MolmoSpaces runs it as it is)."""
+    if joint_range is None or len(joint_range) != 2 or joint_range[0] == joint_range[1]:
+        return []
+    r0, r1 = (float(v) for v in joint_range)
+    out = []
+    if r1 < r0:
+        out.append(("task.articulated_joint_range", f"[{r0:g}, {r1:g}] is reversed (closed above open)"))
+    if not min(r0, r1) - 1e-9 <= start <= max(r0, r1) + 1e-9:
+        out.append(("task.articulated_joint_reset_state",
+                    f"{start:g} is outside articulated_joint_range [{r0:g}, {r1:g}]"))
+    if float(np.clip((start - r0) / (r1 - r0), 0.0, 1.0)) >= threshold:
+        out.append(("task.articulated_joint_reset_state", f"the door starts open past door_openness_threshold "
+                                                          f"{threshold:g}: the episode succeeds at step 0"))
+    return out
+
+
 class DoorOpeningTaskType(TaskType):
     name = "door_opening"
     aliases = ("molmo_lerobot.tasks.door_opening.DoorOpeningTask", *task_aliases("door_opening"))
@@ -141,6 +170,14 @@ class DoorOpeningTaskType(TaskType):
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
         return {"door_openness_threshold": float(spec.task.door_openness_threshold)}
+
+    def spec_problems(self, spec: EpisodeSpec, scene_metadata: Callable[[], Mapping[str, Any] | None]
+                      ) -> list[SpecProblem]:
+        """Warnings (MolmoSpaces runs such episodes): a reversed range, a start outside it or already open."""
+        t = spec.task
+        start = float(t.articulated_joint_reset_state[0]) if t.articulated_joint_reset_state else 0.0
+        return [SpecProblem(field, what, warning=True)
+                for field, what in start_warnings(t.articulated_joint_range, start, float(t.door_openness_threshold))]
 
     def create(self, spec: EpisodeSpec, env: Env) -> DoorOpeningTask:
         task = DoorOpeningTask(spec, env)

@@ -20,6 +20,7 @@ The prompt is theirs (``get_task_description``): :func:`nav_prompt`. The default
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -27,7 +28,7 @@ import numpy as np
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.molmospaces import task_aliases
 from molmo_lerobot.benchmark.task_specs import NavToObjTaskSpec
-from molmo_lerobot.tasks.base import Task, TaskType
+from molmo_lerobot.tasks.base import SpecProblem, Task, TaskType
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
@@ -130,6 +131,19 @@ class NavToObjTaskType(TaskType):
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
         return {"succ_pos_threshold": float(spec.task.succ_pos_threshold)}
+
+    def spec_problems(self, spec: EpisodeSpec, scene_metadata: Callable[[], Mapping[str, Any] | None]
+                      ) -> list[SpecProblem]:
+        """A target the house's metadata does not list (where it lists its objects) can never be reached."""
+        objects = (scene_metadata() or {}).get("objects")
+        if not isinstance(objects, Mapping):
+            return []
+        names = candidate_names(spec, dict(objects))
+        if any(n in objects for n in names):
+            return []
+        field = "task.pickup_obj_candidates" if spec.task.pickup_obj_candidates else "task.pickup_obj_name"
+        return [SpecProblem(field, f"none of {names} is an object of house {spec.house_index} "
+                                   f"({len(objects)} objects, e.g. {', '.join(sorted(objects)[:3])})")]
 
     def create(self, spec: EpisodeSpec, env: Env) -> NavToObjTask:
         return NavToObjTask(spec, env)

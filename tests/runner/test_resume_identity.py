@@ -1,0 +1,71 @@
+"""What a resume keeps: the recorded limit, the recording options, the code, one record per episode."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from molmo_lerobot.errors import RunError
+from molmo_lerobot.runner.evaluate import run_evaluation
+from molmo_lerobot.runner.run_directory import _read_episodes
+
+
+def _common(faulty_policy) -> list[str]:
+    return ["policy=faulty", "workers=1", "horizon=2", f"policy.marker_dir={faulty_policy.marker_dir}"]
+
+
+def test_resume_without_a_limit_keeps_the_recorded_one_and_says_so(faulty_policy, small_bench, tmp_path, eval_config,
+                                                                   capsys):
+    out = tmp_path / "run"
+    run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "limit=1"))
+    (out / "results.json").unlink()  # killed before scoring
+    capsys.readouterr()
+    resumed = run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "resume=true"))
+    assert resumed.summary["n_episodes"] == 1 and json.loads((out / "run.json").read_text())["limit"] == 1
+    assert (f"molmo-eval: resume {out}: 1 of 1 episodes recorded stand, running the other 0 (limit=1 as recorded, "
+            "of 8 in the benchmark)") in capsys.readouterr().err
+
+
+def test_resume_refuses_other_code_naming_the_key(faulty_policy, small_bench, tmp_path, eval_config):
+    out = tmp_path / "run"
+    run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "limit=1"))
+    run = json.loads((out / "run.json").read_text())
+    assert run["code"]["version"] and run["code"]["commit"]  # this checkout is a git repository
+    run["code"]["commit"] = "0" * 40
+    (out / "run.json").write_text(json.dumps(run))
+    with pytest.raises(RunError, match=r"its code differs from this run's \(code.commit: \"0000") as exc:
+        run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "resume=true"))
+    assert len(str(exc.value).splitlines()) == 1
+    with pytest.raises(RunError, match=r"its policy differs from this run's \(policy.act_sleep_s: 0.0 vs 0.5\)"):
+        run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "resume=true", "policy.act_sleep_s=0.5"))
+
+
+@pytest.mark.slow
+def test_a_recorded_run_resumes_only_with_its_recording_options(faulty_policy, small_bench, tmp_path, eval_config):
+    out = tmp_path / "run"
+    common = [*_common(faulty_policy), "record=true", "video.vcodec=h264"]
+    run_evaluation(eval_config(small_bench, out, *common, "limit=1"))
+    for change, line in [
+        (["video.vcodec=libsvtav1"], f"cannot resume {out}: its recording option video.vcodec differs from this "
+                                     'run\'s ("h264" vs "libsvtav1"); one dataset has one set of recording options: '
+                                     "resume with video.vcodec=h264, or start a new output_dir"),
+        (["record_environment_state=true"], "its recording option record_environment_state differs"),
+        (["record=false"], "with record=false: it was started with record=true and its dataset/ would lack"),
+    ]:
+        args = [*common, "limit=2", "resume=true", *change]
+        with pytest.raises(RunError) as exc:
+            run_evaluation(eval_config(small_bench, out, *args))
+        assert line in str(exc.value) and len(str(exc.value).splitlines()) == 1
+    assert (out / "results.json").exists(), "a refused resume leaves the finished run alone"
+    assert run_evaluation(eval_config(small_bench, out, *common, "limit=2", "resume=true")).summary["n_episodes"] == 2
+
+
+def test_a_duplicated_episode_record_is_refused_naming_the_line(tmp_path):
+    record = {"episode_index": 3, "house_index": 1, "task_cls": "pick", "success": False, "success_once": False,
+              "steps": 2, "seed": 5, "error": None}
+    other = {**record, "episode_index": 4}
+    path = tmp_path / "episodes.jsonl"
+    path.write_text("".join(json.dumps(r) + "\n" for r in (record, other, {**record, "success": True})))
+    with pytest.raises(RunError, match=rf"^cannot resume: {path}:3: episode 3 is recorded twice \(also line 1\)"):
+        _read_episodes(path)
