@@ -309,4 +309,7 @@ def test_clients_in_step_are_batched_as_over_websockets():
             t.start()
         for t in threads:
             t.join(30)
+        deadline = time.monotonic() + 10  # the server counts a reply once it is sent: just after the client has it
+        while srv.served < 6 and time.monotonic() < deadline:
+            time.sleep(0.01)
         assert srv.served == 6 and srv.stats()["batch_sizes"].get("2", 0) >= 1
