@@ -169,8 +169,9 @@ def test_a_worker_killed_under_a_stopped_fork_server_is_an_infrastructure_death(
 @pytest.mark.slow
 def test_kill_9_of_the_fork_server_mid_run_costs_no_episode(faulty_policy, small_bench, tmp_path, eval_config):
     """``kill -9`` of the fork server while two workers run: they are not reported dead, and the
-    worker started after one of them dies comes from a fresh server; every episode ends on its
-    first attempt but the killed worker's, and none is an error."""
+    worker started after one of them is killed comes from a fresh server; every episode ends on its
+    first attempt but the killed worker's, and none is an error (it was 2 retried episodes, or the
+    run ending with exit 2 when the next start raced the dying server)."""
     markers, out = faulty_policy.marker_dir, tmp_path / "run"
     cfg = eval_config(small_bench, out, "policy=faulty", "workers=2", "horizon=20", "limit=6",
                       "policy.act_sleep_s=0.05", f"policy.marker_dir={markers}", "episode_retries=1")
@@ -197,5 +198,5 @@ def test_kill_9_of_the_fork_server_mid_run_costs_no_episode(faulty_policy, small
     by = {r.episode_index: r for r in res.episodes}
     assert sorted(by) == list(range(6)) and all(r.error is None for r in by.values()), \
         {i: r.error for i, r in by.items()}
-    retried = [i for i, r in by.items() if r.attempts == 2]
-    assert len(retried) == 1 and all(r.attempts == 1 for i, r in by.items() if i not in retried)
+    retried = [i for i, r in by.items() if r.attempts > 1]  # the killed worker's episode (none if it was idle)
+    assert len(retried) <= 1 and all(by[i].attempts == 2 for i in retried), "a live worker was reported dead"
