@@ -207,6 +207,47 @@ def test_linked_cache_and_install_roots_are_allowed(tmp_path):
     assert (tmp_path / "real_inst" / "objects" / "fruit" / "apple_01" / "apple_01.xml").is_symlink()
 
 
+# -- our cache dir ($MOLMO_LEROBOT_HOME): LIBERO's computed grasps and downscaled textures -----------------------------
+@pytest.mark.parametrize("plant", ["grasps", "grasps/libero-v1", "grasps/libero-v1/franka"])
+def test_libero_grasps_are_never_cached_through_a_link(tmp_path, outside, monkeypatch, plant):
+    """Issue 39, defect 1: a grasp file computed on first use went through a link planted in the cache dir."""
+    import numpy as np
+
+    from molmo_lerobot.libero import grasps
+
+    home = tmp_path / "home"
+    (home / plant).parent.mkdir(parents=True)
+    (home / plant).symlink_to(outside)
+    monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(home))
+    monkeypatch.setattr(grasps, "compute_grasps", lambda uid, robot: np.eye(4)[None])  # the write is under test
+    with pytest.raises(UnsafePathError) as err:
+        grasps.LiberoGraspLibrary().path("libero_ketchup", "franka")
+    assert str(err.value) == (f"{home}: {plant} is a symlink; refusing to write "
+                              "'grasps/libero-v1/franka/libero_ketchup.npz' through it")
+    assert _tree(outside) == []
+
+
+def test_libero_textures_are_never_cached_through_a_link_and_a_linked_cache_dir_is_allowed(tmp_path, outside,
+                                                                                          monkeypatch):
+    from molmo_lerobot.libero.objects import assets_root, texture_file
+
+    src = assets_root() / "textures" / "martin_novak_wood_table.png"
+    home = tmp_path / "home"
+    home.mkdir()
+    (home / "libero_textures").symlink_to(outside)
+    monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(home))
+    with pytest.raises(UnsafePathError, match=f"^{home}: libero_textures is a symlink; refusing to write "
+                                              "'libero_textures/16/textures/martin_novak_wood_table.png'"):
+        texture_file(src, size=16)
+    assert _tree(outside) == []
+    (tmp_path / "real_home").mkdir()
+    monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(tmp_path / "linked_home"))
+    (tmp_path / "linked_home").symlink_to(tmp_path / "real_home")
+    assert texture_file(src, size=16) == tmp_path / "linked_home" / "libero_textures" / "16" / "textures" / src.name
+    assert _tree(tmp_path / "real_home") == ["libero_textures", "libero_textures/16", "libero_textures/16/textures",
+                                             "libero_textures/16/textures/martin_novak_wood_table.png"]
+
+
 # -- no write bypasses fileio ---------------------------------------------------------------------------------------
 _PATH_METHODS = {"write_text", "write_bytes", "touch", "mkdir", "rename", "replace", "unlink", "symlink_to",
                  "hardlink_to", "rmdir"}
@@ -216,8 +257,6 @@ _SHUTIL = {"copy", "copy2", "copyfile", "copytree", "move", "rmtree"}
 
 #: (file, start of the call) -> why it may write without fileio's walk.
 ALLOWED = {
-    ("assets/grasps.py", "path.parent.mkdir("): "save_grasp_file writes where its caller names (a grasp "
-                                                "package being built), not below a run/cache/install root",
     ("benchmark/generate.py", "out.mkdir("): "a benchmark directory the user names, not a run dir",
     ("cli/bench.py", "out.parent.mkdir("): "molmo-bench's output: a benchmark directory the user names",
     ("cli/bench.py", "shutil.rmtree(out)"): "molmo-bench replaces the benchmark directory the user named",

@@ -31,6 +31,12 @@ def package_asset_dir(package: str, *parts: str, marker: str, what: str, install
     return path
 
 
+def home_dir() -> Path:
+    """Our cache dir: ``$MOLMO_LEROBOT_HOME``, else ``~/.cache/molmo_lerobot``. It may be a link; what is
+    written below it goes through :mod:`molmo_lerobot.fileio` with it as the root."""
+    return Path(os.environ.get("MOLMO_LEROBOT_HOME") or Path.home() / ".cache" / "molmo_lerobot")
+
+
 #: Where ``molmo-resources install --preset molmospaces`` puts MolmoSpaces' data when no
 #: ``MLSPACES_ASSETS_DIR`` is set (their layout: ``scenes/``, ``objects/``, ``grasps/``, ``robots/``).
 DEFAULT_MOLMOSPACES_ASSETS_DIR = Path("~/.cache/molmo_lerobot/molmospaces/assets")

@@ -221,6 +221,60 @@ def test_a_server_killed_under_its_client_is_a_one_line_infrastructure_error():
     assert memfd_maps() == [] and not [n for n in os.listdir("/dev/shm") if "molmo" in n]
 
 
+def _impostor(address: str, ready_w: int, report_w: int) -> None:
+    """Forked child: as user ``nobody``, listen on ``address``, greet the first client with an empty
+    metadata map (what a client that does not check would take) and report how many bytes it sent."""
+    got = -1
+    try:
+        os.setgid(65534)
+        os.setuid(65534)
+        with socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET) as srv:
+            srv.bind(shm.sock_address(address))
+            srv.listen(1)
+            os.write(ready_w, b"r")
+            srv.settimeout(60)
+            conn, _ = srv.accept()
+            conn.settimeout(10)
+            try:
+                conn.send(b"\x80")
+                got = len(conn.recv(1 << 16))
+            except OSError:  # the client hung up first
+                got = 0
+    finally:
+        os.write(report_w, str(got).encode())
+        os._exit(0)
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="runs a server as another user (needs root)")
+def test_a_client_refuses_a_server_of_another_user_before_sending_anything():
+    """Issue 39, defect 2: abstract names are visible to every local user. A client (re)connecting
+    while its server is gone reaches whatever listens on the name: one of another user's is refused,
+    with nothing sent (a request connects lazily, as after a dropped connection)."""
+    address = shm.new_address()
+    client = shm.ShmPolicyClient(address, timeout_s=10, connect_timeout_s=5, backoff_s=0.1)
+    ready_r, ready_w = os.pipe()
+    report_r, report_w = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        _impostor(address, ready_w, report_w)
+    os.close(ready_w)
+    os.close(report_w)
+    try:
+        assert os.read(ready_r, 1) == b"r", "the impostor did not start"
+        with pytest.raises(shm.ShmTransportError) as err:
+            client.infer(observation(np.random.default_rng(0)))
+        assert re.fullmatch(rf"policy server shm\+unix:{address} \(process {pid}\) runs as user 65534, not as "
+                            rf"this process's user 0: refused, nothing sent", str(err.value)), str(err.value)
+        assert error_kind(err.value) == INFRASTRUCTURE
+        assert os.read(report_r, 32) == b"0", "the client sent the impostor something"
+        assert not client.connected
+    finally:
+        os.waitpid(pid, 0)
+        os.close(ready_r)
+        os.close(report_r)
+        client.close()
+
+
 def test_serve_transport_auto_is_shm_for_the_local_executor_only():
     assert serve_transport({"serve_transport": "auto"}, "local") == "shm"
     assert serve_transport({}, "ray") == "websocket"
@@ -255,6 +309,9 @@ def test_clients_in_step_are_batched_as_over_websockets():
             t.start()
         for t in threads:
             t.join(30)
+        deadline = time.monotonic() + 10  # the server counts a reply once it is sent: just after the client has it
+        while srv.served < 6 and time.monotonic() < deadline:
+            time.sleep(0.01)
         assert srv.served == 6 and srv.stats()["batch_sizes"].get("2", 0) >= 1
 
 

@@ -194,6 +194,21 @@ def test_workers_of_a_killed_molmo_eval_end_on_their_own(faulty_policy, small_be
     assert running == {}, f"workers still running after their supervisor died: {running}"
 
 
+@pytest.mark.slow
+def test_the_policy_server_of_a_killed_molmo_eval_ends_on_its_own(faulty_policy, small_bench, tmp_path, run_cli):
+    """Issue 39, defect 5: ``kill -9`` of molmo-eval with ``policy.serve=true`` mid-run: its policy server
+    ends as its workers do, and so does the resource tracker it held open, instead of listening on
+    (a GPU model holding its memory) under init."""
+    markers, out = faulty_policy.marker_dir, tmp_path / "run"
+    report = run_cli(*_cli_args(small_bench, out, markers, "workers=1", "horizon=20", "+policy.serve=true",
+                                "policy.act_sleep_s=0.1"),
+                     signal=signal.SIGKILL, when=[(markers / "pids-1", 1)], orphan_grace_s=40)
+    assert report["rc"] == -signal.SIGKILL, report["stderr"]
+    assert report["left"], "molmo-eval left no process to check (did the server start?)"
+    running = {pid: s for pid, s in report["left"].items() if s[0] not in ("Z", "gone")}
+    assert running == {}, f"processes still running after molmo-eval was killed: {running}"
+
+
 def test_a_failing_export_leaves_the_score_standing(faulty_policy, small_bench, tmp_path, eval_config):
     """Scores first: results.json and episodes.jsonl are final before any export step runs; an export
     that fails is an error that says the score stands and where it is; the report still runs."""

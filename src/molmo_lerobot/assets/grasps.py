@@ -24,6 +24,7 @@ import numpy as np
 
 from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.fileio import atomic_open
+from molmo_lerobot.paths import home_dir
 
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetCatalog
@@ -74,12 +75,15 @@ def count_grasp_file(path: str | os.PathLike) -> int:
     return int(shape[0])
 
 
-def save_grasp_file(path: str | os.PathLike, transforms: np.ndarray) -> Path:
-    """Write ``transforms`` to ``path`` atomically (uncompressed, so counts stay header reads)."""
+def save_grasp_file(path: str | os.PathLike, transforms: np.ndarray, *, root: str | os.PathLike | None = None) -> Path:
+    """Write ``transforms`` to ``path`` atomically (uncompressed, so counts stay header reads).
+
+    ``root``: the cache (or output) dir ``path`` lies below; no directory from it down may be a
+    link (:mod:`molmo_lerobot.fileio`). Without it, ``path``'s missing parents are made.
+    """
     path = Path(path)
     transforms = _check(np.asarray(transforms, dtype=np.float64), str(path))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_open(path, "wb") as fh:
+    with atomic_open(path, "wb", root=root, parents=root is None) as fh:
         np.savez(fh, **{KEY: transforms})
     return path
 
@@ -141,8 +145,7 @@ class GraspLibraryType:
 
 def builtin_grasp_dir() -> Path:
     """Where ``grasps generate`` writes the built-in grasps (``$MOLMO_LEROBOT_HOME/grasps/builtin``)."""
-    home = os.environ.get("MOLMO_LEROBOT_HOME") or Path.home() / ".cache" / "molmo_lerobot"
-    return Path(home) / "grasps" / "builtin"
+    return home_dir() / "grasps" / "builtin"
 
 
 class BuiltinGraspLibrary(GraspLibrary):
@@ -178,6 +181,6 @@ def generate_builtin_grasps(out: str | os.PathLike | None = None, robot: str = "
 
     if robot not in HANDS:
         raise GraspError(f"analytic built-in grasps exist for robots {sorted(HANDS)} only, not {robot!r}")
-    root = Path(out) if out is not None else builtin_grasp_dir()
-    return [save_grasp_file(root / robot / f"{uid}.npz", analytic_grasps(obj, HANDS[robot]))
+    root, base = (Path(out), Path(out)) if out is not None else (builtin_grasp_dir(), home_dir())
+    return [save_grasp_file(root / robot / f"{uid}.npz", analytic_grasps(obj, HANDS[robot]), root=base)
             for uid, obj in sorted(BUILTIN_OBJECTS.items())]

@@ -47,7 +47,8 @@ import numpy as np
 
 from molmo_lerobot.assets.grasps import GraspLibrary
 from molmo_lerobot.assets.libraries import AssetError, AssetLibraryType, ObjectTableLibrary
-from molmo_lerobot.libero.objects import COLLISION_GROUP, PACKAGE, assets_root, cache_dir, license_of, texture_file
+from molmo_lerobot.libero.objects import COLLISION_GROUP, PACKAGE, assets_root, license_of, texture_file
+from molmo_lerobot.paths import home_dir
 
 #: robots whose grasp poses these are (one TCP convention)
 ROBOTS = ("franka", "franka_droid")
@@ -312,7 +313,7 @@ class FixtureGraspLibrary(GraspLibrary):
     """Per-joint handle grasps of the fixtures, computed from their geometry (module docstring)."""
 
     def __init__(self) -> None:
-        super().__init__(cache_dir() / "grasps" / "libero_fixtures", name="libero_fixtures")
+        super().__init__(home_dir() / "grasps" / "libero_fixtures", name="libero_fixtures")
 
     def _analytic(self, uid: str, robot: str, joint: str | None) -> bool:
         fx = LIBERO_FIXTURES.get(uid)

@@ -33,6 +33,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.assets.grasps import GraspLibrary, save_grasp_file
+from molmo_lerobot.paths import home_dir
 
 GENERATOR_VERSION = 1
 AZIMUTHS = 8
@@ -51,9 +52,7 @@ APPROACH_SWEEP = 0.15
 
 
 def grasp_dir() -> Path:
-    from molmo_lerobot.libero.objects import cache_dir
-
-    return cache_dir() / "grasps" / f"libero-v{GENERATOR_VERSION}"
+    return home_dir() / "grasps" / f"libero-v{GENERATOR_VERSION}"
 
 
 def surface_points(prims, spacing: float = SURFACE_SPACING) -> np.ndarray:
@@ -288,12 +287,13 @@ class LiberoGraspLibrary(GraspLibrary):
 
     def __init__(self, root: str | Path | None = None) -> None:
         super().__init__(root or grasp_dir(), name="libero")
+        self.write_root = self.root if root else home_dir()  # no link below it is followed (fileio)
 
     def _ensure(self, uid: str, robot: str, joint: str | None) -> None:
         from molmo_lerobot.libero.objects import LIBERO_OBJECTS
 
         if joint is None and robot in GRIPPERS and uid in LIBERO_OBJECTS and super().path(uid, robot) is None:
-            save_grasp_file(self.root / robot / f"{uid}.npz", compute_grasps(uid, robot))
+            save_grasp_file(self.root / robot / f"{uid}.npz", compute_grasps(uid, robot), root=self.write_root)
 
     def path(self, uid: str, robot: str = "franka", joint: str | None = None) -> Path | None:
         self._ensure(uid, robot, joint)

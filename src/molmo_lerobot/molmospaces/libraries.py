@@ -36,6 +36,7 @@ from molmo_lerobot.assets.grasps import GraspLibrary, GraspLibraryType
 from molmo_lerobot.assets.libraries import AssetError, AssetLibrary, AssetLibraryType, MetadataStore, UidLocation
 from molmo_lerobot.molmospaces import layout
 from molmo_lerobot.molmospaces.settings import MolmoSpacesSettings
+from molmo_lerobot.paths import home_dir
 
 _OBJAVERSE_UID = re.compile(r"[0-9a-f]{32}")
 
@@ -126,7 +127,7 @@ def _store_for(source: Path) -> MetadataStore:
     """Our LMDB copy of ``objects_metadata.json.gz`` (rebuilt when the file changes)."""
     stat = source.stat()
     key = hashlib.sha256(f"{source.resolve()}|{stat.st_size}|{stat.st_mtime_ns}".encode()).hexdigest()[:16]
-    home = Path(os.environ.get("MOLMO_LEROBOT_HOME") or Path.home() / ".cache" / "molmo_lerobot")
+    home = home_dir()
     store = MetadataStore(home / "molmospaces" / "metadata" / f"{key}.lmdb")
     if store.exists():
         return store

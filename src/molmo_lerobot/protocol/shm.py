@@ -10,6 +10,9 @@ server's action segment is copied out by the client (actions are small).
 
 The control channel is an ``AF_UNIX`` ``SOCK_SEQPACKET`` socket in the abstract namespace
 (``@molmo-serve-…``: no file either), one connection per client, strictly request → response.
+Abstract names carry no permissions, so each side checks the other's user (``SO_PEERCRED``)
+before it sends anything: a server accepts only its own user's clients, a client only its own
+user's server.
 Its messages are small msgpack maps (:mod:`molmo_lerobot.protocol.codec`) in which every array
 is replaced by a descriptor ``{"__shm__": [offset, dtype, shape]}`` into the sender's current
 frame; prompts, step indices and numpy scalars travel in the map itself. On connect the server
@@ -29,6 +32,7 @@ import mmap
 import os
 import secrets
 import socket
+import struct
 import sys
 import time
 from collections.abc import Callable
@@ -71,6 +75,12 @@ def new_address() -> str:
 
 def sock_address(address: str) -> str:
     return "\0" + address[1:] if address.startswith("@") else address
+
+
+def peer_credentials(sock: socket.socket) -> tuple[int, int]:
+    """``(pid, uid)`` of the process at the other end of a connected ``AF_UNIX`` socket (``SO_PEERCRED``)."""
+    pid, uid, _gid = struct.unpack("3i", sock.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, 12))
+    return pid, uid
 
 
 class Segment:
@@ -251,7 +261,11 @@ class ShmPolicyClient:
         self.connects = 0
 
     def connect(self) -> dict[str, Any]:
-        """Connect (retrying with backoff until ``connect_timeout_s``); return the server's metadata."""
+        """Connect (retrying with backoff until ``connect_timeout_s``); return the server's metadata.
+
+        A server of another user (``SO_PEERCRED``) is refused before anything is sent or read:
+        abstract socket names are visible to every local user, who could bind a dead server's name.
+        """
         self.close()
         deadline = time.monotonic() + self.connect_timeout_s
         delay, attempts = self.backoff_s, 0
@@ -270,6 +284,11 @@ class ShmPolicyClient:
                                              f"{type(exc).__name__}: {exc.strerror or exc})") from None
             time.sleep(delay)
             delay = min(delay * 2, 5.0)
+        pid, uid = peer_credentials(sock)
+        if uid != os.getuid():
+            sock.close()
+            raise ShmTransportError(f"policy server {self.uri} (process {pid}) runs as user {uid}, not as this "
+                                    f"process's user {os.getuid()}: refused, nothing sent")
         self._sock, self._sent_generation, self._frame = sock, 0, 0
         metadata = self._receive("metadata message", None)
         self.metadata = metadata

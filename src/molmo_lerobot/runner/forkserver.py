@@ -14,6 +14,14 @@ modules; importing torch creates no CUDA context and importing MuJoCo no EGL dis
 created by a worker's first use). Every worker checks this when it starts
 (:func:`inherited_gpu_state`) and refuses to run otherwise.
 
+A worker's liveness never depends on the server: the supervisor holds a pidfd on each worker
+(readable once it has ended, whoever its parent is), and only its exit status comes from the
+server, which reaps it. A server that is killed or stopped (SIGSTOP) therefore neither hides a
+worker's death nor fakes one; the status of a worker that ended while its server was lost is
+unreported (:func:`exit_status_lost`). A lost server fails the next start at once
+(:class:`ForkServerLost`, never a wait on a stopped server), and the transport replaces it
+(:meth:`PreloadedForkServer.restart`).
+
 The server forks from its main thread; importing LeRobot leaves it idle library thread pools
 (OpenCV's, jemalloc's, OpenBLAS's), which re-initialise in a forked child: a forked worker runs
 OpenCV's and torch's parallel kernels (``tests/runner/test_worker_start.py``, slow). A policy whose
@@ -22,13 +30,20 @@ libraries cannot be forked that way runs with ``executor.start_method=spawn``.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
+import signal
 import sys
+import time
 from collections.abc import Iterable
 from multiprocessing import forkserver, popen_forkserver, process, reduction, spawn, util
+from multiprocessing.connection import wait
 from multiprocessing.context import ForkServerProcess, set_spawning_popen
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:
     from molmo_lerobot.context import RunContext
@@ -36,6 +51,16 @@ if TYPE_CHECKING:
 #: What every worker imports, whatever its policy; the first sets the worker environment.
 BASE_PRELOAD = ("molmo_lerobot.runner.worker_env", "numpy", "mujoco", "molmo_lerobot.runner.local",
                 "molmo_lerobot.context", "molmo_lerobot.runner.episode_env")
+
+
+#: Seconds an ended worker's exit status may take to come from its fork server (which reaps it).
+STATUS_WAIT_S = 2.0
+#: Seconds a stopping server may take to exit once its last worker has (then it is killed).
+STOP_TIMEOUT_S = 10.0
+
+
+class ForkServerLost(MolmoError, OSError):
+    """The fork server died or was stopped before it forked the worker asked for."""
 
 
 def preload_modules(plugin_modules: Iterable[str] = (), extra: Iterable[str] = ()) -> list[str]:
@@ -49,8 +74,14 @@ class PreloadedForkServer:
 
     def __init__(self, modules: Iterable[str]) -> None:
         self.modules = list(modules)
-        self._server = forkserver.ForkServer()
-        self._server.set_forkserver_preload(self.modules)
+        self._server = self._new()
+        self.forked = False  # whether this server (or one it replaced) has forked a process: then one
+        # that cannot fork was lost (killed, stopped), not broken by its preload
+
+    def _new(self) -> forkserver.ForkServer:
+        server = forkserver.ForkServer()
+        server.set_forkserver_preload(self.modules)
+        return server
 
     def start(self) -> None:
         """Start the server (it imports in the background; the first fork waits for it)."""
@@ -60,25 +91,79 @@ class PreloadedForkServer:
     def pid(self) -> int | None:
         return self._server._forkserver_pid
 
+    def state(self) -> str | None:
+        """Why the server cannot fork now (``gone``, ``stopped``, ...), or None while it runs."""
+        if self.pid is None:
+            return "not started"
+        try:
+            code = Path(f"/proc/{self.pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except (OSError, IndexError):
+            return "gone"
+        return {"T": "stopped", "t": "stopped", "Z": "dead", "X": "dead"}.get(code)
+
     def process(self, target: Any, args: tuple[Any, ...], name: str) -> ForkServerProcess:
-        """A daemon process running ``target(*args)``, forked from this server once started."""
+        """A daemon process running ``target(*args)``, forked from this server once started. Its
+        ``start()`` raises :class:`ForkServerLost` (or ``EOFError``) when the server is lost first."""
         proc = ForkServerProcess(target=target, args=args, name=name, daemon=True)
-        proc._Popen = _Launcher(self._server)  # type: ignore[attr-defined,method-assign]
+        proc._Popen = _Launcher(self)  # type: ignore[attr-defined,method-assign]
         return proc
 
-    def stop(self) -> None:
-        """End the server (its children live on; each ends with its supervisor)."""
-        if self._server._forkserver_pid is not None:
-            self._server._stop()
+    def restart(self) -> None:
+        """End this server however it is (dead, stopped, not answering) and start a fresh one. The
+        processes it forked live on: nothing but their exit status depended on it."""
+        pid = self.pid
+        if pid is not None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+            with contextlib.suppress(ChildProcessError):
+                os.waitpid(pid, 0)
+            os.close(self._server._forkserver_alive_fd)
+        self._server = self._new()
+        self.start()
+
+    def wait_pid(self, status_r: int) -> int:
+        """The pid the server reports on ``status_r`` for the process just asked for; raises
+        :class:`ForkServerLost` when the server dies or is stopped first (the wait for it to finish
+        importing its preload is unbounded, as the standard fork server's)."""
+        while not wait([status_r], timeout=0.5):
+            if (why := self.state()) is not None:
+                raise ForkServerLost(f"the worker fork server (process {self.pid}) is {why}")
+        return forkserver.read_signed(status_r)
+
+    def stop(self, timeout_s: float = STOP_TIMEOUT_S) -> None:
+        """End the server: it exits once every process it forked has (each holds its "alive" pipe);
+        one still there ``timeout_s`` later (stopped, say) is killed. Its children live on."""
+        pid = self.pid
+        if pid is None:
+            return
+        os.close(self._server._forkserver_alive_fd)
+        deadline = time.monotonic() + timeout_s
+        try:
+            while not os.waitpid(pid, os.WNOHANG)[0]:
+                if time.monotonic() > deadline:
+                    os.kill(pid, signal.SIGKILL)
+                    os.waitpid(pid, 0)
+                    break
+                time.sleep(0.02)
+        except ChildProcessError:
+            pass  # reaped elsewhere
+        self._server = self._new()
+
+
+def exit_status_lost(proc: process.BaseProcess) -> bool:
+    """Whether ``proc`` (from :meth:`PreloadedForkServer.process`) ended without its fork server
+    reporting how (the server was killed or stopped): its ``exitcode`` 255 then says nothing."""
+    return bool(getattr(proc._popen, "status_lost", False))  # type: ignore[attr-defined]
 
 
 class _Launcher:
     """``Process._Popen`` for one server; pickled with the process as a harmless stand-in."""
 
-    def __init__(self, server: forkserver.ForkServer | None) -> None:
+    def __init__(self, server: PreloadedForkServer | None) -> None:
         self.server = server
 
     def __call__(self, process_obj: process.BaseProcess) -> _Popen:
+        assert self.server is not None
         return _Popen(process_obj, self.server)
 
     def __reduce__(self) -> tuple[Any, ...]:
@@ -86,10 +171,12 @@ class _Launcher:
 
 
 class _Popen(popen_forkserver.Popen):
-    """The standard forkserver ``Popen``, asking ``server`` instead of the module-wide server."""
+    """The standard forkserver ``Popen``, asking ``server`` instead of the module-wide server, and
+    watching the process through a pidfd (``sentinel``) rather than through the server."""
 
-    def __init__(self, process_obj: process.BaseProcess, server: forkserver.ForkServer) -> None:
+    def __init__(self, process_obj: process.BaseProcess, server: PreloadedForkServer) -> None:
         self._server = server
+        self.status_lost = False
         super().__init__(process_obj)
 
     def _launch(self, process_obj: process.BaseProcess) -> None:
@@ -101,12 +188,46 @@ class _Popen(popen_forkserver.Popen):
             reduction.dump(process_obj, buf)
         finally:
             set_spawning_popen(None)
-        self.sentinel, w = self._server.connect_to_new_process(self._fds)
+        self._status, w = self._server._server.connect_to_new_process(self._fds)
         parent_w = os.dup(w)  # the child's "parent alive" sentinel, as the standard Popen keeps
-        self.finalizer = util.Finalize(self, util.close_fds, (parent_w, self.sentinel))
-        with open(w, "wb", closefd=True) as f:
-            f.write(buf.getbuffer())
-        self.pid = forkserver.read_signed(self.sentinel)
+        try:
+            self.pid = self._server.wait_pid(self._status)  # before the job is written: a stopped server
+        except BaseException:                                # never forks a child to read it
+            util.close_fds(w, parent_w, self._status)
+            raise
+        self._server.forked = True
+        try:
+            self.sentinel = os.pidfd_open(self.pid)
+        except (ProcessLookupError, AttributeError):  # already gone (the server has its status), or no pidfds
+            self.sentinel = self._status
+        fds = (parent_w, self._status) + ((self.sentinel,) if self.sentinel != self._status else ())
+        self.finalizer = util.Finalize(self, util.close_fds, fds)
+        with contextlib.suppress(BrokenPipeError), open(w, "wb", closefd=True) as f:
+            f.write(buf.getbuffer())  # a worker that died before reading its job: its sentinel says so
+
+    def _send_signal(self, sig: int) -> None:
+        """Through the pidfd: a worker outliving its server is reaped by init, and its pid may be reused."""
+        if self.returncode is None and self.sentinel != self._status:
+            with contextlib.suppress(ProcessLookupError):
+                signal.pidfd_send_signal(self.sentinel, sig)
+        else:
+            super()._send_signal(sig)
+
+    def poll(self, flag: int = os.WNOHANG) -> int | None:
+        if self.returncode is None:
+            if not wait([self.sentinel], 0 if flag == os.WNOHANG else None):
+                return None
+            self.returncode = self._exit_status()
+        return self.returncode
+
+    def _exit_status(self) -> int:
+        """The ended process's exit status, from the server that reaps it; 255 and ``status_lost``
+        when the server is gone or does not report it within :data:`STATUS_WAIT_S`."""
+        if wait([self._status], STATUS_WAIT_S):
+            with contextlib.suppress(OSError, EOFError):
+                return forkserver.read_signed(self._status)
+        self.status_lost = True
+        return 255
 
 
 def inherited_gpu_state() -> str | None:

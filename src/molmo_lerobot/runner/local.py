@@ -10,7 +10,9 @@ both give the same per-episode outcomes; each worker reports where its start-up 
 :class:`LocalExecutor` is the :class:`~molmo_lerobot.runner.supervisor.Supervisor` over it.
 A worker ignores SIGINT (the supervisor decides when workers stop); SIGTERM aborts its running
 episode, closes its recorders and ends it. A worker whose supervisor process is gone stops the
-same way, then exits, so none is left running without one.
+same way, then exits, so none is left running without one. The supervisor sees a forked worker
+end through a pidfd, whatever became of the fork server; a server lost (killed, stopped) is
+replaced at the next worker start, once per start.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import importlib
 import json
+import logging
 import multiprocessing as mp
 import os
 import signal
@@ -27,7 +30,7 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from molmo_lerobot.runner.forkserver import PreloadedForkServer, inherited_gpu_state
+from molmo_lerobot.runner.forkserver import PreloadedForkServer, exit_status_lost, inherited_gpu_state
 from molmo_lerobot.runner.plan import EpisodePlan
 from molmo_lerobot.runner.progress import redirect_worker_output
 from molmo_lerobot.runner.supervisor import (
@@ -43,6 +46,8 @@ from molmo_lerobot.runner.supervisor import (
     exit_reason,
 )
 from molmo_lerobot.runner.worker import EpisodeWorker, Startup, WorkerJob, WorkerStop
+
+log = logging.getLogger(__name__)
 
 #: How worker processes start (see the module docstring)
 START_METHODS = ("forkserver", "spawn")
@@ -123,21 +128,36 @@ class ProcessTransport(Transport):
     def start(self, worker_id: str, job: WorkerJob) -> _Worker:
         parent, child = self.ctx.Pipe()
         args = (child, job, worker_id, time.time())
-        if self.start_method == "forkserver":
-            if self.server is None:
-                self.server = PreloadedForkServer(job.preload)
-                self.server.start()
-            proc = self.server.process(_worker_main, args, name=f"molmo-{worker_id}")
-        else:
-            proc = self.ctx.Process(target=_worker_main, args=args, name=f"molmo-{worker_id}", daemon=True)
         try:
-            proc.start()
-        except (OSError, EOFError) as exc:  # the fork server died (a preloaded module crashed it)
-            raise WorkerStartError(f"the worker fork server could not start worker {worker_id} ({exc!r}); "
-                                   "executor.start_method=spawn starts workers without it") from None
+            if self.start_method == "forkserver":
+                proc = self._fork(args, worker_id, job)
+            else:
+                proc = self.ctx.Process(target=_worker_main, args=args, name=f"molmo-{worker_id}", daemon=True)
+                proc.start()
         finally:
             child.close()
         return _Worker(proc, parent)
+
+    def _fork(self, args: tuple[Any, ...], worker_id: str, job: WorkerJob) -> Any:
+        """Start the worker from the fork server; a server lost since it last forked (killed, stopped)
+        is replaced by a fresh one, once. One that cannot fork at all (a preloaded module crashed it)
+        cannot start any worker."""
+        if self.server is None:
+            self.server = PreloadedForkServer(job.preload)
+            self.server.start()
+        for attempt in (0, 1):
+            proc = self.server.process(_worker_main, args, name=f"molmo-{worker_id}")
+            try:
+                proc.start()
+                return proc
+            except (OSError, EOFError) as exc:
+                if attempt or not self.server.forked:
+                    raise WorkerStartError(f"the worker fork server could not start worker {worker_id} "
+                                           f"({type(exc).__name__}: {exc}); "
+                                           "executor.start_method=spawn starts workers without it") from None
+                log.warning("the worker fork server was lost (%s); starting a fresh one", exc)
+                self.server.restart()
+        raise AssertionError("unreachable")
 
     def close(self) -> None:
         if self.server is not None:
@@ -161,7 +181,9 @@ class ProcessTransport(Transport):
             handle.proc.join()
             handle.dead = True
             handle.conn.close()
-            out.append((DEAD, exit_reason(handle.proc.exitcode)))
+            lost = exit_status_lost(handle.proc)
+            out.append((DEAD, "an exit status its lost fork server never reported" if lost
+                        else exit_reason(handle.proc.exitcode)))
         return out
 
     @staticmethod
@@ -178,8 +200,7 @@ class ProcessTransport(Transport):
         with contextlib.suppress(OSError):
             handle.conn.send(None)  # idle: close and exit
         if handle.proc.is_alive():
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(handle.proc.pid, signal.SIGTERM)  # busy: abort the episode, close and exit
+            handle.proc.terminate()  # SIGTERM, busy: abort the episode, close and exit
 
     def ended(self, handle: _Worker) -> bool:
         if handle.proc.is_alive():

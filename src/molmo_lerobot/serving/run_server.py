@@ -7,7 +7,8 @@ picks how they talk: ``shm`` (shared memory, :mod:`molmo_lerobot.serving.shm_ser
 serialisation; workers on this machine only), ``websocket`` (``molmo-serve``'s openpi-compatible
 protocol) or ``auto`` (``shm`` for the local executor where the platform has it, else
 ``websocket``). The server's statistics (transport, requests served, batch sizes seen) are
-written to ``<output_dir>/serve_stats.json``.
+written to ``<output_dir>/serve_stats.json``. A server whose run has gone (``kill -9`` of
+``molmo-eval`` included) stops on its own, as workers do.
 """
 
 from __future__ import annotations
@@ -15,10 +16,13 @@ from __future__ import annotations
 import contextlib
 import json
 import multiprocessing as mp
+import os
+import signal
 import sys
+import threading
 import time
 from collections.abc import Iterator
-from multiprocessing.connection import Connection
+from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +32,8 @@ from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.protocol import shm
 
 STATS_FILE = "serve_stats.json"
+#: Seconds a server whose run has gone has to stop gracefully before it exits regardless.
+ORPHAN_GRACE_S = 10.0
 
 
 class ServeError(MolmoError, RuntimeError):
@@ -62,11 +68,12 @@ def serve_options(policy_cfg: dict[str, Any], workers: int) -> dict[str, Any] | 
 def _serve(config: dict[str, Any], transport: str, options: dict[str, Any], threads: int | None,
            conn: Connection) -> None:
     """Server process: rebuild the run's context from its ``config``, build the server, report where
-    it listens (or the error), serve until SIGTERM, then send its statistics."""
+    it listens (or the error), serve until SIGTERM (or its run's end), then send its statistics."""
     from molmo_lerobot.context import RunContext
     from molmo_lerobot.serving.server import PolicyServer, build_server
     from molmo_lerobot.serving.shm_server import ShmPolicyServer
 
+    threading.Thread(target=_exit_when_orphaned, daemon=True).start()
     cap_threads(threads)  # as many as each in-process worker would use: the same rounding
     try:
         cls, where = (ShmPolicyServer, {}) if transport == "shm" else (PolicyServer, {"host": "127.0.0.1", "port": 0})
@@ -80,6 +87,16 @@ def _serve(config: dict[str, Any], transport: str, options: dict[str, Any], thre
         return
     with contextlib.suppress(OSError):
         conn.send(("stats", server.stats()))
+
+
+def _exit_when_orphaned() -> None:
+    """Stop this server gracefully (then for sure) once the run that started it has gone, however
+    it went (``kill -9`` included): its parent sentinel, a pipe only the parent holds open, reads
+    EOF. A server left behind would hold its model (GPU memory) and the run's resource tracker."""
+    wait([mp.parent_process().sentinel])
+    os.kill(os.getpid(), signal.SIGTERM)
+    time.sleep(ORPHAN_GRACE_S)
+    os._exit(1)
 
 
 def _stats(conn: Connection, timeout_s: float) -> dict[str, Any] | None:

@@ -6,9 +6,10 @@ a policy per connection, the same batcher (``max_batch``, ``batch_timeout_ms``, 
 wait for each other), the same checks of each observation, the same statistics. Observations
 reach the policy as read-only numpy views into the worker's segment (no copy, no decoding); the
 action is written into a segment of the server's per connection. Only clients of this user
-(``SO_PEERCRED``) are accepted, at most ``max_clients`` at a time (a surplus client is told the
-server is busy). A refused request (a bad descriptor, segment or observation) or a failing policy
-ends that connection only, with an error message naming the reason.
+(``SO_PEERCRED``; a client checks the server's user the same way) are accepted, at most
+``max_clients`` at a time (a surplus client is told the server is busy). A refused request (a bad
+descriptor, segment or observation) or a failing policy ends that connection only, with an error
+message naming the reason.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ import contextlib
 import logging
 import os
 import socket
-import struct
 import time
 import traceback
 from typing import Any
@@ -31,6 +31,7 @@ from molmo_lerobot.protocol.shm import (
     ShmTransportError,
     new_address,
     parse,
+    peer_credentials,
     send,
     sock_address,
 )
@@ -88,7 +89,7 @@ class ShmPolicyServer(PolicyServer):
         actions = Segment("molmo-actions")
         self._clients.add(client)
         try:
-            uid = struct.unpack("3i", conn.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, 12))[2]
+            _, uid = peer_credentials(conn)
             if uid != os.getuid():
                 await _send(conn, {"error": f"client of user {uid} refused", "kind": "request"})
                 return
