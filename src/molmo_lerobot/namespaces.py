@@ -40,6 +40,7 @@ from typing import Any
 
 from molmo_lerobot import fileio
 from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.paths import home_dir
 
 NAMESPACE_REGEX = re.compile(r"[-_\w][-_\w/]*[-_\w]+")  # Minari's
 NAMESPACE_METADATA_FILENAME = "namespace_metadata.json"
@@ -102,8 +103,7 @@ def default_root() -> Path:
     """``$MOLMO_DATASETS_PATH``, else ``$MOLMO_LEROBOT_HOME/datasets``, else ``~/.cache/molmo_lerobot/datasets``."""
     if os.environ.get("MOLMO_DATASETS_PATH"):
         return Path(os.environ["MOLMO_DATASETS_PATH"]).expanduser()
-    home = os.environ.get("MOLMO_LEROBOT_HOME") or Path.home() / ".cache" / "molmo_lerobot"
-    return Path(home).expanduser() / "datasets"
+    return home_dir().expanduser() / "datasets"
 
 
 def _dump(metadata: dict[str, Any]) -> str:
