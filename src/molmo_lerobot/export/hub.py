@@ -31,6 +31,11 @@ def _mask(text: str) -> str:
     return text
 
 
+def failure_line(exc: BaseException) -> str:
+    """A failed push's reason: the exception's first line, with any Hub token masked."""
+    return (_mask(f"{type(exc).__name__}: {exc}").splitlines() or [type(exc).__name__])[0]
+
+
 def push_dataset(root: Path, repo_id: str, *, private: bool = False) -> str | None:
     """Push the LeRobot dataset at ``root`` as dataset repo ``repo_id``; the reason (one line) if it failed."""
     from huggingface_hub import HfApi
@@ -50,7 +55,7 @@ def push_dataset(root: Path, repo_id: str, *, private: bool = False) -> str | No
             api.delete_tag(repo_id, tag=CODEBASE_VERSION, repo_type="dataset")
         api.create_tag(repo_id, tag=CODEBASE_VERSION, revision=commit.oid, repo_type="dataset")
     except Exception as exc:  # a push must never cost the local results
-        reason = (_mask(f"{type(exc).__name__}: {exc}").splitlines() or [type(exc).__name__])[0]
+        reason = failure_line(exc)
         log.warning("push of %s to the Hub as %s failed; local files are intact: %s", root, repo_id, reason)
         return reason
     log.info("pushed %s to the Hub as dataset %s", root, repo_id)

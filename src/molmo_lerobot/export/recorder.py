@@ -152,9 +152,9 @@ class LeRobotRecorderFactory(RecorderFactory):
                 upload_dataset(self.dataset_id, store=store, remote=self.remote, private=self.private)
                 error = None
             except Exception as exc:  # a push must never cost the local results
-                from molmo_lerobot.export.hub import _mask
+                from molmo_lerobot.export.hub import failure_line
 
-                error = (_mask(f"{type(exc).__name__}: {exc}").splitlines() or [type(exc).__name__])[0]
+                error = failure_line(exc)
                 log.warning("push of %s to %s failed; local files are intact: %s", self.dataset_id, target, error)
             summary["push"] = {"repo_id": target, "ok": error is None, "error": error}
 
