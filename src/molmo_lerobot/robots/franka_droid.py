@@ -56,7 +56,8 @@ from molmo_lerobot.sim.spec_compat import equality_data, set_joint_damping
 NAMESPACE = "robot_0/"
 #: MolmoSpaces' ``FrankaRobotConfig.base_size``: the pedestal under the arm (x, y, z metres)
 BASE_SIZE = (0.5, 0.5, 0.58)
-#: the FR3's joints (Franka's published limits, as in mujoco_menagerie's franka_fr3):
+#: the FR3's joints: ranges as in mujoco_menagerie's franka_fr3_v2 (fr3v2.xml; its franka_fr3, which
+#: MolmoSpaces' licence notes name, is narrower on joints 1, 2, 4-7: docs/parity.md, "Fallback arm vs FR3"):
 #: range (rad), armature (kg·m²), friction loss (N·m); damping :data:`FR3_DAMPING` on all
 FR3_JOINTS = (((-2.9007, 2.9007), 0.195, 1.137), ((-1.8361, 1.8361), 0.195, 1.137),
               ((-2.9007, 2.9007), 0.195, 1.137), ((-3.0770, -0.1169), 0.195, 1.137),
