@@ -121,6 +121,10 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     recorders = ctx.plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
     executor = _make_executor(cfg)
     bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]), ctx.plugins)
+    try:  # the render profile it names travels to the workers in the config
+        ctx = ctx.for_benchmark(bench)
+    except ValueError as exc:  # an unknown profile, a bad MOLMO_SCENE_* override
+        raise RunError(str(exc)) from None
     started = datetime.now(UTC)
     run_dir = RunDirectory(Path(cfg.get("output_dir") or Path("runs") / f"{safe_name(bench.name)}-"
                                 f"{safe_name(policy_name)}-{started:%Y%m%d-%H%M%S}"))
@@ -193,7 +197,7 @@ def _run_info(cfg: dict[str, Any], ctx: RunContext, planner: EpisodePlanner) -> 
                       "path": str(bench.path)},
         "policy": cfg["policy"], "policy_checkpoint": policy_checkpoints(cfg["policy"]), "seed": cfg["seed"],
         "limit": cfg.get("limit"), "horizon": cfg.get("horizon"),
-        "timing": cfg["timing"], "mujoco": mujoco.__version__,
+        "timing": cfg["timing"], "mujoco": mujoco.__version__, "render_profile": ctx.config["render_profile"],
         "eval_options": {"horizons": planner.horizons, "custom_object": cfg.get("custom_object"),
                          "camera": cfg.get("camera"), "robot": cfg.get("robot"),
                          "end_on_success": bool(cfg.get("end_on_success", False)),
