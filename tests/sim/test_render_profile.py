@@ -56,6 +56,8 @@ def test_v2_renders_every_scene_as_built_and_v3_turns_the_costly_knobs_off(monke
         ref = mujoco.Renderer(v2.model, 224, 224)
         ref.update_scene(v2.data, camera=cam, scene_option=v2.camera_view_options())
         np.testing.assert_array_equal(v2.render(cam), ref.render())
+        ref.enable_depth_rendering()
+        np.testing.assert_allclose(v2.render_depth(cam), ref.render(), rtol=1e-6)
         ref.close()
 
 

@@ -85,10 +85,13 @@ class FrameRenderer:
 
     def depth(self, source: mujoco.MjModel, model: mujoco.MjModel, data: mujoco.MjData, camera: int,
               option: mujoco.MjvOption, size: tuple[int, int]) -> np.ndarray:
-        """Depth in metres, float32 (H, W) (``mujoco.Renderer``'s conversion of the depth buffer)."""
-        slot, rect = self._draw(source, model, data, camera, option, size)
+        """Depth in metres, float32 (H, W): drawn and converted as ``mujoco.Renderer`` does (segmentation
+        colours, which leave the depth buffer unresolved by multisampling)."""
+        slot, rect = self._draw(source, model, data, camera, option, size, segment=True)
         raw = np.empty((size[1], size[0]), dtype=np.float32)
         mujoco.mjr_readPixels(None, raw, rect, slot.context)
+        slot.scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = False
+        slot.scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = False
         extent = model.stat.extent
         near, far = np.float32(model.vis.map.znear * extent), np.float32(model.vis.map.zfar * extent)
         c = np.float32(-0.5) * (-(far + near) / (far - near)) - np.float32(0.5)
