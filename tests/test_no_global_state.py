@@ -22,6 +22,8 @@ import molmo_lerobot
 PROCESS_CACHES = {
     ("molmo_lerobot.sim.env", "_MODEL_CACHE"):
         "compiled MuJoCo models keyed by everything that defines them (a compile cache, the same for every run)",
+    ("molmo_lerobot.sim.render", "_PROCESS_RENDERERS"):
+        "the process's one OpenGL context and its render contexts per compiled model (a GPU resource, no run state)",
     ("molmo_lerobot.resources.index", "_ENVS"): "LMDB allows one open handle per environment and process",
     ("molmo_lerobot.resources.index", "_ENVS_PID"): "the process the LMDB handles belong to (reset after fork)",
     ("molmo_lerobot.robots.franka", "_base_xml"): "constant MJCF text read from the installed package",

@@ -11,6 +11,7 @@ No module keeps run state of its own.
 from __future__ import annotations
 
 import copy
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -20,7 +21,9 @@ from molmo_lerobot.molmospaces.settings import MolmoSpacesSettings, resolve
 from molmo_lerobot.plugins import Plugins
 
 if TYPE_CHECKING:
+    from molmo_lerobot.benchmark.load import Benchmark
     from molmo_lerobot.sim.env import Timing
+    from molmo_lerobot.sim.render_profile import RenderProfile
 
 
 @dataclass(frozen=True)
@@ -53,6 +56,26 @@ class RunContext:
         from molmo_lerobot.sim.env import Timing
 
         return Timing(**(self.config.get("timing") or {}))
+
+    @property
+    def render_profile(self) -> RenderProfile:
+        """The run's render profile (``render_profile`` of the config, set by :meth:`for_benchmark`;
+        else the default profile with this process's overrides)."""
+        from molmo_lerobot.sim.render_profile import RenderProfile, resolve_profile
+
+        record = self.config.get("render_profile")
+        return RenderProfile.from_record(record) if record else resolve_profile(None)
+
+    def for_benchmark(self, bench: Benchmark) -> RunContext:
+        """This context with the render profile ``bench`` names (with this process's overrides), which
+        workers rebuilding it from :meth:`portable_config` then use."""
+        from molmo_lerobot.sim.render_profile import RenderProfileError, resolve_profile
+
+        try:
+            profile = resolve_profile(bench.metadata.render_profile if bench.metadata else None)
+        except RenderProfileError as exc:
+            raise RenderProfileError(f"{bench.path}: benchmark_metadata.json: {exc}") from None
+        return dataclasses.replace(self, config={**self.config, "render_profile": profile.record()})
 
     def portable_config(self) -> dict[str, Any]:
         """The config with every data path absolute: what a worker rebuilds this context from."""

@@ -70,6 +70,7 @@ class MolmoEnv(gym.Env):
         self.context = RunContext.build({**(eval_options or {}), "seed": run_seed, "horizon": horizon,
                                          "timing": timing or {}})
         self.bench = load_run_benchmark(benchmark, self.context.plugins)
+        self.context = self.context.for_benchmark(self.bench)  # the look its metadata names
         self.end_on_success = bool(end_on_success)
         self.environment_state = bool(environment_state)
         self._n = len(self.bench.episodes)

@@ -119,6 +119,7 @@ def test_cli_text_and_json(tmp_path, capsys):
 
 
 TRIAL = {"timing": {"policy_dt_ms": 66.0, "ctrl_dt_ms": 2.0, "sim_dt_ms": 2.0}, "horizon": None,
+         "render_profile": {"name": "v2", "shadows": None, "exposure": 1.0, "overrides": {}},
          "eval_options": {"horizons": {}, "custom_object": {"path": None}, "camera": {"randomization": 0}},
          "thresholds": {"pick": {"succ_pos_threshold": 0.01, "horizon_steps": [303]}},
          "versions": {"molmo-lerobot": "0.1.0", "mujoco": "3.3.0"},
@@ -147,6 +148,10 @@ def _changed(path: str, value):
         ("eval_options.custom_object.path", "/data/objects/" + "x" * 90 + ".xml",
          f'eval_options.custom_object.path null vs "/data/objects/{"x" * 90}.xml"'),
         ("thresholds.pick.succ_pos_threshold", 0.05, "thresholds.pick.succ_pos_threshold 0.01 vs 0.05"),
+        # issue 36: the look is part of the trial (a profile, or an environment override of it)
+        ("render_profile.name", "v3", 'render_profile.name "v2" vs "v3"'),
+        ("render_profile.overrides.MOLMO_SCENE_SHADOWS", "0",
+         "render_profile.overrides.MOLMO_SCENE_SHADOWS (unset) vs"),
     ],
 )
 def test_compare_refuses_runs_of_different_trials(tmp_path, path, value, needle):

@@ -118,6 +118,18 @@ def test_resume_refuses_a_different_run(faulty_policy, small_bench, tmp_path, ev
     assert (out / "results.json").exists(), "a refused resume leaves the finished run alone"
 
 
+def test_resume_refuses_a_different_render_profile(faulty_policy, small_bench, tmp_path, eval_config, monkeypatch):
+    """Issue 36: an environment override of the look (here shadows off) is part of the run, never silent."""
+    out = tmp_path / "run"
+    common = ["policy=faulty", "workers=1", "horizon=2", "limit=1", f"policy.marker_dir={faulty_policy.marker_dir}"]
+    first = run_evaluation(eval_config(small_bench, out, *common))
+    assert first.summary["render_profile"]["name"] == "v2" and first.summary["render_profile"]["overrides"] == {}
+    monkeypatch.setenv("MOLMO_SCENE_SHADOWS", "0")
+    with pytest.raises(RunError, match="render_profile differs") as info:
+        run_evaluation(eval_config(small_bench, out, *common, "resume=true"))
+    assert "\n" not in str(info.value) and "MOLMO_SCENE_SHADOWS" in str(info.value)
+
+
 @pytest.mark.slow
 def test_recorded_run_killed_and_resumed_gives_one_consistent_dataset(small_bench, tmp_path, eval_config, outcomes):
     """record=true: after SIGKILL + resume the dataset holds each episode exactly once, matching the results."""

@@ -322,3 +322,6 @@ class BenchmarkMetadata(_Model):
     camera_system_class: str | None = None
     source_data_date: str | None = None
     benchmark_created_date: str | None = None
+    #: the render profile its episodes are seen through (``None``: ``v2``, every scene as it builds;
+    #: :mod:`molmo_lerobot.sim.render_profile`)
+    render_profile: str | None = None

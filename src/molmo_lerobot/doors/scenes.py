@@ -21,7 +21,6 @@ the leaf extends to from the hinge (``leaf_dir``, ±1 along y), the room it swin
 from __future__ import annotations
 
 import math
-import os
 from functools import cache
 from typing import Any
 
@@ -131,20 +130,19 @@ class DoorRooms(SceneDataset):
         self.check_house(house_index)
         lay = layout(house_index)
         door = door_geometry(house_index)
-        shadows = os.environ.get("MOLMO_SCENE_SHADOWS", "1") not in ("0", "false", "no")
         world = mujoco.MjSpec()
         world.modelname = f"{self.name}_{house_index}"
         world.compiler.degree = False  # the hinge range is in radians
         world.visual.headlight.ambient = [0.3, 0.3, 0.3]
         world.visual.headlight.diffuse = [0.3, 0.3, 0.3]
         world.visual.headlight.specular = [0.0, 0.0, 0.0]
-        world.visual.quality.shadowsize = SHADOW_SIZE if shadows else 0
+        world.visual.quality.shadowsize = SHADOW_SIZE
         self._rooms(world, lay)
         self._door(world, lay, door)
         az = lay["light_az"]
         world.worldbody.add_light(name="key", pos=[1.5 * math.cos(az), 1.5 * math.sin(az), 2.4],
                                   dir=[-math.cos(az), -math.sin(az), -1.6], diffuse=[0.6] * 3, specular=[0.1] * 3,
-                                  castshadow=shadows, cutoff=70.0, type=mujoco.mjtLightType.mjLIGHT_SPOT)
+                                  castshadow=True, cutoff=70.0, type=mujoco.mjtLightType.mjLIGHT_SPOT)
         world.worldbody.add_light(name="fill", pos=[0.0, 0.0, 2.5], dir=[0.0, 0.0, -1.0], diffuse=[0.35] * 3,
                                   specular=[0.0] * 3, castshadow=False, type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
         return world

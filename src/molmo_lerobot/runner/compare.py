@@ -32,7 +32,7 @@ from molmo_lerobot.results import wilson_ci
 
 METRICS = {"success": "success at the final step", "success_once": "success at any step"}
 #: ``results.json`` fields that define the trial an episode is (besides the benchmark).
-TRIAL_FIELDS = ("timing", "horizon", "eval_options", "mujoco")
+TRIAL_FIELDS = ("timing", "horizon", "eval_options", "mujoco", "render_profile")
 #: ``config`` keys that do not change an episode's trial (who runs it, where its outputs go);
 #: a difference in any other key is flagged.
 NEUTRAL_CONFIG = frozenset({"policy", "benchmark", "seed", "limit", "workers", "executor", "output_dir", "record",

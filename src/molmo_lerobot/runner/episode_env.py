@@ -17,9 +17,10 @@ if TYPE_CHECKING:
 
 
 def build_env(spec: EpisodeSpec, timing: Timing, ctx: RunContext, camera: Mapping[str, Any] | None = None) -> Env:
-    """The episode's environment under the run ``ctx``; ``camera`` is the run's ``camera`` options (see
-    :func:`~molmo_lerobot.cameras.options.episode_camera_system` for the choice of cameras)."""
+    """The episode's environment under the run ``ctx`` (its render profile); ``camera`` is the run's ``camera``
+    options (see :func:`~molmo_lerobot.cameras.options.episode_camera_system` for the choice of cameras)."""
     plugins = ctx.plugins
     robot = plugins.robot(spec.robot.robot_name).configured(ctx.settings)
     cameras = episode_camera_system(spec, camera, plugins.camera_system, robot.default_camera_system)
-    return make_env(spec, timing, plugins.scene_dataset(spec.scene_dataset), robot, cameras, ctx)
+    scene = plugins.scene_dataset(spec.scene_dataset)
+    return make_env(spec, timing, scene, robot, cameras, ctx, ctx.render_profile)

@@ -166,6 +166,10 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     recorders = ctx.plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
     executor = _make_executor(cfg)
     bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]), ctx.plugins)
+    try:  # the render profile it names travels to the workers in the config
+        ctx = ctx.for_benchmark(bench)
+    except ValueError as exc:  # an unknown profile, a bad MOLMO_SCENE_* override
+        raise RunError(str(exc)) from None
     started = datetime.now(UTC)
     run_dir = RunDirectory(Path(cfg.get("output_dir") or Path("runs") / f"{safe_name(bench.name)}-"
                                 f"{safe_name(policy_name)}-{started:%Y%m%d-%H%M%S}"))
@@ -254,6 +258,7 @@ def _run_info(cfg: dict[str, Any], ctx: RunContext, planner: EpisodePlanner) -> 
         "policy": cfg["policy"], "policy_checkpoint": policy_checkpoints(cfg["policy"]), "seed": cfg["seed"],
         "limit": cfg.get("limit"), "horizon": cfg.get("horizon"),
         "timing": cfg["timing"], "mujoco": mujoco.__version__, "code": code_version(),
+        "render_profile": ctx.config["render_profile"],
         "recording": ({key: cfg.get(key) for key in ("record_environment_state", "record_hold_steps", "video")}
                       if cfg.get("record") else None),
         "eval_options": {"horizons": planner.horizons, "custom_object": cfg.get("custom_object"),

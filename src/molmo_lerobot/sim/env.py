@@ -26,7 +26,6 @@ from __future__ import annotations
 import copy
 import json
 import math
-import time
 import warnings
 from collections import OrderedDict
 from collections.abc import Sequence
@@ -38,6 +37,8 @@ import numpy as np
 
 from molmo_lerobot.poses import pose7, unit_pose
 from molmo_lerobot.sim.geometry import subtree
+from molmo_lerobot.sim.render import process_renderer
+from molmo_lerobot.sim.render_profile import RenderProfile, resolve_profile
 from molmo_lerobot.sim.spec_compat import set_joint_damping
 
 if TYPE_CHECKING:
@@ -119,7 +120,7 @@ _MODEL_CACHE_SIZE = 4
 
 
 def _model_key(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: RobotType,
-               cameras: CameraSystem) -> str:
+               cameras: CameraSystem, profile: RenderProfile) -> str:
     mods = spec.scene_modifications.model_dump(mode="json", exclude={"object_poses"})
     return json.dumps([spec.scene_dataset, spec.data_split, spec.house_index, robot.name,
                        vars(robot),  # a configured robot's settings (rby1: where its model is read from)
@@ -127,7 +128,7 @@ def _model_key(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: Ro
                        robot.base_size(spec.robot),
                        list(spec.img_resolution), [c.model_dump(mode="json") for c in spec.cameras], mods,
                        timing.sim_dt_ms, type(scene).__qualname__, cameras.name,
-                       cameras.episode_key(spec)], sort_keys=True, default=str)
+                       cameras.episode_key(spec), profile.record()], sort_keys=True, default=str)
 
 
 def _add_primitive(world: mujoco.MjSpec, name: str, prim: Any) -> None:
@@ -150,7 +151,8 @@ def _add_primitive(world: mujoco.MjSpec, name: str, prim: Any) -> None:
 
 
 def _build_model(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: RobotType,
-                 camera_system: CameraSystem, ctx: SceneContext) -> tuple[mujoco.MjModel, list[str]]:
+                 camera_system: CameraSystem, ctx: SceneContext,
+                 profile: RenderProfile) -> tuple[mujoco.MjModel, list[str]]:
     world = scene.build_episode(spec, ctx)
     robot.place(world, spec)
     mods = spec.scene_modifications
@@ -179,6 +181,7 @@ def _build_model(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: 
         except ValueError as exc:
             raise ValueError(f"scene {spec.scene_dataset!r} house {spec.house_index} does not compile: "
                              f"{str(exc).strip().splitlines()[-1]}") from None
+    profile.apply(model)
     return model, cams
 
 
@@ -186,7 +189,7 @@ def _place_cameras(spec: EpisodeSpec, timing: Timing, model: mujoco.MjModel, rob
                    camera_system: CameraSystem) -> None:
     """Let ``camera_system`` place its cameras in the reset scene (on a scratch copy), then fix
     the poses it chose in ``model``."""
-    probe = Env(spec, timing, copy.copy(model), robot, list(cams))
+    probe = Env(spec, timing, copy.copy(model), robot, list(cams), source=model)
     try:
         probe.reset(0)
         poses = camera_system.place(probe)
@@ -198,25 +201,27 @@ def _place_cameras(spec: EpisodeSpec, timing: Timing, model: mujoco.MjModel, rob
 
 
 def make_env(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: RobotType,
-             camera_system: CameraSystem, ctx: SceneContext) -> Env:
-    """Assemble, compile (cached per scene content) and wrap one episode's simulation.
+             camera_system: CameraSystem, ctx: SceneContext, profile: RenderProfile | None = None) -> Env:
+    """Assemble, compile (cached per scene content and render profile) and wrap one episode's simulation.
 
     ``scene``, ``robot`` and ``camera_system`` are the plugin objects for the episode's
     ``scene_dataset``, ``robot.robot_name`` and chosen camera system, resolved by the caller;
-    ``ctx`` is what the scene dataset reads of the run.
+    ``ctx`` is what the scene dataset reads of the run; ``profile`` the run's render profile
+    (``None``: the default profile with this process's overrides).
     """
-    key = _model_key(spec, timing, scene, robot, camera_system)
+    profile = resolve_profile(None) if profile is None else profile
+    key = _model_key(spec, timing, scene, robot, camera_system, profile)
     if key in _MODEL_CACHE:
         _MODEL_CACHE.move_to_end(key)
     else:
-        model, cams = _build_model(spec, timing, scene, robot, camera_system, ctx)
+        model, cams = _build_model(spec, timing, scene, robot, camera_system, ctx, profile)
         if camera_system.places_in_scene:
             _place_cameras(spec, timing, model, robot, cams, camera_system)
         _MODEL_CACHE[key] = model, cams
         while len(_MODEL_CACHE) > _MODEL_CACHE_SIZE:
             _MODEL_CACHE.popitem(last=False)
     model, cams = _MODEL_CACHE[key]
-    env = Env(spec, timing, copy.copy(model), robot, list(cams))
+    env = Env(spec, timing, copy.copy(model), robot, list(cams), source=model)
     env.camera_system = camera_system.name
     env._scene, env._scene_ctx = scene, ctx
     return env
@@ -229,12 +234,14 @@ class Env:
     """One episode's simulation. Built by :func:`make_env`; see the module docstring for timing."""
 
     def __init__(self, spec: EpisodeSpec, timing: Timing, model: mujoco.MjModel, robot: RobotType,
-                 camera_names: list[str]) -> None:
+                 camera_names: list[str], source: mujoco.MjModel | None = None) -> None:
         if abs(model.opt.timestep - timing.sim_dt_s) > 1e-12:
             raise ValueError(f"model timestep {model.opt.timestep} differs from sim_dt_ms={timing.sim_dt_ms}")
         self.spec = spec
         self.timing = timing
         self.model = model
+        #: the compiled model ``model`` copies: episodes of one house share its render context
+        self._source = model if source is None else source
         self.data = mujoco.MjData(model)
         self.robot_type = robot
         self.robot = robot.bind(model)
@@ -247,10 +254,12 @@ class Env:
         self._scene_ctx: SceneContext | None = None
         self._scene_metadata: dict[str, Any] | None = None
         self._depth_cameras = [c.name for c in spec.cameras if c.record_depth]
-        self._renderer: mujoco.Renderer | None = None
-        self._depth_renderer: mujoco.Renderer | None = None
-        self._seg_renderer: mujoco.Renderer | None = None
-        #: seconds spent creating renderers (each an OpenGL context and the model's GPU upload)
+        #: frames of the current state by camera: each camera renders at most once per state
+        self._frames: dict[str, np.ndarray] = {}
+        self._frames_key = b""
+        #: frames rendered (RGB, depth and segmentation), for tests and profiling
+        self.renders = 0
+        #: seconds this env spent making the process's GL context and its model's render context
         self.renderer_setup_s = 0.0
         self._view = self.camera_view_options()
         self.seed: int | None = None
@@ -309,10 +318,8 @@ class Env:
                              "top-level body")
 
     def close(self) -> None:
-        for r in (self._renderer, self._depth_renderer, self._seg_renderer):
-            if r is not None:
-                r.close()
-        self._renderer = self._depth_renderer = self._seg_renderer = None
+        """Drop this episode's frames (the process's GL context stays for the next episode)."""
+        self._frames.clear()
 
     # Stepping ------------------------------------------------------------------------------------
     def _validate(self, action: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -381,30 +388,52 @@ class Env:
         opt.geomgroup[:3] = 1
         return opt
 
-    def _make_renderer(self) -> mujoco.Renderer:
+    def _state_key(self) -> bytes:
+        """What a frame depends on that a step, a reset or a task may change."""
+        d, m = self.data, self.model
+        return b"".join(a.tobytes() for a in (np.array([d.time]), d.qpos, d.mocap_pos, d.mocap_quat, m.cam_pos,
+                                              m.cam_quat, m.cam_fovy, m.body_pos, m.body_quat))
+
+    def _size(self) -> tuple[int, int]:
         width, height = self.spec.img_resolution
-        t0 = time.perf_counter()
-        renderer = mujoco.Renderer(self.model, height=int(height), width=int(width))
-        self.renderer_setup_s += time.perf_counter() - t0
-        return renderer
+        return int(width), int(height)
+
+    def _camera_id(self, camera: str) -> int:
+        cid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
+        if cid < 0:
+            raise ValueError(f"The camera {camera!r} does not exist.")
+        return cid
+
+    def _renderer(self):
+        renderer = process_renderer()
+        before = renderer.setup_s
+        self.renders += 1
+        return renderer, before
 
     def render(self, camera: str) -> np.ndarray:
-        """RGB uint8 image (H, W, 3) from ``camera``; the renderer is created once and reused."""
-        if self._renderer is None:
-            self._renderer = self._make_renderer()
-        self._renderer.update_scene(self.data, camera=camera, scene_option=self._view)
-        return self._renderer.render()
+        """RGB uint8 image (H, W, 3) from ``camera``, rendered once per state: the policy, the recorder
+        and ``render()`` of the Gymnasium env get the same frame (do not write into it)."""
+        key = self._state_key()
+        cached = self._frames.get(camera)
+        if cached is not None and self._frames_key == key:
+            return cached
+        if self._frames_key != key:
+            self._frames.clear()
+            self._frames_key = key
+        renderer, before = self._renderer()
+        frame = renderer.rgb(self._source, self.model, self.data, self._camera_id(camera), self._view, self._size())
+        self.renderer_setup_s += renderer.setup_s - before
+        self._frames[camera] = frame
+        return frame
 
     def visible_fractions(self, camera: str, bodies: Sequence[str]) -> dict[str, float]:
         """For each body, the fraction of ``camera``'s pixels showing a geom of its subtree
         (a segmentation render at the episode's resolution, what the camera sees)."""
-        if self._seg_renderer is None:
-            self._seg_renderer = self._make_renderer()
-            self._seg_renderer.enable_segmentation_rendering()
         mujoco.mj_camlight(self.model, self.data)  # cameras the caller just moved
-        self._seg_renderer.update_scene(self.data, camera=camera, scene_option=self._view)
-        seg = self._seg_renderer.render()
-        geom_ids = np.where(seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM, seg[..., 0], -1)
+        renderer, before = self._renderer()
+        geom_ids = renderer.geom_ids(self._source, self.model, self.data, self._camera_id(camera), self._view,
+                                     self._size())
+        self.renderer_setup_s += renderer.setup_s - before
         out = {}
         for name in bodies:
             owned = np.isin(self.model.geom_bodyid, list(self.subtree_bodies(name)))
@@ -413,11 +442,10 @@ class Env:
 
     def render_depth(self, camera: str) -> np.ndarray:
         """Depth in metres, float32 (H, W), from ``camera``."""
-        if self._depth_renderer is None:
-            self._depth_renderer = self._make_renderer()
-            self._depth_renderer.enable_depth_rendering()
-        self._depth_renderer.update_scene(self.data, camera=camera, scene_option=self._view)
-        return self._depth_renderer.render().astype(np.float32)
+        renderer, before = self._renderer()
+        depth = renderer.depth(self._source, self.model, self.data, self._camera_id(camera), self._view, self._size())
+        self.renderer_setup_s += renderer.setup_s - before
+        return depth
 
     # Privileged access (tasks, scripted experts) --------------------------------------------------
     @property
