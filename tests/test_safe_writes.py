@@ -302,7 +302,7 @@ def _raw_writes(tree: ast.AST):
             elif base == "shutil":
                 if f.attr in _SHUTIL:
                     yield n
-            elif base not in ("fileio", "str") and f.attr in _PATH_METHODS:
+            elif base not in ("fileio", "str", "dataclasses") and f.attr in _PATH_METHODS:  # dataclasses.replace copies
                 if f.attr == "replace" and len(n.args) == 2:
                     continue  # str.replace(old, new); Path.replace takes one argument
                 yield n

@@ -77,10 +77,10 @@ class RenderProfile:
                                                          np.asarray(head.specular) * e)
 
     def record(self) -> dict[str, Any]:
-        """The JSON a run records and a resume or comparison checks."""
+        """The JSON a run records and a resume or comparison checks; the environment's overrides come right
+        after the name, so a refusal names the variable that changed the look rather than a setting it set."""
         out = dataclasses.asdict(self)
-        out["overrides"] = dict(self.overrides)
-        return out
+        return {"name": out.pop("name"), "overrides": dict(out.pop("overrides")), **out}
 
     @classmethod
     def from_record(cls, record: Mapping[str, Any]) -> RenderProfile:
