@@ -37,15 +37,19 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-import gymnasium as gym
-import numpy as np
-from gymnasium import spaces
+from molmo_lerobot.gl import use_headless_gl
 
-from molmo_lerobot.context import RunContext
-from molmo_lerobot.errors import MolmoError
-from molmo_lerobot.features import ENV_STATE_KEY, FeatureMap, is_wrist
-from molmo_lerobot.runner.episode import Episode, load_run_benchmark, open_episode
-from molmo_lerobot.runner.plan import EpisodePlanner
+use_headless_gl()  # before MuJoCo is imported (by the imports below): unset, it would pick GLFW and need a display
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+from gymnasium import spaces  # noqa: E402
+
+from molmo_lerobot.context import RunContext  # noqa: E402
+from molmo_lerobot.errors import MolmoError  # noqa: E402
+from molmo_lerobot.features import ENV_STATE_KEY, FeatureMap, is_wrist  # noqa: E402
+from molmo_lerobot.runner.episode import Episode, load_run_benchmark, open_episode  # noqa: E402
+from molmo_lerobot.runner.plan import EpisodePlanner  # noqa: E402
 
 NAMESPACE = "molmo_lerobot"
 

@@ -13,6 +13,8 @@ import os
 import sys
 from typing import Any
 
+from molmo_lerobot.gl import use_headless_gl
+
 _CFG_TYPES = ("job", "hydra", "all")
 
 
@@ -29,7 +31,7 @@ def _main(argv: list[str] | None = None) -> int:
         if a in ("--cfg", "-c") and (i + 1 == len(args) or args[i + 1] not in _CFG_TYPES):
             args.insert(i + 1, "job")
             break
-    os.environ.setdefault("MUJOCO_GL", "egl")
+    use_headless_gl()
     import hydra
     from hydra.core.global_hydra import GlobalHydra
     from hydra.errors import HydraException, OverrideParseException

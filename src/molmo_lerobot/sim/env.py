@@ -23,11 +23,14 @@ has settled on its receptacle reads as unsupported (``docs/parity.md``).
 
 from __future__ import annotations
 
+import atexit
 import copy
+import functools
 import json
 import math
 import time
 import warnings
+import weakref
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -36,6 +39,7 @@ from typing import TYPE_CHECKING, Any
 import mujoco
 import numpy as np
 
+from molmo_lerobot.gl import gl_error
 from molmo_lerobot.poses import pose7, unit_pose
 from molmo_lerobot.sim.geometry import subtree
 from molmo_lerobot.sim.spec_compat import set_joint_damping
@@ -225,6 +229,12 @@ def make_env(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: Robo
 # The environment ---------------------------------------------------------------------------------
 
 
+def _close_at_exit(ref: weakref.ref[Env]) -> None:
+    env = ref()
+    if env is not None:
+        env.close()
+
+
 class Env:
     """One episode's simulation. Built by :func:`make_env`; see the module docstring for timing."""
 
@@ -250,6 +260,7 @@ class Env:
         self._renderer: mujoco.Renderer | None = None
         self._depth_renderer: mujoco.Renderer | None = None
         self._seg_renderer: mujoco.Renderer | None = None
+        self._exit_hook: functools.partial[None] | None = None  # closes the renderers of an env left open
         #: seconds spent creating renderers (each an OpenGL context and the model's GPU upload)
         self.renderer_setup_s = 0.0
         self._view = self.camera_view_options()
@@ -313,6 +324,9 @@ class Env:
             if r is not None:
                 r.close()
         self._renderer = self._depth_renderer = self._seg_renderer = None
+        if self._exit_hook is not None:
+            atexit.unregister(self._exit_hook)
+            self._exit_hook = None
 
     # Stepping ------------------------------------------------------------------------------------
     def _validate(self, action: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -384,7 +398,16 @@ class Env:
     def _make_renderer(self) -> mujoco.Renderer:
         width, height = self.spec.img_resolution
         t0 = time.perf_counter()
-        renderer = mujoco.Renderer(self.model, height=int(height), width=int(width))
+        # a Renderer whose __init__ fails leaves close() (its __del__) attributes to test: no second traceback
+        renderer = mujoco.Renderer.__new__(mujoco.Renderer)
+        renderer._gl_context = renderer._mjr_context = None
+        try:
+            renderer.__init__(self.model, height=int(height), width=int(width))
+        except (mujoco.FatalError, RuntimeError, ImportError, AttributeError) as exc:
+            raise gl_error(exc) from None
+        if self._exit_hook is None:  # an env still open at exit closes its renderers before EGL is terminated
+            self._exit_hook = functools.partial(_close_at_exit, weakref.ref(self))
+            atexit.register(self._exit_hook)
         self.renderer_setup_s += time.perf_counter() - t0
         return renderer
 
