@@ -143,6 +143,13 @@ def test_the_card_says_in_prose_what_the_data_is_and_its_limitations(two_worker_
     assert "scripted expert that end" not in card  # no episode was cut at its success hold
 
 
+def test_a_local_datasets_card_links_no_hub_viewer_but_says_how_to_view_it(two_worker_run):
+    """push=false: the Hub's viewer would open nothing (no such dataset there); LeRobot's local viewer can."""
+    card = (two_worker_run[0] / "dataset" / "README.md").read_text()
+    assert "huggingface.co/spaces/lerobot/visualize_dataset" not in card
+    assert f"`lerobot-dataset-viz --repo-id {two_worker_run[1].repo_id} --root . --episode-index 0`" in card
+
+
 def test_resume_adds_new_shards_to_the_previous_dataset(two_worker_run, tmp_path):
     out0, _, results, _, _ = two_worker_run
     out = tmp_path / "run"

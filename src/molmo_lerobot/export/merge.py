@@ -212,7 +212,8 @@ def _build(work: Path, sources: list[_Source], shards: list[Shard], torn: list[s
     fileio.atomic_write(tmp / "results.json", json.dumps(shared, indent=2) + "\n", root=tmp)
     meta = LeRobotDatasetMetadata(factory.repo_id, root=tmp)
     check_dataset(tmp, results)
-    fileio.atomic_write(tmp / "README.md", str(make_card(meta.info, shared, factory.repo_id, records)), root=tmp)
+    fileio.atomic_write(tmp / "README.md", str(make_card(meta.info, shared, factory.repo_id, records,
+                                                                    on_hub=factory.push)), root=tmp)
     return tmp
 
 
