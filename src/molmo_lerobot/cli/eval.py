@@ -14,6 +14,7 @@ import sys
 from typing import Any
 
 from molmo_lerobot.gl import use_headless_gl
+from molmo_lerobot.runner.progress import quiet_library_bars
 
 _CFG_TYPES = ("job", "hydra", "all")
 
@@ -32,6 +33,7 @@ def _main(argv: list[str] | None = None) -> int:
             args.insert(i + 1, "job")
             break
     use_headless_gl()
+    quiet_library_bars()  # not on a terminal: LeRobot's merge bars would fill the log with redraws
     import hydra
     from hydra.core.global_hydra import GlobalHydra
     from hydra.errors import HydraException, OverrideParseException
