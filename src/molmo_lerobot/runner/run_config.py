@@ -260,6 +260,7 @@ class RunConfig(_OpenSection):
                                             "{key}: expected a path, got {got}")] = None
     record: Flag = False
     record_hold_steps: Any = 10  # the recorder checks it (record=true)
+    record_min_frames: Any = 100  # the recorder checks it (record=true)
     record_environment_state: Flag = False
     push: Flag = False
     resume: Flag = False
