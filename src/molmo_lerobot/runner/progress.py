@@ -10,8 +10,8 @@
   line every ``heartbeat_s`` while episodes run; never carriage returns.
 * Workers write their own stdout/stderr (weight-loading prints, library warnings) to
   ``output_dir/logs/<worker_id>.log`` (:func:`redirect_worker_output`), so they cannot break the bar.
-* Not a terminal: the libraries' own progress bars (LeRobot's dataset merge, ``datasets``, the Hub
-  client: all tqdm) are off (:func:`quiet_library_bars`); a log would hold every redraw.
+* Not a terminal: the libraries' own tqdm progress bars (LeRobot's dataset merge, ``datasets``) are
+  off (:func:`quiet_library_bars`); a log would hold every redraw.
 """
 
 from __future__ import annotations
@@ -41,8 +41,8 @@ def quiet_library_bars(stream: IO[str] | None = None) -> None:
     user set wins."""
     stream = sys.stderr if stream is None else stream
     if not getattr(stream, "isatty", lambda: False)():
-        for var in ("TQDM_DISABLE", "HF_HUB_DISABLE_PROGRESS_BARS", "HF_DATASETS_DISABLE_PROGRESS_BARS"):
-            os.environ.setdefault(var, "1")
+        # TQDM_DISABLE alone: datasets' and the Hub's own switches warn when a library turns bars back on
+        os.environ.setdefault("TQDM_DISABLE", "1")
 
 
 def redirect_worker_output(output_dir: str | Path, worker_id: str) -> Path | None:
