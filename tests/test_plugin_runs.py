@@ -117,8 +117,16 @@ def test_a_sweep_writes_one_complete_run_per_job(tmp_path, capsys):
 def test_a_sweep_job_that_fails_does_not_stop_the_others(tmp_path, capsys):
     sweep = tmp_path / "sweep"
     assert main(["-m", "workers=0,1", *FAST[:3], "progress=false", f"hydra.sweep.dir={sweep}"]) == 2
-    assert "workers must be at least 1, got 0" in capsys.readouterr().err
+    out = capsys.readouterr()
+    assert "workers must be at least 1, got 0" in out.err
     assert json.loads((sweep / "1-random-pick_v1" / "results.json").read_text())["n_episodes"] == 2
+    # the sweep ends with one table of its jobs (each job's own summary scrolled by above it)
+    table = out.out.strip().splitlines()[-4:]
+    assert table[0] == "sweep: 2 jobs"
+    assert table[1].split() == ["job", "policy", "benchmark", "success", "exit", "outputs"]
+    assert table[2].split()[:4] == ["0", "random", "pick_v1", "error:"] and table[2].split()[-2:] == ["2", "-"]
+    assert table[3].split()[:3] == ["1", "random", "pick_v1"] and table[3].split()[-2:] == [
+        "0", str(sweep / "1-random-pick_v1")]
 
 
 def test_a_single_run_writes_nothing_but_its_output_dir(tmp_path, monkeypatch):

@@ -406,7 +406,7 @@ def test_molmo_bench_validate_reports_a_clash_in_one_line(impostor_dist):
     res = subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.bench", "validate",
                           str(data_path("benchmarks") / "pick_v1")],
                          capture_output=True, text=True, env=env, timeout=300)
-    assert res.returncode == 1 and "Traceback" not in res.stderr
+    assert res.returncode == 2 and "Traceback" not in res.stderr
     assert res.stderr.strip().splitlines() == [
         "molmo-bench: error: robot 'franka' is provided by plugin 'franka' (molmo-lerobot 0.1.0) and plugin "
         "'impostor_franka' (impostor-bots 0.1); choose one with plugins.prefer.robot.franka=<plugin>"]

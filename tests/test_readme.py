@@ -91,3 +91,37 @@ def test_policy_interface_facts_match_the_code():
     for name in ("pick_v1", "open_v1"):
         spec = load_benchmark(data_path("benchmarks") / name, plugins).episodes[0]
         assert [c.name for c in spec.cameras] == ["exterior", "wrist"] and list(spec.img_resolution) == [224, 224]
+
+
+def _quickstart() -> list[list[str]]:
+    (_lang, body), = [b for b in _blocks(_section("Quickstart")) if b[0] == "bash"]
+    return [shlex.split(line, comments=True) for line in body.splitlines() if line.strip()]
+
+
+def test_quickstart_is_six_lines_eval_record_load_train_eval():
+    lines = _quickstart()
+    assert len(lines) == 6 and lines[0] == ["source", ".venv/bin/activate"]
+    assert [line[0] for line in lines[1:]] == ["molmo-eval", "molmo-eval", "python", "lerobot-train", "molmo-eval"]
+    record, train, evaluate = lines[2], lines[4], lines[5]
+    assert "record=true" in record and "--dataset.root=runs/quick-expert/dataset" in train
+    out = next(a.split("=", 1)[1] for a in train if a.startswith("--output_dir="))
+    assert f"policy.path={out}/checkpoints/last/pretrained_model" in evaluate
+
+
+@pytest.mark.slow  # imports LeRobot's policies (a minute on 2 loaded cores)
+def test_quickstart_commands_are_valid_as_written():
+    """Each molmo-eval line is a valid run config; every lerobot-train flag is one LeRobot knows."""
+    import draccus
+    import lerobot.policies  # noqa: F401  (registers the policy types, as lerobot-train's imports do)
+    from lerobot.configs.train import TrainPipelineConfig
+
+    from molmo_lerobot.config import compose
+    from molmo_lerobot.runner.run_config import RunConfig
+
+    lines = _quickstart()
+    for line in lines:
+        if line[0] == "molmo-eval":
+            RunConfig.of(compose(line[1:]))
+    train = next(line for line in lines if line[0] == "lerobot-train")
+    cfg = draccus.parse(config_class=TrainPipelineConfig, args=train[1:])
+    assert cfg.policy.type == "act" and cfg.policy.device == "cpu" and cfg.steps == 20

@@ -25,6 +25,10 @@ Observation
 Action
     float32 ``(n,)``: the robot's move groups concatenated in that same order (the
     ``action`` feature of our datasets), e.g. Franka: 7 arm joint targets + 1 gripper command.
+    Every value is an absolute position target, so ``action_space`` is bounded by what the robot
+    clips targets to: each arm joint's range (its actuator's ctrl range), the gripper's 0 open … 1
+    closed, a mobile base's x and y (m, from its start) by its actuators' range and its yaw as a
+    heading in [-π, π]; ``action_space.sample()`` is a reachable pose.
 
 The reward is the task's own (``Task.reward``: e.g. the opening fraction for open/close), else
 1.0 on success and 0.0 otherwise. ``info`` carries ``is_success`` (success in the current state, LeRobot's key),
@@ -37,15 +41,19 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-import gymnasium as gym
-import numpy as np
-from gymnasium import spaces
+from molmo_lerobot.gl import use_headless_gl
 
-from molmo_lerobot.context import RunContext
-from molmo_lerobot.errors import MolmoError
-from molmo_lerobot.features import ENV_STATE_KEY, FeatureMap, is_wrist
-from molmo_lerobot.runner.episode import Episode, load_run_benchmark, open_episode
-from molmo_lerobot.runner.plan import EpisodePlanner
+use_headless_gl()  # before MuJoCo is imported (by the imports below): unset, it would pick GLFW and need a display
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+from gymnasium import spaces  # noqa: E402
+
+from molmo_lerobot.context import RunContext  # noqa: E402
+from molmo_lerobot.errors import MolmoError  # noqa: E402
+from molmo_lerobot.features import ENV_STATE_KEY, FeatureMap, is_wrist  # noqa: E402
+from molmo_lerobot.runner.episode import Episode, load_run_benchmark, open_episode  # noqa: E402
+from molmo_lerobot.runner.plan import EpisodePlanner  # noqa: E402
 
 NAMESPACE = "molmo_lerobot"
 
@@ -167,8 +175,18 @@ class MolmoEnv(gym.Env):
                                  "agent_pos": spaces.Box(-np.inf, np.inf, (self.features.state_dim,), np.float32)})
         if self.features.env_state_names:
             obs_space[ENV_STATE_KEY] = spaces.Box(-np.inf, np.inf, (len(self.features.env_state_names),), np.float32)
-        act_space = spaces.Box(-np.inf, np.inf, (self.features.action_dim,), np.float32)
-        return obs_space, act_space
+        lo, hi = self._action_bounds()
+        return obs_space, spaces.Box(lo, hi, dtype=np.float32)
+
+    def _action_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each move group's target bounds, in the action's order: what the robot clips a target to
+        (joint and actuator ranges; the gripper 0 … 1; a base's heading ±π), unbounded where it does not say."""
+        robot, lo, hi = self._episode.env.robot, [], []
+        for group, dim in self.features.move_groups.items():
+            bounds = robot.command_range(group)
+            lo.append(np.full(dim, -np.inf) if bounds is None else bounds[0])
+            hi.append(np.full(dim, np.inf) if bounds is None else bounds[1])
+        return np.concatenate(lo).astype(np.float32), np.concatenate(hi).astype(np.float32)
 
     def _feature_map(self, obs: dict[str, Any]) -> FeatureMap:
         env = self._episode.env

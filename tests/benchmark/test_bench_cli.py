@@ -28,7 +28,7 @@ def test_validate_reports_every_problem(tmp_path, data, capsys):
     episodes[1]["task"]["robot_base_pose"] = [0, 0, 0]
     episodes[2]["robot"].pop("robot_name")
     (tmp_path / "benchmark.json").write_text(json.dumps(episodes))
-    assert main(["validate", str(tmp_path)]) == 1
+    assert main(["validate", str(tmp_path)]) == 2
     err = capsys.readouterr().err.splitlines()
     assert err[-3:] == [
         f"{tmp_path / 'benchmark.json'}: episode 1: field task.robot_base_pose: expected 7 values, got 3",
@@ -41,7 +41,7 @@ def test_validate_subprocess_has_no_traceback(tmp_path):
     (tmp_path / "benchmark.json").write_text('[{"house_index": 3, "task": {"task_cls": "x.y.Z",]')
     res = subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.bench", "validate", str(tmp_path)],
                          capture_output=True, text=True, timeout=120)
-    assert res.returncode == 1, res.stderr
+    assert res.returncode == 2, res.stderr
     assert "invalid JSON at line 1, column 50" in res.stderr and "Traceback" not in res.stderr
 
 
@@ -49,7 +49,7 @@ def test_validate_unknown_task_with_installed_plugins(tmp_path, data, capsys):
     episodes = json.loads((data / "pick_list" / "benchmark.json").read_text())
     episodes[0]["task"]["task_cls"] = "x.y.Z"
     (tmp_path / "benchmark.json").write_text(json.dumps(episodes))
-    assert main(["validate", str(tmp_path)]) == 1
+    assert main(["validate", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert f"{tmp_path / 'benchmark.json'}: episode 0: field task.task_cls: unknown task 'x.y.Z'" in err
 
@@ -118,3 +118,27 @@ def test_generate_with_the_real_generator_is_deterministic(tmp_path, capsys):
     assert a.sha256 == b.sha256 != c.sha256
     assert a.name == "tiny" and len(a) == 4 and len({ep.house_index for ep in a.episodes}) == 2
     assert validate_benchmark(a, ctx.plugins, ctx) == []
+
+
+def test_validate_finds_what_molmo_eval_finds_from_any_directory(data, tmp_path, monkeypatch, capsys):
+    """A shipped name (as ``molmo-eval benchmark=pick_v2``) and a path relative to the current directory."""
+    monkeypatch.chdir(tmp_path)  # not the repository root
+    assert main(["validate", "--schema-only", "pick_v2"]) == 0
+    assert "benchmark  pick_v2" in capsys.readouterr().out
+    (tmp_path / "mine").symlink_to(data / "pick_legacy")
+    assert main(["validate", "--schema-only", "mine"]) == 0
+    assert main(["validate", "--schema-only", "no_such_benchmark"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("molmo-bench: error: unknown benchmark 'no_such_benchmark': neither a "
+                                               "path nor a shipped benchmark (close_v1, ")
+
+
+def test_validate_exits_as_molmo_eval_does_on_an_invalid_benchmark(tmp_path):
+    """molmo-eval refuses an invalid benchmark with exit 2 before any run directory: so does validate."""
+    from molmo_lerobot.cli.eval import main as eval_main
+
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "benchmark.json").write_text("[]")
+    code = eval_main([f"benchmark.path={tmp_path / 'bad'}", f"output_dir={tmp_path / 'run'}", "workers=1"])
+    assert code == main(["validate", "--schema-only", str(tmp_path / "bad")]) == 2
+    assert not (tmp_path / "run").exists()

@@ -62,7 +62,7 @@ def test_deeply_nested_json_is_one_line(episodes, tmp_path, depth, capsys):
     text = json.dumps([ep])[:-2] + ', "junk": ' + "[" * depth + "]" * depth + "}]"
     (d / "benchmark.json").write_text(text)
     assert _problems(d) == [f"{d / 'benchmark.json'}: JSON nested deeper than {MAX_JSON_DEPTH} levels"]
-    assert main(["validate", str(d)]) == 1
+    assert main(["validate", str(d)]) == 2
     err = capsys.readouterr().err
     assert "nested deeper" in err and "Traceback" not in err and "RecursionError" not in err
 
@@ -77,7 +77,7 @@ def test_a_fifo_episode_file_does_not_hang_validate(data, tmp_path):
     os.mkfifo(fifo)
     proc = subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.bench", "validate", str(d), "--schema-only"],
                           capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 1
+    assert proc.returncode == 2
     assert f"{fifo}: cannot read: not a regular file" in proc.stderr
     assert "Traceback" not in proc.stderr
 

@@ -32,10 +32,11 @@ def obs(index: int, step: int) -> dict:
 
 
 def run_episode(rec, index: int, steps: int, success_from: int | None, error: str | None = None,
-                reward: bool = False, expert: bool = False, success_until: int | None = None) -> EpisodeResult:
+                reward: bool = False, expert: bool = False, success_until: int | None = None,
+                prompt: str = "pick up the mug") -> EpisodeResult:
     """Feed one episode to ``rec``; succeeds from step ``success_from`` on (None: never) up to
     ``success_until`` (None: the end); ``expert``: played by a scripted expert."""
-    rec.start_episode(info(index, steps, expert=expert))
+    rec.start_episode(info(index, steps, prompt=prompt, expert=expert))
     ok = once = False
     n = steps if error is None else steps // 2
     for t in range(n):
@@ -47,7 +48,7 @@ def run_episode(rec, index: int, steps: int, success_from: int | None, error: st
         result = EpisodeResult.failed(index, index % 3, "molmo.tasks.Pick", 1000 + index, error, task_type="pick")
     else:
         result = EpisodeResult(index, index % 3, "molmo.tasks.Pick", ok, once, steps, 1000 + index,
-                               task_type="pick", prompt="pick up the mug", horizon=steps)
+                               task_type="pick", prompt=prompt, horizon=steps)
     rec.end_episode(result)
     return result
 

@@ -82,12 +82,14 @@ def test_a_dataset_about_to_be_pushed_names_no_path_of_this_machine(recorded, hu
     assert shared["benchmark"]["sha256"] == res.summary["benchmark"]["sha256"]
 
 
-def readme_command(program: str) -> list[str]:
-    """The ``program`` command of README.md's bash blocks, as its arguments (continuations joined)."""
+def readme_command(program: str, section: str = "### LeRobot's tools on the dataset") -> list[str]:
+    """The first ``program`` command of README.md's bash blocks from ``section`` on, as its arguments
+    (continuations joined)."""
     import re
     import shlex
 
     readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    readme = readme[readme.index(section):]
     for block in re.findall(r"```bash\n(.*?)```", readme, re.S):
         for line in block.replace("\\\n", " ").splitlines():
             if line.startswith(program + " "):

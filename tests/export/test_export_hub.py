@@ -50,7 +50,9 @@ def test_push_then_load_from_the_hub_gives_the_same_frames(hub, tmp_path):
     # the scores and eval records travel with the dataset
     for name in ("results.json", "meta/eval/episodes.jsonl", "README.md"):
         assert (tmp_path / "download" / name).read_bytes() == (tmp_path / "run" / "dataset" / name).read_bytes()
-    assert "success (end)" in (tmp_path / "download" / "README.md").read_text()
+    card = (tmp_path / "download" / "README.md").read_text()
+    assert "success (end)" in card
+    assert f"huggingface.co/spaces/lerobot/visualize_dataset?path={factory.repo_id}" in card  # on the Hub: its viewer
 
 
 def test_failed_push_warns_and_keeps_local_files(tmp_path, monkeypatch, caplog):

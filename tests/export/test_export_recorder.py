@@ -143,6 +143,13 @@ def test_the_card_says_in_prose_what_the_data_is_and_its_limitations(two_worker_
     assert "scripted expert that end" not in card  # no episode was cut at its success hold
 
 
+def test_a_local_datasets_card_links_no_hub_viewer_but_says_how_to_view_it(two_worker_run):
+    """push=false: the Hub's viewer would open nothing (no such dataset there); LeRobot's local viewer can."""
+    card = (two_worker_run[0] / "dataset" / "README.md").read_text()
+    assert "huggingface.co/spaces/lerobot/visualize_dataset" not in card
+    assert f"`lerobot-dataset-viz --repo-id {two_worker_run[1].repo_id} --root . --episode-index 0`" in card
+
+
 def test_resume_adds_new_shards_to_the_previous_dataset(two_worker_run, tmp_path):
     out0, _, results, _, _ = two_worker_run
     out = tmp_path / "run"
@@ -339,3 +346,59 @@ def test_a_merge_killed_between_the_swap_renames_is_completed_by_the_next(two_wo
     assert _load(out / "dataset", again.repo_id).num_episodes == 5
     assert not list(out.glob(".dataset-merge-*")) and not (out / SHARDS_DIR).exists()
     assert again.missing(out, everything) == {5}, "episode 5 finished but its recording was lost"
+
+
+def _lerobot_stats(root, repo_id) -> dict:
+    """The stats LeRobot computes on a dataset's data: per episode (compute_episode_stats), aggregated."""
+    from lerobot.datasets.compute_stats import aggregate_stats, compute_episode_stats
+
+    ds = _load(root, repo_id)
+    numeric = {k: v for k, v in ds.meta.features.items() if v["dtype"] not in ("image", "video", "string")}
+    table = ds.hf_dataset.with_format("numpy")
+    per_episode = []
+    for ep in range(ds.num_episodes):
+        meta = ds.meta.episodes[ep]
+        rows = table[int(meta["dataset_from_index"]):int(meta["dataset_to_index"])]
+        per_episode.append(compute_episode_stats({k: np.asarray(rows[k]) for k in numeric}, numeric))
+    return aggregate_stats(per_episode)
+
+
+def _assert_stats_match(root, repo_id) -> dict:
+    expected, stored = _lerobot_stats(root, repo_id), _load(root, repo_id).meta.stats
+    for column, stats in expected.items():
+        for stat, value in stats.items():
+            np.testing.assert_allclose(np.asarray(stored[column][stat], dtype=np.float64),
+                                       np.asarray(value, dtype=np.float64), rtol=1e-6, atol=1e-9,
+                                       err_msg=f"{column}.{stat}")
+    return stored
+
+
+def test_merged_stats_are_lerobots_stats_of_the_merged_data(tmp_path):
+    """3 episodes (245 frames, 3 tasks) from two workers' shards: the bookkeeping columns are re-indexed."""
+    factory = LeRobotRecorderFactory.from_config(CFG)
+    w0, w1 = factory.make("w0g0", tmp_path), factory.make("w1g0", tmp_path)
+    results = [S.run_episode(w0, 0, 80, success_from=70, prompt="pick up the mug"),
+               S.run_episode(w1, 1, 85, success_from=None, prompt="pick up the bowl"),
+               S.run_episode(w1, 2, 80, success_from=60, prompt="pick up the plate")]
+    w0.close()
+    w1.close()
+    factory.finalize(tmp_path, results, S.summary_for(results))
+    stats = _assert_stats_match(tmp_path / "dataset", factory.repo_id)
+    for column, high in (("episode_index", 2), ("task_index", 2), ("index", 244), ("frame_index", 84)):
+        assert (float(stats[column]["min"][0]), float(stats[column]["max"][0])) == (0, high), column
+    assert int(stats["index"]["count"][0]) == 245
+
+
+def test_stats_after_a_resume_cut_the_previous_dataset(two_worker_run, tmp_path):
+    """Resume stores episode 2 between previous ones: the previous dataset is cut (delete_episodes)."""
+    out0, _, results, _, _ = two_worker_run
+    out = tmp_path / "run"
+    shutil.copytree(out0, out)
+    factory = LeRobotRecorderFactory.from_config(CFG)
+    w = factory.make("w0g0", out)
+    redo = S.run_episode(w, 2, 5, success_from=1)
+    w.close()
+    everything = [redo if r.episode_index == 2 else r for r in results]
+    factory.finalize(out, everything, S.summary_for(everything))
+    stats = _assert_stats_match(out / "dataset", factory.repo_id)
+    assert float(stats["episode_index"]["max"][0]) == 4

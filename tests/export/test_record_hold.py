@@ -15,7 +15,8 @@ from molmo_lerobot.export.recorder import LeRobotRecorderFactory, RecordConfigEr
 from molmo_lerobot.runner.evaluate import run_evaluation
 
 CFG = {"benchmark": {"name": "synth_v1"}, "policy": {"name": "scripted"},
-       "timing": {"policy_dt_ms": 66.0}, "hub": {"repo_id": None, "private": False}, "push": False}
+       "timing": {"policy_dt_ms": 66.0}, "hub": {"repo_id": None, "private": False}, "push": False,
+       "record_min_frames": 0}  # the synthetic episodes are shorter than the default minimum
 
 
 def _episodes(root, repo_id):
@@ -73,6 +74,23 @@ def test_hold_null_records_the_whole_rollout(tmp_path):
     assert _episodes(tmp_path / "dataset", factory.repo_id)[0][0] == 12
 
 
+def test_an_experts_recording_keeps_record_min_frames(tmp_path):
+    """The hold ends no recording before record_min_frames (lerobot-doctor's gate: no demonstration
+    shorter than the policy's action chunk); the horizon still ends it."""
+    factory = LeRobotRecorderFactory.from_config({**CFG, "record_hold_steps": 2, "record_min_frames": 9})
+    assert LeRobotRecorderFactory.from_config({k: v for k, v in CFG.items() if k != "record_min_frames"}
+                                              ).min_frames == 100  # the default: ACT's and SmolVLA's chunk
+    w = factory.make("w0g0", tmp_path)
+    results = [S.run_episode(w, 0, 12, success_from=3, expert=True),  # held to 9 frames, not 6
+               S.run_episode(w, 1, 7, success_from=3, expert=True),  # the horizon (7) comes first
+               S.run_episode(w, 2, 12, success_from=8, expert=True)]  # the hold (8 + 2) is past the minimum
+    w.close()
+    factory.finalize(tmp_path, results, S.summary_for(results))
+    assert {e: n for e, (n, _, _) in _episodes(tmp_path / "dataset", factory.repo_id).items()} == {0: 9, 1: 7, 2: 11}
+    with pytest.raises(RecordConfigError, match="record_min_frames"):
+        LeRobotRecorderFactory.from_config({**CFG, "record_min_frames": -1})
+
+
 @pytest.mark.parametrize("hold", [-1, True, 2.5, "10"])
 def test_record_hold_steps_is_validated(hold):
     with pytest.raises(RecordConfigError, match="record_hold_steps"):
@@ -105,8 +123,9 @@ def test_pick_v1_expert_recording_is_mostly_motion_and_scores_do_not_change(tmp_
     for key in ("success_rate", "success_once_rate", "n_success", "n_episodes"):
         assert held_summary[key] == full_summary[key]
     first = int(np.flatnonzero(full_data["next.success"].to_numpy())[0])
-    assert len(held_data) == first + 11 < len(full_data) == 120  # the default hold: 10 steps
-    assert np.array_equal(np.stack(held_data["action"]), np.stack(full_data["action"])[: first + 11])
+    kept = max(first + 11, 100)  # the default hold (10 steps), at least record_min_frames (100)
+    assert len(held_data) == kept < len(full_data) == 120
+    assert np.array_equal(np.stack(held_data["action"]), np.stack(full_data["action"])[:kept])
     frozen = _frozen_fraction(np.stack(held_data["action"]))
     print(f"repeated actions: {frozen:.1%} of {len(held_data)} frames held, "
           f"{_frozen_fraction(np.stack(full_data['action'])):.1%} of {len(full_data)} in full")

@@ -87,3 +87,31 @@ def test_replayed_actions_give_molmo_evals_trial(tmp_path):
     frames = pd.concat(pd.read_parquet(p) for p in sorted((out / "dataset" / "data").rglob("*.parquet")))
     recorded = np.stack(frames[frames["episode_index"] == ds_index]["observation.state"].to_numpy())
     np.testing.assert_array_equal(recorded, np.stack(states[:steps]))
+
+
+@pytest.mark.parametrize("benchmark", ["pick_v1", "nav_v1"])
+def test_action_space_is_the_robots_target_range(benchmark):
+    """Bounded by what the robot clips targets to: a sampled action is commanded as is (no clipping)."""
+    env = gym.make(f"molmo_lerobot/{benchmark}", horizon=2).unwrapped
+    try:
+        space = env.action_space
+        assert np.all(np.isfinite(space.low)) and np.all(np.isfinite(space.high)) and np.all(space.low < space.high)
+        names = env.features.action_names
+        gripper = [i for i, n in enumerate(names) if "gripper" in n or "finger" in n]
+        assert gripper and all((space.low[i], space.high[i]) == (0.0, 1.0) for i in gripper)
+        env.reset(seed=0)
+        sim = env._episode.env
+        space.seed(3)
+        for _ in range(5):
+            action = space.sample()
+            assert space.contains(action)
+            for group, values in env.features.split_action(action.astype(np.float64)).items():
+                sim.robot.command(sim.data, group, values)
+                if group != "base":  # a base's yaw is taken within ±π of the current yaw
+                    np.testing.assert_allclose(sim.robot.targets(sim.data, group), values, rtol=0, atol=1e-6)
+            env.step(action)
+        if benchmark == "nav_v1":
+            assert names[:3] == ("base_x", "base_y", "base_theta")
+            assert tuple(space.low[2:3]) == (np.float32(-np.pi),) and tuple(space.high[2:3]) == (np.float32(np.pi),)
+    finally:
+        env.close()

@@ -110,3 +110,16 @@ def test_connection_lost_mid_episode_fails_the_episode_then_recovers():
             far.act(obs)
         far.reset(CTX)  # the next episode reconnects
         assert far.act(obs)["arm"].shape == (8, 7)
+
+
+def test_a_host_name_that_does_not_resolve_fails_at_once():
+    """Not after policy.connect_timeout_s (60 s) of retries: a retry cannot make the name resolve."""
+    import time
+
+    from molmo_lerobot.protocol.client import PolicyClient
+
+    client = PolicyClient("no.such.host", 8000, connect_timeout_s=60.0)
+    t0 = time.monotonic()
+    with pytest.raises(PolicyClientError, match=r"no.such.host:8000: its host name does not resolve .*policy.host"):
+        client.connect()
+    assert time.monotonic() - t0 < 5.0

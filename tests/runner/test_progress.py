@@ -95,3 +95,23 @@ def test_on_a_terminal_library_warnings_print_above_the_bar(tmp_path, monkeypatc
     assert "Token authentication is disabled for this Ray cluster." in screen  # a line of its own
     assert any(seg.startswith("bench · p: 100%") for seg in screen)
     assert ray_logger.handlers == [handler]  # restored after the run
+
+
+LIBRARY_BARS = """
+import sys
+from molmo_lerobot.runner.progress import quiet_library_bars
+quiet_library_bars()  # what molmo-eval does before anything imports tqdm
+import tqdm  # LeRobot's dataset merge draws tqdm.tqdm bars (lerobot/datasets/aggregate.py)
+for _ in tqdm.tqdm(range(3), desc="Copy data and videos"):
+    pass
+"""
+
+
+def test_off_a_terminal_the_libraries_draw_no_progress_bars():
+    """LeRobot's merge bars (tqdm) would put every redraw in a log; on a terminal they stay."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith("TQDM_")}
+    proc = subprocess.run([sys.executable, "-c", LIBRARY_BARS], capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "Copy data and videos" not in proc.stderr and "\r" not in proc.stderr, proc.stderr

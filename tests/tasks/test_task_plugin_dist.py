@@ -148,7 +148,7 @@ def test_toy_task_benchmark_validates_and_runs_end_to_end(site, tmp_path):
 def test_bad_toy_field_is_one_line_naming_file_episode_and_field(site, tmp_path):
     bench = _bench(tmp_path, 1.0, -2.0)
     proc = _run(site, "bench", "validate", str(bench))
-    assert proc.returncode == 1
+    assert proc.returncode == 2
     lines = proc.stderr.splitlines()
     assert lines[0] == (f"{bench / 'benchmark.json'}: episode 1: field task.wait_sec: "
                         "Input should be greater than 0 (got -2.0)"), proc.stderr

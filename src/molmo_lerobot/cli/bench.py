@@ -1,13 +1,16 @@
 """``molmo-bench``: check benchmark files and make new benchmarks.
 
-  molmo-bench validate PATH [KEY=VALUE ...]
+  molmo-bench validate BENCHMARK [KEY=VALUE ...]
   molmo-bench generate --task pick --houses 10 --episodes-per-house 5 --seed 0 --name pick_v1 [--out DIR]
 
-``validate`` prints a summary (name, episodes, tasks, content hash) and exits 0 for a valid
+``validate`` takes what ``molmo-eval`` and the Gymnasium env take: a shipped benchmark's name
+(``pick_v2``) or a benchmark directory or JSON file (a relative path from the current directory).
+It prints a summary (name, episodes, tasks, content hash) and exits 0 for a valid
 file — one MolmoSpaces accepts — printing one ``warning:`` line per thing this machine lacks
 to run it (scene assets, robot, camera system) with how to get it; an invalid file gets every
-problem (file, episode index, field) and exit 1. ``KEY=VALUE`` are run-config overrides saying
-where data lives (``molmospaces.assets_dir=…``, ``scene_xml_paths=[…]``, ``+asset_libraries.x=…``).
+problem (file, episode index, field) and, like ``molmo-eval`` refusing it, exit 2.
+``KEY=VALUE`` are run-config overrides saying where data lives (``molmospaces.assets_dir=…``,
+``scene_xml_paths=[…]``, ``+asset_libraries.x=…``).
 ``generate`` writes a deterministic benchmark (``benchmark.json`` + ``benchmark_metadata.json``)
 and validates it; the output directory appears only once it is complete.
 """
@@ -31,12 +34,15 @@ from molmo_lerobot.benchmark.schema import NATIVE_TASK_CLS
 from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.plugins import PluginConflict, Plugins
 
+#: the exit status for a benchmark that cannot be run (``molmo-eval`` refuses it with the same)
+INVALID = 2
+
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="molmo-bench", description="Check and make benchmarks.")
     sub = parser.add_subparsers(dest="command", required=True)
-    val = sub.add_parser("validate", help="check a benchmark directory or JSON file")
-    val.add_argument("path", type=Path)
+    val = sub.add_parser("validate", help="check a benchmark: a shipped name, a directory or a JSON file")
+    val.add_argument("path", metavar="BENCHMARK", help="a shipped benchmark's name (pick_v2) or a path")
     val.add_argument("--schema-only", action="store_true", help="skip the checks against installed plugins")
     val.add_argument("overrides", nargs="*", metavar="KEY=VALUE",
                      help="run-config overrides that locate data (molmospaces.assets_dir=…, scene_xml_paths=[…], …)")
@@ -54,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     return _generate(args)
 
 
-def _validate(path: Path, *, schema_only: bool, overrides: list[str] | None = None) -> int:
+def _validate(path: str, *, schema_only: bool, overrides: list[str] | None = None) -> int:
     plugins, ctx = Plugins(), None
     if not schema_only:
         from molmo_lerobot.config import ConfigError, compose
@@ -66,13 +72,15 @@ def _validate(path: Path, *, schema_only: bool, overrides: list[str] | None = No
             print(f"molmo-bench: error: {exc}", file=sys.stderr)
             return 2
         plugins = ctx.plugins
-    try:
-        bench = load_benchmark(path, plugins)
+    from molmo_lerobot.runner.episode import EpisodeSetupError, load_run_benchmark
+
+    try:  # molmo-eval's and the Gymnasium env's lookup: a path, else a shipped benchmark's name
+        bench = load_run_benchmark(path, plugins)
     except BenchmarkError as exc:
-        return _report(exc.problems)
-    except PluginConflict as exc:
+        return _report(exc.problems, INVALID)
+    except (PluginConflict, EpisodeSetupError) as exc:
         print(f"molmo-bench: error: {exc}", file=sys.stderr)
-        return 1
+        return INVALID
     if ctx is not None:
         from molmo_lerobot.benchmark.validate import validate_benchmark
 
@@ -80,12 +88,12 @@ def _validate(path: Path, *, schema_only: bool, overrides: list[str] | None = No
             found = validate_benchmark(bench, plugins, ctx)
         except PluginConflict as exc:
             print(f"molmo-bench: error: {exc}", file=sys.stderr)
-            return 1
+            return INVALID
         problems = [p for p in found if not p.warning]
         if problems:
             for rec in plugins.broken():
                 print(f"note: plugin {rec.name!r} from {rec.distribution} failed to load: {rec.error}", file=sys.stderr)
-            return _report(problems)
+            return _report(problems, INVALID)
         warnings = [p for p in found if p.warning]
         lines = _grouped(warnings)
         for line in lines:  # valid, but not runnable here as it stands: one line per missing thing
@@ -115,13 +123,13 @@ def _grouped(warnings: list[Problem]) -> list[str]:
     return lines
 
 
-def _report(problems: list[Problem]) -> int:
+def _report(problems: list[Problem], code: int = 1) -> int:
     for p in problems:
         print(p, file=sys.stderr)
     n_eps = len({p.episode_index for p in problems if p.episode_index is not None})
     tail = f" in {n_eps} episode{'s' * (n_eps != 1)}" if n_eps else ""
     print(f"molmo-bench: {len(problems)} problem{'s' * (len(problems) != 1)}{tail}", file=sys.stderr)
-    return 1
+    return code
 
 
 def _print_summary(bench: Benchmark) -> None:

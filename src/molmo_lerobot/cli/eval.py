@@ -13,6 +13,9 @@ import os
 import sys
 from typing import Any
 
+from molmo_lerobot.gl import use_headless_gl
+from molmo_lerobot.runner.progress import quiet_library_bars
+
 _CFG_TYPES = ("job", "hydra", "all")
 
 
@@ -29,7 +32,8 @@ def _main(argv: list[str] | None = None) -> int:
         if a in ("--cfg", "-c") and (i + 1 == len(args) or args[i + 1] not in _CFG_TYPES):
             args.insert(i + 1, "job")
             break
-    os.environ.setdefault("MUJOCO_GL", "egl")
+    use_headless_gl()
+    quiet_library_bars()  # not on a terminal: LeRobot's merge bars would fill the log with redraws
     import hydra
     from hydra.core.global_hydra import GlobalHydra
     from hydra.errors import HydraException, OverrideParseException
@@ -40,8 +44,9 @@ def _main(argv: list[str] | None = None) -> int:
     from molmo_lerobot.runner.supervisor import RunInterrupted
 
     codes: list[int] = []
+    jobs: list[dict[str, Any]] = []  # one row per job, for a sweep's closing table
     app = hydra.main(version_base="1.3", config_path=str(primary_config_dir()), config_name="eval")(
-        lambda cfg: codes.append(_job(cfg)))
+        lambda cfg: codes.append(_job(cfg, jobs)))
     saved_argv, saved_full_error = sys.argv, os.environ.get("HYDRA_FULL_ERROR")
     sys.argv = ["molmo-eval", *args]  # hydra.main parses sys.argv
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors to us instead of printing them and exiting 1
@@ -69,7 +74,21 @@ def _main(argv: list[str] | None = None) -> int:
         else:
             os.environ["HYDRA_FULL_ERROR"] = saved_full_error
         GlobalHydra.instance().clear()
+    if len(jobs) > 1 or any(a in ("-m", "--multirun") for a in args):
+        print("\n".join(sweep_table(jobs)))
     return max(codes, default=0)
+
+
+def sweep_table(jobs: list[dict[str, Any]]) -> list[str]:
+    """A sweep's jobs in one table: job, policy, benchmark, score (or the error), exit status, outputs."""
+    rows = [("job", "policy", "benchmark", "success", "exit", "outputs")]
+    for job in jobs:
+        rows.append((str(job["job"]), job["policy"], job["benchmark"], job["success"], str(job["exit"]),
+                     job["outputs"]))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]) - 1)]
+    lines = [f"sweep: {len(jobs)} job{'s' * (len(jobs) != 1)}"]
+    lines += ["  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=False)) + "  " + r[-1] for r in rows]
+    return lines
 
 
 def _override_message(override: str, message: str) -> str:
@@ -86,8 +105,13 @@ def _override_message(override: str, message: str) -> str:
     return f"cannot parse override {override!r}: {detail} (grammar: https://hydra.cc/docs/advanced/override_grammar/basic)"
 
 
-def _job(cfg: Any) -> int:
-    """One run, validated here (a sweep job writes to its sweep subdir unless ``output_dir`` is set)."""
+def _job(cfg: Any, jobs: list[dict[str, Any]]) -> int:
+    """One run, validated here (a sweep job writes to its sweep subdir unless ``output_dir`` is set);
+    appends its row to ``jobs``."""
+    row = {"job": len(jobs), "policy": str(cfg.get("policy", {}).get("name", "?")),
+           "benchmark": str(cfg.get("benchmark", {}).get("path") or cfg.get("benchmark", {}).get("name", "?")),
+           "success": "error", "exit": 2, "outputs": "-"}
+    jobs.append(row)
     from hydra.core.hydra_config import HydraConfig
     from hydra.types import RunMode
 
@@ -111,14 +135,22 @@ def _job(cfg: Any) -> int:
     except expected as exc:
         for line in str(exc).splitlines() or [type(exc).__name__]:  # one line per problem
             print(f"molmo-eval: error: {line}", file=sys.stderr)
+        row["success"] = f"error: {(str(exc).splitlines() or [type(exc).__name__])[0][:60]}"
         return 2
+    s = res.summary
+    row["outputs"] = str(res.output_dir)
+    row["success"] = ("no episode ran" if s["success_rate"] is None else
+                      f"{s['success_rate']:.3f} ({s['n_success']}/{s['n_episodes']})"
+                      + (f", {s['n_errors']} errored" if s["n_errors"] else ""))
     print("\n".join([*summary_lines(res.summary), f"outputs: {res.output_dir}"]))
     push = res.summary.get("push")
     if push and not push["ok"]:
         print(f"molmo-eval: error: push to the Hub as {push['repo_id']} failed ({push['error']}); every local "
               f"file is kept in {res.output_dir} (results.json records the failure)", file=sys.stderr)
-        return 1
-    return 0 if res.summary["success_rate"] is not None else 1  # 1: no episode ran, so there is no score
+        row["exit"] = 1
+    else:
+        row["exit"] = 0 if s["success_rate"] is not None else 1  # 1: no episode ran, so there is no score
+    return row["exit"]
 
 
 if __name__ == "__main__":

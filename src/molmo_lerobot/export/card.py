@@ -101,12 +101,19 @@ def description(meta_info: dict[str, Any], summary: dict[str, Any], records: lis
     return "\n".join(lines)
 
 
-def make_card(meta_info: Any, summary: dict[str, Any], repo_id: str, records: list[dict[str, Any]]) -> Any:
+def make_card(meta_info: Any, summary: dict[str, Any], repo_id: str, records: list[dict[str, Any]],
+              on_hub: bool = False) -> Any:
     """A :class:`huggingface_hub.DatasetCard` from LeRobot's template (``meta_info``: LeRobot's
-    ``DatasetInfo``), with this description."""
+    ``DatasetInfo``), with this description. ``on_hub`` (``push=true``): the template's "visualize this
+    dataset" link to the Hub's viewer; a local dataset instead gets the ``lerobot-dataset-viz`` command
+    (the Hub viewer cannot open a dataset that is not on the Hub)."""
     from lerobot.datasets.utils import create_lerobot_dataset_card
 
     bench = (summary.get("benchmark") or {}).get("name")
     tags = TAGS + ([str(bench)] if bench else [])
-    return create_lerobot_dataset_card(tags=tags, license="apache-2.0", dataset_info=meta_info, repo_id=repo_id,
-                                       dataset_description=description(meta_info.to_dict(), summary, records))
+    text = description(meta_info.to_dict(), summary, records)
+    if not on_hub:
+        text += ("\n\n**Visualize** (a local dataset, not on the Hub), from this directory: "
+                 f"`lerobot-dataset-viz --repo-id {repo_id} --root . --episode-index 0`")
+    return create_lerobot_dataset_card(tags=tags, license="apache-2.0", dataset_info=meta_info,
+                                       repo_id=repo_id if on_hub else None, dataset_description=text)

@@ -197,6 +197,7 @@ def _build(work: Path, sources: list[_Source], shards: list[Shard], torn: list[s
     except Exception as exc:
         raise ExportError(f"merging {len(roots)} dataset shards under {output_dir / SHARDS_DIR} failed: "
                           f"{type(exc).__name__}: {exc}") from exc
+    restat(tmp)
     frames = {b: sources[si].episodes[li].get("frames", by_index[b].steps) for b, (si, li) in chosen.items()}
     records = portable(_eval_records(results, dataset_index, frames, discarded, summary, factory), output_dir)
     fileio.atomic_write(tmp / EVAL_EPISODES, "".join(json.dumps(r) + "\n" for r in records), root=tmp)
@@ -211,8 +212,37 @@ def _build(work: Path, sources: list[_Source], shards: list[Shard], torn: list[s
     fileio.atomic_write(tmp / "results.json", json.dumps(shared, indent=2) + "\n", root=tmp)
     meta = LeRobotDatasetMetadata(factory.repo_id, root=tmp)
     check_dataset(tmp, results)
-    fileio.atomic_write(tmp / "README.md", str(make_card(meta.info, shared, factory.repo_id, records)), root=tmp)
+    fileio.atomic_write(tmp / "README.md", str(make_card(meta.info, shared, factory.repo_id, records,
+                                                                    on_hub=factory.push)), root=tmp)
     return tmp
+
+
+def restat(root: Path) -> None:
+    """Rewrite ``meta/stats.json`` of the merged dataset at ``root`` from its merged data.
+
+    LeRobot's ``aggregate_datasets`` aggregates each source's ``stats.json`` as it was before the
+    merge re-indexed ``index``, ``episode_index`` and ``task_index`` (every shard's start at 0), and
+    ``delete_episodes`` (a resumed run's subset) copies each episode's stats unchanged. The numeric
+    features are computed here as LeRobot computes a dataset's stats (``compute_episode_stats`` per
+    episode, then ``aggregate_stats``, as its ``recompute_stats``, but the bookkeeping columns
+    included); image and video statistics, which no re-indexing changes, are kept.
+    """
+    import numpy as np
+    import pyarrow.dataset as pads
+    from lerobot.datasets.compute_stats import aggregate_stats, compute_episode_stats
+    from lerobot.datasets.io_utils import load_stats
+    from lerobot.datasets.utils import serialize_dict
+
+    features = json.loads((root / "meta/info.json").read_text())["features"]
+    numeric = {k: v for k, v in features.items() if v["dtype"] not in ("image", "video", "string")}
+    frames = pads.dataset(str(root / "data"), format="parquet").to_table(columns=list(numeric)).to_pandas()
+    per_episode = []
+    for _, episode in frames.groupby("episode_index", sort=True):
+        columns = {k: episode[k].to_numpy() for k in numeric}
+        per_episode.append(compute_episode_stats(
+            {k: np.stack(v) if v.dtype == object else v for k, v in columns.items()}, numeric))
+    stats = {**(load_stats(root) or {}), **aggregate_stats(per_episode)}
+    fileio.atomic_write(root / "meta/stats.json", json.dumps(serialize_dict(stats), indent=4) + "\n", root=root)
 
 
 def _subset(src: _Source, keep: list[int], out: Path, repo_id: str) -> Path:

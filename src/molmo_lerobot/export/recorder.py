@@ -6,7 +6,9 @@ LeRobot v3 dataset shard (``streaming_encoding=True``: video is encoded while th
 runs, by :mod:`molmo_lerobot.export.video` with the run's ``video`` settings), saves an
 episode only if it finished without error, and finalizes its shard when the worker closes.
 An expert's episode (:attr:`EpisodeInfo.expert`) is recorded up to ``record_hold_steps`` after
-its first success (the rollout itself, and so the score, runs on to the horizon).
+its first success, but at least ``record_min_frames`` frames (100: the action chunk of LeRobot's
+ACT and SmolVLA, so no demonstration is shorter than the chunk a policy trained on it predicts); the
+rollout itself, and so the score, runs on to the horizon either way.
 ``finalize`` then merges the shards into ``output_dir/dataset`` with
 ``lerobot.datasets.aggregate.aggregate_datasets``, writes the eval records, the dataset card
 and ``results.json`` into it, and pushes to the Hub when ``push=true``.
@@ -83,6 +85,8 @@ class LeRobotRecorderFactory(RecorderFactory):
     dataset_id: str | None = None
     store_root: str | None = None
     remote: str | None = None
+    #: ... but an expert's recording keeps at least this many frames (the horizon permitting)
+    min_frames: int = 100
 
     @classmethod
     def from_config(cls, cfg: dict[str, Any]) -> LeRobotRecorderFactory:
@@ -102,10 +106,13 @@ class LeRobotRecorderFactory(RecorderFactory):
         hold = cfg.get("record_hold_steps", cls.hold_steps)
         if hold is not None and (isinstance(hold, bool) or not isinstance(hold, int) or hold < 0):
             raise RecordConfigError(f"record_hold_steps: expected a non-negative integer or null, got {hold!r}")
+        least = cfg.get("record_min_frames", cls.min_frames)
+        if isinstance(least, bool) or not isinstance(least, int) or least < 0:
+            raise RecordConfigError(f"record_min_frames: expected a non-negative integer, got {least!r}")
         return cls(repo_id=str(repo_id), policy_dt_ms=float(cfg["timing"]["policy_dt_ms"]), benchmark=bench,
                    policy=policy, push=push, private=bool(hub.get("private", False)),
                    video=VideoSettings.from_config(cfg.get("video")), hold_steps=hold, dataset_id=dataset_id,
-                   store_root=store_root, remote=remote)
+                   store_root=store_root, remote=remote, min_frames=least)
 
     @property
     def fps(self) -> int:
@@ -211,9 +218,10 @@ def _slug(text: str) -> str:
 class LeRobotRecorder(Recorder):
     """One worker's writer: frames stream into the current shard; errors are never saved.
 
-    An expert's recording stops ``hold_steps`` after its first successful step: a demonstration
-    that idles to the horizon teaches a policy to stand still. The last recorded frame is marked
-    ``next.done``; the rollout goes on unrecorded (and unrendered) for the episode's score.
+    An expert's recording stops ``hold_steps`` after its first successful step (and not before
+    ``min_frames``): a demonstration that idles to the horizon teaches a policy to stand still. The
+    last recorded frame is marked ``next.done``; the rollout goes on unrecorded (and unrendered) for
+    the episode's score.
     """
 
     wants_images = True
@@ -253,7 +261,7 @@ class LeRobotRecorder(Recorder):
         if self._last is not None and step > self._last:
             return  # past the success hold: the rollout goes on for its score only
         if success and self._last is None and info.expert and self.factory.hold_steps is not None:
-            self._last = step + self.factory.hold_steps
+            self._last = max(step + self.factory.hold_steps, self.factory.min_frames - 1)
         done = done or step == self._last
         if self._frames == 0:
             layout = FrameLayout.from_step(info, obs, reward)

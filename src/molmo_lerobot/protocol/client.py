@@ -8,6 +8,7 @@ cannot stall them) and a maximum message size.
 
 from __future__ import annotations
 
+import socket
 import time
 from typing import Any
 
@@ -70,7 +71,9 @@ class PolicyClient:
 
     # connection ---------------------------------------------------------------------------
     def connect(self) -> dict[str, Any]:
-        """Connect (retrying with exponential backoff until ``connect_timeout_s``); return the metadata."""
+        """Connect (retrying with exponential backoff until ``connect_timeout_s``); return the metadata.
+        A host name that does not resolve fails at once (:class:`PolicyClientError`); a refused or
+        unanswered connection (a server still starting) is retried."""
         self.close()
         deadline = time.monotonic() + self.connect_timeout_s
         delay, attempts, last = self.backoff_s, 0, None
@@ -92,6 +95,12 @@ class PolicyClient:
                 break
             except InvalidURI as exc:
                 raise PolicyClientError(f"bad policy server address {self.uri!r}: {exc}") from exc
+            except socket.gaierror as exc:  # a name that does not resolve will not on a retry (unless DNS is down)
+                if exc.errno == socket.EAI_AGAIN:
+                    last = exc
+                else:
+                    raise PolicyClientError(f"policy server {self.uri}: its host name does not resolve "
+                                            f"({exc.strerror or exc}); check policy.host") from None
             except (OSError, TimeoutError, InvalidHandshake) as exc:
                 last = exc
             if time.monotonic() + delay > deadline:

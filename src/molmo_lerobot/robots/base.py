@@ -46,6 +46,11 @@ class RobotHandle(ABC):
         ``timing.control=ramp`` the environment interpolates controller ticks in ctrl space.
         """
 
+    def command_range(self, group: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """The bounds :meth:`command` clips ``group``'s targets to (what an action means there); None
+        where this robot does not say (the Gymnasium env's ``action_space`` is then unbounded there)."""
+        return None
+
     def joint_qpos(self, data: mujoco.MjData, group: str) -> np.ndarray:
         """``group``'s joints in their own units (rad, m), as MolmoSpaces' ``qpos`` reports them."""
         return self.qpos(data, group)
@@ -68,6 +73,14 @@ class RobotHandle(ABC):
     @abstractmethod
     def body_ids(self) -> frozenset[int]:
         """Ids of every body that belongs to the robot (for contact tests)."""
+
+
+def planar_base_range(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A holonomic base's (x, y, yaw) target bounds: its yaw target, unbounded (it is taken within ±π
+    of the current yaw), as a heading in [-π, π]."""
+    lo, hi = np.array(lo, dtype=np.float64), np.array(hi, dtype=np.float64)
+    lo[2], hi[2] = max(lo[2], -math.pi), min(hi[2], math.pi)
+    return lo, hi
 
 
 class ArmGripperHandle(RobotHandle):
@@ -124,6 +137,10 @@ class ArmGripperHandle(RobotHandle):
     def targets(self, data, group):
         self._check(group)
         return data.ctrl[self._arm_u].copy() if group == "arm" else np.array([self._gripper_target(data)])
+
+    def command_range(self, group):
+        self._check(group)
+        return (self._lo.copy(), self._hi.copy()) if group == "arm" else (np.zeros(1), np.ones(1))
 
     def command(self, data, group, values):
         self._check(group)

@@ -43,7 +43,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.robots.base import PEDESTAL_RGBA, RobotType
+from molmo_lerobot.robots.base import PEDESTAL_RGBA, RobotType, planar_base_range
 from molmo_lerobot.robots.franka_droid import BASE_SIZE, NAMESPACE, FrankaDroid, FrankaDroidHandle, load_droid_spec
 
 #: MolmoSpaces' ``base_control_params``: slide kp, hinge kp (damping ratio 1 on all) and the slides' range (m)
@@ -131,6 +131,11 @@ class MobileFrankaHandle(FrankaDroidHandle):
     def base_pose(self, data):
         """The base body's world pose now (observations' ``robot_base_pose`` follow the robot)."""
         return np.concatenate([data.xpos[self._base_body], data.xquat[self._base_body]])
+
+    def command_range(self, group):
+        if group != "base":
+            return super().command_range(group)
+        return planar_base_range(self._base_lo, self._base_hi)
 
     def command(self, data, group, values):
         if group != "base":

@@ -47,7 +47,7 @@ import numpy as np
 from molmo_lerobot import hookimpl
 from molmo_lerobot.paths import molmospaces_assets_dir
 from molmo_lerobot.resources.molmospaces import VERSIONS
-from molmo_lerobot.robots.base import RobotHandle, RobotType
+from molmo_lerobot.robots.base import RobotHandle, RobotType, planar_base_range
 from molmo_lerobot.robots.mobile_franka import BASE_JOINTS, _yaw
 from molmo_lerobot.sim.geometry import subtree
 
@@ -181,6 +181,13 @@ class RBY1Handle(RobotHandle):
         if self._gripper(group):
             return np.array([float((ctrl[0] - GRIPPER_OPEN) / (GRIPPER_CLOSED - GRIPPER_OPEN))])
         return ctrl.copy()
+
+    def command_range(self, group):
+        self._check(group)
+        if self._gripper(group):
+            return np.zeros(1), np.ones(1)
+        lo, hi = self._lo[group], self._hi[group]
+        return planar_base_range(lo, hi) if group == "base" else (lo.copy(), hi.copy())
 
     def command(self, data, group, values):
         self._check(group)

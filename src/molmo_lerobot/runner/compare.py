@@ -35,8 +35,9 @@ METRICS = {"success": "success at the final step", "success_once": "success at a
 TRIAL_FIELDS = ("timing", "horizon", "eval_options", "mujoco", "render_profile")
 #: ``config`` keys that do not change an episode's trial (who runs it, where its outputs go);
 #: a difference in any other key is flagged.
-NEUTRAL_CONFIG = frozenset({"policy", "benchmark", "seed", "limit", "workers", "executor", "output_dir", "record",
-                            "record_hold_steps", "record_environment_state", "push", "resume", "progress", "hub",
+NEUTRAL_CONFIG = frozenset({"policy", "benchmark", "seed", "limit", "episodes", "sample", "workers", "executor",
+                            "output_dir", "record", "record_hold_steps", "record_environment_state", "push", "resume",
+                            "progress", "hub",
                             "wandb", "video", *TRIAL_FIELDS, "horizons", "custom_object", "camera", "robot"})
 Z95 = 1.959963984540054
 
@@ -218,6 +219,17 @@ def _flags(run_a: Run, run_b: Run) -> list[str]:
     return notes
 
 
+def _selection(run: Run) -> str:
+    """How ``run`` chose its episodes (``results.json``'s ``selection``, else its ``limit``)."""
+    chosen = run.results.get("selection")
+    if isinstance(chosen, dict) and chosen.get("kind") == "sample":
+        return f"sample={chosen.get('sample')} seed={chosen.get('seed')}"
+    if isinstance(chosen, dict) and chosen.get("kind") == "episodes":
+        return f"episodes={_short(chosen.get('episodes'), 60)}"
+    limit = run.results.get("limit")
+    return f"limit={limit}" if limit is not None else "every episode"
+
+
 def _task(ea: dict[str, Any], eb: dict[str, Any]) -> str:
     """The task an episode belongs to, also for records that carry no ``task_type`` (errors of older runs)."""
     for ep in (ea, eb):
@@ -264,6 +276,10 @@ def compare_runs(run_a: Run, run_b: Run, metric: str = "success",
     only_in = {"a": sorted(set(run_a.episodes) - set(shared)), "b": sorted(set(run_b.episodes) - set(shared))}
     if only_in["a"] or only_in["b"]:
         notes.append(f"episodes outside the comparison: {len(only_in['a'])} only in A, {len(only_in['b'])} only in B")
+        chose = {key: _selection(run) for key, run in (("a", run_a), ("b", run_b))}
+        if chose["a"] != chose["b"]:
+            notes.append(f"the runs selected their episodes differently (A: {chose['a']}; B: {chose['b']}): "
+                         "rerun one with the other's selection to pair them all")
     return {
         "benchmark": {"name": run_a.benchmark.get("name"), "sha256": sha_a},
         "metric": metric,

@@ -44,6 +44,7 @@ from molmo_lerobot.runner.plan import EpisodePlan, EpisodePlanner
 from molmo_lerobot.runner.progress import Progress
 from molmo_lerobot.runner.run_config import RunConfig, episode_work_problem
 from molmo_lerobot.runner.run_directory import RunDirectory
+from molmo_lerobot.runner.selection import selection_of
 from molmo_lerobot.runner.supervisor import RunInterrupted
 from molmo_lerobot.runner.worker import WorkerJob, startup_summary
 from molmo_lerobot.serving.run_server import ServeError, served_policy
@@ -177,11 +178,12 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     if cfg.get("resume") and cfg.get("limit") is None:  # a resume keeps the run's limit unless given a new one
         cfg["limit"] = run_dir.recorded_limit()
     planner = EpisodePlanner(ctx, bench)
-    plans, thresholds = _plan_run(planner, list(range(len(bench.episodes)))[:cfg.get("limit")])
-    run_info = _run_info(cfg, ctx, planner)
+    indices, selection = selection_of(cfg, bench)
+    plans, thresholds = _plan_run(planner, indices)
+    run_info = {**_run_info(cfg, ctx, planner), "selection": selection}
     done = run_dir.open(run_info, bool(cfg.get("resume")), recorders)
     outside = sorted(r.episode_index for r in done if r.episode_index not in plans)
-    if outside:  # cannot happen with an unchanged benchmark and limit check; never drop them silently
+    if outside:  # cannot happen with an unchanged benchmark, selection and limit check; never drop them silently
         raise RunError(f"cannot resume {run_dir.path}: it records episodes {outside[:10]} that this run would not "
                        "evaluate")
 

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
+from molmo_lerobot.gl import use_headless_gl
 from molmo_lerobot.runner.forkserver import PreloadedForkServer, exit_status_lost, inherited_gpu_state
 from molmo_lerobot.runner.plan import EpisodePlan
 from molmo_lerobot.runner.progress import redirect_worker_output
@@ -59,7 +60,7 @@ ORPHAN_GRACE_S = 10.0
 def _worker_main(conn: Connection, job: WorkerJob, worker_id: str, started_at: float) -> None:
     launch_s = time.time() - started_at  # process start, and for spawn the imports of unpickling this job
     inherited = inherited_gpu_state()
-    os.environ.setdefault("MUJOCO_GL", "egl")
+    use_headless_gl()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     redirect_worker_output(job.output_dir, worker_id)  # library prints go to logs/, not through the bar
     threading.Thread(target=_exit_when_orphaned, daemon=True).start()

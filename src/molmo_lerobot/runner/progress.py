@@ -10,6 +10,8 @@
   line every ``heartbeat_s`` while episodes run; never carriage returns.
 * Workers write their own stdout/stderr (weight-loading prints, library warnings) to
   ``output_dir/logs/<worker_id>.log`` (:func:`redirect_worker_output`), so they cannot break the bar.
+* Not a terminal: the libraries' own tqdm progress bars (LeRobot's dataset merge, ``datasets``) are
+  off (:func:`quiet_library_bars`); a log would hold every redraw.
 """
 
 from __future__ import annotations
@@ -31,6 +33,16 @@ from molmo_lerobot.recording import EpisodeInfo, Recorder, RecorderFactory
 
 PROGRESS_DIR = ".progress"
 LOGS_DIR = "logs"
+
+
+def quiet_library_bars(stream: IO[str] | None = None) -> None:
+    """Turn the libraries' tqdm bars off unless ``stream`` (default stderr) is a terminal. Call it before
+    tqdm is imported (it reads ``TQDM_*`` then); processes started later inherit it. A variable the
+    user set wins."""
+    stream = sys.stderr if stream is None else stream
+    if not getattr(stream, "isatty", lambda: False)():
+        # TQDM_DISABLE alone: datasets' and the Hub's own switches warn when a library turns bars back on
+        os.environ.setdefault("TQDM_DISABLE", "1")
 
 
 def redirect_worker_output(output_dir: str | Path, worker_id: str) -> Path | None:

@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from molmo_lerobot.gl import use_headless_gl
 from molmo_lerobot.runner.plan import EpisodePlan
 from molmo_lerobot.runner.progress import redirect_worker_output
 from molmo_lerobot.runner.supervisor import (
@@ -47,7 +48,7 @@ class SimulatorActor:
     worker's ``policy=remote`` connects to the one on the node the actor was placed on."""
 
     def __init__(self, job: WorkerJob, worker_id: str, ports: dict[str, int] | None = None) -> None:
-        os.environ.setdefault("MUJOCO_GL", "egl")
+        use_headless_gl()
         redirect_worker_output(job.output_dir, worker_id)  # library prints go to logs/, not through the bar
         self.worker: EpisodeWorker | None = None
         self.init_error: str | None = None
@@ -120,7 +121,7 @@ class RayTransport(Transport):
 
         if ray.is_initialized():
             return
-        os.environ.setdefault("MUJOCO_GL", "egl")  # local-cluster workers inherit the driver's environment
+        use_headless_gl()  # local-cluster workers inherit the driver's environment
         kwargs: dict[str, Any] = dict(include_dashboard=self.include_dashboard, logging_level=logging.WARNING)
         if self.address is None:
             kwargs["num_cpus"] = max(1, round(workers * self.num_cpus_per_worker))

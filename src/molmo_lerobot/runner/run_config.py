@@ -323,12 +323,22 @@ class RunConfig(_OpenSection):
     limit: Annotated[int | None, _rule(
         _optional(lambda v: _is_int(v) and v >= 1),
         "{key}: expected a positive integer (or null for every episode), got {got}")] = None
+    #: exactly these benchmark indices (runner/selection.py); at most one of limit, episodes, sample
+    episodes: Annotated[list[int] | None, _rule(
+        _optional(lambda v: isinstance(v, list) and v != [] and all(_is_int(i) and i >= 0 for i in v)
+                  and len(set(v)) == len(v)),
+        "{key}: expected a non-empty list of distinct benchmark indices (>= 0), got {got}")] = None
+    #: K episodes spread over the benchmark's (house, task) strata, drawn with ``seed``
+    sample: Annotated[int | None, _rule(
+        _optional(lambda v: _is_int(v) and v >= 1),
+        "{key}: expected a positive number of episodes (or null), got {got}")] = None
     seed: Annotated[int, _rule(_is_int, "{key}: expected an integer, got {got}")] = 0
     output_dir: Annotated[str | None, _rule(_optional(lambda v: isinstance(v, str) and v.strip() != ""),
                                             "{key}: expected a path (or null for runs/<benchmark>-<policy>-"
                                             "<time>), got {got}")] = None
     record: Flag = False
     record_hold_steps: Any = 10  # the recorder checks it (record=true)
+    record_min_frames: Any = 100  # the recorder checks it (record=true)
     record_environment_state: Flag = False
     push: Flag = False
     dataset_id: Annotated[str | None, BeforeValidator(_dataset_id)] = None
@@ -350,6 +360,14 @@ class RunConfig(_OpenSection):
     scene_xml_paths: list[str] = []
     hub: HubConfig = HubConfig()
     wandb: WandbConfig = WandbConfig()
+
+    @model_validator(mode="after")
+    def _one_selection(self) -> RunConfig:
+        given = [k for k in ("limit", "episodes", "sample") if getattr(self, k) is not None]
+        if len(given) > 1:
+            raise _problem(f"{' and '.join(given)}: give at most one of limit (the first K episodes), episodes "
+                           "(these indices) and sample (K spread over houses and tasks)")
+        return self
 
     @model_validator(mode="after")
     def _bounded_work(self) -> RunConfig:

@@ -36,7 +36,8 @@ RESULTS_FILE = "results.json"
 
 #: ``run.json`` fields a resume must find unchanged (``recording``: see :func:`_check_recording`)
 RUN_IDENTITY = ("benchmark", "policy", "policy_checkpoint", "seed", "horizon", "timing", "mujoco", "eval_options",
-                "code", "render_profile")
+                "code", "render_profile",
+                "selection")  # selection: episodes=[…] / sample=K (runner/selection.py); null for limit
 #: ``episodes.jsonl`` fields a record must have, with their JSON types
 _RECORD_TYPES: dict[str, tuple[type, ...]] = {
     "episode_index": (int,), "house_index": (int, type(None)), "task_cls": (str, type(None)), "success": (bool,),

@@ -3,6 +3,6 @@ picks its OpenGL backend then): the first module a worker's fork server imports.
 
 from __future__ import annotations
 
-import os
+from molmo_lerobot.gl import use_headless_gl
 
-os.environ.setdefault("MUJOCO_GL", "egl")
+use_headless_gl()

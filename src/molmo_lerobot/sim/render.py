@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
+from molmo_lerobot.gl import gl_error
+
 #: render contexts kept per process (as many as the compiled-model cache holds, :mod:`molmo_lerobot.sim.env`)
 _MODEL_SLOTS = 4
 #: the process's GL context and render contexts, keyed by process id (a forked child makes its own)
@@ -122,8 +124,11 @@ def process_renderer() -> FrameRenderer:
     if renderer is None:
         _PROCESS_RENDERERS.clear()  # a forked child never uses its parent's context
         t0 = time.perf_counter()
-        gl = mujoco.GLContext(64, 64)
-        gl.make_current()
+        try:
+            gl = mujoco.GLContext(64, 64)
+            gl.make_current()
+        except (mujoco.FatalError, RuntimeError, ImportError, AttributeError) as exc:
+            raise gl_error(exc) from None  # one line: the backend MuJoCo used and what to set
         renderer = FrameRenderer(gl, setup_s=time.perf_counter() - t0)
         _PROCESS_RENDERERS[pid] = renderer
         atexit.register(_release, pid)

@@ -10,6 +10,10 @@ benchmark's episodes in order; ``--seed=S`` starts at episode ``S mod N`` (see
 succeeded: that is ``success_once`` in ``molmo-eval``'s episodes.jsonl. ``--env.environment_state=true``
 adds the task's ground truth as ``observation.environment_state`` (what ``record_environment_state=true``
 records and ``molmo-eval`` passes to a policy trained on it).
+
+Rendering: with ``MUJOCO_GL`` unset the env renders through EGL (as ``molmo-eval``); if MuJoCo cannot
+render at all, building the config exits with one line saying what to set (``SystemExit``), not with
+LeRobot's "failed when parsing" (draccus reports any other exception of ``__post_init__`` as that).
 """
 
 from __future__ import annotations
@@ -18,10 +22,14 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
 
-from lerobot.configs.types import FeatureType, PolicyFeature
-from lerobot.envs.configs import EnvConfig
+from molmo_lerobot.gl import use_headless_gl
 
-from molmo_lerobot.features import ACTION, ENV_STATE, ENV_STATE_KEY, STATE, image_feature
+use_headless_gl()  # before anything imports MuJoCo: unset, it would pick GLFW and need a display
+
+from lerobot.configs.types import FeatureType, PolicyFeature  # noqa: E402
+from lerobot.envs.configs import EnvConfig  # noqa: E402
+
+from molmo_lerobot.features import ACTION, ENV_STATE, ENV_STATE_KEY, STATE, image_feature  # noqa: E402
 
 
 @EnvConfig.register_subclass("molmo")
@@ -41,9 +49,13 @@ class MolmoEnvConfig(EnvConfig):
     features_map: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        from molmo_lerobot.gl import GLError
         from molmo_lerobot.gym_env import MolmoEnv
 
-        env = MolmoEnv(**self.gym_kwargs)
+        try:
+            env = MolmoEnv(**self.gym_kwargs)
+        except GLError as exc:  # no rendering here is no config error: say what to set, not "failed when parsing"
+            raise SystemExit(f"error: --env.type=molmo: {exc}") from None
         try:
             self.fps = env.metadata["render_fps"]
             fmap = env.features
