@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
 from omegaconf import OmegaConf
 
 from molmo_lerobot.config import compose
 from molmo_lerobot.errors import RunError
 from molmo_lerobot.runner.evaluate import _make_executor, run_evaluation
-from molmo_lerobot.runner.ray_executor import RayExecutor
+from molmo_lerobot.runner.ray_executor import RayExecutor, RayTransport
 
 
 def test_executor_ray_config_reaches_the_executor():
@@ -90,3 +92,20 @@ def test_local_and_ray_random_policy_trajectories_are_identical(faulty_policy, s
     assert sorted(local_traces) == list(range(8)) and ray_traces == local_traces
     assert len(set(local_traces.values())) == 8, "every episode's seed gives its own trajectory"
     assert all(r.error is None for r in runs["ray"].episodes)
+
+
+@pytest.mark.parametrize("chosen", [None, "disabled"])
+def test_a_local_cluster_chooses_rays_auth_mode_so_ray_warns_nothing(monkeypatch, chosen):
+    """Issue 39 (first hour, output): a new local cluster logged Ray's token-authentication warning at every
+    run; the mode is now chosen explicitly (Ray's own default, token), a user's choice left as it is."""
+    import ray
+
+    seen = {}
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(ray, "init", lambda **kwargs: seen.setdefault("mode", os.environ.get("RAY_AUTH_MODE")))
+    if chosen is None:
+        monkeypatch.delenv("RAY_AUTH_MODE", raising=False)
+    else:
+        monkeypatch.setenv("RAY_AUTH_MODE", chosen)
+    RayTransport().join(1)
+    assert seen["mode"] == (chosen or "token")

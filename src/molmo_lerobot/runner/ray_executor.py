@@ -125,6 +125,9 @@ class RayTransport(Transport):
         kwargs: dict[str, Any] = dict(include_dashboard=self.include_dashboard, logging_level=logging.WARNING)
         if self.address is None:
             kwargs["num_cpus"] = max(1, round(workers * self.num_cpus_per_worker))
+            # Ray turns token authentication on for a new local cluster and logs a warning at every start unless
+            # the mode was chosen: choose its own default explicitly (a user's RAY_AUTH_MODE is left as set)
+            os.environ.setdefault("RAY_AUTH_MODE", "token")
         try:
             ray.init(address=self.address, **kwargs)
         except (ConnectionError, RuntimeError, ValueError) as exc:
