@@ -50,8 +50,11 @@ class FrameRenderer:
             self.slots.move_to_end(key)
             return slot
         t0 = time.perf_counter()
-        self.gl.make_current()
-        context = mujoco.MjrContext(source, mujoco.mjtFontScale.mjFONTSCALE_150.value)
+        try:  # a backend whose context creation "succeeded" without a display (GLFW) fails here
+            self.gl.make_current()
+            context = mujoco.MjrContext(source, mujoco.mjtFontScale.mjFONTSCALE_150.value)
+        except (mujoco.FatalError, RuntimeError) as exc:
+            raise gl_error(exc) from None
         mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, context)
         context.readDepthMap = mujoco.mjtDepthMap.mjDEPTH_ZEROFAR
         slot = _Slot(source, context, mujoco.MjvScene(source, maxgeom=10000))
