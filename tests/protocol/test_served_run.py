@@ -58,24 +58,25 @@ def outcome(e) -> tuple:
     return (e.episode_index, e.success, e.success_once, e.steps, e.seed, e.error)
 
 
-def test_served_batched_runs_equal_in_process_over_both_transports(act_dir, tmp_path):
+# websockets: served runs over them stay in the default run through tests/protocol/test_remote_policy.py
+@pytest.mark.parametrize("transport", [pytest.param("websocket", marks=pytest.mark.slow), "auto"])
+def test_served_batched_runs_equal_in_process_over_both_transports(act_dir, tmp_path, transport):
     """In process, served over websockets and served over shared memory (``auto`` on Linux): the
     same outcomes per episode, the same actions up to batched rounding."""
     local = evaluate(act_dir, tmp_path / "local", "workers=1")
     assert local.summary["n_errors"] == 0 and len(local.episodes) == 2
-    for transport in ("websocket", "auto"):
-        out = tmp_path / transport
-        batched = evaluate(act_dir, out, "workers=2", "policy.serve=true", "policy.serve_batch_timeout_ms=50",
-                           f"policy.serve_transport={transport}")
-        assert [outcome(e) for e in batched.episodes] == [outcome(e) for e in local.episodes], transport
-        assert batched.summary["policy"]["name"] == "lerobot" and batched.summary["policy"]["serve"] is True
-        stats = json.loads((out / STATS_FILE).read_text())
-        assert stats["transport"] == {"websocket": "websocket", "auto": "shm"}[transport]
-        assert stats["batching"] and stats["max_batch"] == 2 and stats["served"] > 0
-        # one forward for several workers' requests rounds differently from one per request (float32), and
-        # which requests share a forward depends on timing; the difference compounds over the steps
-        np.testing.assert_allclose(actions(batched), actions(local), rtol=1e-3, atol=2e-4)
-        assert not mp.active_children()  # the server process was stopped and reaped
+    out = tmp_path / transport
+    batched = evaluate(act_dir, out, "workers=2", "policy.serve=true", "policy.serve_batch_timeout_ms=50",
+                       f"policy.serve_transport={transport}")
+    assert [outcome(e) for e in batched.episodes] == [outcome(e) for e in local.episodes], transport
+    assert batched.summary["policy"]["name"] == "lerobot" and batched.summary["policy"]["serve"] is True
+    stats = json.loads((out / STATS_FILE).read_text())
+    assert stats["transport"] == {"websocket": "websocket", "auto": "shm"}[transport]
+    assert stats["batching"] and stats["max_batch"] == 2 and stats["served"] > 0
+    # one forward for several workers' requests rounds differently from one per request (float32), and
+    # which requests share a forward depends on timing; the difference compounds over the steps
+    np.testing.assert_allclose(actions(batched), actions(local), rtol=1e-3, atol=2e-4)
+    assert not mp.active_children()  # the server process was stopped and reaped
 
 
 @pytest.mark.slow

@@ -120,12 +120,24 @@ def test_recorded_only_when_asked_and_a_state_policy_gets_it(tmp_path):
     assert res.summary["n_errors"] == 0
     policy_feats = json.loads((tmp_path / "policy" / "dataset" / "meta" / "info.json").read_text())["features"]
     assert policy_feats[ENV_STATE]["names"] == NAMES  # the recording holds what the policy saw
-    served = run_evaluation(compose([f"policy.path={act}", "policy=lerobot", "policy.device=cpu", *args[:-2],
-                                     "policy.serve=true", "progress=false", f"output_dir={tmp_path / 'served'}"]))
-    assert served.summary["n_errors"] == 0  # the served policy is sent the state too
-    assert [e.success for e in served.episodes] == [e.success for e in res.episodes]
     run_evaluation(compose(["policy=scripted", *args, f"output_dir={tmp_path / 'off'}"]))
     assert ENV_STATE not in json.loads((tmp_path / "off" / "dataset" / "meta" / "info.json").read_text())["features"]
+
+
+@pytest.mark.slow
+def test_a_served_state_policy_is_sent_the_state_too(tmp_path):
+    genv = MolmoEnv("pick_v1", episode_index=0, horizon=3, environment_state=True)
+    try:
+        fmap = genv.features
+    finally:
+        genv.close()
+    act = _tiny_state_act(tmp_path / "act", fmap)
+    args = [f"policy.path={act}", "policy=lerobot", "policy.device=cpu", "benchmark=pick_v1", "limit=1", "workers=1",
+            "horizon=3", "progress=false"]
+    res = run_evaluation(compose([*args, f"output_dir={tmp_path / 'policy'}"]))
+    served = run_evaluation(compose([*args, "policy.serve=true", f"output_dir={tmp_path / 'served'}"]))
+    assert res.summary["n_errors"] == 0 and served.summary["n_errors"] == 0
+    assert [e.success for e in served.episodes] == [e.success for e in res.episodes]
 
 
 def test_a_task_without_environment_state_is_an_episode_error(tmp_path):
