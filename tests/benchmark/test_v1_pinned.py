@@ -12,7 +12,7 @@ from collections import Counter
 
 import pytest
 
-from molmo_lerobot.benchmark.load import load_benchmark
+from molmo_lerobot.benchmark.load import Benchmark, load_benchmark
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.rollout import horizon_with_source
@@ -46,9 +46,9 @@ def test_every_shipped_v1_benchmark_is_pinned():
     assert sorted(p.name for p in data_path("benchmarks").iterdir() if p.name.endswith("_v1")) == sorted(PINNED)
 
 
-@pytest.mark.parametrize("name", sorted(PINNED))
-def test_v1_trials_are_unchanged(name):
-    sha, horizons, thresholds = PINNED[name]
+def assert_trials(name: str, sha: str, horizons: dict, thresholds: dict) -> Benchmark:
+    """The shipped benchmark ``name`` has content hash ``sha``, these resolved horizons (episodes per
+    ``(steps at 66 ms, source)``) and one set of thresholds per task type; the benchmark, for more checks."""
     plugins = Plugins()
     bench = load_benchmark(data_path("benchmarks") / name, plugins)
     resolved, rules = Counter(), {}
@@ -59,3 +59,9 @@ def test_v1_trials_are_unchanged(name):
     assert bench.sha256 == sha
     assert dict(resolved) == horizons
     assert {t: [json.loads(r) for r in rs] for t, rs in rules.items()} == {t: [r] for t, r in thresholds.items()}
+    return bench
+
+
+@pytest.mark.parametrize("name", sorted(PINNED))
+def test_v1_trials_are_unchanged(name):
+    assert_trials(name, *PINNED[name])

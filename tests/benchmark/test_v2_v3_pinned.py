@@ -6,15 +6,10 @@ benchmark names, or to what a benchmark naming none runs, fails here."""
 
 from __future__ import annotations
 
-import json
-from collections import Counter
-
 import pytest
+from test_v1_pinned import assert_trials
 
-from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import Plugins
-from molmo_lerobot.runner.rollout import horizon_with_source
 from molmo_lerobot.sim.render_profile import resolve_profile
 
 PLACE = {"max_place_receptacle_pos_displacement": 0.15, "max_place_receptacle_rot_displacement": 1.0472,
@@ -52,15 +47,5 @@ def test_every_shipped_v2_and_v3_benchmark_is_pinned():
 @pytest.mark.parametrize("version", sorted(LOOK))
 @pytest.mark.parametrize("task", sorted(PINNED))
 def test_v2_and_v3_trials_are_unchanged(task, version):
-    sha, horizons, thresholds = PINNED[task]
-    plugins = Plugins()
-    bench = load_benchmark(data_path("benchmarks") / f"{task}_{version}", plugins)
-    resolved, rules = Counter(), {}
-    for spec in bench.episodes:
-        task_type = plugins.task_type(spec.task_name)
-        resolved[horizon_with_source(None, spec.task, task_type.default_horizon_sec, 66.0)] += 1
-        rules.setdefault(task_type.name, set()).add(json.dumps(task_type.thresholds(spec), sort_keys=True))
-    assert bench.sha256 == sha
-    assert dict(resolved) == horizons
-    assert {t: [json.loads(r) for r in rs] for t, rs in rules.items()} == {t: [r] for t, r in thresholds.items()}
+    bench = assert_trials(f"{task}_{version}", *PINNED[task])
     assert resolve_profile(bench.metadata.render_profile, {}).record() == LOOK[version]
