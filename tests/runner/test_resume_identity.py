@@ -51,6 +51,7 @@ def test_a_recorded_run_resumes_only_with_its_recording_options(faulty_policy, s
                                      'run\'s ("h264" vs "libsvtav1"); one dataset has one set of recording options: '
                                      "resume with video.vcodec=h264, or start a new output_dir"),
         (["record_environment_state=true"], "its recording option record_environment_state differs"),
+        (["record_min_frames=0"], "its recording option record_min_frames differs"),
         (["record=false"], "with record=false: it was started with record=true and its dataset/ would lack"),
     ]:
         args = [*common, "limit=2", "resume=true", *change]

@@ -75,6 +75,10 @@ def _versions() -> dict[str, str]:
     return out
 
 
+#: the options that shape a recording: one dataset has one set of them (``run.json``'s ``recording``)
+RECORDING_OPTIONS = ("record_environment_state", "record_hold_steps", "record_min_frames", "video")
+
+
 def code_version() -> dict[str, str | None]:
     """This project's code: its package version and, in a git checkout, the commit (``run.json``'s
     ``code``; a resume refuses other code)."""
@@ -261,8 +265,7 @@ def _run_info(cfg: dict[str, Any], ctx: RunContext, planner: EpisodePlanner) -> 
         "limit": cfg.get("limit"), "horizon": cfg.get("horizon"),
         "timing": cfg["timing"], "mujoco": mujoco.__version__, "code": code_version(),
         "render_profile": ctx.config["render_profile"],
-        "recording": ({key: cfg.get(key) for key in ("record_environment_state", "record_hold_steps", "video")}
-                      if cfg.get("record") else None),
+        "recording": {key: cfg.get(key) for key in RECORDING_OPTIONS} if cfg.get("record") else None,
         "eval_options": {"horizons": planner.horizons, "custom_object": cfg.get("custom_object"),
                          "camera": cfg.get("camera"), "robot": cfg.get("robot"),
                          "end_on_success": bool(cfg.get("end_on_success", False)),
