@@ -95,6 +95,19 @@ class _Actor:
     dead: bool = False
 
 
+#: Ray's logger for token authentication, and its notice that it turned token authentication on for a new
+#: local cluster (its default, logged at every start); the filter drops that notice and nothing else
+_RAY_AUTH_LOGGER = "ray._private.authentication.authentication_token_setup"
+
+
+class _QuietAuthNotice(logging.Filter):
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not record.getMessage().startswith("Token authentication is enabled for this Ray cluster")
+
+
+_QUIET_AUTH_NOTICE = _QuietAuthNotice()
+
+
 class RayTransport(Transport):
     """Workers as Ray actors (one CPU each unless configured), started with ``max_restarts=0``."""
 
@@ -122,12 +135,10 @@ class RayTransport(Transport):
         if ray.is_initialized():
             return
         use_headless_gl()  # local-cluster workers inherit the driver's environment
+        logging.getLogger(_RAY_AUTH_LOGGER).addFilter(_QUIET_AUTH_NOTICE)
         kwargs: dict[str, Any] = dict(include_dashboard=self.include_dashboard, logging_level=logging.WARNING)
         if self.address is None:
             kwargs["num_cpus"] = max(1, round(workers * self.num_cpus_per_worker))
-            # Ray turns token authentication on for a new local cluster and logs a warning at every start unless
-            # the mode was chosen: choose its own default explicitly (a user's RAY_AUTH_MODE is left as set)
-            os.environ.setdefault("RAY_AUTH_MODE", "token")
         try:
             ray.init(address=self.address, **kwargs)
         except (ConnectionError, RuntimeError, ValueError) as exc:
