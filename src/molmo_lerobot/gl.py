@@ -21,8 +21,10 @@ class GLError(MolmoError, RuntimeError):
 
 
 def use_headless_gl() -> None:
-    """Set ``MUJOCO_GL=egl`` unless the environment chose a backend (call it before importing MuJoCo)."""
-    os.environ.setdefault("MUJOCO_GL", HEADLESS_GL)
+    """Set ``MUJOCO_GL=egl`` unless the environment chose a backend (call it before importing MuJoCo); an empty
+    ``MUJOCO_GL`` chooses none (MuJoCo reads it as unset and picks GLFW)."""
+    if not os.environ.get("MUJOCO_GL", "").strip():
+        os.environ["MUJOCO_GL"] = HEADLESS_GL
 
 
 def gl_error(exc: BaseException) -> GLError:

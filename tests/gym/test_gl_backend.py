@@ -31,10 +31,11 @@ def _run(code: str, **env: str | None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-c", code], env=environ, capture_output=True, text=True, timeout=300)
 
 
-@pytest.mark.parametrize("code, out", [(GYM, "rendered (224, 224, 3)"),
-                                       pytest.param(PLUGIN, "pixels/exterior", marks=pytest.mark.slow)])
-def test_renders_with_mujoco_gl_unset_and_exits_quietly(code, out):
-    proc = _run(code)
+@pytest.mark.parametrize("code, out, chosen", [(GYM, "rendered (224, 224, 3)", None),
+                                               (GYM, "rendered (224, 224, 3)", ""),  # set but empty: unset to MuJoCo
+                                               pytest.param(PLUGIN, "pixels/exterior", None, marks=pytest.mark.slow)])
+def test_renders_with_mujoco_gl_unset_and_exits_quietly(code, out, chosen):
+    proc = _run(code, MUJOCO_GL=chosen)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert out in proc.stdout
     assert "Traceback" not in proc.stderr and "Exception ignored" not in proc.stderr, proc.stderr[-2000:]
