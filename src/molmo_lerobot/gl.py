@@ -10,14 +10,15 @@ from __future__ import annotations
 import os
 import sys
 
-from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.errors import InfrastructureError
 
 #: the backend chosen when ``MUJOCO_GL`` is unset: headless, on a GPU or Mesa's software EGL
 HEADLESS_GL = "egl"
 
 
-class GLError(MolmoError, RuntimeError):
-    """MuJoCo could not create an OpenGL context to render with."""
+class GLError(InfrastructureError):
+    """MuJoCo could not create an OpenGL context to render with: the machine's fault, not the episode's
+    (recorded as infrastructure; ``resume=true`` reruns it once ``MUJOCO_GL`` is fixed)."""
 
 
 def use_headless_gl() -> None:

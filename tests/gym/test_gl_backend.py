@@ -57,3 +57,11 @@ def test_lerobot_reports_a_gl_failure_as_such_not_as_a_config_parse_error():
     lines = [line for line in proc.stderr.splitlines() if "GLFWError" not in line and "warnings.warn" not in line]
     assert lines == [lines[-1]] and lines[-1].startswith("error: --env.type=molmo: MuJoCo cannot render"), proc.stderr
     assert "parsing" not in proc.stderr
+
+
+def test_a_gl_failure_is_the_machines_not_the_episodes():
+    """Run with a backend that cannot render, every episode was an *episode* error that resume never reruns."""
+    from molmo_lerobot.errors import INFRASTRUCTURE, error_kind
+    from molmo_lerobot.gl import gl_error
+
+    assert error_kind(gl_error(RuntimeError("an OpenGL platform library has not been loaded"))) == INFRASTRUCTURE
