@@ -276,8 +276,9 @@ def test_an_episode_stored_twice_is_merged_once(tmp_path):
     assert bool(last["next.success"]) is True  # the copy that matches the result was kept
 
 
-def test_a_new_episode_between_previous_ones_keeps_benchmark_order(two_worker_run, tmp_path):
-    """Resume stores episode 2 (errored before): the previous dataset is cut around it, frames intact."""
+def _resume_storing_episode_2(two_worker_run, tmp_path):
+    """A copy of the two-worker run resumed with episode 2 (errored before) now stored: its dataset is cut
+    around the new episode. Returns the run directory and its recorder factory."""
     out0, _, results, _, _ = two_worker_run
     out = tmp_path / "run"
     shutil.copytree(out0, out)
@@ -287,6 +288,12 @@ def test_a_new_episode_between_previous_ones_keeps_benchmark_order(two_worker_ru
     w.close()
     everything = [redo if r.episode_index == 2 else r for r in results]
     factory.finalize(out, everything, S.summary_for(everything))
+    return out, factory
+
+
+def test_a_new_episode_between_previous_ones_keeps_benchmark_order(two_worker_run, tmp_path):
+    """Resume stores episode 2 (errored before): the previous dataset is cut around it, frames intact."""
+    out, factory = _resume_storing_episode_2(two_worker_run, tmp_path)
     records = [r for r in read_eval_records(out / "dataset") if r["episode_index"] is not None]
     assert [r["benchmark_episode_index"] for r in records] == [0, 1, 2, 3, 4]
     ds = _load(out / "dataset", factory.repo_id)
@@ -391,14 +398,6 @@ def test_merged_stats_are_lerobots_stats_of_the_merged_data(tmp_path):
 
 def test_stats_after_a_resume_cut_the_previous_dataset(two_worker_run, tmp_path):
     """Resume stores episode 2 between previous ones: the previous dataset is cut (delete_episodes)."""
-    out0, _, results, _, _ = two_worker_run
-    out = tmp_path / "run"
-    shutil.copytree(out0, out)
-    factory = LeRobotRecorderFactory.from_config(CFG)
-    w = factory.make("w0g0", out)
-    redo = S.run_episode(w, 2, 5, success_from=1)
-    w.close()
-    everything = [redo if r.episode_index == 2 else r for r in results]
-    factory.finalize(out, everything, S.summary_for(everything))
+    out, factory = _resume_storing_episode_2(two_worker_run, tmp_path)
     stats = _assert_stats_match(out / "dataset", factory.repo_id)
     assert float(stats["episode_index"]["max"][0]) == 4
