@@ -42,8 +42,8 @@ if TYPE_CHECKING:
     from molmo_lerobot.tasks.base import TaskType
 
     #: what :meth:`Plugins.resolve` gives for a kind not spelled as a literal
-    Provided = (TaskType | RobotType | CameraSystem | SceneDataset | AssetLibraryType | GraspLibraryType
-                | PolicyType)
+    type Provided = (TaskType | RobotType | CameraSystem | SceneDataset | AssetLibraryType | GraspLibraryType
+                     | PolicyType)
 
 ENTRY_POINT_GROUP = hookspecs.PROJECT
 
