@@ -124,7 +124,7 @@ class OwnLayout(Layout):
 
     @classmethod
     def fetch_meta(cls, manager: ResourceManager, spec: ResourceSpec, tmp: Path) -> bool:
-        remote, meta, root = manager.remote, manager.meta_dir(spec), manager.cache_dir
+        remote, meta, root = manager.require_remote(), manager.meta_dir(spec), manager.cache_dir
         try:
             remote.download(f"{spec.rel}/manifest.json", tmp / "manifest.json")
         except RemoteNotFoundError:

@@ -32,6 +32,7 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
+from typing import Literal
 
 from filelock import FileLock, Timeout
 
@@ -131,11 +132,22 @@ class ResourceManager:
     def version_dir(self, spec: ResourceSpec | str) -> Path:
         return self.cache_dir / ResourceSpec.parse(spec).rel
 
-    def link_path(self, spec: ResourceSpec | str) -> Path:
-        spec = ResourceSpec.parse(spec)
+    @property
+    def install_root(self) -> Path:
+        """The install dir; :class:`ResourceError` when none is configured."""
         if self.install_dir is None:
             raise ResourceError("no install dir configured")
-        return self.install_dir / spec.data_type / spec.source
+        return self.install_dir
+
+    def require_remote(self) -> Remote:
+        """The remote; :class:`ResourceError` when none was given."""
+        if self.remote is None:
+            raise ResourceError(f"no remote was given (cache {self.cache_dir})")
+        return self.remote
+
+    def link_path(self, spec: ResourceSpec | str) -> Path:
+        spec = ResourceSpec.parse(spec)
+        return self.install_root / spec.data_type / spec.source
 
     def meta_dir(self, spec: ResourceSpec | str) -> Path:
         """Bookkeeping dir of a version (manifest, index, flags); libraries may keep derived data here."""
@@ -221,7 +233,7 @@ class ResourceManager:
 
     def _remote_versions(self, spec: ResourceSpec) -> str:
         try:
-            files = self.remote.list_files(f"{spec.data_type}/{spec.source}")
+            files = self.require_remote().list_files(f"{spec.data_type}/{spec.source}")
         except ResourceError:
             return "the remote cannot be listed"
         versions = sorted({p.split("/")[2] for p in files if p.count("/") >= 3})
@@ -404,7 +416,7 @@ class ResourceManager:
         part, xdir = tmp / f"{token}.part", tmp / f"x-{token}"
         layout = self.layout(spec)
         try:
-            inflated = self.remote.fetch_archive(spec.rel, name, part, layout.format)
+            inflated = self.require_remote().fetch_archive(spec.rel, name, part, layout.format)
             limit = layout.check_download(part, name, entry, files, inflated)
             try:
                 safe_extract(part, xdir, name, files, limit, root=self.cache_dir)
@@ -462,6 +474,7 @@ class ResourceManager:
             return
         path = self.meta_dir(spec) / "links.json"
         known = read_json(path) if path.is_file() else []
+        known = known if isinstance(known, list) else []
         links = sorted({r for r in known if isinstance(r, str) and os.path.islink(vdir / r)} | set(new))
         bad = [r for r in links if not fileio.resolves_inside(vdir, r)]
         if bad:
@@ -477,7 +490,7 @@ class ResourceManager:
         target = self.version_dir(spec)
         mode = self.manifest(spec)["link"]
         layout = self.layout(spec)
-        install = self.install_dir
+        install = self.install_root
         with self._install_lock(), layout.link_lock():
             fileio.make_dirs(link.parent, root=install)
             current = self.linked().get(spec.data_type, {}).get(spec.source)
@@ -512,7 +525,7 @@ class ResourceManager:
             def point(d: dict) -> None:
                 d.setdefault(spec.data_type, {})[spec.source] = spec.version
 
-            self.update_json(self.install_dir / META / "installed.json", point, "str")
+            self.update_json(install / META / "installed.json", point, "str")
             layout.record_link(point, current)
         return link
 
@@ -528,7 +541,8 @@ class ResourceManager:
             self.update_json(self.cache_dir / META / "installed.json", add, "list")
             self.layout(spec).record_cache(add)  # under the layout's lock (held by the caller)
 
-    def update_json(self, path: Path, edit: Callable[[dict], None], values: str, indent: int = 1) -> None:
+    def update_json(self, path: Path, edit: Callable[[dict], None], values: Literal["list", "str"],
+                    indent: int = 1) -> None:
         """Edit a version record ``{type: {source: values}}`` (``values``: ``"list"`` or ``"str"``) in place;
         ours sorted with ``indent`` 1, another tool's as it writes them."""
         data = check_local(read_json(path), path, values) if path.is_file() else {}
@@ -572,8 +586,8 @@ class ResourceManager:
                 for version in versions:
                     spec = ResourceSpec(data_type, source, version)
                     problems += self._verify_version(spec)
-        for data_type, sources in sorted(self.linked().items()):
-            for source, version in sorted(sources.items()):
+        for data_type, links in sorted(self.linked().items()):
+            for source, version in sorted(links.items()):
                 spec = ResourceSpec(data_type, source, version)
                 link = self.link_path(spec)
                 if not link.exists():

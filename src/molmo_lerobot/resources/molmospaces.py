@@ -260,17 +260,17 @@ class MolmoSpacesLayout(Layout):
         self.manager.update_json(self.manager.cache_dir / LOCAL_MANIFEST, add, "list", indent=2)
 
     def link_lock(self):
-        return self.manager.lock(self.manager.install_dir / LOCK)
+        return self.manager.lock(self.manager.install_root / LOCK)
 
     def link_files(self) -> list[str]:
         return [REMOTE_MANIFEST, TRIES]
 
     def flag_links(self, link_dir: Path, archives: list[str]) -> None:
         for archive in archives:
-            atomic_write(link_flag(link_dir, archive), "", root=self.manager.install_dir)
+            atomic_write(link_flag(link_dir, archive), "", root=self.manager.install_root)
 
     def record_link(self, point: Edit, previous: str | None) -> None:
-        install, spec = self.manager.install_dir, self.spec
+        install, spec = self.manager.install_root, self.spec
         if previous is not None and previous != spec.version:  # their cached tries index is per version
             fileio.rmtree(install / ".lmdb" / spec.data_type / spec.source, root=install, ignore_errors=True)
         self.manager.update_json(install / LOCAL_MANIFEST, point, "str", indent=2)
