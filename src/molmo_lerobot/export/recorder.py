@@ -143,12 +143,13 @@ class LeRobotRecorderFactory(RecorderFactory):
         the report read it there), then, with ``push=true``, upload it with its namespace chain."""
         from molmo_lerobot.namespaces import DatasetStore, upload_dataset
 
-        store = DatasetStore(self.store_root)
+        store, dataset_id = DatasetStore(self.store_root), self.dataset_id
+        assert dataset_id is not None  # finalize() stores only with one
         if root is None:
             raise RuntimeError(f"dataset_id {self.dataset_id!r}: no episode finished without error, so there is "
                                "no dataset to store")
         bench = summary.get("benchmark") or {}
-        store.add_dataset(self.dataset_id, root, {
+        store.add_dataset(dataset_id, root, {
             "benchmark": {"name": bench.get("name"), "sha256": bench.get("sha256")}, "policy": self.policy,
             "success_rate": summary.get("success_rate"), "n_success": summary.get("n_success"),
             "n_episodes": summary.get("n_episodes"), "run_id": output_dir.resolve().name,
@@ -156,7 +157,7 @@ class LeRobotRecorderFactory(RecorderFactory):
         if self.push:
             target = f"{self.remote}/{self.dataset_id}"
             try:
-                upload_dataset(self.dataset_id, store=store, remote=self.remote, private=self.private)
+                upload_dataset(dataset_id, store=store, remote=self.remote, private=self.private)
                 error = None
             except Exception as exc:  # a push must never cost the local results
                 from molmo_lerobot.export.hub import failure_line
