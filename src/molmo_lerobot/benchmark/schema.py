@@ -83,7 +83,10 @@ Vec4 = Annotated[list[float], _fixed_vector(4)]
 Quat = Annotated[list[float], _fixed_vector(4, quat_at=0)]
 Pose7 = Annotated[list[float], _fixed_vector(7, quat_at=3)]
 FiniteList = Annotated[list[float], AfterValidator(_finite_list)]
-ImgResolution = Annotated[tuple[int, ...], AfterValidator(_resolution)]
+if TYPE_CHECKING:
+    ImgResolution = tuple[int, int]  # what validation gives
+else:  # any length is parsed, so that a wrong one fails with our message
+    ImgResolution = Annotated[tuple[int, ...], AfterValidator(_resolution)]
 StrictInt = Annotated[int, Strict()]  # JSON true is not the integer 1
 
 
