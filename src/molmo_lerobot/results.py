@@ -283,8 +283,9 @@ class RunSummary(Rates):
         return self.model_copy(update={piece.key: piece})
 
     def document(self) -> dict[str, Any]:
-        """The JSON document (``results.json``'s content)."""
-        return self.model_dump(mode="json", exclude_unset=True)
+        """The JSON document (``results.json``'s content), its version and primary metric first."""
+        doc = self.model_dump(mode="json", exclude_unset=True)
+        return {**{k: doc.pop(k) for k in ("schema_version", "primary_metric") if k in doc}, **doc}
 
     def to_json(self) -> str:
         return json.dumps(self.document(), indent=2) + "\n"
