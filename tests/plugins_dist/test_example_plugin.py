@@ -91,8 +91,9 @@ def test_its_benchmark_pack_is_found_by_name(target):
         "from molmo_lerobot.gym_env import register_benchmarks\n"
         "cfg = compose(['benchmark=example_pick'])\n"
         "path = find_benchmark(cfg.benchmark.name, Plugins())\n"
+        "ids = register_benchmarks()\n"
         "print(cfg.benchmark.name, path.parent.parent.name, path.name,\n"
-        "      'molmo_lerobot/example_pick' in register_benchmarks(), 'molmo_lerobot/pick_v1' in register_benchmarks())\n"
+        "      'molmo_lerobot/example_pick' in ids, 'molmo_lerobot/pick_v1' in ids)\n"
     )
     proc = subprocess.run([sys.executable, "-c", code], env=env_with(target), capture_output=True, text=True,
                           timeout=180)
