@@ -43,6 +43,6 @@ def find_benchmark(benchmark: str | Path, plugins: Plugins) -> Path:
         return path
     try:
         return benchmark_dir(str(benchmark), plugins)
-    except UnknownBenchmark as exc:
-        first, *rest = str(exc).splitlines()
-        raise UnknownBenchmark("\n".join([f"{first}; no such path either", *rest])) from None
+    except UnknownBenchmark:
+        raise UnknownBenchmark(f"unknown benchmark {str(benchmark)!r}: neither a path nor a registered benchmark "
+                               f"({', '.join(benchmark_names(plugins))})") from None
