@@ -56,7 +56,8 @@ def test_an_unknown_name_says_what_there_is():
     with pytest.raises(UnknownBenchmark, match=r"^unknown benchmark 'pick_v9': neither a path nor a registered "
                                               r"benchmark \(close_v1, .*, pick_v3\)$"):
         find_benchmark("pick_v9", Plugins())
-    with pytest.raises(UnknownBenchmark, match=r"^unknown benchmark 'pick_v9'; did you mean 'pick_v3', .*\(available: close_v1, "):
+    with pytest.raises(UnknownBenchmark, match=r"^unknown benchmark 'pick_v9'; did you mean 'pick_v3', "
+                                              r".*\(available: close_v1, "):
         benchmark_dir("pick_v9", Plugins())
 
 
