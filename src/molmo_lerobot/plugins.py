@@ -42,13 +42,15 @@ KIND_HOOKS = {
     "molmo_grasp_libraries": "grasp_library",
     "molmo_policies": "policy",
     "molmo_experts": "expert",
+    "molmo_benchmarks": "benchmark",
     "molmo_config_dirs": "config",
     "molmo_episode_overrides": "override",
     "molmo_recorders": "recorder",
 }
 #: kinds whose items are looked up by name (``plugins.prefer.<kind>``) → their hook
 PROVIDER_HOOKS = {kind: hook for hook, kind in KIND_HOOKS.items()
-                  if kind in ("task", "robot", "camera", "scene", "asset_library", "grasp_library", "policy", "expert")}
+                  if kind in ("task", "robot", "camera", "scene", "asset_library", "grasp_library", "policy", "expert",
+                              "benchmark")}
 
 
 class PluginError(MolmoError, LookupError):

@@ -29,12 +29,12 @@ from omegaconf import DictConfig
 
 from molmo_lerobot.assets.grasps import GraspError
 from molmo_lerobot.assets.libraries import AssetError
+from molmo_lerobot.benchmark.registry import benchmark_dir
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.errors import ExportError, RunError
 from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import SettingsError
-from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import PluginError
+from molmo_lerobot.plugins import PluginError, Plugins
 from molmo_lerobot.results import EpisodeResult, RunSummary, summarize
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
@@ -106,10 +106,10 @@ def safe_name(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._-")[:100] or "unnamed"
 
 
-def resolve_benchmark_path(bench_cfg: dict[str, Any]) -> Path:
+def resolve_benchmark_path(bench_cfg: dict[str, Any], plugins: Plugins) -> Path:
     if bench_cfg.get("path"):
         return Path(bench_cfg["path"]).expanduser()
-    return data_path("benchmarks") / str(bench_cfg["name"])
+    return benchmark_dir(str(bench_cfg["name"]), plugins)
 
 
 def plugin_option_problems(cfg: dict[str, Any], ctx: RunContext) -> list[str]:
@@ -175,7 +175,7 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
         raise RunError("\n".join(problems))
     recorders = ctx.plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
     executor = _make_executor(cfg)
-    bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]), ctx.plugins)
+    bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"], ctx.plugins), ctx.plugins)
     try:  # the render profile it names travels to the workers in the config
         ctx = ctx.for_benchmark(bench)
     except ValueError as exc:  # an unknown profile, a bad MOLMO_SCENE_* override
