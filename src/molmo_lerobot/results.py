@@ -42,9 +42,8 @@ SCHEMA_VERSION = 1
 PRIMARY_METRIC = "success_rate (success at the final step)"
 EPISODES_FILE = "episodes.jsonl"
 RESULTS_FILE = "results.json"
-#: the printed name of each success flag (one name, one field)
-SUCCESS_LABELS = {"success": "success at the final step", "success_once": "success at any chunk end",
-                  "success_any_step": "success at any step"}
+#: the printed name of each scored success flag (one name, one field; see the module docstring)
+SUCCESS_LABELS = {"success": "success at the final step", "success_once": "success at any chunk end"}
 
 
 class RunFileError(MolmoError, ValueError):
