@@ -15,8 +15,6 @@ KNOWN: list[frozenset[str]] = [
     # context -> plugins -> hookspecs -> policies.base -> context (EpisodeContext.run)
     frozenset({"benchmark.load", "benchmark.task_specs", "context", "hookspecs", "plugins", "policies.base",
                "recording"}),
-    # the manager names MolmoSpaces' layout, which reads the manager
-    frozenset({"resources.layout", "resources.manager", "resources.molmospaces"}),
     # the library types take the catalog their libraries join (TYPE_CHECKING), the catalog makes them
     frozenset({"assets.catalog", "assets.grasps", "assets.libraries"}),
     # merging the shards takes the recorder factory (TYPE_CHECKING); the recorder merges

@@ -257,7 +257,7 @@ _SHUTIL = {"copy", "copy2", "copyfile", "copytree", "move", "rmtree"}
 
 #: (file, start of the call) -> why it may write without fileio's walk.
 ALLOWED = {
-    ("benchmark/generate.py", "out.mkdir("): "a benchmark directory the user names, not a run dir",
+    ("benchmark/output.py", "out.mkdir("): "a benchmark directory the user names, not a run dir",
     ("cli/bench.py", "out.parent.mkdir("): "molmo-bench's output: a benchmark directory the user names",
     ("cli/bench.py", "shutil.rmtree(out)"): "molmo-bench replaces the benchmark directory the user named",
     ("cli/bench.py", "os.replace(tmp, out)"): "molmo-bench: its fresh mkdtemp dir into the named place",

@@ -26,6 +26,7 @@ from hydra.plugins.search_path_plugin import SearchPathPlugin
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from molmo_lerobot.benchmark.registry import benchmark_names
 from molmo_lerobot.hookspecs import ConfigError
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
@@ -39,7 +40,8 @@ def primary_config_dir() -> Path:
 
 class PluginConfigDirs(SearchPathPlugin):
     """Appends every ``molmo_config_dirs`` directory to the search path of our configs, and gives
-    every registered policy that none of them configures a default ``policy/<name>``."""
+    every registered policy and benchmark that none of them configures a default ``policy/<name>``
+    / ``benchmark/<name>``."""
 
     def manipulate_search_path(self, search_path: ConfigSearchPath) -> None:
         primary = primary_config_dir()
@@ -55,6 +57,7 @@ class PluginConfigDirs(SearchPathPlugin):
                 seen.append(path)
                 search_path.append(provider="molmo-plugin", path=f"file://{path}")
         _default_policy_configs(plugins, seen)
+        _default_benchmark_configs(plugins, seen)
 
 
 def _default_policy_configs(plugins: Plugins, config_dirs: list[Path]) -> None:
@@ -65,6 +68,16 @@ def _default_policy_configs(plugins: Plugins, config_dirs: list[Path]) -> None:
     for name in plugins.names("policy"):
         if not any((d / "policy" / f"{name}.yaml").is_file() for d in config_dirs):
             store.store(group="policy", name=name, node={"name": name}, provider="molmo_lerobot")
+
+
+def _default_benchmark_configs(plugins: Plugins, config_dirs: list[Path]) -> None:
+    """``benchmark/<name>`` = ``{name: <name>, path: null}`` for each registered benchmark
+    (:mod:`molmo_lerobot.benchmark.registry`) no config dir has a ``benchmark/<name>.yaml`` for: the
+    shipped benchmarks and those plugins ship are ``benchmark=<name>`` without a yaml each."""
+    store = ConfigStore.instance()
+    for name in benchmark_names(plugins):
+        if not any((d / "benchmark" / f"{name}.yaml").is_file() for d in config_dirs):
+            store.store(group="benchmark", name=name, node={"name": name, "path": None}, provider="molmo_lerobot")
 
 
 def _register() -> None:

@@ -234,11 +234,12 @@ ENTRY_POINT = f"{__name__}:MolmoEnv"
 
 
 def register_benchmarks(namespace: str = NAMESPACE) -> list[str]:
-    """Register ``<namespace>/<name>`` for every shipped benchmark and ``<namespace>/Benchmark``."""
-    from molmo_lerobot.paths import data_path
+    """Register ``<namespace>/<name>`` for every registered benchmark and ``<namespace>/Benchmark``."""
+    from molmo_lerobot.benchmark.registry import benchmark_names
+    from molmo_lerobot.plugins import Plugins
 
     ids = []
-    names = sorted(p.name for p in data_path("benchmarks").iterdir() if p.is_dir())
+    names = benchmark_names(Plugins())
     for name in names:
         env_id = f"{namespace}/{name}"
         if env_id not in gym.registry:

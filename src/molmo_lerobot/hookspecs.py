@@ -29,6 +29,7 @@ from molmo_lerobot.errors import MolmoError
 if TYPE_CHECKING:
     from molmo_lerobot.assets.grasps import GraspLibraryType
     from molmo_lerobot.assets.libraries import AssetLibraryType
+    from molmo_lerobot.benchmark.packs import BenchmarkDir
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.cameras.base import CameraSystem
     from molmo_lerobot.policies.base import PolicyType
@@ -106,6 +107,15 @@ def molmo_experts() -> list[PolicyType]:
     """Scripted experts, each a :class:`~molmo_lerobot.policies.base.PolicyType` whose ``name`` is
     the task type it serves (``aliases``: further task types). ``policy=scripted`` plays the
     expert of each episode's task type; task plugins never import their experts.
+    """
+
+
+@hookspec
+def molmo_benchmarks() -> list[BenchmarkDir]:
+    """Benchmarks this plugin ships, each a :class:`~molmo_lerobot.benchmark.packs.BenchmarkDir`
+    (``name`` → directory); :func:`~molmo_lerobot.benchmark.packs.benchmark_pack` lists every
+    benchmark directory of a folder. ``molmo-eval benchmark=<name>``, ``molmo-bench validate <name>``
+    and the Gymnasium id ``molmo_lerobot/<name>`` then find them.
     """
 
 

@@ -33,6 +33,7 @@ from molmo_lerobot.hookspecs import ConfigError
 if TYPE_CHECKING:
     from molmo_lerobot.assets.grasps import GraspLibraryType
     from molmo_lerobot.assets.libraries import AssetLibraryType
+    from molmo_lerobot.benchmark.packs import BenchmarkDir
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.cameras.base import CameraSystem
     from molmo_lerobot.policies.base import PolicyType
@@ -43,7 +44,7 @@ if TYPE_CHECKING:
 
     #: what :meth:`Plugins.resolve` gives for a kind not spelled as a literal
     type Provided = (TaskType | RobotType | CameraSystem | SceneDataset | AssetLibraryType | GraspLibraryType
-                     | PolicyType)
+                     | PolicyType | BenchmarkDir)
 
 ENTRY_POINT_GROUP = hookspecs.PROJECT
 
@@ -57,13 +58,15 @@ KIND_HOOKS = {
     "molmo_grasp_libraries": "grasp_library",
     "molmo_policies": "policy",
     "molmo_experts": "expert",
+    "molmo_benchmarks": "benchmark",
     "molmo_config_dirs": "config",
     "molmo_episode_overrides": "override",
     "molmo_recorders": "recorder",
 }
 #: kinds whose items are looked up by name (``plugins.prefer.<kind>``) → their hook
 PROVIDER_HOOKS = {kind: hook for hook, kind in KIND_HOOKS.items()
-                  if kind in ("task", "robot", "camera", "scene", "asset_library", "grasp_library", "policy", "expert")}
+                  if kind in ("task", "robot", "camera", "scene", "asset_library", "grasp_library", "policy", "expert",
+                              "benchmark")}
 
 
 #: provider pins, ``{kind: {name: plugin}}`` (the run's ``plugins.prefer``)
@@ -261,6 +264,8 @@ class Plugins:
                 prefer: Pins | None = None) -> GraspLibraryType: ...
     @overload
     def resolve(self, kind: Literal["policy", "expert"], name: str, prefer: Pins | None = None) -> PolicyType: ...
+    @overload
+    def resolve(self, kind: Literal["benchmark"], name: str, prefer: Pins | None = None) -> BenchmarkDir: ...
     @overload
     def resolve(self, kind: str, name: str, prefer: Pins | None = None) -> Provided: ...
 

@@ -8,6 +8,7 @@ the same bits everywhere. Depends on nothing else of the package.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import mujoco
@@ -15,6 +16,19 @@ import numpy as np
 
 #: a vector given as a list or an array
 Vector = Sequence[float] | np.ndarray
+
+
+def yaw_quat(yaw: float) -> list[float]:
+    """The wxyz quaternion of a rotation by ``yaw`` about the world z axis."""
+    return [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
+
+
+def quat_mul(a: Sequence[float], b: Sequence[float]) -> list[float]:
+    """The Hamilton product ``a * b`` of two wxyz quaternions (``b`` applied first)."""
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return [w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2]
 
 
 def mat_to_quat(mat: np.ndarray) -> list[float]:

@@ -23,7 +23,7 @@ from molmo_lerobot.errors import describe
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetCatalog
     from molmo_lerobot.policies.base import Action, Observation
-    from molmo_lerobot.results import EpisodeResult
+    from molmo_lerobot.results import EpisodeResult, RunSummary, SummaryPiece
 
 log = logging.getLogger(__name__)
 
@@ -87,8 +87,11 @@ class RecorderFactory(ABC):
     @abstractmethod
     def make(self, worker_id: str, output_dir: Path) -> Recorder: ...
 
-    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any]) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
-        """Runs once in the main process after every worker closed."""
+    def finalize(self, output_dir: Path, results: list[EpisodeResult],
+                 summary: RunSummary) -> SummaryPiece | None:
+        """Runs once in the main process after every worker closed (and the run was scored); returns
+        what it adds to ``results.json``, if anything."""
+        return None
 
     def missing(self, output_dir: Path, results: list[EpisodeResult]) -> set[int]:
         """On ``resume=true``, before any worker starts: the episodes among ``results`` whose output

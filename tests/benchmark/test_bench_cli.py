@@ -130,7 +130,7 @@ def test_validate_finds_what_molmo_eval_finds_from_any_directory(data, tmp_path,
     assert main(["validate", "--schema-only", "no_such_benchmark"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("molmo-bench: error: unknown benchmark 'no_such_benchmark': neither a "
-                                               "path nor a shipped benchmark (close_v1, ")
+                                               "path nor a registered benchmark (close_v1, ")
 
 
 def test_validate_exits_as_molmo_eval_does_on_an_invalid_benchmark(tmp_path):

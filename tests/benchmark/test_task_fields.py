@@ -64,5 +64,5 @@ def test_odd_door_starts_are_warnings_and_listed_in_results():
                         steps=2, seed=1, extra={"start_warnings": ["task.articulated_joint_reset_state: 100 ..."]})
     plain = EpisodeResult(episode_index=4, house_index=0, task_cls="door_opening", success=False,
                           success_once=False, steps=2, seed=2)
-    assert summarize([odd, plain])["start_warnings"] == [
+    assert summarize([odd, plain]).document()["start_warnings"] == [
         {"episode_index": 3, "warnings": ["task.articulated_joint_reset_state: 100 ..."]}]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from molmo_lerobot.recording import EpisodeInfo
-from molmo_lerobot.results import EpisodeResult, summarize
+from molmo_lerobot.results import EpisodeResult, RunSummary, summarize
 
 CAMS = ["exo", "wrist"]
 W, H = 32, 24
@@ -53,7 +53,7 @@ def run_episode(rec, index: int, steps: int, success_from: int | None, error: st
     return result
 
 
-def summary_for(results: list[EpisodeResult]) -> dict:
+def summary_for(results: list[EpisodeResult]) -> RunSummary:
     return summarize(sorted(results, key=lambda r: r.episode_index),
                      benchmark={"name": "synth_v1", "sha256": "ab" * 32, "n_episodes": len(results)},
                      policy={"name": "scripted"}, seed=0)

@@ -53,7 +53,7 @@ def test_multi_worker_recording_loads_and_agrees_with_episodes_jsonl(recorded):
     firsts = [int(ds.meta.episodes[i]["dataset_from_index"]) for i in range(4)]
     assert [int(ds[first]["eval.episode_index"]) for first in firsts] == [0, 1, 2, 3]
     assert json.loads((out / "dataset" / "meta" / "info.json").read_text())["robot_type"] == "franka"
-    page = write_report(out, res.summary, res.episodes).read_text()
+    page = write_report(out, res.run_summary, res.episodes).read_text()
     assert page.count("<video") == 8
 
 

@@ -10,6 +10,7 @@ import pytest
 
 from molmo_lerobot.export.hub import push_dataset
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
+from molmo_lerobot.results import Push
 
 CFG = {"benchmark": {"name": "synth_v1"}, "policy": {"name": "scripted"}, "timing": {"policy_dt_ms": 66.0},
        "hub": {"repo_id": "molmo-test/synth-rollouts", "private": True}, "push": True}
@@ -37,9 +38,8 @@ def test_push_then_load_from_the_hub_gives_the_same_frames(hub, tmp_path):
 
     factory = LeRobotRecorderFactory.from_config(CFG)
     results = _record(tmp_path / "run", factory)
-    summary = S.summary_for(results)
-    factory.finalize(tmp_path / "run", results, summary)  # merges and pushes
-    assert summary["push"] == {"repo_id": factory.repo_id, "ok": True, "error": None}
+    pushed = factory.finalize(tmp_path / "run", results, S.summary_for(results))  # merges and pushes
+    assert pushed == Push(repo_id=factory.repo_id, ok=True, error=None)
     local = LeRobotDataset(factory.repo_id, root=tmp_path / "run" / "dataset", video_backend="pyav")
     remote = LeRobotDataset(factory.repo_id, root=tmp_path / "download", video_backend="pyav")
     assert remote.num_episodes == local.num_episodes == 2 and len(remote) == len(local) == 11
@@ -90,7 +90,6 @@ def test_a_refused_commit_is_recorded_in_the_summary(hub, tmp_path):
     factory = LeRobotRecorderFactory.from_config(CFG)
     out = tmp_path / "run"
     results = _record(out, factory)
-    summary = S.summary_for(results)
-    factory.finalize(out, results, summary)
-    assert summary["push"]["ok"] is False and "500" in summary["push"]["error"]
+    pushed = factory.finalize(out, results, S.summary_for(results))
+    assert pushed is not None and pushed.ok is False and "500" in str(pushed.error)
     assert (out / "dataset" / "meta" / "info.json").is_file() and (out / "dataset" / "results.json").is_file()

@@ -119,7 +119,7 @@ def test_feature_names_are_joint_names(two_worker_run):
 def test_results_card_and_cleanup(two_worker_run):
     out, _, _, summary, _ = two_worker_run
     root = out / "dataset"
-    assert json.loads((root / "results.json").read_text())["n_episodes"] == summary["n_episodes"] == 6
+    assert json.loads((root / "results.json").read_text())["n_episodes"] == summary.n_episodes == 6
     card = (root / "README.md").read_text()
     assert "| **all** | 6 | 50.0% |" in card and "meta/eval/episodes.jsonl" in card
     info = json.loads((root / "meta/eval/info.json").read_text())

@@ -30,7 +30,7 @@ def test_report_without_recording_has_scores_plot_and_a_row_per_episode(tmp_path
     path = write_report(tmp_path, S.summary_for(results), results)
     page = path.read_text()
     assert path.name == "report.html"
-    assert "33.3%" in page and "66.7%" in page  # success at the end / at any step
+    assert "33.3%" in page and "66.7%" in page  # success at the end / at any chunk end
     assert page.count("<svg") == 1 and page.count("<rect") >= 6  # bars: all, open, pick × 2 metrics
     rows = re.findall(r"<tr id=ep(\d+) data-outcome=(\w+)>", page)
     assert rows == [("0", "success"), ("1", "failure"), ("2", "error")]
@@ -69,8 +69,7 @@ def test_wandb_offline_run_records_the_scores(tmp_path, monkeypatch):
     monkeypatch.setenv("WANDB_MODE", "offline")
     monkeypatch.setenv("WANDB_SILENT", "true")
     results = _results()
-    summary = S.summary_for(results)
-    summary["config"] = {"wandb": {"enable": True, "project": "molmo-test"}}
+    summary = S.summary_for(results).model_copy(update={"config": {"wandb": {"enable": True, "project": "molmo-test"}}})
     assert log_run(tmp_path, summary, results) is True
     (run_dir,) = list((tmp_path / "wandb").glob("offline-run-*"))
     (table,) = list(run_dir.glob("files/media/table/episodes_*.table.json"))
@@ -97,13 +96,13 @@ def test_failures_are_grouped_with_counts_and_breakdowns_per_house_and_category(
     wins = [EpisodeResult(6 + i, 1, "x.Pick", True, True, 30, 6 + i, task_type="pick",
                           extra={"first_success_step": 5 * (i + 1), "object_category": "mug"}) for i in range(4)]
     results = [*timeouts, *never, late, *wins]
-    page = render_report({**S.summary_for(results), "timing": {"policy_dt_ms": 100.0}}, results)
+    page = render_report(S.summary_for(results).model_copy(update={"timing": {"policy_dt_ms": 100.0}}), results)
     failures = page.split("<h2>Failures</h2>")[1].split("<h2>")[0]
     groups = re.findall(r"<tr id=reason(\d+)><td class=num>F\d+</td><td title='[^']*'>([^<]+)</td>"
                         r"<td class=num>(\d+)</td>", failures)
     assert [(g, n) for _, g, n in groups] == [("error: TimeoutError: episode # ran past # s", "3"),
                                               ("never succeeded", "2"),
-                                              ("succeeded at some step, not at the end", "1")]
+                                              ("succeeded at a chunk end, not at the end", "1")]
     assert "6 of 10 episodes failed" in failures
     # each failing row links to its group instead of repeating the reason
     assert re.search(r"<tr id=ep0 data-outcome=error>.*?href=\"#reason1\"", page)

@@ -82,7 +82,7 @@ def _bytes_per_episode(cfg, res) -> tuple[int, int]:
 
     plain = RunConfig.of(cfg).plain()
     ctx = RunContext.build(plain)
-    planner = EpisodePlanner(ctx, load_benchmark(resolve_benchmark_path(plain["benchmark"]), ctx.plugins))
+    planner = EpisodePlanner(ctx, load_benchmark(resolve_benchmark_path(plain["benchmark"], ctx.plugins), ctx.plugins))
     plan = max(len(pickle.dumps(planner.plan(e.episode_index))) for e in res.episodes)
     result = max(len(pickle.dumps(e.to_dict())) for e in res.episodes)
     return plan, result

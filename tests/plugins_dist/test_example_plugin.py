@@ -2,8 +2,9 @@
 
 Installs plugins/molmo-example-policy into a temporary ``--target`` directory (no deps, no
 build isolation: offline) and runs the real console commands with ``PYTHONPATH`` pointing
-there: ``molmo-plugins`` lists it, Hydra finds its ``policy/example_sine.yaml``, and
-``molmo-serve`` serves it over the openpi protocol and survives malformed frames.
+there: ``molmo-plugins`` lists it, Hydra finds its ``policy/example_sine.yaml``, its benchmark pack
+is ``benchmark=example_pick`` everywhere a shipped benchmark is, and ``molmo-serve`` serves it over
+the openpi protocol and survives malformed frames.
 """
 
 from __future__ import annotations
@@ -42,7 +43,8 @@ def target(tmp_path_factory) -> Path:
 
 
 def env_with(target: Path) -> dict[str, str]:
-    env = dict(os.environ, PYTHONPATH=str(target), MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+    path = os.pathsep.join([str(target), *filter(None, [os.environ.get("PYTHONPATH")])])  # the code under test
+    env = dict(os.environ, PYTHONPATH=path, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
     return env
 
 
@@ -78,6 +80,30 @@ def test_code_and_hydra_config_are_discovered(target):
                           timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["molmo_example_policy", "SinePolicy", "0.3", "2.0"]
+
+
+def test_its_benchmark_pack_is_found_by_name(target):
+    """``example_pick`` ships in the distribution: the run config, the registry, the Gymnasium ids and
+    ``molmo-bench validate`` know it by name, as they know the shipped benchmarks."""
+    code = (
+        "from molmo_lerobot.config import compose; from molmo_lerobot.plugins import Plugins\n"
+        "from molmo_lerobot.benchmark.registry import find_benchmark\n"
+        "from molmo_lerobot.gym_env import register_benchmarks\n"
+        "cfg = compose(['benchmark=example_pick'])\n"
+        "path = find_benchmark(cfg.benchmark.name, Plugins())\n"
+        "ids = register_benchmarks()\n"
+        "print(cfg.benchmark.name, path.parent.parent.name, path.name,\n"
+        "      'molmo_lerobot/example_pick' in ids, 'molmo_lerobot/pick_v1' in ids)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], env=env_with(target), capture_output=True, text=True,
+                          timeout=180)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["example_pick", "molmo_example_policy", "example_pick", "True", "True"]
+    check = subprocess.run([sys.executable, "-c", "import sys; from molmo_lerobot.cli.bench import main; "
+                            "sys.exit(main(['validate', '--schema-only', 'example_pick']))"],
+                           env=env_with(target), capture_output=True, text=True, timeout=120)
+    assert check.returncode == 0, check.stderr
+    assert "episodes   2 over 1 houses" in check.stdout
 
 
 def test_molmo_serve_serves_it_and_survives_malformed_frames(target):

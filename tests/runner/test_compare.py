@@ -9,6 +9,7 @@ import math
 import pytest
 
 from molmo_lerobot.cli.compare import main
+from molmo_lerobot.results import EpisodeResult, summarize
 from molmo_lerobot.runner.compare import (
     CompareError,
     compare_runs,
@@ -29,8 +30,10 @@ def _write_run(path, outcomes, sha=SHA, policy="p", seed=0, task=lambda i: "pick
              "steps": 10, "seed": 1000 * seed + i, "error": "RuntimeError: boom" if i in errors else None,
              "task_type": task(i), "horizon": horizon(i)} for i, (s, o) in outcomes.items()]
     (path / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
-    (path / "results.json").write_text(json.dumps({"benchmark": {"name": "b", "sha256": sha, "n_episodes": 99},
-                                                   "policy": {"name": policy}, "seed": seed, **(header or {})}))
+    summary = summarize([EpisodeResult.from_dict(r) for r in rows],
+                        benchmark={"name": "b", "sha256": sha, "n_episodes": 99}, policy={"name": policy}, seed=seed,
+                        **(header or {}))
+    (path / "results.json").write_text(summary.to_json())
     return path
 
 
@@ -97,8 +100,10 @@ def test_compare_refuses_different_benchmarks_and_unfinished_runs(tmp_path):
     c = _write_run(tmp_path / "c", {5: (True, True)})
     with pytest.raises(CompareError, match="share no episodes"):
         compare_runs(load_run(a), load_run(c))
-    (c / "episodes.jsonl").write_text('{"episode_index": 5, "success": true}\n')
-    with pytest.raises(CompareError, match=r"episodes.jsonl:1: field 'success_once' is missing"):
+    record = json.loads((c / "episodes.jsonl").read_text())
+    (c / "episodes.jsonl").write_text(json.dumps({k: v for k, v in record.items() if k != "success_once"}) + "\n")
+    with pytest.raises(CompareError, match=r"episodes.jsonl:1: corrupt episode record \(field 'success_once' is "
+                                           r"missing\)$"):
         load_run(c)
 
 
@@ -112,7 +117,8 @@ def test_cli_text_and_json(tmp_path, capsys):
     assert main([str(a), str(b), "--json", "--metric", "success_once"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["metric"] == "success_once" and rep["overall"]["diff"] == 0.0
-    (b / "results.json").write_text(json.dumps({"benchmark": {"name": "b", "sha256": "ef" * 32}}))
+    other = json.loads((b / "results.json").read_text())
+    (b / "results.json").write_text(json.dumps({**other, "benchmark": {"name": "b", "sha256": "ef" * 32}}))
     assert main([str(a), str(b)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("molmo-compare: error: refusing to compare") and err.count("\n") == 1

@@ -1,7 +1,9 @@
-"""Run finalizers: chosen from the config, run after the score, failures collected as one line each."""
+"""Run finalizers: chosen from the config, run after the score, what they add returned, failures collected
+as one line each."""
 
 from __future__ import annotations
 
+from molmo_lerobot.results import Push, summarize
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 
 
@@ -24,6 +26,28 @@ def test_every_step_runs_and_each_failure_is_one_line(tmp_path):
         def finalize(self, output_dir, results, summary):
             ran.append("last")
 
-    failed = finalize_run(tmp_path, [], {}, [Recorded()], [Last()])
+    scored = summarize([], seed=0)
+    final = finalize_run(tmp_path, [], scored, [Recorded()], [Last()])
     assert ran == ["recorder", "last"]
-    assert failed == ["export Recorded: OSError: disk full"]
+    assert final.export_errors == ["export Recorded: OSError: disk full"]
+    assert final.document() == {**scored.document(), "export_errors": ["export Recorded: OSError: disk full"]}
+
+
+def test_what_a_step_returns_goes_into_the_summary_the_next_steps_see(tmp_path):
+    seen = []
+
+    class Pushes:
+        def finalize(self, output_dir, results, summary):
+            return Push(repo_id="ns/name", ok=False, error="HTTP 500")
+
+    class Report:
+        label = "report"
+
+        def finalize(self, output_dir, results, summary):
+            seen.append(summary.push)
+
+    scored = summarize([], seed=0)
+    final = finalize_run(tmp_path, [], scored, [Pushes()], [Report()])
+    assert seen == [Push(repo_id="ns/name", ok=False, error="HTTP 500")] and final.export_errors is None
+    assert final.document()["push"] == {"repo_id": "ns/name", "ok": False, "error": "HTTP 500"}
+    assert "push" not in scored.document()  # the scored summary is never edited

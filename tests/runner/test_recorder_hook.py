@@ -36,7 +36,7 @@ class StepCounterFactory(RecorderFactory):
         return StepCounter(Path(output_dir) / f"steps-{worker_id}.json")
 
     def finalize(self, output_dir, results, summary) -> None:
-        (Path(output_dir) / "finalized.json").write_text(json.dumps(summary["n_episodes"]))
+        (Path(output_dir) / "finalized.json").write_text(json.dumps(summary.n_episodes))
 
 
 class CounterPlugin:

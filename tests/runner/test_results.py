@@ -24,7 +24,7 @@ def test_summary_counts_errors_as_failures_and_splits_tasks():
         EpisodeResult(1, 1, "a.Pick", False, True, 10, 2, task_type="pick"),
         EpisodeResult.failed(2, 2, "a.Open", 3, "RuntimeError: boom", task_type="open"),
     ]
-    s = summarize(rs, seed=0)
+    s = summarize(rs, seed=0).document()
     assert s["n_episodes"] == 3 and s["n_success"] == 1 and s["n_errors"] == 1
     assert s["success_rate"] == pytest.approx(1 / 3)
     assert s["success_once_rate"] == pytest.approx(2 / 3)
@@ -46,11 +46,12 @@ def test_no_episode_simulated_is_no_score_but_honest_counts():
     from molmo_lerobot.results import summary_lines
 
     rs = [EpisodeResult.failed(i, 1, "a.Pick", i, "RuntimeError: boom", task_type="pick") for i in range(3)]
-    s = summarize(rs, benchmark={"name": "b"}, policy={"name": "p"})
+    summary = summarize(rs, benchmark={"name": "b"}, policy={"name": "p"})
+    s = summary.document()
     assert (s["n_episodes"], s["n_valid"], s["n_errors"], s["n_success"]) == (3, 0, 3, 0)
     assert s["success_rate"] is None and s["success_once_rate"] is None and s["ci95"] is None
     assert s["per_task"]["pick"]["success_rate"] is None
-    lines = summary_lines(s)
+    lines = summary_lines(summary)
     assert lines[0] == "no episode ran: 3 of 3 episodes errored · b · p: no score"
     assert not any("0.000" in ln for ln in lines)
 
@@ -60,10 +61,11 @@ def test_errors_lead_the_headline_and_tasks_without_a_valid_episode_have_no_rate
 
     rs = [EpisodeResult(0, 1, "a.Pick", True, True, 10, 1, task_type="pick"),
           EpisodeResult.failed(1, 2, "a.Open", 3, "RuntimeError: boom", task_type="open")]
-    s = summarize(rs, benchmark={"name": "b"}, policy={"name": "p"})
+    summary = summarize(rs, benchmark={"name": "b"}, policy={"name": "p"})
+    s = summary.document()
     assert s["n_valid"] == 1 and s["success_rate"] == 0.5
     assert s["per_task"]["open"]["success_rate"] is None and s["per_task"]["pick"]["n_valid"] == 1
-    lines = summary_lines(s)
+    lines = summary_lines(summary)
     assert lines[0].startswith("1 of 2 episodes errored · b · p: success 0.500")
     assert "  open: no episode ran (0/1, 1 errored)" in lines
 
@@ -79,11 +81,12 @@ def test_infrastructure_errors_and_output_failures_are_told_apart():
                                 task_type="pick")
     raised = EpisodeResult.failed(2, 1, "a.Pick", 3, "RuntimeError: boom", task_type="pick")
     assert died.rerun_on_resume and not raised.rerun_on_resume and not kept.rerun_on_resume
-    s = summarize([kept, died, raised], benchmark={"name": "b"}, policy={"name": "p"})
+    summary = summarize([kept, died, raised], benchmark={"name": "b"}, policy={"name": "p"})
+    s = summary.document()
     assert s["n_success"] == 1 and s["n_errors"] == 2
     assert [e["error_kind"] for e in s["errors"]] == ["infrastructure", "episode"]
     assert s["output_errors"] == [{"episode_index": 0, "errors": kept.output_errors}]
-    lines = summary_lines(s)
+    lines = summary_lines(summary)
     assert any(ln.startswith("  1 of the errors are infrastructure failures") and "resume=true" in ln for ln in lines)
     assert "  outputs not written for 1 episode, outcomes kept (episode 0: GlanceRecorder: OSError: [Errno 28] No " \
            "space left on device; all in results.json output_errors)" in lines

@@ -7,8 +7,8 @@ import json
 import pytest
 
 from molmo_lerobot.errors import RunError
+from molmo_lerobot.results import RunFileError, read_episodes
 from molmo_lerobot.runner.evaluate import run_evaluation
-from molmo_lerobot.runner.run_directory import _read_episodes
 
 
 def _common(faulty_policy) -> list[str]:
@@ -68,5 +68,5 @@ def test_a_duplicated_episode_record_is_refused_naming_the_line(tmp_path):
     other = {**record, "episode_index": 4}
     path = tmp_path / "episodes.jsonl"
     path.write_text("".join(json.dumps(r) + "\n" for r in (record, other, {**record, "success": True})))
-    with pytest.raises(RunError, match=rf"^cannot resume: {path}:3: episode 3 is recorded twice \(also line 1\)"):
-        _read_episodes(path)
+    with pytest.raises(RunFileError, match=rf"^{path}:3: episode 3 is recorded twice \(also line 1\)$"):
+        read_episodes(path)

@@ -8,7 +8,8 @@ import math
 import pytest
 
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
-from molmo_lerobot.benchmark.generate import generate_benchmark, write_benchmark
+from molmo_lerobot.benchmark.generate import generate_benchmark
+from molmo_lerobot.benchmark.output import write_benchmark
 from molmo_lerobot.benchmark.schema import BenchmarkMetadata
 from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.paths import data_path

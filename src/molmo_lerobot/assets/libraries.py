@@ -247,7 +247,7 @@ class ResourceAssetLibrary(AssetLibrary):
     enumerable = False
 
     def __init__(self, manager, objects: str, grasps: str | None = None, name: str | None = None) -> None:
-        from molmo_lerobot.resources.manager import ResourceSpec
+        from molmo_lerobot.resources.spec import ResourceSpec
 
         self.manager = manager
         self.objects, self.grasps = ResourceSpec.parse(objects), ResourceSpec.parse(grasps) if grasps else None

@@ -12,10 +12,8 @@ same arguments always give the same episodes (byte-identical JSON).
 from __future__ import annotations
 
 import importlib
-import json
 import math
 from collections import Counter
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -27,8 +25,8 @@ from molmo_lerobot.assets.builtin import (
     BuiltinObject,
     BuiltinReceptacle,
 )
-from molmo_lerobot.fileio import atomic_write
-from molmo_lerobot.poses import look_rotation, mat_to_quat
+from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
+from molmo_lerobot.poses import look_rotation, mat_to_quat, quat_mul, yaw_quat
 from molmo_lerobot.robots.franka import Franka
 from molmo_lerobot.sim.tabletop import ProceduralTabletop, ProceduralTabletopReceptacles
 
@@ -50,29 +48,13 @@ MIN_GAP = 0.05
 _MAX_TRIES = 200
 
 
-def _r(x: float) -> float:
-    """Round for stable, readable JSON."""
-    return round(float(x), 5)
-
-
-def _yaw_quat(yaw: float) -> list[float]:
-    return [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
-
-
-def _quat_mul(a: list[float], b: list[float]) -> list[float]:
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return [w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2]
-
-
 def _resting(obj: BuiltinObject, yaw: float) -> tuple[list[float], float, float]:
     """Orientation of ``obj`` resting on a table, its footprint radius and its centre height."""
     hx, hy, hz = obj.half_extents
     if obj.shape == "capsule":  # lies on its side: local z along world x, then yaw
         lie = [math.cos(math.pi / 4), 0.0, math.sin(math.pi / 4), 0.0]
-        return _quat_mul(_yaw_quat(yaw), lie), math.hypot(hz, hx), hx
-    return _yaw_quat(yaw), math.hypot(hx, hy), hz
+        return quat_mul(yaw_quat(yaw), lie), math.hypot(hz, hx), hx
+    return yaw_quat(yaw), math.hypot(hx, hy), hz
 
 
 def _layout(objects: list[BuiltinObject], region: dict[str, Any], rng: np.random.Generator) -> dict[str, list[float]]:
@@ -91,27 +73,27 @@ def _layout(objects: list[BuiltinObject], region: dict[str, Any], rng: np.random
             else:
                 break
             placed.append((x, y, radius))
-            poses[obj.uid] = [_r(x), _r(y), _r(region["z"] + height)] + [_r(q) for q in quat]
+            poses[obj.uid] = [rounded(x), rounded(y), rounded(region["z"] + height)] + [rounded(q) for q in quat]
         if len(poses) == len(objects):
             return poses
     raise RuntimeError(f"could not place {len(objects)} objects in {region} after {_MAX_TRIES} tries")
 
 
-def _cameras(table_height: float, rng: np.random.Generator) -> list[dict[str, Any]]:
+def tabletop_cameras(table_height: float, rng: np.random.Generator) -> list[dict[str, Any]]:
     """An exocentric camera beside the table (jittered) and a wrist camera on the hand."""
     eye = np.array([1.3, -0.6, table_height + 0.7]) + rng.uniform(-0.03, 0.03, 3)
     target = np.array([0.38, 0.0, table_height + 0.12])
     forward = target - eye
-    exo = {"name": "exterior", "type": "exocentric", "pos": [_r(v) for v in eye], "up": [0.0, 0.0, 1.0],
-           "forward": [_r(v) for v in forward / np.linalg.norm(forward)], "fov": 55.0, "record_depth": False}
+    exo = {"name": "exterior", "type": "exocentric", "pos": [rounded(v) for v in eye], "up": [0.0, 0.0, 1.0],
+           "forward": [rounded(v) for v in forward / np.linalg.norm(forward)], "fov": 55.0, "record_depth": False}
     # wrist camera in link 7's frame: beside the hand, across the finger axis, looking past the fingertips
     side = np.array([math.sqrt(0.5), -math.sqrt(0.5), 0.0])
     offset = 0.075 * side + np.array([0.0, 0.0, 0.12])
     lookat = np.array([0.0, 0.0, 0.32])
     quat = mat_to_quat(look_rotation(lookat - offset, side))
     wrist = {"name": "wrist", "type": "robot_mounted", "reference_body_names": ["panda0_link7"],
-             "camera_offset": [_r(v) for v in offset], "lookat_offset": [_r(v) for v in lookat],
-             "camera_quaternion": [_r(q) for q in quat], "fov": 75.0, "record_depth": False}
+             "camera_offset": [rounded(v) for v in offset], "lookat_offset": [rounded(v) for v in lookat],
+             "camera_quaternion": [rounded(q) for q in quat], "fov": 75.0, "record_depth": False}
     return [exo, wrist]
 
 
@@ -124,7 +106,7 @@ def episode_base(house: int, scene_dataset: str, seed: int, robot: Franka, arm: 
         "data_split": "val",
         "seed": seed,
         "robot": {"robot_name": robot.name,
-                  "init_qpos": {"arm": [_r(q) for q in arm], "gripper": list(robot.default_init_qpos["gripper"])}},
+                  "init_qpos": {"arm": [rounded(q) for q in arm], "gripper": list(robot.default_init_qpos["gripper"])}},
         "img_resolution": list(IMG_RESOLUTION),
         "cameras": cameras,
         "scene_modifications": {"added_objects": {}, "object_poses": poses, "removed_objects": []},
@@ -143,11 +125,11 @@ def _episode(scene: ProceduralTabletop, house: int, index: int, seed: int, task:
     # arguments are evaluated in order: the episode seed is drawn before the cameras
     return {
         **episode_base(house, scene.name, int(rng.integers(2**31 - 1)), robot, arm,
-                       _cameras(meta["table_height"], rng), poses),
+                       tabletop_cameras(meta["table_height"], rng), poses),
         "task": {
             "task_cls": TASK_CLS[task],
             "task_type": task,
-            "robot_base_pose": [_r(v) for v in meta["robot_base_pose"]],
+            "robot_base_pose": [rounded(v) for v in meta["robot_base_pose"]],
             "pickup_obj_name": target.uid,
             "pickup_obj_start_pose": poses[target.uid],
             "succ_pos_threshold": 0.01,
@@ -161,7 +143,7 @@ def _episode(scene: ProceduralTabletop, house: int, index: int, seed: int, task:
 def _receptacle_footprint(rec: BuiltinReceptacle, yaw: float) -> tuple[list[float], float, float]:
     """Orientation, footprint radius and centre height of a receptacle standing on a table."""
     hx, hy, hz = rec.half_extents
-    return _yaw_quat(yaw), (hx if rec.round else math.hypot(hx, hy)), hz
+    return yaw_quat(yaw), (hx if rec.round else math.hypot(hx, hy)), hz
 
 
 def _fits(obj: BuiltinObject, rec: BuiltinReceptacle) -> bool:
@@ -199,7 +181,7 @@ def _place_layout(receptacles: list[BuiltinReceptacle], objects: list[BuiltinObj
             else:
                 break
             placed.append((x, y, radius))
-            poses[item.uid] = [_r(x), _r(y), _r(region["z"] + height)] + [_r(q) for q in quat]
+            poses[item.uid] = [rounded(x), rounded(y), rounded(region["z"] + height)] + [rounded(q) for q in quat]
             if next_to and k == 0:  # the free spot beside the receptacle, inside the workspace
                 for _ in range(50):
                     a = float(rng.uniform(-math.pi, math.pi))
@@ -239,7 +221,7 @@ def _place_episode(scene: ProceduralTabletop, house: int, index: int, seed: int,
     defaults = {uid: o["default_pose"] for uid, o in meta["objects"].items()}
     # distractors that do not fit stay in the house's default row; room around the object comes first
     for clearance, n in ((c, n) for c in (PICK_CLEARANCE, 0.0) for n in range(len(others), -1, -1)):
-        rest = {o.uid: [_r(v) for v in defaults[o.uid]] for o in others[n:]}
+        rest = {o.uid: [rounded(v) for v in defaults[o.uid]] for o in others[n:]}
         fixed = [(p[0], p[1], _resting(BUILTIN_OBJECTS[uid], 0.0)[1]) for uid, p in rest.items()]
         poses = _place_layout(in_scene, [pick, *others[:n]], meta["placement_region"], rng,
                               task == "pick_and_place_next_to", fixed, clearance)
@@ -250,19 +232,19 @@ def _place_episode(scene: ProceduralTabletop, house: int, index: int, seed: int,
         raise RuntimeError(f"house {house}: could not lay out {pick.uid} and {[r.uid for r in in_scene]}")
     robot = Franka()
     arm = np.asarray(robot.default_init_qpos["arm"]) + rng.uniform(-0.05, 0.05, 7)
-    cameras = _cameras(meta["table_height"], rng)
+    cameras = tabletop_cameras(meta["table_height"], rng)
     phrase = f"the {pick.color} {pick.category}"
     task_spec: dict[str, Any] = {
         "task_cls": TASK_CLS[task],
         "task_type": task,
-        "robot_base_pose": [_r(v) for v in meta["robot_base_pose"]],
+        "robot_base_pose": [rounded(v) for v in meta["robot_base_pose"]],
         "pickup_obj_name": pick.uid,
         "pickup_obj_start_pose": poses[pick.uid],
         "place_receptacle_name": target.uid,
         "place_receptacle_start_pose": poses[target.uid],
         "receptacle_supported_weight_frac": 0.5,
         "max_place_receptacle_pos_displacement": 0.15,
-        "max_place_receptacle_rot_displacement": _r(math.radians(60)),
+        "max_place_receptacle_rot_displacement": rounded(math.radians(60)),
     }
     if task == "pick_and_place_color":
         colors = dict(zip((r.uid for r in pair), paints, strict=True))
@@ -319,34 +301,3 @@ def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: 
                    f"Franka Panda, exocentric + wrist camera (generator v{GENERATOR_VERSION}, seed {seed})")
     return episodes, benchmark_metadata(name, task, description, episodes, houses, episodes_per_house, seed,
                                         BUILTIN_OBJECTS, GENERATOR_VERSION, **extra)
-
-
-def benchmark_metadata(name: str, task: str, description: str, episodes: list[dict[str, Any]], houses: list[int],
-                       episodes_per_house: int, seed: int, objects: dict[str, Any], version: int,
-                       **extra: Any) -> dict[str, Any]:
-    """``benchmark_metadata.json`` of a generated benchmark (``objects`` maps target UIDs to assets,
-    ``version`` is the generator's)."""
-    categories = Counter(objects[e["task"]["pickup_obj_name"]].category for e in episodes)
-    return {
-        "name": name,
-        "description": description,
-        "num_episodes": len(episodes),
-        "num_houses": len(houses),
-        "task_cls_counts": dict(Counter(e["task"]["task_cls"] for e in episodes)),
-        "object_category_counts": dict(sorted(categories.items())),
-        **extra,
-        "robot_counts": dict(Counter(e["robot"]["robot_name"] for e in episodes)),
-        "house_counts": {str(h): episodes_per_house for h in houses},
-        "camera_system_class": "standard",
-        "generator": {"task": task, "n_houses": len(houses), "episodes_per_house": episodes_per_house, "seed": seed,
-                      "version": version},
-    }
-
-
-def write_benchmark(out_dir: str | Path, episodes: list[dict[str, Any]], metadata: dict[str, Any]) -> Path:
-    """Write ``benchmark.json`` and ``benchmark_metadata.json`` (each atomically) into ``out_dir``."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write(out / "benchmark_metadata.json", json.dumps(metadata, indent=1) + "\n")
-    atomic_write(out / "benchmark.json", json.dumps(episodes, indent=1) + "\n")
-    return out

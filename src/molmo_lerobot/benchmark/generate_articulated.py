@@ -17,7 +17,8 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.assets.articulated import ARTICULATED_OBJECTS
-from molmo_lerobot.benchmark.generate import _cameras, _r, benchmark_metadata, episode_base
+from molmo_lerobot.benchmark.generate import episode_base, tabletop_cameras
+from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
 from molmo_lerobot.robots.franka import Franka
 from molmo_lerobot.sim.articulated import ArticulatedTabletop
 
@@ -58,8 +59,8 @@ def _exterior(table_height: float, rng: np.random.Generator) -> dict[str, Any]:
     eye = np.array([-0.35, -0.85, table_height + 0.85]) + rng.uniform(-0.03, 0.03, 3)
     target = np.array([0.5, 0.0, table_height + 0.15])
     forward = target - eye
-    return {"name": "exterior", "type": "exocentric", "pos": [_r(v) for v in eye], "up": [0.0, 0.0, 1.0],
-            "forward": [_r(v) for v in forward / np.linalg.norm(forward)], "fov": 60.0, "record_depth": False}
+    return {"name": "exterior", "type": "exocentric", "pos": [rounded(v) for v in eye], "up": [0.0, 0.0, 1.0],
+            "forward": [rounded(v) for v in forward / np.linalg.norm(forward)], "fov": 60.0, "record_depth": False}
 
 
 def _candidates(house: int, meta: dict[str, Any], task: str) -> list[tuple[str, str]]:
@@ -93,7 +94,7 @@ def _episode(scene: ArticulatedTabletop, house: int, index: int, seed: int, task
     start = 0.0 if task == "open" else j.open_q * float(rng.uniform(*CLOSE_START))
     robot = Franka()
     arm = np.asarray(READY_ARM) + rng.uniform(-0.05, 0.05, 7)
-    wrist = [c for c in _cameras(meta["table_height"], rng) if c["name"] == "wrist"]
+    wrist = [c for c in tabletop_cameras(meta["table_height"], rng) if c["name"] == "wrist"]
     phrase = _phrase(uid, joint, meta)
     obj_meta = meta["objects"][uid]
     # arguments are evaluated in order: the episode seed is drawn before the exterior camera
@@ -103,13 +104,13 @@ def _episode(scene: ArticulatedTabletop, house: int, index: int, seed: int, task
         "task": {
             "task_cls": TASK_CLS,
             "task_type": task,
-            "robot_base_pose": [_r(v) for v in meta["robot_base_pose"]],
+            "robot_base_pose": [rounded(v) for v in meta["robot_base_pose"]],
             "pickup_obj_name": uid,
-            "pickup_obj_start_pose": [_r(v) for v in obj_meta["default_pose"]],
+            "pickup_obj_start_pose": [rounded(v) for v in obj_meta["default_pose"]],
             "articulation_object_name": uid,
             "joint_name": obj_meta["joints"][joint]["joint"],
             "joint_index": [jj.name for jj in info.joints].index(joint),
-            "joint_start_position": _r(start),
+            "joint_start_position": rounded(start),
             "task_success_threshold": THRESHOLD,
             "task_horizon_sec": HORIZON_SEC,
         },

@@ -1,7 +1,7 @@
 """``molmo-bench``: check benchmark files and make new benchmarks.
 
   molmo-bench validate BENCHMARK [KEY=VALUE ...]
-  molmo-bench generate --task pick --houses 10 --episodes-per-house 5 --seed 0 --name pick_v1 [--out DIR]
+  molmo-bench generate [GENERATOR] --task pick --houses 10 --episodes-per-house 5 --seed 0 --name pick_v1 [--out DIR]
 
 ``validate`` takes what ``molmo-eval`` and the Gymnasium env take: a shipped benchmark's name
 (``pick_v2``) or a benchmark directory or JSON file (a relative path from the current directory).
@@ -12,19 +12,25 @@ problem (file, episode index, field) and, like ``molmo-eval`` refusing it, exit 
 ``KEY=VALUE`` are run-config overrides saying where data lives (``molmospaces.assets_dir=…``,
 ``scene_xml_paths=[…]``, ``+asset_libraries.x=…``).
 ``generate`` writes a deterministic benchmark (``benchmark.json`` + ``benchmark_metadata.json``)
-and validates it; the output directory appears only once it is complete.
+with one of :data:`GENERATORS` (default ``v1``) and validates it; the output directory appears only
+once it is complete. Each shipped benchmark is what its generator writes for the arguments its
+``benchmark_metadata.json`` records (``generator``), byte for byte; the ``*_v3`` benchmarks are the
+``*_v2`` episodes with render profile v3 named in their metadata.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import re
 import shutil
 import sys
 import tempfile
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from pydantic import ValidationError
 
@@ -38,6 +44,41 @@ from molmo_lerobot.plugins import PluginConflict, Plugins
 INVALID = 2
 
 
+@dataclass(frozen=True)
+class Generator:
+    """One ``molmo-bench generate <name>``: the module whose ``generate_benchmark`` makes the episodes."""
+
+    module: str
+    tasks: tuple[str, ...]  # the --task values; the first is the default
+    about: str
+    #: ``generate_benchmark(task, houses, episodes_per_house, seed, name)``; ``False``: one task, no task argument
+    takes_task: bool = True
+
+    def generate(self, task: str | None, houses: int, per_house: int, seed: int,
+                 name: str) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+        task = task or self.tasks[0]
+        make = importlib.import_module(self.module).generate_benchmark
+        if self.takes_task:
+            return make(task, houses, per_house, seed, name)
+        if task not in self.tasks:
+            raise ValueError(f"generate: this generator makes {self.tasks[0]!r} episodes only, not --task {task!r}")
+        return make(houses, per_house, seed, name)
+
+
+#: every generator ``molmo-bench generate`` runs (the shipped benchmarks name theirs in their metadata)
+GENERATORS = {
+    "v1": Generator("molmo_lerobot.benchmark.generate",
+                    ("pick", "pick_and_place", "pick_and_place_next_to", "pick_and_place_color", "open", "close"),
+                    "the procedural (and articulated) tabletop, Franka Panda, exocentric + wrist camera"),
+    "v2": Generator("molmo_lerobot.libero.generate", ("pick", "pick_and_place", "next_to", "color", "open", "close"),
+                    "textured LIBERO rooms (and LIBERO cabinets), franka_droid, DROID cameras"),
+    "nav": Generator("molmo_lerobot.libero.generate_nav", ("nav_to_obj",),
+                     "nav_to_obj in multi-room nav_houses, mobile_franka", takes_task=False),
+    "door": Generator("molmo_lerobot.doors.generate", ("door_opening",),
+                      "open the door between two door_rooms rooms, mobile_franka", takes_task=False),
+}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="molmo-bench", description="Check and make benchmarks.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -46,8 +87,12 @@ def main(argv: list[str] | None = None) -> int:
     val.add_argument("--schema-only", action="store_true", help="skip the checks against installed plugins")
     val.add_argument("overrides", nargs="*", metavar="KEY=VALUE",
                      help="run-config overrides that locate data (molmospaces.assets_dir=…, scene_xml_paths=[…], …)")
-    gen = sub.add_parser("generate", help="generate a benchmark deterministically")
-    gen.add_argument("--task", default="pick")
+    gen = sub.add_parser("generate", help="generate a benchmark deterministically",
+                         epilog="generators: " + "; ".join(f"{n}: {g.about} (--task {', '.join(g.tasks)})"
+                                                            for n, g in GENERATORS.items()))
+    gen.add_argument("generator", nargs="?", default="v1", choices=list(GENERATORS),
+                     help="which generator (default v1)")
+    gen.add_argument("--task", help="what the episodes ask (default: the generator's first task)")
     gen.add_argument("--houses", type=int, required=True, help="number of scenes (houses)")
     gen.add_argument("--episodes-per-house", type=int, required=True)
     gen.add_argument("--seed", type=int, default=0)
@@ -151,7 +196,7 @@ def _task_label(task_cls: str, task_type: str | None) -> str:
 
 
 def _generate(args: argparse.Namespace) -> int:
-    from molmo_lerobot.benchmark.generate import generate_benchmark, write_benchmark
+    from molmo_lerobot.benchmark.output import write_benchmark
 
     if args.houses < 1 or args.episodes_per_house < 1:
         print("molmo-bench: error: --houses and --episodes-per-house must be >= 1", file=sys.stderr)
@@ -165,7 +210,8 @@ def _generate(args: argparse.Namespace) -> int:
         print(f"molmo-bench: error: {out} exists (use --force to replace it)", file=sys.stderr)
         return 2
     try:
-        episodes, metadata = generate_benchmark(args.task, args.houses, args.episodes_per_house, args.seed, args.name)
+        episodes, metadata = GENERATORS[args.generator].generate(args.task, args.houses, args.episodes_per_house,
+                                                                 args.seed, args.name)
     except (ValueError, LookupError) as exc:
         print(f"molmo-bench: error: {exc}", file=sys.stderr)
         return 2

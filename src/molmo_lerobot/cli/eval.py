@@ -143,7 +143,7 @@ def _job(cfg: Any, jobs: list[dict[str, Any]]) -> int:
     row["success"] = ("no episode ran" if s["success_rate"] is None else
                       f"{s['success_rate']:.3f} ({s['n_success']}/{s['n_episodes']})"
                       + (f", {s['n_errors']} errored" if s["n_errors"] else ""))
-    print("\n".join([*summary_lines(res.summary), f"outputs: {res.output_dir}"]))
+    print("\n".join([*summary_lines(res.run_summary), f"outputs: {res.output_dir}"]))
     push = res.summary.get("push")
     if push and not push["ok"]:
         print(f"molmo-eval: error: push to the Hub as {push['repo_id']} failed ({push['error']}); every local "

@@ -1,8 +1,7 @@
 """Deterministic door-opening benchmarks in the ``door_rooms`` houses (``mobile_franka``).
 
-``python -m molmo_lerobot.doors.generate --houses 12 --episodes-per-house 5 --seed 0 --name door_v1
---out benchmarks/door_v1`` writes ``benchmark.json`` and ``benchmark_metadata.json``
-(:func:`~molmo_lerobot.benchmark.generate.write_benchmark`). Per episode: a house, the side of the
+``molmo-bench generate door --houses 12 --episodes-per-house 5 --seed 0 --name door_v1`` writes
+door_v1. Per episode: a house, the side of the
 door the robot starts on (alternating along the house's episodes, so each house has push and pull
 episodes), and the robot's start pose sampled as MolmoSpaces' door sampler samples it
 (``DoorOpeningTaskSamplerConfig``): 1.0–1.5 m from the handle on that side, facing it within ±0.25
@@ -15,7 +14,6 @@ the prompt is their push / pull prompt (:func:`molmo_lerobot.tasks.door_opening.
 
 from __future__ import annotations
 
-import argparse
 import math
 from functools import cache
 from typing import Any
@@ -23,8 +21,9 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from molmo_lerobot.benchmark.generate import _r, _yaw_quat, write_benchmark
+from molmo_lerobot.benchmark.output import rounded
 from molmo_lerobot.doors.scenes import DOOR_NAME, DoorRooms, door_geometry
+from molmo_lerobot.poses import yaw_quat
 from molmo_lerobot.tasks.door_opening import DEFAULT_THRESHOLD, PULL_PROMPT, PUSH_PROMPT, is_pushing
 
 GENERATOR_VERSION = 1
@@ -68,7 +67,7 @@ def start_pose(house: int, side: int, rng: np.random.Generator) -> list[float]:
             continue
         to_handle = handle[:2] - p
         yaw = math.atan2(to_handle[1], to_handle[0]) + float(rng.uniform(-YAW_NOISE, YAW_NOISE))
-        pose = [_r(p[0]), _r(p[1]), 0.0, *(_r(q) for q in _yaw_quat(yaw))]
+        pose = [rounded(p[0]), rounded(p[1]), 0.0, *(rounded(q) for q in yaw_quat(yaw))]
         if (prompt(house, pose) == PUSH_PROMPT) == (side != door["swing_side"]):  # their prompt tells the truth
             return pose
     raise RuntimeError(f"door_rooms house {house}: no start pose on side {side}")
@@ -94,7 +93,7 @@ def _episode(house: int, index: int, seed: int) -> dict[str, Any]:
         "scene_dataset": DoorRooms.name,
         "data_split": "val",
         "seed": int(rng.integers(2**31 - 1)),
-        "robot": {"robot_name": ROBOT, "init_qpos": {"base": [], "arm": [_r(q) for q in arm], "gripper": [0.0]}},
+        "robot": {"robot_name": ROBOT, "init_qpos": {"base": [], "arm": [rounded(q) for q in arm], "gripper": [0.0]}},
         "img_resolution": list(IMG_RESOLUTION),
         "cameras": [],
         "scene_modifications": {"added_objects": {}, "object_poses": {}, "removed_objects": []},
@@ -103,7 +102,7 @@ def _episode(house: int, index: int, seed: int) -> dict[str, Any]:
             "task_type": "door_opening",
             "robot_base_pose": base,
             "door_body_name": DOOR_NAME,
-            "articulated_joint_range": [_r(v) for v in door["range"]],
+            "articulated_joint_range": [rounded(v) for v in door["range"]],
             "articulated_joint_reset_state": [0.0],
             "door_openness_threshold": DEFAULT_THRESHOLD,
             "task_horizon_sec": HORIZON_SEC,
@@ -137,19 +136,3 @@ def generate_benchmark(n_houses: int, episodes_per_house: int, seed: int,
                       "episodes_per_house": episodes_per_house, "seed": seed, "version": GENERATOR_VERSION},
     }
     return episodes, metadata
-
-
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--houses", type=int, default=12)
-    parser.add_argument("--episodes-per-house", type=int, default=5)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--name", default="door_v1")
-    parser.add_argument("--out", required=True)
-    args = parser.parse_args(argv)
-    episodes, metadata = generate_benchmark(args.houses, args.episodes_per_house, args.seed, args.name)
-    print(write_benchmark(args.out, episodes, metadata))
-
-
-if __name__ == "__main__":
-    main()

@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from molmo_lerobot.features import IMAGE_PREFIX, STATE
+from molmo_lerobot.results import Rates, RunSummary
 
 TAGS = ["molmo-lerobot", "evaluation", "rollouts", "mujoco", "simulation", "synthetic"]
 
@@ -14,25 +15,24 @@ def _pct(x: float | None) -> str:
     return "n/a" if x is None else f"{100.0 * float(x):.1f}%"
 
 
-def _ci(ci: Any) -> str:
+def _ci(ci: tuple[float, float] | None) -> str:
     if ci is None:  # no episode simulated: no interval
         return "n/a"
-    lo, hi = [*ci, 0.0, 1.0][:2]
+    lo, hi = ci
     return f"[{_pct(lo)}, {_pct(hi)}]"
 
 
-def score_table(summary: dict[str, Any]) -> str:
-    """Markdown table: overall and per-task success (at the end and at any step) with Wilson 95% CIs."""
-    rows = [("**all**", summary)] + [(f"`{t}`", b) for t, b in sorted((summary.get("per_task") or {}).items())]
+def score_table(summary: RunSummary) -> str:
+    """Markdown table: overall and per-task success (at the end and at any chunk end) with Wilson 95% CIs."""
+    rows: list[tuple[str, Rates]] = [("**all**", summary), *((f"`{t}`", b) for t, b in summary.per_task.items())]
     lines = [
-        "| task | episodes | success (end) | 95% CI | success (any step) | 95% CI | errors |",
+        "| task | episodes | success (end) | 95% CI | success (any chunk end) | 95% CI | errors |",
         "|---|---:|---:|---|---:|---|---:|",
     ]
     for name, b in rows:
         lines.append(
-            f"| {name} | {b.get('n_episodes', 0)} | {_pct(b.get('success_rate', 0.0))} | {_ci(b.get('ci95', (0, 1)))} "
-            f"| {_pct(b.get('success_once_rate', 0.0))} | {_ci(b.get('success_once_ci95', (0, 1)))} "
-            f"| {b.get('n_errors', 0)} |"
+            f"| {name} | {b.n_episodes} | {_pct(b.success_rate)} | {_ci(b.ci95)} "
+            f"| {_pct(b.success_once_rate)} | {_ci(b.success_once_ci95)} | {b.n_errors} |"
         )
     return "\n".join(lines)
 
@@ -47,21 +47,20 @@ def _cameras(meta_info: dict[str, Any]) -> list[str]:
     return out
 
 
-def description(meta_info: dict[str, Any], summary: dict[str, Any], records: list[dict[str, Any]]) -> str:
+def description(meta_info: dict[str, Any], summary: RunSummary, records: list[dict[str, Any]]) -> str:
     """The card's prose: what the data is (simulated), robot, sensors, tasks, scores, limitations."""
-    bench = summary.get("benchmark") or {}
-    policy = summary.get("policy") or {}
-    policy_name = policy.get("name", "?") if isinstance(policy, dict) else str(policy)
-    sha = str(bench.get("sha256", ""))
+    bench_name = summary.benchmark.name if summary.benchmark else "?"
+    policy_name = (summary.policy or {}).get("name", "?")
+    sha = (summary.benchmark and summary.benchmark.sha256) or ""
     stored = [r for r in records if r.get("episode_index") is not None]
     held = [r for r in stored if r.get("frames", r["steps"]) < r["steps"]]
     prompts = sorted({str(r.get("prompt")) for r in stored if r.get("prompt")})
-    tasks = sorted((summary.get("per_task") or {}).items())
+    tasks = sorted(summary.per_task.items())
     cameras = _cameras(meta_info)
     fps = meta_info.get("fps")
     state = ((meta_info.get("features") or {}).get(STATE) or {}).get("shape") or ["?"]
     lines = [
-        f"Evaluation rollouts of policy `{policy_name}` on benchmark `{bench.get('name', '?')}` "
+        f"Evaluation rollouts of policy `{policy_name}` on benchmark `{bench_name}` "
         f"(sha256 `{sha[:16]}`), recorded with molmo_lerobot.",
         "",
         "**Simulated data.** Every frame is synthetic: the scenes, the robot and its cameras are simulated "
@@ -70,17 +69,17 @@ def description(meta_info: dict[str, Any], summary: dict[str, Any], records: lis
         "as `observation.state` and the commanded joint targets as `action` (names in `meta/info.json`). "
         f"Sensors: {len(cameras)} simulated RGB camera(s), {', '.join(cameras) or 'none'}, at {fps} fps; "
         "no depth, force or tactile sensing. "
-        f"Task(s): {', '.join(f'`{t}` ({b.get('n_episodes', 0)} episodes)' for t, b in tasks) or 'none'}; "
+        f"Task(s): {', '.join(f'`{t}` ({b.n_episodes} episodes)' for t, b in tasks) or 'none'}; "
         f"each episode's language instruction is its LeRobot task ({len(prompts)} distinct, "
         f"e.g. \"{prompts[0] if prompts else ''}\").",
         "",
         f"**Scores.** The benchmark's success rule judges each episode on the simulator state; the primary "
-        f"metric is {summary.get('primary_metric', 'success_rate')}. Every attempted episode counts; errored "
+        f"metric is {summary.primary_metric}. Every attempted episode counts; errored "
         "episodes count as failures and are not stored as dataset episodes.",
         "",
         score_table(summary),
         "",
-        f"{len(stored)} of {summary.get('n_episodes', 0)} attempted episodes are stored. "
+        f"{len(stored)} of {summary.n_episodes} attempted episodes are stored. "
         "`meta/eval/episodes.jsonl` maps every attempted episode (dataset `episode_index`, or null when "
         "not stored) to its outcome, seed, house, policy and benchmark hash; `results.json` is the run summary.",
     ]
@@ -101,7 +100,7 @@ def description(meta_info: dict[str, Any], summary: dict[str, Any], records: lis
     return "\n".join(lines)
 
 
-def make_card(meta_info: Any, summary: dict[str, Any], repo_id: str, records: list[dict[str, Any]],
+def make_card(meta_info: Any, summary: RunSummary, repo_id: str, records: list[dict[str, Any]],
               on_hub: bool = False) -> Any:
     """A :class:`huggingface_hub.DatasetCard` from LeRobot's template (``meta_info``: LeRobot's
     ``DatasetInfo``), with this description. ``on_hub`` (``push=true``): the template's "visualize this
@@ -109,7 +108,7 @@ def make_card(meta_info: Any, summary: dict[str, Any], repo_id: str, records: li
     (the Hub viewer cannot open a dataset that is not on the Hub)."""
     from lerobot.datasets.utils import create_lerobot_dataset_card
 
-    bench = (summary.get("benchmark") or {}).get("name")
+    bench = summary.benchmark.name if summary.benchmark else None
     tags = TAGS + ([str(bench)] if bench else [])
     text = description(meta_info.to_dict(), summary, records)
     if not on_hub:

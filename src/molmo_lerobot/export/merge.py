@@ -39,7 +39,7 @@ from molmo_lerobot.export.card import make_card
 from molmo_lerobot.export.frames import EVAL_EPISODE_INDEX
 from molmo_lerobot.export.portable import portable
 from molmo_lerobot.export.shards import SHARDS_DIR, Shard, list_shards
-from molmo_lerobot.results import EpisodeResult
+from molmo_lerobot.results import RESULTS_FILE, EpisodeResult, RunSummary
 
 if TYPE_CHECKING:
     from molmo_lerobot.export.recorder import LeRobotRecorderFactory
@@ -142,7 +142,7 @@ def stored_episodes(output_dir: Path, results: list[EpisodeResult]) -> set[int]:
     return set(_choose(sources, {r.episode_index: r for r in results}))
 
 
-def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any],
+def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: RunSummary,
                  factory: LeRobotRecorderFactory) -> Path | None:
     """Build ``output_dir/dataset`` from the shards; returns its root, or None when nothing was recorded."""
     output_dir = Path(output_dir)
@@ -168,7 +168,7 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: dict[s
 
 
 def _build(work: Path, sources: list[_Source], shards: list[Shard], torn: list[str], results: list[EpisodeResult],
-           summary: dict[str, Any], factory: LeRobotRecorderFactory) -> Path | None:
+           summary: RunSummary, factory: LeRobotRecorderFactory) -> Path | None:
     """The merged, checked dataset at ``work/dataset``; None when no episode is to be stored."""
     from lerobot.datasets.aggregate import aggregate_datasets
     from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
@@ -202,14 +202,14 @@ def _build(work: Path, sources: list[_Source], shards: list[Shard], torn: list[s
     records = portable(_eval_records(results, dataset_index, frames, discarded, summary, factory), output_dir)
     fileio.atomic_write(tmp / EVAL_EPISODES, "".join(json.dumps(r) + "\n" for r in records), root=tmp)
     info = {
-        "benchmark": summary.get("benchmark"), "policy": factory.policy, "repo_id": factory.repo_id,
+        "benchmark": summary.document().get("benchmark"), "policy": factory.policy, "repo_id": factory.repo_id,
         "policy_dt_ms": factory.policy_dt_ms, "fps_exact": 1000.0 / factory.policy_dt_ms, "fps": factory.fps,
         "n_attempted": len(results), "n_recorded": len(dataset_index), "torn_shards": torn,
         "session": factory.session,
     }
-    shared = portable(summary, output_dir)
+    shared = RunSummary.from_document(portable(summary.document(), output_dir))  # no path of this machine
     fileio.atomic_write(tmp / EVAL_INFO, json.dumps(portable(info, output_dir), indent=2) + "\n", root=tmp)
-    fileio.atomic_write(tmp / "results.json", json.dumps(shared, indent=2) + "\n", root=tmp)
+    fileio.atomic_write(tmp / RESULTS_FILE, shared.to_json(), root=tmp)
     meta = LeRobotDatasetMetadata(factory.repo_id, root=tmp)
     check_dataset(tmp, results)
     fileio.atomic_write(tmp / "README.md", str(make_card(meta.info, shared, factory.repo_id, records,
@@ -257,9 +257,9 @@ def _subset(src: _Source, keep: list[int], out: Path, repo_id: str) -> Path:
 
 
 def _eval_records(results: list[EpisodeResult], dataset_index: dict[int, int], frames: dict[int, int],
-                  discarded: dict[int, str], summary: dict[str, Any],
+                  discarded: dict[int, str], summary: RunSummary,
                   factory: LeRobotRecorderFactory) -> list[dict[str, Any]]:
-    bench = summary.get("benchmark") or {}
+    bench = summary.benchmark.model_dump() if summary.benchmark else {}
     records = []
     for r in sorted(results, key=lambda r: r.episode_index):
         idx = dataset_index.get(r.episode_index)

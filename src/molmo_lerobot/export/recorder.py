@@ -29,7 +29,7 @@ from molmo_lerobot.export.shards import SHARDS_DIR, new_session, shard_name, wri
 from molmo_lerobot.export.video import RecordingDataset, VideoSettings
 from molmo_lerobot.hookspecs import ConfigError
 from molmo_lerobot.recording import EpisodeInfo, Recorder, RecorderFactory
-from molmo_lerobot.results import EpisodeResult
+from molmo_lerobot.results import EpisodeResult, Push, RunSummary
 
 log = logging.getLogger(__name__)
 
@@ -121,24 +121,25 @@ class LeRobotRecorderFactory(RecorderFactory):
     def make(self, worker_id: str, output_dir: Path) -> LeRobotRecorder:
         return LeRobotRecorder(self, worker_id, Path(output_dir))
 
-    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any]) -> None:
+    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: RunSummary) -> Push | None:
         """Merge the shards into ``output_dir/dataset``; push it when ``push=true``.
 
-        The push outcome goes into ``summary["push"]`` (``repo_id``, ``ok``, ``error``): a failed
-        push keeps every local file and makes ``molmo-eval`` exit non-zero."""
+        Returns the push outcome (``results.json``'s ``push``): a failed push keeps every local
+        file and makes ``molmo-eval`` exit non-zero."""
         from molmo_lerobot.export.hub import push_dataset
         from molmo_lerobot.export.merge import merge_shards
 
         quiet_libraries()
         root = merge_shards(Path(output_dir), results, summary, self)
         if self.dataset_id is not None:
-            self._store(Path(output_dir), root, summary)
-        elif self.push:
-            error = (push_dataset(root, self.repo_id, private=self.private) if root is not None
-                     else "no episode finished without error, so there is no dataset to push")
-            summary["push"] = {"repo_id": self.repo_id, "ok": error is None, "error": error}
+            return self._store(Path(output_dir), root, summary)
+        if not self.push:
+            return None
+        error = (push_dataset(root, self.repo_id, private=self.private) if root is not None
+                 else "no episode finished without error, so there is no dataset to push")
+        return Push(repo_id=self.repo_id, ok=error is None, error=error)
 
-    def _store(self, output_dir: Path, root: Path | None, summary: dict[str, Any]) -> None:
+    def _store(self, output_dir: Path, root: Path | None, summary: RunSummary) -> Push | None:
         """Copy the dataset into the store as ``dataset_id`` (the run directory keeps its own: ``resume`` and
         the report read it there), then, with ``push=true``, upload it with its namespace chain."""
         from molmo_lerobot.namespaces import DatasetStore, upload_dataset
@@ -148,23 +149,24 @@ class LeRobotRecorderFactory(RecorderFactory):
         if root is None:
             raise RuntimeError(f"dataset_id {self.dataset_id!r}: no episode finished without error, so there is "
                                "no dataset to store")
-        bench = summary.get("benchmark") or {}
+        bench = summary.benchmark
         store.add_dataset(dataset_id, root, {
-            "benchmark": {"name": bench.get("name"), "sha256": bench.get("sha256")}, "policy": self.policy,
-            "success_rate": summary.get("success_rate"), "n_success": summary.get("n_success"),
-            "n_episodes": summary.get("n_episodes"), "run_id": output_dir.resolve().name,
-            "started_at": summary.get("started_at"), "lerobot_repo_id": self.repo_id}, run_dir=output_dir)
-        if self.push:
-            target = f"{self.remote}/{self.dataset_id}"
-            try:
-                upload_dataset(dataset_id, store=store, remote=self.remote, private=self.private)
-                error = None
-            except Exception as exc:  # a push must never cost the local results
-                from molmo_lerobot.export.hub import failure_line
+            "benchmark": {"name": bench and bench.name, "sha256": bench and bench.sha256}, "policy": self.policy,
+            "success_rate": summary.success_rate, "n_success": summary.n_success,
+            "n_episodes": summary.n_episodes, "run_id": output_dir.resolve().name,
+            "started_at": summary.started_at, "lerobot_repo_id": self.repo_id}, run_dir=output_dir)
+        if not self.push:
+            return None
+        target = f"{self.remote}/{self.dataset_id}"
+        try:
+            upload_dataset(dataset_id, store=store, remote=self.remote, private=self.private)
+            error = None
+        except Exception as exc:  # a push must never cost the local results
+            from molmo_lerobot.export.hub import failure_line
 
-                error = failure_line(exc)
-                log.warning("push of %s to %s failed; local files are intact: %s", self.dataset_id, target, error)
-            summary["push"] = {"repo_id": target, "ok": error is None, "error": error}
+            error = failure_line(exc)
+            log.warning("push of %s to %s failed; local files are intact: %s", self.dataset_id, target, error)
+        return Push(repo_id=target, ok=error is None, error=error)
 
     def missing(self, output_dir: Path, results: list[EpisodeResult]) -> set[int]:
         """Resume: the episodes that finished without error but are neither in ``output_dir/dataset``

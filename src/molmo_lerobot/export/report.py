@@ -21,7 +21,7 @@ from typing import Any
 
 from molmo_lerobot.export.merge import DATASET_DIR, EVAL_EPISODES, EVAL_INFO, read_eval_records
 from molmo_lerobot.fileio import atomic_write
-from molmo_lerobot.results import EpisodeResult, wilson_ci
+from molmo_lerobot.results import SUCCESS_LABELS, EpisodeResult, Rates, RunSummary, wilson_ci
 
 REPORT_FILE = "report.html"
 
@@ -50,9 +50,13 @@ def _e(x: Any) -> str:
     return html.escape("" if x is None else str(x))
 
 
-def _bars_svg(summary: dict[str, Any]) -> str:
-    """Horizontal bars per task (and overall): success at the end and at any step, with 95% CI whiskers."""
-    rows = [("all", summary), *sorted((summary.get("per_task") or {}).items())]
+def _rows(summary: RunSummary) -> list[tuple[str, Rates]]:
+    return [("all", summary), *sorted(summary.per_task.items())]
+
+
+def _bars_svg(summary: RunSummary) -> str:
+    """Horizontal bars per task (and overall): success at the end and at any chunk end, with 95% CI whiskers."""
+    rows = _rows(summary)
     left, width, bar, gap = 140, 420, 11, 10
     height = len(rows) * (2 * bar + gap) + 40
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{left + width + 60}" height="{height}" '
@@ -64,11 +68,11 @@ def _bars_svg(summary: dict[str, Any]) -> str:
     y = 14.0
     for name, b in rows:
         parts.append(f'<text x="{left - 8}" y="{y + bar + 3}" text-anchor="end">'
-                     f'{_e(name)} (n={b.get("n_episodes", 0)})</text>')
-        for key, ci_key, color in (("success_rate", "ci95", "#1a73e8"),
-                                   ("success_once_rate", "success_once_ci95", "#9bbcf3")):
-            rate = float(b.get(key) or 0.0)  # null: no episode of this block simulated
-            lo, hi = [*(b.get(ci_key) or (rate, rate)), 0.0, 1.0][:2]
+                     f'{_e(name)} (n={b.n_episodes})</text>')
+        for key, value, ci, color in (("success_rate", b.success_rate, b.ci95, "#1a73e8"),
+                                      ("success_once_rate", b.success_once_rate, b.success_once_ci95, "#9bbcf3")):
+            rate = float(value or 0.0)  # null: no episode of this block simulated
+            lo, hi = ci or (rate, rate)
             parts.append(f'<rect x="{left}" y="{y}" width="{rate * width:.1f}" height="{bar}" fill="{color}">'
                          f'<title>{_e(name)} {key}: {_pct(rate)} (95% CI {_pct(lo)}–{_pct(hi)})</title></rect>')
             cy = y + bar / 2
@@ -84,22 +88,21 @@ def _bars_svg(summary: dict[str, Any]) -> str:
     parts.append(f'<rect x="{left}" y="{legend_y - 8}" width="10" height="8" fill="#1a73e8"/>'
                  f'<text x="{left + 14}" y="{legend_y}">success at the end (primary)</text>'
                  f'<rect x="{left + 190}" y="{legend_y - 8}" width="10" height="8" fill="#9bbcf3"/>'
-                 f'<text x="{left + 204}" y="{legend_y}">success at any step</text>')
+                 f'<text x="{left + 204}" y="{legend_y}">{SUCCESS_LABELS["success_once"]}</text>')
     parts.append("</svg>")
     return "".join(parts)
 
 
-def _task_table(summary: dict[str, Any]) -> str:
-    rows = [("all", summary), *sorted((summary.get("per_task") or {}).items())]
+def _task_table(summary: RunSummary) -> str:
     out = ["<table><tr><th>task</th><th>episodes</th><th>success (end)</th><th>95% CI</th>"
-           "<th>success (any step)</th><th>95% CI</th><th>errors</th></tr>"]
-    for name, b in rows:
-        lo, hi = [*(b.get("ci95") or (None, None)), 0, 1][:2]
-        lo2, hi2 = [*(b.get("success_once_ci95") or (None, None)), 0, 1][:2]
-        out.append(f"<tr><td>{_e(name)}</td><td class=num>{b.get('n_episodes', 0)}</td>"
-                   f"<td class=num>{_pct(b.get('success_rate', 0))}</td><td>{_pct(lo)} – {_pct(hi)}</td>"
-                   f"<td class=num>{_pct(b.get('success_once_rate', 0))}</td><td>{_pct(lo2)} – {_pct(hi2)}</td>"
-                   f"<td class=num>{b.get('n_errors', 0)}</td></tr>")
+           "<th>success (any chunk end)</th><th>95% CI</th><th>errors</th></tr>"]
+    for name, b in _rows(summary):
+        lo, hi = b.ci95 or (None, None)
+        lo2, hi2 = b.success_once_ci95 or (None, None)
+        out.append(f"<tr><td>{_e(name)}</td><td class=num>{b.n_episodes}</td>"
+                   f"<td class=num>{_pct(b.success_rate)}</td><td>{_pct(lo)} – {_pct(hi)}</td>"
+                   f"<td class=num>{_pct(b.success_once_rate)}</td><td>{_pct(lo2)} – {_pct(hi2)}</td>"
+                   f"<td class=num>{b.n_errors}</td></tr>")
     out.append("</table>")
     return "".join(out)
 
@@ -146,7 +149,7 @@ def failure_reason(r: EpisodeResult) -> str | None:
         return "error: " + re.sub(r"\d+(\.\d+)?", "#", msg)
     if r.success:
         return None
-    return "succeeded at some step, not at the end" if r.success_once else "never succeeded"
+    return "succeeded at a chunk end, not at the end" if r.success_once else "never succeeded"
 
 
 def _group_table(title: str, groups: dict[Any, list[EpisodeResult]], label: Any) -> str:
@@ -246,8 +249,8 @@ def _first_success_svg(results: list[EpisodeResult], policy_dt_s: float) -> str:
 def _episode_rows(results: list[EpisodeResult], videos: dict[int, list[tuple[str, str]]],
                   groups: dict[int, int], policy_dt_s: float, output_dir: Path | None) -> str:
     head = ("<table id=episodes><tr><th>glance (first | last)</th><th>#</th><th>house</th><th>task</th>"
-            "<th>instruction</th><th>outcome</th><th>any step</th><th>first success</th><th>steps</th><th>seed</th>"
-            "<th>time</th><th>video</th></tr>")
+            "<th>instruction</th><th>outcome</th><th>any chunk end</th><th>first success</th><th>steps</th>"
+            "<th>seed</th><th>time</th><th>video</th></tr>")
     out = [head]
     for r in sorted(results, key=lambda r: r.episode_index):
         extra = r.extra or {}
@@ -295,27 +298,26 @@ document.querySelectorAll("input[name=show]").forEach(function (el) {
 </script>"""
 
 
-def render_report(summary: dict[str, Any], results: list[EpisodeResult],
+def render_report(summary: RunSummary, results: list[EpisodeResult],
                   videos: dict[int, list[tuple[str, str]]] | None = None, output_dir: Path | None = None) -> str:
     """The report page as a string; ``output_dir`` (if given) is checked for each thumbnail."""
-    bench = summary.get("benchmark") or {}
-    policy = summary.get("policy") or {}
-    policy_name = policy.get("name", "?") if isinstance(policy, dict) else str(policy)
-    lo, hi = [*(summary.get("ci95") or (None, None)), 0, 1][:2]
-    title = f"{policy_name} on {bench.get('name', '?')}"
-    versions = ", ".join(f"{k} {v}" for k, v in (summary.get("versions") or {}).items())
-    policy_dt_s = float((summary.get("timing") or {}).get("policy_dt_ms", 66.0)) / 1000.0
+    bench = summary.benchmark
+    policy_name = (summary.policy or {}).get("name", "?")
+    lo, hi = summary.ci95 or (None, None)
+    title = f"{policy_name} on {bench.name if bench else '?'}"
+    versions = ", ".join(f"{k} {v}" for k, v in (summary.versions or {}).items())
+    policy_dt_s = float((summary.timing or {}).get("policy_dt_ms", 66.0)) / 1000.0
     failures, groups = _failure_groups(results)
     return "".join([
         "<!doctype html><html lang=en><head><meta charset=utf-8>",
         f"<title>{_e(title)}</title><style>{_CSS}</style></head><body>",
-        f"<h1>{_e(title)}</h1><p class=sub>benchmark sha256 <code>{_e(str(bench.get('sha256', ''))[:16])}</code> · "
-        f"seed {_e(summary.get('seed'))} · {summary.get('n_episodes', 0)} episodes "
-        f"({summary.get('n_errors', 0)} errors) · {_e(summary.get('started_at', ''))}</p>",
-        f"<p><span class=big>{_pct(summary.get('success_rate', 0))}</span> success at the end "
-        f"(95% CI {_pct(lo)} – {_pct(hi)}) · {_pct(summary.get('success_once_rate', 0))} at any step · "
-        f"{summary.get('n_success', 0)}/{summary.get('n_episodes', 0)}</p>",
-        f"<p class=sub>{_e(summary.get('primary_metric', ''))}. Errored episodes count as failures.</p>",
+        f"<h1>{_e(title)}</h1><p class=sub>benchmark sha256 <code>{_e(((bench and bench.sha256) or '')[:16])}</code> · "
+        f"seed {_e(summary.seed)} · {summary.n_episodes} episodes "
+        f"({summary.n_errors} errors) · {_e(summary.started_at or '')}</p>",
+        f"<p><span class=big>{_pct(summary.success_rate)}</span> success at the end "
+        f"(95% CI {_pct(lo)} – {_pct(hi)}) · {_pct(summary.success_once_rate)} at any chunk end · "
+        f"{summary.n_success}/{summary.n_episodes}</p>",
+        f"<p class=sub>{_e(summary.primary_metric)}. Errored episodes count as failures.</p>",
         "<h2>Per task</h2>", _task_table(summary), "<div style='margin-top:1rem'>", _bars_svg(summary), "</div>",
         "<h2>Failures</h2>", failures,
         _breakdowns(results),
@@ -325,7 +327,7 @@ def render_report(summary: dict[str, Any], results: list[EpisodeResult],
     ])
 
 
-def write_report(output_dir: Path | str, summary: dict[str, Any], results: list[EpisodeResult]) -> Path:
+def write_report(output_dir: Path | str, summary: RunSummary, results: list[EpisodeResult]) -> Path:
     """Write ``output_dir/report.html`` (atomically) and return its path."""
     output_dir = Path(output_dir)
     page = render_report(summary, results, episode_videos(output_dir), output_dir)

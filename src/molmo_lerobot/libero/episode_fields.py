@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from molmo_lerobot.benchmark.generate import _r
+from molmo_lerobot.benchmark.output import rounded
 
 IMG_RESOLUTION = (224, 224)
 ROBOT = "franka_droid"
@@ -32,7 +32,7 @@ def episode_fields(scene_name: str, house: int, rng: np.random.Generator, arm: n
         "scene_dataset": scene_name,
         "data_split": "val",
         "seed": int(rng.integers(2**31 - 1)),
-        "robot": {"robot_name": ROBOT, "init_qpos": {"arm": [_r(q) for q in arm], "gripper": [0.0]}},
+        "robot": {"robot_name": ROBOT, "init_qpos": {"arm": [rounded(q) for q in arm], "gripper": [0.0]}},
         "img_resolution": list(IMG_RESOLUTION),
         "cameras": [],
         "scene_modifications": {"added_objects": {}, "object_poses": object_poses, "removed_objects": []},

@@ -1,9 +1,8 @@
 """Deterministic v2 benchmarks in the textured LIBERO rooms (``libero_rooms``, franka_droid, DROID cameras).
 
-``python -m molmo_lerobot.libero.generate --task pick --houses 20 --episodes-per-house 5 --seed 0
---name pick_v2 --out benchmarks/pick_v2`` writes the same two files as ``molmo-bench generate``
-(:func:`~molmo_lerobot.benchmark.generate.write_benchmark`). :data:`TASKS` maps each ``--task`` to its
-task type, horizon and episode function.
+``molmo-bench generate v2 --task pick --houses 20 --episodes-per-house 5 --seed 0 --name pick_v2``
+writes pick_v2. :data:`TASKS` maps each ``--task`` to its task type, horizon and episode function
+(``open`` / ``close``: :mod:`molmo_lerobot.libero.generate_articulated`).
 
 ``pick``: per episode a house, the object to pick (a graspable one), a collision-free layout of it and
 two or three of the house's other objects inside the robot's workspace (the rest stay where the house
@@ -30,7 +29,6 @@ JSON (on the same MuJoCo build).
 
 from __future__ import annotations
 
-import argparse
 import math
 from collections import Counter
 from collections.abc import Callable
@@ -41,12 +39,13 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from molmo_lerobot.benchmark.generate import _r, _yaw_quat, benchmark_metadata, write_benchmark
+from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
 from molmo_lerobot.libero.episode_fields import CAMERA_SYSTEM, episode_fields, start_arm
 from molmo_lerobot.libero.generate_articulated import TASKS as ARTICULATED_TASKS
 from molmo_lerobot.libero.generate_articulated import generate_benchmark as generate_articulated
 from molmo_lerobot.libero.objects import LIBERO_OBJECTS
 from molmo_lerobot.libero.rooms import REGION_X, REGION_Y, LiberoRooms, resting_radius
+from molmo_lerobot.poses import yaw_quat
 from molmo_lerobot.sim.env import PHYSICS_OPTIONS
 
 GENERATOR_VERSION = 2
@@ -90,7 +89,7 @@ def settle(house: int, poses: dict[str, list[float]]) -> tuple[dict[str, list[fl
     out, shift = {}, 0.0
     for name, pose in poses.items():
         b = model.body(name).id
-        out[name] = [_r(v) for v in data.xpos[b]] + [_r(v) for v in data.xquat[b]]
+        out[name] = [rounded(v) for v in data.xpos[b]] + [rounded(v) for v in data.xquat[b]]
         shift = max(shift, float(np.linalg.norm(data.xpos[b] - pose[:3])))
     return out, shift
 
@@ -112,7 +111,7 @@ def _layout(house: int, target: str, others: list[str], z: float, defaults: dict
         else:
             return None
         placed.append((x, y, r))
-        poses[uid] = [x, y, z + obj.half_extents[2] + 0.002, *_yaw_quat(float(rng.uniform(-math.pi, math.pi)))]
+        poses[uid] = [x, y, z + obj.half_extents[2] + 0.002, *yaw_quat(float(rng.uniform(-math.pi, math.pi)))]
     return poses
 
 
@@ -142,7 +141,7 @@ def _pick_episode(scene: LiberoRooms, house: int, index: int, seed: int, task: s
         "task": {
             "task_cls": TASKS["pick"].task_cls,
             "task_type": "pick",
-            "robot_base_pose": [_r(v) for v in meta["robot_base_pose"]],
+            "robot_base_pose": [rounded(v) for v in meta["robot_base_pose"]],
             "pickup_obj_name": target,
             "pickup_obj_start_pose": settled[target],
             "succ_pos_threshold": 0.01,
@@ -179,7 +178,7 @@ def _place_layout(items: list[tuple[str, float]], z: float, defaults: dict[str, 
         else:
             return None
         placed.append((x, y, r))
-        poses[uid] = [x, y, z + obj.half_extents[2] + 0.002, *_yaw_quat(float(rng.uniform(-math.pi, math.pi)))]
+        poses[uid] = [x, y, z + obj.half_extents[2] + 0.002, *yaw_quat(float(rng.uniform(-math.pi, math.pi)))]
         if k == 0:
             first = (x, y, r)
         if next_to and k == 0:  # the free spot beside the first receptacle
@@ -270,14 +269,14 @@ def _place_episode(scene: LiberoRooms, house: int, index: int, seed: int, task: 
     spec: dict[str, Any] = {
         "task_cls": kind.task_cls,
         "task_type": kind.task_type,
-        "robot_base_pose": [_r(v) for v in meta["robot_base_pose"]],
+        "robot_base_pose": [rounded(v) for v in meta["robot_base_pose"]],
         "pickup_obj_name": pick,
         "pickup_obj_start_pose": settled[pick],
         "place_receptacle_name": target,
         "place_receptacle_start_pose": settled[target],
         "receptacle_supported_weight_frac": 0.5,
         "max_place_receptacle_pos_displacement": 0.15,
-        "max_place_receptacle_rot_displacement": _r(math.radians(60)),
+        "max_place_receptacle_rot_displacement": rounded(math.radians(60)),
     }
     if task == "next_to":
         spec["min_surface_to_surface_gap"] = 0.0
@@ -324,7 +323,10 @@ TASKS: dict[str, TaskKind] = {
 
 def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: int,
                        name: str) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """Episodes (JSON-ready EpisodeSpec dicts) and metadata, fully determined by the arguments."""
+    """Episodes (JSON-ready EpisodeSpec dicts) and metadata, fully determined by the arguments
+    (``open`` / ``close``: :mod:`molmo_lerobot.libero.generate_articulated`'s)."""
+    if task in ARTICULATED_TASKS:
+        return generate_articulated(task, n_houses, episodes_per_house, seed, name)
     if task not in TASKS:
         raise ValueError(f"generate_v2: unknown task {task!r} (can generate: {', '.join(TASKS)})")
     if n_houses < 1 or episodes_per_house < 1:
@@ -353,21 +355,3 @@ def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: 
                                                                              for s in sorted(set(styles.values()))})
     meta["camera_system_class"] = CAMERA_SYSTEM
     return episodes, meta
-
-
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--task", required=True, choices=sorted({*TASKS, *ARTICULATED_TASKS}))
-    parser.add_argument("--houses", type=int, required=True)
-    parser.add_argument("--episodes-per-house", type=int, required=True)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--name", required=True)
-    parser.add_argument("--out", required=True)
-    args = parser.parse_args(argv)
-    generate = generate_articulated if args.task in ARTICULATED_TASKS else generate_benchmark
-    episodes, meta = generate(args.task, args.houses, args.episodes_per_house, args.seed, args.name)
-    print(write_benchmark(args.out, episodes, meta))
-
-
-if __name__ == "__main__":
-    main()

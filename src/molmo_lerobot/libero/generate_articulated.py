@@ -1,7 +1,7 @@
 """Deterministic open/close v2 benchmarks: LIBERO fixtures in the textured rooms (``libero_fixture_rooms``).
 
-``python -m molmo_lerobot.libero.generate --task open --houses 25 --episodes-per-house 4 --seed 0
---name open_v2 --out benchmarks/open_v2`` (and ``--task close``). The v1 open/close tasks
+``molmo-bench generate v2 --task open --houses 25 --episodes-per-house 4 --seed 0 --name open_v2``
+(and ``--task close``). The v1 open/close tasks
 (:mod:`molmo_lerobot.benchmark.generate_articulated`) in the v2 setting: per episode, a house with
 at least one joint the task may target (close: slide joints only, as v1), one joint of its fixture,
 the joint's start state in ``task.joint_start_position`` (closed for open; 95–100 % open for close),
@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from molmo_lerobot.benchmark.generate import _r, benchmark_metadata
 from molmo_lerobot.benchmark.generate_articulated import CLOSE_KINDS, CLOSE_START, TASK_CLS, THRESHOLD
+from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
 from molmo_lerobot.libero.episode_fields import CAMERA_SYSTEM, episode_fields, start_arm
 from molmo_lerobot.libero.fixture_rooms import LiberoFixtureRooms
 from molmo_lerobot.libero.fixtures import LIBERO_FIXTURES
@@ -57,13 +57,13 @@ def _episode(scene: LiberoFixtureRooms, house: int, index: int, seed: int, task:
         "task": {
             "task_cls": TASK_CLS,
             "task_type": task,
-            "robot_base_pose": [_r(v) for v in meta["robot_base_pose"]],
+            "robot_base_pose": [rounded(v) for v in meta["robot_base_pose"]],
             "pickup_obj_name": fx.uid,
-            "pickup_obj_start_pose": [_r(v) for v in meta["objects"][fx.uid]["default_pose"]],
+            "pickup_obj_start_pose": [rounded(v) for v in meta["objects"][fx.uid]["default_pose"]],
             "articulation_object_name": fx.uid,
             "joint_name": meta["objects"][fx.uid]["joints"][joint]["joint"],
             "joint_index": [j.name for j in fx.joints].index(joint),
-            "joint_start_position": _r(start),
+            "joint_start_position": rounded(start),
             "task_success_threshold": THRESHOLD,
             "task_horizon_sec": HORIZON_SEC,
         },

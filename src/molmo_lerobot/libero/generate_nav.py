@@ -1,8 +1,7 @@
 """The deterministic ``nav_v1`` benchmark: ``nav_to_obj`` in the ``nav_houses`` scenes on ``mobile_franka``.
 
-``python -m molmo_lerobot.libero.generate_nav --houses 12 --episodes-per-house 5 --seed 0 --name nav_v1 --out
-benchmarks/nav_v1`` writes the same two files as ``molmo-bench generate``
-(:func:`~molmo_lerobot.benchmark.generate.write_benchmark`). Per episode: a house, a target object of the
+``molmo-bench generate nav --houses 12 --episodes-per-house 5 --seed 0 --name nav_v1`` writes nav_v1.
+Per episode: a house, a target object of the
 house (its category's instances are the candidates; two categories per house have two, in different rooms; the
 next object when no start reaches the drawn one's), and the robot's start: a floor cell a robot of
 :data:`ROBOT_RADIUS` fits on, with a path to the ring :data:`GOAL_RING` around the nearest candidate, at least
@@ -14,7 +13,6 @@ candidates' name (their category's where their names differ); ``succ_pos_thresho
 
 from __future__ import annotations
 
-import argparse
 import math
 from functools import cache
 from typing import Any
@@ -22,9 +20,10 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from molmo_lerobot.benchmark.generate import _r, _yaw_quat, benchmark_metadata, write_benchmark
+from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
 from molmo_lerobot.libero.nav_houses import NavHouses, display_name
 from molmo_lerobot.libero.objects import LIBERO_OBJECTS
+from molmo_lerobot.poses import yaw_quat
 from molmo_lerobot.robots.mobile_franka import MobileFranka
 from molmo_lerobot.sim.navigation import free_space, occupancy, path_lengths
 from molmo_lerobot.tasks.nav_to_obj import DEFAULT_SUCC_POS_THRESHOLD, nav_prompt
@@ -103,7 +102,7 @@ def _nav_episode(scene: NavHouses, house: int, index: int, seed: int) -> dict[st
         "task": {
             "task_cls": TASK_CLS,
             "task_type": "nav_to_obj",
-            "robot_base_pose": [_r(x), _r(y), BASE_Z, *(_r(q) for q in _yaw_quat(yaw))],
+            "robot_base_pose": [rounded(x), rounded(y), BASE_Z, *(rounded(q) for q in yaw_quat(yaw))],
             "pickup_obj_name": target,
             "pickup_obj_candidates": candidates,
             "pickup_obj_category": category,
@@ -134,19 +133,3 @@ def generate_benchmark(n_houses: int, episodes_per_house: int, seed: int,
                                                  for n in sorted(set(rooms.values()))})
     meta["camera_system_class"] = MobileFranka.default_camera_system
     return episodes, meta
-
-
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--houses", type=int, required=True)
-    parser.add_argument("--episodes-per-house", type=int, required=True)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--name", required=True)
-    parser.add_argument("--out", required=True)
-    args = parser.parse_args(argv)
-    episodes, meta = generate_benchmark(args.houses, args.episodes_per_house, args.seed, args.name)
-    print(write_benchmark(args.out, episodes, meta))
-
-
-if __name__ == "__main__":
-    main()

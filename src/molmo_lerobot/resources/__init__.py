@@ -7,8 +7,10 @@ from molmo_lerobot.resources.errors import (
     StaleLockError,
     UnsafeArchiveError,
 )
-from molmo_lerobot.resources.manager import InstallResult, ResourceManager, ResourceSpec, pack
+from molmo_lerobot.resources.manager import InstallResult, ResourceManager
+from molmo_lerobot.resources.packing import pack
 from molmo_lerobot.resources.remotes import HfRemote, HttpRemote, LocalRemote, Remote, open_remote
+from molmo_lerobot.resources.spec import ResourceSpec
 
 __all__ = [
     "CorruptArchiveError", "HfRemote", "HttpRemote", "InstallResult", "LocalRemote", "Remote", "RemoteNotFoundError",

@@ -2,36 +2,37 @@
 
 The resource manager runs one install / lock / verify flow for every version and always keeps
 its own records (``<cache>/.molmo/``: manifest, index, locks, ``complete``; the install dir's
-``.molmo/installed.json``). A :class:`Layout`, chosen per version by its manifest's ``format``,
-supplies the rest: where the version's metadata comes from (its remote files, or a version dir
-another tool filled), how an extracted archive is checked and marked done, and what another tool
-sharing the cache expects to find (its locks, flags and records). :class:`OwnLayout` is ours
-(``molmo-resources pack``); :class:`~molmo_lerobot.resources.molmospaces.MolmoSpacesLayout`
-keeps molmospaces-resources' layout, so either tool uses what the other installed.
+``.molmo/installed.json``). A :class:`Layout`, chosen per version by its manifest's ``format``
+(:data:`~molmo_lerobot.resources.formats.LAYOUTS`), supplies the rest: where the version's
+metadata comes from (its remote files, or a version dir another tool filled), how an extracted
+archive is checked and marked done, and what another tool sharing the cache expects to find (its
+locks, flags and records). A layout works on a :class:`~molmo_lerobot.resources.spec.VersionPlace`
+(where the version lives), the version's manifest and the dirs' :class:`~.locks.FileLocks`; it
+never sees the manager. :class:`OwnLayout` is ours (``molmo-resources pack``);
+:class:`~molmo_lerobot.resources.molmospaces.MolmoSpacesLayout` keeps molmospaces-resources'
+layout, so either tool uses what the other installed.
 """
 
 from __future__ import annotations
 
 import contextlib
 from abc import ABC, abstractmethod
-from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar
+from typing import ClassVar
 
 from molmo_lerobot import fileio
 from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.resources.archive import extract_limit, verify_archive
 from molmo_lerobot.resources.errors import RemoteNotFoundError, ResourceError
+from molmo_lerobot.resources.locks import FileLocks
 from molmo_lerobot.resources.manifests import check_index, parse_manifest, read_json
-
-if TYPE_CHECKING:
-    from molmo_lerobot.resources.manager import ResourceManager, ResourceSpec
-
-Edit = Callable[[dict], None]
+from molmo_lerobot.resources.records import Edit
+from molmo_lerobot.resources.remotes import Remote
+from molmo_lerobot.resources.spec import VersionPlace
 
 
 class Layout(ABC):
-    """One version's layout, bound to its manager (``manager``) and version (``spec``).
+    """One version's layout: where it lives (``place``), its ``manifest`` and the dirs' ``locks``.
 
     The defaults keep nothing beyond the manager's own records; a layout overrides what its
     format needs.
@@ -40,20 +41,20 @@ class Layout(ABC):
     #: the manifest ``format`` this layout serves
     format: ClassVar[int | str]
 
-    def __init__(self, manager: ResourceManager, spec: ResourceSpec) -> None:
-        self.manager, self.spec = manager, spec
+    def __init__(self, place: VersionPlace, manifest: dict, locks: FileLocks) -> None:
+        self.place, self.manifest, self.locks = place, manifest, locks
 
     # -- metadata, before the version's format is known --------------------------------
     @classmethod
-    def adopt(cls, manager: ResourceManager, spec: ResourceSpec) -> bool:
-        """Make the manager's metadata from a version dir another tool filled; ``False``: none there."""
+    def adopt(cls, place: VersionPlace) -> bool:
+        """Make our metadata (in ``place.meta_dir``) from a version dir another tool filled; ``False``: none there."""
         return False
 
     @classmethod
     @abstractmethod
-    def fetch_meta(cls, manager: ResourceManager, spec: ResourceSpec, tmp: Path) -> bool:
-        """Fetch the version's metadata from the remote into the manager's meta dir (``manifest.json``
-        last: its presence means the metadata is complete); ``False``: the remote has no version in this layout."""
+    def fetch_meta(cls, place: VersionPlace, remote: Remote, tmp: Path) -> bool:
+        """Fetch the version's metadata from ``remote`` into ``place.meta_dir`` (``manifest.json`` last: its
+        presence means the metadata is complete); ``False``: the remote has no version in this layout."""
 
     @classmethod
     def records(cls, root: Path) -> list[Path]:
@@ -81,7 +82,7 @@ class Layout(ABC):
         (``inflated``: its unpacked size, where the remote knows it)."""
 
     def complete(self) -> bool:
-        """Whether the version is complete without the manager's ``complete`` mark (another tool extracted it)."""
+        """Whether the version is complete without our ``complete`` mark (another tool extracted it)."""
         return False
 
     def own_file(self, rel: str) -> bool:
@@ -90,7 +91,7 @@ class Layout(ABC):
 
     # -- changes -----------------------------------------------------------------------
     def lock(self) -> contextlib.AbstractContextManager:
-        """Held (inside the manager's version lock) while the version's cache dir changes."""
+        """Held (inside our version lock) while the version's cache dir changes."""
         return contextlib.nullcontext()
 
     def prepare(self) -> None:  # noqa: B027 - optional hook: does nothing unless overridden
@@ -101,7 +102,7 @@ class Layout(ABC):
 
     # -- links -------------------------------------------------------------------------
     def link_lock(self) -> contextlib.AbstractContextManager:
-        """Held (inside the manager's install lock) while the install dir's link changes."""
+        """Held (inside our install lock) while the install dir's link changes."""
         return contextlib.nullcontext()
 
     def link_files(self) -> list[str]:
@@ -123,8 +124,8 @@ class OwnLayout(Layout):
     format = 1
 
     @classmethod
-    def fetch_meta(cls, manager: ResourceManager, spec: ResourceSpec, tmp: Path) -> bool:
-        remote, meta, root = manager.require_remote(), manager.meta_dir(spec), manager.cache_dir
+    def fetch_meta(cls, place: VersionPlace, remote: Remote, tmp: Path) -> bool:
+        spec, meta, root = place.spec, place.meta_dir, place.cache_dir
         try:
             remote.download(f"{spec.rel}/manifest.json", tmp / "manifest.json")
         except RemoteNotFoundError:
@@ -142,12 +143,11 @@ class OwnLayout(Layout):
         return True
 
     def done(self) -> set[str]:
-        marks = self.manager.meta_dir(self.spec) / "done"
+        marks = self.place.meta_dir / "done"
         return {p.name[:-3] for p in marks.glob("*.ok")} if marks.is_dir() else set()
 
     def mark_done(self, archive: str, entry: dict) -> None:
-        atomic_write(self.manager.meta_dir(self.spec) / "done" / f"{archive}.ok", entry["sha256"],
-                     root=self.manager.cache_dir)
+        atomic_write(self.place.meta_dir / "done" / f"{archive}.ok", entry["sha256"], root=self.place.cache_dir)
 
     def check_download(self, part: Path, archive: str, entry: dict, files: dict[str, list],
                        inflated: int | None) -> int:

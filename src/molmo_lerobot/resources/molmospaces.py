@@ -29,7 +29,7 @@ from molmo_lerobot import fileio
 from molmo_lerobot.fileio import atomic_open, atomic_write
 from molmo_lerobot.resources.archive import extract_limit
 from molmo_lerobot.resources.errors import RemoteNotFoundError, ResourceError
-from molmo_lerobot.resources.layout import Edit, Layout
+from molmo_lerobot.resources.layout import Layout
 from molmo_lerobot.resources.manifests import (
     ARCHIVE_NAME,
     check_index,
@@ -37,7 +37,9 @@ from molmo_lerobot.resources.manifests import (
     parse_manifest,
     read_json,
 )
-from molmo_lerobot.resources.remotes import MOLMOSPACES
+from molmo_lerobot.resources.records import Edit, update_record
+from molmo_lerobot.resources.remotes import MOLMOSPACES, Remote
+from molmo_lerobot.resources.spec import VersionPlace
 
 REMOTE_MANIFEST = "mjthor_resource_file_to_size_mb.json"
 TRIES = "mjthor_resources_combined_meta.json.gz"
@@ -181,27 +183,28 @@ class MolmoSpacesLayout(Layout):
     max_inflate_ratio = 64
 
     @classmethod
-    def adopt(cls, manager, spec) -> bool:
-        vdir = manager.version_dir(spec)
+    def adopt(cls, place: VersionPlace) -> bool:
+        vdir = place.version_dir
         if not ((vdir / REMOTE_MANIFEST).is_file() and (vdir / TRIES).is_file()):
             return False
-        cls._convert(manager, spec, vdir, f"{spec}: cache {vdir}")
+        cls._convert(place, vdir, f"{place.spec}: cache {vdir}")
         return True
 
     @classmethod
-    def fetch_meta(cls, manager, spec, tmp: Path) -> bool:
+    def fetch_meta(cls, place: VersionPlace, remote: Remote, tmp: Path) -> bool:
+        spec = place.spec
         try:
             for name in (REMOTE_MANIFEST, TRIES):
-                manager.remote.download(f"{spec.rel}/{name}", tmp / name)
+                remote.download(f"{spec.rel}/{name}", tmp / name)
         except RemoteNotFoundError:
             return False
-        cls._convert(manager, spec, tmp, f"{spec}: remote {manager.remote.url} {spec.rel}")
+        cls._convert(place, tmp, f"{spec}: remote {remote.url} {spec.rel}")
         return True
 
     @classmethod
-    def _convert(cls, manager, spec, src: Path, where: str) -> None:
-        """The manager's manifest and index from their two metadata files in ``src`` (kept beside them)."""
-        meta, root = manager.meta_dir(spec), manager.cache_dir
+    def _convert(cls, place: VersionPlace, src: Path, where: str) -> None:
+        """Our manifest and index from their two metadata files in ``src`` (kept beside them)."""
+        spec, meta, root = place.spec, place.meta_dir, place.cache_dir
         sizes = read_json(src / REMOTE_MANIFEST, f"{where}/{REMOTE_MANIFEST}")
         tries = read_json(src / TRIES, f"{where}/{TRIES}")
         manifest, index = convert(spec.data_type, spec.source, spec.version, sizes, tries, where)
@@ -225,14 +228,14 @@ class MolmoSpacesLayout(Layout):
         return name.startswith(".") and name.endswith("_complete_links")
 
     def done(self) -> set[str]:
-        vdir = self.manager.version_dir(self.spec)
-        return {a for a in self.manager.manifest(self.spec)["archives"] if extract_flag(vdir, a).exists()}
+        vdir = self.place.version_dir
+        return {a for a in self.manifest["archives"] if extract_flag(vdir, a).exists()}
 
     def mark_done(self, archive: str, entry: dict) -> None:
-        atomic_write(extract_flag(self.manager.version_dir(self.spec), archive), "", root=self.manager.cache_dir)
+        atomic_write(extract_flag(self.place.version_dir, archive), "", root=self.place.cache_dir)
 
     def complete(self) -> bool:
-        return set(self.manager.manifest(self.spec)["archives"]) <= self.done()
+        return set(self.manifest["archives"]) <= self.done()
 
     def check_download(self, part: Path, archive: str, entry: dict, files: dict[str, list],
                        inflated: int | None) -> int:
@@ -244,33 +247,34 @@ class MolmoSpacesLayout(Layout):
         return is_own_file(rel)
 
     def lock(self):
-        return self.manager.lock(self.manager.cache_dir / LOCK)
+        return self.locks.hold(self.place.cache_dir / LOCK)
 
     def prepare(self) -> None:
         """Their metadata files inside the version dir, as molmospaces-resources keeps them."""
-        root = self.manager.cache_dir
-        vdir = fileio.make_dirs(self.manager.version_dir(self.spec), root=root)
+        root = self.place.cache_dir
+        vdir = fileio.make_dirs(self.place.version_dir, root=root)
         for name in (REMOTE_MANIFEST, TRIES):
             if not (vdir / name).is_file():
-                with open(self.manager.meta_dir(self.spec) / "raw" / name, "rb") as src, \
+                with open(self.place.meta_dir / "raw" / name, "rb") as src, \
                         atomic_open(vdir / name, "wb", root=root) as dst:
                     shutil.copyfileobj(src, dst)
 
     def record_cache(self, add: Edit) -> None:
-        self.manager.update_json(self.manager.cache_dir / LOCAL_MANIFEST, add, "list", indent=2)
+        root = self.place.cache_dir
+        update_record(root / LOCAL_MANIFEST, add, "list", root=root, indent=2)
 
     def link_lock(self):
-        return self.manager.lock(self.manager.install_root / LOCK)
+        return self.locks.hold(self.place.install_root / LOCK)
 
     def link_files(self) -> list[str]:
         return [REMOTE_MANIFEST, TRIES]
 
     def flag_links(self, link_dir: Path, archives: list[str]) -> None:
         for archive in archives:
-            atomic_write(link_flag(link_dir, archive), "", root=self.manager.install_root)
+            atomic_write(link_flag(link_dir, archive), "", root=self.place.install_root)
 
     def record_link(self, point: Edit, previous: str | None) -> None:
-        install, spec = self.manager.install_root, self.spec
+        install, spec = self.place.install_root, self.place.spec
         if previous is not None and previous != spec.version:  # their cached tries index is per version
             fileio.rmtree(install / ".lmdb" / spec.data_type / spec.source, root=install, ignore_errors=True)
-        self.manager.update_json(install / LOCAL_MANIFEST, point, "str", indent=2)
+        update_record(install / LOCAL_MANIFEST, point, "str", root=install, indent=2)

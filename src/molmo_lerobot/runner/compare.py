@@ -28,9 +28,9 @@ from typing import Any
 
 from molmo_lerobot.benchmark.schema import known_task_type
 from molmo_lerobot.errors import MolmoError
-from molmo_lerobot.results import wilson_ci
+from molmo_lerobot.results import RESULTS_FILE, SUCCESS_LABELS, EpisodeResult, RunFileError, read_run, wilson_ci
 
-METRICS = {"success": "success at the final step", "success_once": "success at any step"}
+METRICS = {key: SUCCESS_LABELS[key] for key in ("success", "success_once")}
 #: ``results.json`` fields that define the trial an episode is (besides the benchmark).
 TRIAL_FIELDS = ("timing", "horizon", "eval_options", "mujoco", "render_profile")
 #: ``config`` keys that do not change an episode's trial (who runs it, where its outputs go);
@@ -48,13 +48,13 @@ class CompareError(MolmoError, ValueError):
 
 @dataclass
 class Run:
-    """A finished run directory: its ``results.json`` header and its episodes by index."""
+    """A finished run directory: its ``results.json`` (as written) and its episodes by index."""
 
     path: Path
     policy: str
     benchmark: dict[str, Any]
     seed: Any
-    episodes: dict[int, dict[str, Any]]
+    episodes: dict[int, EpisodeResult]
     results: dict[str, Any]
 
 
@@ -75,46 +75,18 @@ class PairedStats:
 
 
 def load_run(path: str | Path) -> Run:
-    """Read ``results.json`` and ``episodes.jsonl`` of a finished run; refuse anything else."""
-    root = Path(path)
-    results_path = root / "results.json"
-    episodes_path = root / "episodes.jsonl"
-    if not root.is_dir():
-        raise CompareError(f"{root}: not a run directory")
-    if not results_path.exists():
-        raise CompareError(f"{root}: no results.json (unfinished run? complete it with resume=true)")
+    """A finished run (:func:`~molmo_lerobot.results.read_run`); refuse anything else."""
     try:
-        results = json.loads(results_path.read_text())
-    except json.JSONDecodeError as exc:
-        raise CompareError(f"{results_path}: not valid JSON ({exc})") from None
-    except RecursionError:
-        raise CompareError(f"{results_path}: JSON nested too deeply") from None
-    if not isinstance(results, dict):
-        raise CompareError(f"{results_path}: expected a JSON object")
-    bench = results.get("benchmark")
-    if not isinstance(bench, dict) or not bench.get("sha256"):
-        raise CompareError(f"{results_path}: field benchmark.sha256 is missing")
-    if not episodes_path.exists():
-        raise CompareError(f"{root}: episodes.jsonl is missing")
-    episodes: dict[int, dict[str, Any]] = {}
-    for lineno, line in enumerate(episodes_path.read_text().splitlines(), 1):
-        if not line.strip():
-            continue
-        try:
-            ep = json.loads(line)
-        except json.JSONDecodeError as exc:
-            raise CompareError(f"{episodes_path}:{lineno}: not valid JSON ({exc})") from None
-        except RecursionError:
-            raise CompareError(f"{episodes_path}:{lineno}: JSON nested too deeply") from None
-        if not isinstance(ep, dict):
-            raise CompareError(f"{episodes_path}:{lineno}: expected a JSON object")
-        for key in ("episode_index", "success", "success_once"):
-            if key not in ep:
-                raise CompareError(f"{episodes_path}:{lineno}: field {key!r} is missing")
-        episodes[int(ep["episode_index"])] = ep
-    policy = results.get("policy") or {}
-    return Run(root, str(policy.get("name", "?")) if isinstance(policy, dict) else str(policy), bench,
-               results.get("seed"), episodes, results)
+        recorded = read_run(path)
+    except RunFileError as exc:
+        raise CompareError(str(exc)) from None
+    summary = recorded.summary
+    assert summary is not None  # a finished run has one
+    if summary.benchmark is None or not summary.benchmark.sha256:
+        raise CompareError(f"{recorded.path / RESULTS_FILE}: field benchmark.sha256 is missing")
+    policy = summary.policy or {}
+    return Run(recorded.path, str(policy.get("name", "?")), summary.benchmark.model_dump(), summary.seed,
+               {r.episode_index: r for r in recorded.episodes}, summary.document())
 
 
 def mcnemar_exact(only_a: int, only_b: int) -> float:
@@ -162,8 +134,8 @@ def paired_stats(pairs: list[tuple[bool, bool]]) -> PairedStats:
                        paired_diff_ci(both, only_a, only_b, neither), mcnemar_exact(only_a, only_b))
 
 
-def _outcome(ep: dict[str, Any], metric: str) -> bool:
-    return bool(ep.get(metric)) and ep.get("error") is None
+def _outcome(ep: EpisodeResult, metric: str) -> bool:
+    return bool(getattr(ep, metric)) and ep.error is None
 
 
 _UNSET = object()
@@ -196,7 +168,7 @@ def trial_differences(run_a: Run, run_b: Run, shared: list[int]) -> tuple[list[s
         rule_a = {k: v for k, v in ta[task].items() if k != "horizon_steps"}
         rule_b = {k: v for k, v in tb[task].items() if k != "horizon_steps"}
         diffs.extend(_differences(f"thresholds.{task}", rule_a, rule_b))
-    horizons = [(i, run_a.episodes[i].get("horizon"), run_b.episodes[i].get("horizon")) for i in shared]
+    horizons = [(i, run_a.episodes[i].horizon, run_b.episodes[i].horizon) for i in shared]
     horizons = [h for h in horizons if h[1] is not None and h[2] is not None and h[1] != h[2]]
     if horizons:
         i, ha, hb = horizons[0]
@@ -230,12 +202,12 @@ def _selection(run: Run) -> str:
     return f"limit={limit}" if limit is not None else "every episode"
 
 
-def _task(ea: dict[str, Any], eb: dict[str, Any]) -> str:
+def _task(ea: EpisodeResult, eb: EpisodeResult) -> str:
     """The task an episode belongs to, also for records that carry no ``task_type`` (errors of older runs)."""
     for ep in (ea, eb):
-        if ep.get("task_type"):
-            return str(ep["task_type"])
-    cls = ea.get("task_cls") or eb.get("task_cls")
+        if ep.task_type:
+            return ep.task_type
+    cls = ea.task_cls or eb.task_cls
     return known_task_type(cls) or str(cls or "unknown")
 
 
@@ -265,7 +237,7 @@ def compare_runs(run_a: Run, run_b: Run, metric: str = "success",
         pair = (_outcome(ea, metric), _outcome(eb, metric))
         pairs.append(pair)
         by_task[_task(ea, eb)].append(pair)
-        seed_mismatch += ea.get("seed") != eb.get("seed")
+        seed_mismatch += ea.seed != eb.seed
     notes = [f"the runs ran different trials (compared anyway): {d}" for d in diffs]
     if unchecked:
         notes.append(f"not recorded by both runs, so not checked: {', '.join(unchecked)}")
@@ -286,7 +258,7 @@ def compare_runs(run_a: Run, run_b: Run, metric: str = "success",
         "metric_description": METRICS[metric] + "; an episode with an error counts as a failure",
         "runs": {
             key: {"path": str(run.path), "policy": run.policy, "seed": run.seed,
-                  "n_errors": sum(run.episodes[i].get("error") is not None for i in shared)}
+                  "n_errors": sum(run.episodes[i].error is not None for i in shared)}
             for key, run in (("a", run_a), ("b", run_b))
         },
         "n_shared": len(shared),

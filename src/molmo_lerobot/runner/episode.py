@@ -28,19 +28,14 @@ class EpisodeSetupError(MolmoError, ValueError):
 
 
 def load_run_benchmark(benchmark: str | Path, plugins: Plugins) -> Benchmark:
-    """A benchmark by shipped name or by directory/file path; one clear error otherwise."""
+    """A benchmark by directory/file path or registered name; one clear error otherwise."""
     from molmo_lerobot.benchmark.load import load_benchmark
-    from molmo_lerobot.paths import data_path
+    from molmo_lerobot.benchmark.registry import UnknownBenchmark, find_benchmark
 
-    path = Path(str(benchmark)).expanduser()
-    if not path.exists():
-        shipped = data_path("benchmarks")
-        if not (shipped / str(benchmark)).is_dir():
-            names = ", ".join(sorted(p.name for p in shipped.iterdir() if p.is_dir()))
-            raise EpisodeSetupError(f"unknown benchmark {str(benchmark)!r}: neither a path nor a shipped "
-                                    f"benchmark ({names})")
-        path = shipped / str(benchmark)
-    return load_benchmark(path, plugins)
+    try:
+        return load_benchmark(find_benchmark(benchmark, plugins), plugins)
+    except UnknownBenchmark as exc:
+        raise EpisodeSetupError(str(exc)) from None
 
 
 @dataclass

@@ -29,13 +29,13 @@ from omegaconf import DictConfig
 
 from molmo_lerobot.assets.grasps import GraspError
 from molmo_lerobot.assets.libraries import AssetError
+from molmo_lerobot.benchmark.registry import benchmark_dir
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.errors import ExportError, RunError
 from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import SettingsError
-from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import PluginError
-from molmo_lerobot.results import EpisodeResult, summarize
+from molmo_lerobot.plugins import PluginError, Plugins
+from molmo_lerobot.results import EpisodeResult, RunSummary, summarize
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
 from molmo_lerobot.runner.forkserver import worker_preload
@@ -55,16 +55,21 @@ if TYPE_CHECKING:
 
 @dataclass
 class EvalResults:
-    """What ``run_evaluation`` returns: the ``results.json`` document and every episode."""
+    """What ``run_evaluation`` returns: the run's summary and every episode."""
 
-    summary: dict[str, Any]
+    run_summary: RunSummary
     episodes: list[EpisodeResult]
     output_dir: Path
 
     @property
+    def summary(self) -> dict[str, Any]:
+        """The ``results.json`` document, as written."""
+        return self.run_summary.document()
+
+    @property
     def success_rate(self) -> float | None:
         """Success at the final step; ``None`` when no episode simulated (every one errored)."""
-        return self.summary["success_rate"]
+        return self.run_summary.success_rate
 
 
 def _versions() -> dict[str, str]:
@@ -101,10 +106,10 @@ def safe_name(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._-")[:100] or "unnamed"
 
 
-def resolve_benchmark_path(bench_cfg: dict[str, Any]) -> Path:
+def resolve_benchmark_path(bench_cfg: dict[str, Any], plugins: Plugins) -> Path:
     if bench_cfg.get("path"):
         return Path(bench_cfg["path"]).expanduser()
-    return data_path("benchmarks") / str(bench_cfg["name"])
+    return benchmark_dir(str(bench_cfg["name"]), plugins)
 
 
 def plugin_option_problems(cfg: dict[str, Any], ctx: RunContext) -> list[str]:
@@ -172,7 +177,7 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
         raise RunError("\n".join(problems))
     recorders = ctx.plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
     executor = _make_executor(cfg)
-    bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"]), ctx.plugins)
+    bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"], ctx.plugins), ctx.plugins)
     try:  # the render profile it names travels to the workers in the config
         ctx = ctx.for_benchmark(bench)
     except ValueError as exc:  # an unknown profile, a bad MOLMO_SCENE_* override
@@ -204,19 +209,17 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
         started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=cfg,
         startup=startup_summary(startups),
     )
-    odd = summary["start_warnings"]
+    odd = summary.start_warnings
     if odd:
         print(f"molmo-eval: warning: {len(odd)} episode{'s' * (len(odd) != 1)} started oddly (results.json "
-              f"start_warnings), e.g. episode {odd[0]['episode_index']}: {odd[0]['warnings'][0]}", file=sys.stderr)
+              f"start_warnings), e.g. episode {odd[0].episode_index}: {odd[0].warnings[0]}", file=sys.stderr)
     scored = run_dir.write_scored(ordered, summary)  # the score, before any export
-    failed = finalize_run(run_dir.path, ordered, summary, recorders, run_finalizers(cfg))
-    if failed:
-        summary["export_errors"] = failed
+    summary = finalize_run(run_dir.path, ordered, summary, recorders, run_finalizers(cfg))
     run_dir.update_results(summary, scored)
-    if failed:
-        raise ExportError(f"export failed after the run was scored ({'; '.join(failed)}); the score stands: "
-                          f"{summary['n_success']}/{summary['n_episodes']} successes in {run_dir.results_file}")
-    return EvalResults(summary=summary, episodes=ordered, output_dir=run_dir.path)
+    if summary.export_errors:
+        raise ExportError(f"export failed after the run was scored ({'; '.join(summary.export_errors)}); the score "
+                          f"stands: {summary.n_success}/{summary.n_episodes} successes in {run_dir.results_file}")
+    return EvalResults(run_summary=summary, episodes=ordered, output_dir=run_dir.path)
 
 
 def _stored_run_dir(dataset_id: str) -> Path:

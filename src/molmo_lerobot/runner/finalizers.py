@@ -3,8 +3,10 @@
 report (every run) and the W&B log (``wandb.enable=true``).
 
 A finalizer is an object with a ``label`` and ``finalize(output_dir, results, summary)``, the
-recorder factories' own run-level step. One that fails never changes the score: its one-line
-failure goes to ``results.json`` (``export_errors``) and the run then fails with it.
+recorder factories' own run-level step. It returns what it adds to ``results.json`` (a
+:data:`~molmo_lerobot.results.SummaryPiece`, e.g. the dataset's ``push``) or ``None``; the steps
+after it see the summary with it. One that fails never changes the score: its one-line failure
+goes to ``results.json`` (``export_errors``) and the run then fails with it.
 """
 
 from __future__ import annotations
@@ -12,13 +14,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Protocol
 
-from molmo_lerobot.results import EpisodeResult
+from molmo_lerobot.results import EpisodeResult, RunSummary, SummaryPiece
 
 
 class Finalizer(Protocol):
     label: str
 
-    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any]) -> None: ...
+    def finalize(self, output_dir: Path, results: list[EpisodeResult],
+                 summary: RunSummary) -> SummaryPiece | None: ...
 
 
 class ReportFinalizer:
@@ -26,7 +29,7 @@ class ReportFinalizer:
 
     label = "report"
 
-    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any]) -> None:
+    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: RunSummary) -> None:
         from molmo_lerobot.export.report import write_report
 
         write_report(output_dir, summary, results)
@@ -37,7 +40,7 @@ class WandbFinalizer:
 
     label = "W&B log"
 
-    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any]) -> None:
+    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: RunSummary) -> None:
         from molmo_lerobot.export.wandb_log import log_run
 
         log_run(output_dir, summary, results)
@@ -49,14 +52,18 @@ def run_finalizers(config: dict[str, Any]) -> list[Finalizer]:
     return [ReportFinalizer(), *([WandbFinalizer()] if wandb else [])]
 
 
-def finalize_run(output_dir: Path, results: list[EpisodeResult], summary: dict[str, Any], recorders: list[Any],
-                 finalizers: list[Finalizer]) -> list[str]:
-    """Run the recorder factories' ``finalize`` and then ``finalizers``; one line per failure."""
+def finalize_run(output_dir: Path, results: list[EpisodeResult], summary: RunSummary, recorders: list[Any],
+                 finalizers: list[Finalizer]) -> RunSummary:
+    """Run the recorder factories' ``finalize`` and then ``finalizers``; the summary with what they
+    added and, if any failed, ``export_errors`` (one line per failure)."""
     steps = [*((f"export {type(f).__name__}", f) for f in recorders), *((f.label, f) for f in finalizers)]
     failed = []
     for label, step in steps:
         try:
-            step.finalize(output_dir, results, summary)
+            piece = step.finalize(output_dir, results, summary)
         except Exception as exc:
             failed.append(f"{label}: {type(exc).__name__}: {exc}".splitlines()[0])
-    return failed
+            continue
+        if piece is not None:
+            summary = summary.with_piece(piece)
+    return summary.model_copy(update={"export_errors": failed}) if failed else summary

@@ -28,21 +28,14 @@ from typing import Any
 from molmo_lerobot import fileio
 from molmo_lerobot.errors import RunError
 from molmo_lerobot.fileio import atomic_write
-from molmo_lerobot.results import EpisodeResult
+from molmo_lerobot.results import EPISODES_FILE, RESULTS_FILE, EpisodeResult, RunFileError, RunSummary, read_run
 
 RUN_FILE = "run.json"
-EPISODES_FILE = "episodes.jsonl"
-RESULTS_FILE = "results.json"
 
 #: ``run.json`` fields a resume must find unchanged (``recording``: see :func:`_check_recording`)
 RUN_IDENTITY = ("benchmark", "policy", "policy_checkpoint", "seed", "horizon", "timing", "mujoco", "eval_options",
                 "code", "render_profile",
                 "selection")  # selection: episodes=[…] / sample=K (runner/selection.py); null for limit
-#: ``episodes.jsonl`` fields a record must have, with their JSON types
-_RECORD_TYPES: dict[str, tuple[type, ...]] = {
-    "episode_index": (int,), "house_index": (int, type(None)), "task_cls": (str, type(None)), "success": (bool,),
-    "success_once": (bool,), "steps": (int,), "seed": (int,), "error": (str, type(None)),
-}
 
 
 class RunDirectory:
@@ -117,7 +110,10 @@ class RunDirectory:
                 raise RunError(f"cannot resume {out}: its {key} differs from this run's ({where}: {_short(was)} vs "
                                f"{_short(now)}){hint}")
         _check_recording(out, previous.get("recording"), current.get("recording"))
-        done = _read_episodes(self.episodes_file)
+        try:
+            done = read_run(out, finished=False).episodes
+        except RunFileError as exc:
+            raise RunError(f"cannot resume: {exc}; delete that line to run its episode again") from None
         old, new = previous.get("limit"), current["limit"]
         if new is not None and (old is None or new < old):
             recorded, shown = len(done), "null" if old is None else old
@@ -160,10 +156,10 @@ class RunDirectory:
         """``episodes.jsonl`` opened for appending (close it when the run ends)."""
         return EpisodeLog(self)
 
-    def write_scored(self, results: list[EpisodeResult], summary: dict[str, Any]) -> str:
+    def write_scored(self, results: list[EpisodeResult], summary: RunSummary) -> str:
         """``episodes.jsonl`` in episode order and then ``results.json`` (the score, before any export);
         returns the ``results.json`` text written."""
-        scored = json.dumps(summary, indent=2) + "\n"
+        scored = summary.to_json()
         try:
             atomic_write(self.episodes_file, "".join(json.dumps(r.to_dict()) + "\n" for r in results), root=self.path)
             atomic_write(self.results_file, scored, root=self.path)
@@ -171,10 +167,10 @@ class RunDirectory:
             raise self.write_error("the run's outputs", exc) from None
         return scored
 
-    def update_results(self, summary: dict[str, Any], scored: str) -> None:
-        """Rewrite ``results.json`` if ``summary`` changed since ``scored`` (what the export did: push
+    def update_results(self, summary: RunSummary, scored: str) -> None:
+        """Rewrite ``results.json`` if ``summary`` changed since ``scored`` (what the export added: push
         status, failures; the score is the same)."""
-        text = json.dumps(summary, indent=2) + "\n"
+        text = summary.to_json()
         if text != scored:
             atomic_write(self.results_file, text, root=self.path)
 
@@ -231,46 +227,3 @@ def _short(value: Any, limit: int = 80) -> str:
     """``value`` as JSON, cut to ``limit`` characters (a whole policy config is no error message)."""
     text = json.dumps(value, sort_keys=True)
     return text if len(text) <= limit else text[: limit - 1] + "…"
-
-
-def _read_episodes(path: Path) -> list[EpisodeResult]:
-    """Episodes persisted in ``episodes.jsonl`` so far. A torn last line (killed mid-write) is dropped,
-    its episode rerun; any other unreadable record stops the resume with its line number."""
-    done: dict[int, EpisodeResult] = {}
-    first_line: dict[int, int] = {}
-    if not path.exists():
-        return []
-    text = path.read_text(errors="replace")
-    lines = text.splitlines()
-    for lineno, line in enumerate(lines, 1):
-        if not line.strip():
-            continue
-        try:
-            data = json.loads(line)
-            why = _record_problem(data)
-        except (json.JSONDecodeError, RecursionError) as exc:
-            if lineno == len(lines) and not text.endswith("\n"):
-                continue  # torn by a kill mid-write
-            why = "not valid JSON" if isinstance(exc, json.JSONDecodeError) else "JSON nested too deeply"
-        if why:
-            raise RunError(f"cannot resume: {path}:{lineno}: corrupt episode record ({why}); "
-                           "delete that line to rerun its episode")
-        r = EpisodeResult.from_dict(data)
-        if r.episode_index in done:
-            raise RunError(f"cannot resume: {path}:{lineno}: episode {r.episode_index} is recorded twice (also line "
-                           f"{first_line[r.episode_index]}); delete the line that is wrong")
-        done[r.episode_index] = r
-        first_line[r.episode_index] = lineno
-    return list(done.values())
-
-
-def _record_problem(data: Any) -> str | None:
-    if not isinstance(data, dict):
-        return "not a JSON object"
-    for key, types in _RECORD_TYPES.items():
-        if key not in data:
-            return f"field {key!r} is missing"
-        value = data[key]
-        if not isinstance(value, types) or (isinstance(value, bool) and bool not in types):
-            return f"field {key!r} is {json.dumps(value)[:40]}"
-    return None

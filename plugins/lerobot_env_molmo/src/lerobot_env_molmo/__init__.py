@@ -7,7 +7,7 @@ benchmark directory). Observation and action features are named as in our ``reco
 ``lerobot-train`` on such a dataset evaluates here without mapping flags. ``--seed=0`` runs the
 benchmark's episodes in order; ``--seed=S`` starts at episode ``S mod N`` (see
 ``molmo_lerobot.gym_env``). LeRobot's ``pc_success`` counts an episode as a success if any step
-succeeded: that is ``success_once`` in ``molmo-eval``'s episodes.jsonl. ``--env.environment_state=true``
+succeeded: that is ``extra.success_any_step`` in ``molmo-eval``'s episodes.jsonl. ``--env.environment_state=true``
 adds the task's ground truth as ``observation.environment_state`` (what ``record_environment_state=true``
 records and ``molmo-eval`` passes to a policy trained on it).
 

@@ -1,4 +1,5 @@
-"""Example third-party policy: a sine wave on every arm joint around the start pose."""
+"""Example third-party plugin: a policy (a sine wave on every arm joint around the start pose) and a
+benchmark pack (``benchmarks/example_pick``: two pick episodes on the procedural tabletop)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from molmo_lerobot import hookimpl
+from molmo_lerobot.benchmark.packs import BenchmarkDir, benchmark_pack
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
 
 
@@ -47,3 +49,8 @@ def molmo_policies() -> list[PolicyType]:
 @hookimpl
 def molmo_config_dirs() -> list[str]:
     return [str(Path(__file__).resolve().parent / "conf")]
+
+
+@hookimpl
+def molmo_benchmarks() -> list[BenchmarkDir]:
+    return benchmark_pack(Path(__file__).resolve().parent / "benchmarks")
