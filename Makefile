@@ -10,7 +10,7 @@ PYTHON312 ?= $(shell scripts/find-python312.sh)
 # Plugin distributions to install; the example plugin is installed by its own test instead.
 PLUGINS := $(filter-out plugins/molmo-example-%,$(wildcard plugins/*/pyproject.toml))
 
-.PHONY: eval test test-all perf perf-gpu parity train-demo clean
+.PHONY: eval test test-all typecheck perf perf-gpu parity train-demo clean
 
 $(VENV): pyproject.toml $(PLUGINS)
 	@test -n "$(PYTHON312)" || { echo "Python 3.12 not found (PATH or pyenv)"; exit 1; }
@@ -40,6 +40,10 @@ test: $(VENV)
 test-all: $(VENV)
 	$(PY) -m pytest -q -m "slow or not slow"
 
+# mypy over src/ ([tool.mypy] in pyproject.toml); tests/test_types.py runs the same in make test.
+typecheck: $(VENV)
+	$(PY) -m mypy
+
 perf: $(VENV)
 	$(PY) -m pytest -q -s -m perf tests/perf
 
@@ -62,4 +66,4 @@ train-demo: $(VENV)
 	PYTHON=$(PY) scripts/train_demo.sh
 
 clean:
-	rm -rf $(VENV) $(PARITY_VENV) outputs runs
+	rm -rf $(VENV) $(PARITY_VENV) outputs runs .mypy_cache

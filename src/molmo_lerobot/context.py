@@ -96,6 +96,6 @@ def build_catalog(plugins: Plugins, settings: MolmoSpacesSettings) -> AssetCatal
     A type name two plugins provide fails with :class:`~molmo_lerobot.plugins.PluginConflict`
     unless the run pins one (``plugins.prefer.asset_library.<name>=<plugin>``).
     """
-    types = {kind: [plugins.resolve(kind, name) for name in plugins.names(kind)]
-             for kind in ("asset_library", "grasp_library")}
-    return AssetCatalog.compose(types["asset_library"], types["grasp_library"], settings)
+    assets = [plugins.resolve("asset_library", name) for name in plugins.names("asset_library")]
+    grasps = [plugins.resolve("grasp_library", name) for name in plugins.names("grasp_library")]
+    return AssetCatalog.compose(assets, grasps, settings)

@@ -29,7 +29,7 @@ import stat
 import uuid
 from collections.abc import Iterator
 from pathlib import Path, PurePosixPath
-from typing import IO, Any
+from typing import IO, Any, NoReturn
 
 from molmo_lerobot.errors import MolmoError
 
@@ -135,7 +135,7 @@ def _open_dir(fd: int, part: str, parts: tuple, i: int, rel: str, where: str) ->
         _refuse(fd, part, "/".join(parts[: i + 1]), rel, where)
 
 
-def _refuse(fd: int, leaf: str, shown: str, rel: str, where: str):
+def _refuse(fd: int, leaf: str, shown: str, rel: str, where: str) -> NoReturn:
     st = lstat_at(fd, leaf)
     link = st is not None and stat.S_ISLNK(st.st_mode)
     what = "" if shown == rel else f"{rel!r} "
@@ -194,7 +194,8 @@ def make_dirs(path: str | os.PathLike, *, root: str | os.PathLike) -> Path:
     """Create the directory ``path`` below ``root`` (the root too when missing), refusing any link below
     the root, ``path`` itself included; returns ``path``."""
     with open_dir(path, root=root):
-        return Path(path)
+        pass
+    return Path(path)
 
 
 def open_fd(path: str | os.PathLike, flags: int, mode: int = 0o666, *, root: str | os.PathLike | None = None) -> int:

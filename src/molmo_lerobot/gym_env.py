@@ -39,7 +39,7 @@ The reward is the task's own (``Task.reward``: e.g. the opening fraction for ope
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any
 
 from molmo_lerobot.gl import use_headless_gl
 
@@ -65,7 +65,8 @@ class EpisodeIndexError(MolmoError, IndexError):
 class MolmoEnv(gym.Env):
     """One benchmark as a Gymnasium env; see the module docstring for the conventions."""
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 15}
+    # gymnasium reads it from the class (render modes) and types it as an instance attribute
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 15}  # noqa: RUF012
 
     def __init__(self, benchmark: str = "pick_v1", *, episode_index: int | None = None, run_seed: int = 0,
                  horizon: int | None = None, end_on_success: bool = False, timing: dict[str, float] | None = None,
@@ -89,7 +90,7 @@ class MolmoEnv(gym.Env):
         self.metadata = {**self.metadata, "render_fps": round(1000.0 / self.context.timing.policy_dt_ms)}
         #: the longest horizon of the benchmark (LeRobot's rollout loop bound)
         self._max_episode_steps = max(plan.horizon or 0 for plan in self._plans)
-        self._episode = self._open(self._pinned or 0)  # spaces come from a real episode
+        self._episode: Episode | None = self._open(self._pinned or 0)  # spaces come from a real episode
         self.observation_space, self.action_space = self._spaces()
         self._steps = 0
         self._success_once = False
@@ -150,8 +151,15 @@ class MolmoEnv(gym.Env):
     def _open(self, index: int) -> Episode:
         return open_episode(self._plans[index], self.bench, self.context)
 
+    @property
+    def _current(self) -> Episode:
+        """The open episode (a closed env has none)."""
+        if self._episode is None:
+            raise RuntimeError("the env is closed; reset() opens an episode")
+        return self._episode
+
     def _observe(self) -> dict[str, Any]:
-        ep = self._episode
+        ep = self._current
         obs = ep.env.observe(images=True)
         if self.environment_state:
             if not ep.task.environment_state_names:
@@ -181,7 +189,7 @@ class MolmoEnv(gym.Env):
     def _action_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Each move group's target bounds, in the action's order: what the robot clips a target to
         (joint and actuator ranges; the gripper 0 … 1; a base's heading ±π), unbounded where it does not say."""
-        robot, lo, hi = self._episode.env.robot, [], []
+        robot, lo, hi = self._current.env.robot, [], []
         for group, dim in self.features.move_groups.items():
             bounds = robot.command_range(group)
             lo.append(np.full(dim, -np.inf) if bounds is None else bounds[0])
@@ -189,16 +197,16 @@ class MolmoEnv(gym.Env):
         return np.concatenate(lo).astype(np.float32), np.concatenate(hi).astype(np.float32)
 
     def _feature_map(self, obs: dict[str, Any]) -> FeatureMap:
-        env = self._episode.env
-        return FeatureMap.from_observation(env.move_groups, env.joint_names, env.camera_names, obs,
-                                           self._episode.task.environment_state_names)
+        ep = self._current
+        return FeatureMap.from_observation(ep.env.move_groups, ep.env.joint_names, ep.env.camera_names, obs,
+                                           ep.task.environment_state_names)
 
     def _check_layout(self, obs: dict[str, Any]) -> None:
         """Every episode of one env must share the spaces (cameras, resolution, move groups)."""
         new, ours = self._feature_map(obs), self.features
         if (new.camera_shapes != ours.camera_shapes or new.move_groups != ours.move_groups
                 or new.env_state_names != ours.env_state_names):
-            raise ValueError(f"{self.bench.where(self._episode.index)}: cameras {new.camera_shapes} / move groups "
+            raise ValueError(f"{self.bench.where(self._current.index)}: cameras {new.camera_shapes} / move groups "
                              f"{new.move_groups} differ from this env's spaces "
                              f"({ours.camera_shapes} / {ours.move_groups}); pin episode_index to run it")
 
@@ -210,7 +218,7 @@ class MolmoEnv(gym.Env):
         return out
 
     def _info(self, success: bool) -> dict[str, Any]:
-        ep = self._episode
+        ep = self._current
         return {"is_success": bool(success), "success_once": bool(self._success_once or success),
                 "episode_index": ep.index, "task": ep.task_type.name, "task_description": ep.prompt,
                 "seed": ep.seed, "horizon": ep.horizon}
@@ -219,6 +227,10 @@ class MolmoEnv(gym.Env):
         if self._episode is not None:
             self._episode.close()
             self._episode = None
+
+
+#: what ``gym.make`` imports (a string: gymnasium's entry point type takes no class)
+ENTRY_POINT = f"{__name__}:MolmoEnv"
 
 
 def register_benchmarks(namespace: str = NAMESPACE) -> list[str]:
@@ -231,11 +243,11 @@ def register_benchmarks(namespace: str = NAMESPACE) -> list[str]:
     for name in names:
         env_id = f"{namespace}/{name}"
         if env_id not in gym.registry:
-            gym.register(env_id, entry_point=MolmoEnv, kwargs={"benchmark": name}, disable_env_checker=True)
+            gym.register(env_id, entry_point=ENTRY_POINT, kwargs={"benchmark": name}, disable_env_checker=True)
         ids.append(env_id)
     generic = f"{namespace}/Benchmark"
     if generic not in gym.registry:
-        gym.register(generic, entry_point=MolmoEnv, disable_env_checker=True)
+        gym.register(generic, entry_point=ENTRY_POINT, disable_env_checker=True)
     return [*ids, generic]
 
 

@@ -33,6 +33,7 @@ if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.cameras.base import CameraSystem
     from molmo_lerobot.policies.base import PolicyType
+    from molmo_lerobot.recording import RecorderFactory
     from molmo_lerobot.robots.base import RobotType
     from molmo_lerobot.sim.scenes import SceneDataset
     from molmo_lerobot.tasks.base import TaskType
@@ -129,7 +130,7 @@ def molmo_config_dirs() -> list[str]:
 
 
 @hookspec
-def molmo_recorders(config: dict[str, Any]) -> list[Any]:
+def molmo_recorders(config: dict[str, Any]) -> list[RecorderFactory]:
     """Recorder factories (:class:`~molmo_lerobot.recording.RecorderFactory`) for this run.
 
     Called once in the main process with the resolved run config (a plain dict); return an

@@ -400,7 +400,8 @@ class HubRemote:
         repo_id, path_in_repo = self._repo(dataset_id)
         source = store.path(dataset_id)
         self.api.create_repo(repo_id, repo_type="dataset", private=self.private, exist_ok=True)
-        ops = [CommitOperationAdd(_join(path_in_repo, rel), str(source / rel))
+        ops: list[CommitOperationAdd | CommitOperationDelete] = [
+               CommitOperationAdd(_join(path_in_repo, rel), str(source / rel))
                for rel, entry in sorted(fileio.walk(source).items())
                if entry[0] == "f" and not any(p.startswith(".") for p in rel.split("/"))]
         new = {op.path_in_repo for op in ops}

@@ -22,13 +22,29 @@ import sys
 import traceback
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 import pluggy
 
 from molmo_lerobot import hookspecs
 from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.hookspecs import ConfigError
+
+if TYPE_CHECKING:
+    from molmo_lerobot.assets.grasps import GraspLibraryType
+    from molmo_lerobot.assets.libraries import AssetLibraryType
+    from molmo_lerobot.benchmark.packs import BenchmarkDir
+    from molmo_lerobot.benchmark.schema import EpisodeSpec
+    from molmo_lerobot.cameras.base import CameraSystem
+    from molmo_lerobot.policies.base import PolicyType
+    from molmo_lerobot.recording import RecorderFactory
+    from molmo_lerobot.robots.base import RobotType
+    from molmo_lerobot.sim.scenes import SceneDataset
+    from molmo_lerobot.tasks.base import TaskType
+
+    #: what :meth:`Plugins.resolve` gives for a kind not spelled as a literal
+    type Provided = (TaskType | RobotType | CameraSystem | SceneDataset | AssetLibraryType | GraspLibraryType
+                     | PolicyType | BenchmarkDir)
 
 ENTRY_POINT_GROUP = hookspecs.PROJECT
 
@@ -51,6 +67,10 @@ KIND_HOOKS = {
 PROVIDER_HOOKS = {kind: hook for hook, kind in KIND_HOOKS.items()
                   if kind in ("task", "robot", "camera", "scene", "asset_library", "grasp_library", "policy", "expert",
                               "benchmark")}
+
+
+#: provider pins, ``{kind: {name: plugin}}`` (the run's ``plugins.prefer``)
+Pins = Mapping[str, Mapping[str, str]]
 
 
 class PluginError(MolmoError, LookupError):
@@ -227,7 +247,29 @@ class Plugins:
         return index
 
     # Registries -----------------------------------------------------------------------
-    def resolve(self, kind: str, name: str, prefer: Mapping[str, Mapping[str, str]] | None = None) -> Any:
+    # One overload per kind: ``resolve("robot", …)`` is a RobotType to the type checker.
+    @overload
+    def resolve(self, kind: Literal["task"], name: str, prefer: Pins | None = None) -> TaskType: ...
+    @overload
+    def resolve(self, kind: Literal["robot"], name: str, prefer: Pins | None = None) -> RobotType: ...
+    @overload
+    def resolve(self, kind: Literal["camera"], name: str, prefer: Pins | None = None) -> CameraSystem: ...
+    @overload
+    def resolve(self, kind: Literal["scene"], name: str, prefer: Pins | None = None) -> SceneDataset: ...
+    @overload
+    def resolve(self, kind: Literal["asset_library"], name: str,
+                prefer: Pins | None = None) -> AssetLibraryType: ...
+    @overload
+    def resolve(self, kind: Literal["grasp_library"], name: str,
+                prefer: Pins | None = None) -> GraspLibraryType: ...
+    @overload
+    def resolve(self, kind: Literal["policy", "expert"], name: str, prefer: Pins | None = None) -> PolicyType: ...
+    @overload
+    def resolve(self, kind: Literal["benchmark"], name: str, prefer: Pins | None = None) -> BenchmarkDir: ...
+    @overload
+    def resolve(self, kind: str, name: str, prefer: Pins | None = None) -> Provided: ...
+
+    def resolve(self, kind: str, name: str, prefer: Pins | None = None) -> Provided:
         """The ``kind`` item called ``name`` (or an alias of it).
 
         A name several plugins provide resolves only if ``prefer`` (default: the pins set
@@ -253,7 +295,7 @@ class Plugins:
                                  f"providers of {kind} {name!r} ({who}); give one plugin name")
         return chosen[0]
 
-    def set_preferences(self, prefer: Mapping[str, Mapping[str, str]] | None) -> None:
+    def set_preferences(self, prefer: Pins | None) -> None:
         """Pin providers for clashing names (``{kind: {name: plugin}}``, the run's ``plugins.prefer``).
 
         Replaces earlier pins; every pin is checked now (known kind, a plugin that provides
@@ -292,23 +334,23 @@ class Plugins:
             msg += f"\n  plugin {r.name!r} from {r.distribution} failed to load: {r.error}"
         return msg
 
-    def task_type(self, name: str) -> Any:
+    def task_type(self, name: str) -> TaskType:
         """Task type by name or alias (MolmoSpaces ``task_cls`` dotted paths are aliases)."""
         return self.resolve("task", name)
 
-    def robot(self, name: str) -> Any:
+    def robot(self, name: str) -> RobotType:
         return self.resolve("robot", name)
 
-    def camera_system(self, name: str) -> Any:
+    def camera_system(self, name: str) -> CameraSystem:
         return self.resolve("camera", name)
 
-    def scene_dataset(self, name: str) -> Any:
+    def scene_dataset(self, name: str) -> SceneDataset:
         return self.resolve("scene", name)
 
-    def policy(self, name: str) -> Any:
+    def policy(self, name: str) -> PolicyType:
         return self.resolve("policy", name)
 
-    def expert(self, task_type: str) -> Any:
+    def expert(self, task_type: str) -> PolicyType:
         """The scripted expert registered for a task type (by the task type's name)."""
         return self.resolve("expert", task_type)
 
@@ -326,14 +368,14 @@ class Plugins:
                 self._break(rec, f"molmo_config_dirs() failed: {_one_line(exc)}")
         return dirs
 
-    def recorder_factories(self, config: dict[str, Any]) -> list[Any]:
+    def recorder_factories(self, config: dict[str, Any]) -> list[RecorderFactory]:
         """Every ``molmo_recorders`` implementation's factories for this run config.
 
         A plugin that rejects the config (``ValueError``) fails the run with a
         :class:`ConfigError`; one that fails otherwise is marked broken and skipped with a
         warning, so a broken third-party recorder never breaks runs that do not use it.
         """
-        factories: list[Any] = []
+        factories: list[RecorderFactory] = []
         try:
             for _, result in self._call("molmo_recorders", run_time=True, config=config):
                 factories.extend(result or [])
@@ -343,7 +385,7 @@ class Plugins:
             raise ConfigError(str(exc)) from None
         return factories
 
-    def apply_episode_overrides(self, episode: Any, context: Any) -> Any:
+    def apply_episode_overrides(self, episode: EpisodeSpec, context: Any) -> EpisodeSpec:
         """Run every ``molmo_episode_overrides`` implementation in pluggy's call order, with the
         run's :class:`~molmo_lerobot.context.RunContext` and its config.
 

@@ -14,6 +14,9 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
+#: a vector given as a list or an array
+Vector = Sequence[float] | np.ndarray
+
 
 def yaw_quat(yaw: float) -> list[float]:
     """The wxyz quaternion of a rotation by ``yaw`` about the world z axis."""
@@ -61,7 +64,7 @@ def frame_matrix(pos: Sequence[float] | np.ndarray, mat: np.ndarray) -> np.ndarr
     return T
 
 
-def look_rotation(forward: Sequence[float], up: Sequence[float]) -> np.ndarray:
+def look_rotation(forward: Vector, up: Vector) -> np.ndarray:
     """Rotation matrix of a MuJoCo camera (looks along -z, +y up) looking along ``forward``."""
     f = np.asarray(forward, dtype=np.float64)
     u = np.asarray(up, dtype=np.float64)

@@ -139,9 +139,9 @@ def read_episodes(path: Path, torn_tail: bool = False) -> list[EpisodeResult]:
                 continue
             why = f"not valid JSON: {exc}" if isinstance(exc, json.JSONDecodeError) else "JSON nested too deeply"
             raise RunFileError(f"{path}:{lineno}: corrupt episode record ({why})") from None
-        why = record_problem(data)
-        if why:
-            raise RunFileError(f"{path}:{lineno}: corrupt episode record ({why})")
+        problem = record_problem(data)
+        if problem:
+            raise RunFileError(f"{path}:{lineno}: corrupt episode record ({problem})")
         r = EpisodeResult.from_dict(data)
         if r.episode_index in done:
             raise RunFileError(f"{path}:{lineno}: episode {r.episode_index} is recorded twice (also line "

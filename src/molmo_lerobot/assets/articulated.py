@@ -137,20 +137,21 @@ def _kitchen_spec(item: str) -> mujoco.MjSpec:
 
 # Drawer chests of primitives ---------------------------------------------------------------------
 
-_CHEST = {"half": (0.2, 0.18, 0.17), "wall": 0.012, "travel": 0.26}
+#: a chest's half extents, wall thickness and drawer travel (metres)
+_CHEST_HALF, _CHEST_WALL, _CHEST_TRAVEL = (0.2, 0.18, 0.17), 0.012, 0.26
 
 
 def _drawer_chest_spec(obj: ArticulatedObject) -> mujoco.MjSpec:
-    hx, hy, hz = _CHEST["half"]
-    t = _CHEST["wall"]
+    hx, hy, hz = _CHEST_HALF
+    t = _CHEST_WALL
     spec = mujoco.MjSpec()
     spec.modelname = obj.uid
     box = mujoco.mjtGeom.mjGEOM_BOX
     body = spec.worldbody.add_body(name=obj.root_body)
     rgba = list(obj.rgba)
-    for name, size, pos in (("top", (hx, hy, t), (0, 0, hz - t)), ("bottom", (hx, hy, t), (0, 0, -hz + t)),
-                            ("left", (t, hy, hz), (-hx + t, 0, 0)), ("right", (t, hy, hz), (hx - t, 0, 0)),
-                            ("back", (hx, t, hz), (0, hy - t, 0))):
+    for name, size, pos in (("top", (hx, hy, t), (0.0, 0.0, hz - t)), ("bottom", (hx, hy, t), (0.0, 0.0, -hz + t)),
+                            ("left", (t, hy, hz), (-hx + t, 0.0, 0.0)), ("right", (t, hy, hz), (hx - t, 0.0, 0.0)),
+                            ("back", (hx, t, hz), (0.0, hy - t, 0.0))):
         body.add_geom(name=f"carcass_{name}", type=box, size=list(size), pos=list(pos), rgba=rgba)
     drawer = body.add_body(name="drawer", pos=[0.0, 0.0, 0.0])
     joint = obj.joints[0]
@@ -159,11 +160,11 @@ def _drawer_chest_spec(obj: ArticulatedObject) -> mujoco.MjSpec:
     dx, dz = hx - 2 * t - 0.003, hz - 2 * t - 0.003
     dy = hy - t - 0.01
     front_rgba = [min(1.0, c * 1.15) for c in rgba[:3]] + [1.0]
-    for name, size, pos in (("front", (hx - 2 * t - 0.002, t, hz - 2 * t - 0.002), (0, -hy + t, 0)),
-                            ("floor", (dx, dy, 0.005), (0, 0, -dz + 0.005)),
-                            ("side_l", (0.005, dy, dz * 0.6), (-dx + 0.005, 0, -dz * 0.4)),
-                            ("side_r", (0.005, dy, dz * 0.6), (dx - 0.005, 0, -dz * 0.4)),
-                            ("rear", (dx, 0.005, dz * 0.6), (0, dy - 0.005, -dz * 0.4))):
+    for name, size, pos in (("front", (hx - 2 * t - 0.002, t, hz - 2 * t - 0.002), (0.0, -hy + t, 0.0)),
+                            ("floor", (dx, dy, 0.005), (0.0, 0.0, -dz + 0.005)),
+                            ("side_l", (0.005, dy, dz * 0.6), (-dx + 0.005, 0.0, -dz * 0.4)),
+                            ("side_r", (0.005, dy, dz * 0.6), (dx - 0.005, 0.0, -dz * 0.4)),
+                            ("rear", (dx, 0.005, dz * 0.6), (0.0, dy - 0.005, -dz * 0.4))):
         drawer.add_geom(name=f"drawer_{name}", type=box, size=list(size), pos=list(pos),
                         rgba=front_rgba if name == "front" else rgba, mass=0.3 if name == "front" else 0.1)
     hp = joint.handle_pos
@@ -181,8 +182,8 @@ def _drawer_chest_spec(obj: ArticulatedObject) -> mujoco.MjSpec:
 
 
 def _chest(uid: str, color: str, rgba: tuple[float, float, float, float]) -> ArticulatedObject:
-    hx, hy, hz = _CHEST["half"]
-    handle = JointInfo(name="drawer_slide", kind="slide", body="drawer", open_q=_CHEST["travel"],
+    hx, hy, hz = _CHEST_HALF
+    handle = JointInfo(name="drawer_slide", kind="slide", body="drawer", open_q=_CHEST_TRAVEL,
                        handle_pos=(0.0, -hy - 0.045, 0.0), handle_axis="x", handle_half_length=0.07,
                        label="drawer")
     return ArticulatedObject(uid=uid, category="drawer_chest", description=f"{color} drawer", synset="chest.n.02",
@@ -262,14 +263,15 @@ class ArticulatedGraspLibrary(GraspLibrary):
 
     def load(self, uid: str, robot: str = "franka", joint: str | None = None) -> np.ndarray | None:
         got = super().load(uid, robot, joint)
-        if got is None and self._analytic(uid, robot, joint):
+        if got is None and joint is not None and self._analytic(uid, robot, joint):
             return handle_grasps(ARTICULATED_OBJECTS[uid], joint)
         return got
 
     def count(self, uid: str, robot: str = "franka", joint: str | None = None) -> int | None:
         got = super().count(uid, robot, joint)
         if got is None and self._analytic(uid, robot, joint):
-            return len(self.load(uid, robot, joint))
+            grasps = self.load(uid, robot, joint)
+            return None if grasps is None else len(grasps)
         return got
 
 

@@ -280,6 +280,10 @@ def analytic_grasps(obj: BuiltinObject, hand: HandGeometry = PANDA_HAND) -> np.n
 RECEPTACLE_SHAPES = ("bowl", "plate", "tray", "box")
 
 
+#: ``(suffix, type, size, pos, yaw)`` of one geom of a receptacle, in its body frame
+ReceptacleGeom = tuple[str, str, tuple[float, ...], tuple[float, float, float], float]
+
+
 @dataclass(frozen=True)
 class BuiltinReceptacle:
     """A receptacle: one free body ``uid`` with a base geom and a ring of rim geoms.
@@ -331,7 +335,7 @@ class BuiltinReceptacle:
     def color(self) -> str:
         return self.description.split()[0]
 
-    def geoms(self) -> list[tuple[str, str, tuple[float, ...], tuple[float, float, float], float]]:
+    def geoms(self) -> list[ReceptacleGeom]:
         """``(suffix, type, size, pos, yaw)`` of every geom, in the body frame."""
         hz = self.half_extents[2]
         base_z = -hz + self.base_half_height
@@ -340,7 +344,7 @@ class BuiltinReceptacle:
         w = self.WALL
         if self.round:
             r = self.half_size[0]
-            out = [("_base", "cylinder", (r, self.base_half_height), (0.0, 0.0, base_z), 0.0)]
+            out: list[ReceptacleGeom] = [("_base", "cylinder", (r, self.base_half_height), (0.0, 0.0, base_z), 0.0)]
             half_len = (r - w) * np.tan(np.pi / self.RIM_SEGMENTS) + w
             for k in range(self.RIM_SEGMENTS):
                 a = 2 * np.pi * k / self.RIM_SEGMENTS

@@ -54,11 +54,12 @@ class AssetCatalog:
         those before it: a higher priority is looked up first, and a grasp library type's
         libraries go ahead of those shipped with asset libraries of its priority.
         """
-        steps = sorted([(t.priority, 0, t.name, t) for t in asset_types] +
-                       [(t.priority, 1, t.name, t) for t in grasp_types], key=lambda step: step[:3])
+        steps: list[tuple[int, int, str, AssetLibraryType | GraspLibraryType]] = [
+            *((t.priority, 0, t.name, t) for t in asset_types), *((t.priority, 1, t.name, t) for t in grasp_types)]
+        steps.sort(key=lambda step: step[:3])
         catalog = cls()
-        for _, is_grasps, _, kind in steps:
-            if is_grasps:
+        for *_, kind in steps:
+            if isinstance(kind, GraspLibraryType):
                 for grasps, asset_library in kind.make(settings, catalog):
                     catalog.register_grasp_library(grasps, asset_library=asset_library)
             else:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import os
 import zipfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -84,7 +84,7 @@ def save_grasp_file(path: str | os.PathLike, transforms: np.ndarray, *, root: st
     path = Path(path)
     transforms = _check(np.asarray(transforms, dtype=np.float64), str(path))
     with atomic_open(path, "wb", root=root, parents=root is None) as fh:
-        np.savez(fh, **{KEY: transforms})
+        np.savez(fh, transforms=transforms)  # the array is named KEY
     return path
 
 
@@ -138,7 +138,7 @@ class GraspLibraryType:
     """
 
     name: str
-    make: Callable[[Any, AssetCatalog], list[tuple[GraspLibrary, str | None]]]
+    make: Callable[[Any, AssetCatalog], Sequence[tuple[GraspLibrary, str | None]]]
     priority: int = 0
     aliases: tuple[str, ...] = ()
 
@@ -171,7 +171,8 @@ class BuiltinGraspLibrary(GraspLibrary):
     def count(self, uid: str, robot: str = "franka", joint: str | None = None) -> int | None:
         got = super().count(uid, robot, joint)
         if got is None and self.has(uid, robot, joint):
-            return len(self.load(uid, robot, joint))
+            grasps = self.load(uid, robot, joint)
+            return None if grasps is None else len(grasps)
         return got
 
 

@@ -18,7 +18,7 @@ import json
 import os
 import uuid
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -104,7 +104,7 @@ class AssetLibraryType:
     """
 
     name: str
-    make: Callable[[Any, AssetCatalog], list[AssetLibrary]]
+    make: Callable[[Any, AssetCatalog], Sequence[AssetLibrary]]
     priority: int = 0
     aliases: tuple[str, ...] = ()
 

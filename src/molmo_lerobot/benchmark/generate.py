@@ -161,7 +161,8 @@ def _place_layout(receptacles: list[BuiltinReceptacle], objects: list[BuiltinObj
     ``next_to``: keep a free disc beside the first receptacle for the object, and start the
     object at least :data:`NEXT_TO_START_GAP` from that receptacle.
     """
-    items = [(r, *_receptacle_footprint(r, float(rng.uniform(-math.pi, math.pi)))) for r in receptacles]
+    items: list[tuple[BuiltinReceptacle | BuiltinObject, list[float], float, float]] = [
+        (r, *_receptacle_footprint(r, float(rng.uniform(-math.pi, math.pi)))) for r in receptacles]
     items += [(o, *_resting(o, float(rng.uniform(-math.pi, math.pi)))) for o in objects]
     pick, quat, pick_radius, height = items[len(receptacles)]
     items[len(receptacles)] = (pick, quat, pick_radius + pick_clearance, height)

@@ -44,12 +44,13 @@ def _handles(house: int) -> dict[tuple[str, str], tuple[float, float, float]]:
     model = scene.build(house).compile()
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
-    out = {}
+    out: dict[tuple[str, str], tuple[float, float, float]] = {}
     for uid, obj in scene.metadata(house)["objects"].items():
         for joint, j in obj.get("joints", {}).items():
             b = model.body(j["body"]).id
             local = np.asarray(ARTICULATED_OBJECTS[uid].joint(joint).handle_pos)
-            out[(uid, joint)] = tuple(float(v) for v in data.xpos[b] + data.xmat[b].reshape(3, 3) @ local)
+            x, y, z = (float(v) for v in data.xpos[b] + data.xmat[b].reshape(3, 3) @ local)
+            out[(uid, joint)] = (x, y, z)
     return out
 
 

@@ -15,7 +15,7 @@ validation against the installed plugins, not parsing, reports it (with a "did y
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import (
     AfterValidator,
@@ -42,8 +42,8 @@ class _Model(BaseModel):
 # Vectors ---------------------------------------------------------------------------------
 
 
-def _fixed_vector(n: int, quat_at: int | None = None) -> Any:
-    """A ``list[float]`` of exactly ``n`` finite values (with a non-zero quaternion at ``quat_at``)."""
+def _fixed_vector(n: int, quat_at: int | None = None) -> AfterValidator:
+    """Checks a ``list[float]`` has exactly ``n`` finite values (with a non-zero quaternion at ``quat_at``)."""
 
     def check(v: list[float]) -> list[float]:
         if len(v) != n:
@@ -54,7 +54,7 @@ def _fixed_vector(n: int, quat_at: int | None = None) -> Any:
             raise PydanticCustomError("zero_quaternion", "quaternion (qw, qx, qy, qz) must not be all zero", {})
         return v
 
-    return Annotated[list[float], AfterValidator(check)]
+    return AfterValidator(check)
 
 
 def _finite_list(v: list[float]) -> list[float]:
@@ -78,12 +78,15 @@ def _resolution(v: tuple[int, ...]) -> tuple[int, int]:
     return (v[0], v[1])
 
 
-Vec3 = _fixed_vector(3)
-Vec4 = _fixed_vector(4)
-Quat = _fixed_vector(4, quat_at=0)
-Pose7 = _fixed_vector(7, quat_at=3)
+Vec3 = Annotated[list[float], _fixed_vector(3)]
+Vec4 = Annotated[list[float], _fixed_vector(4)]
+Quat = Annotated[list[float], _fixed_vector(4, quat_at=0)]
+Pose7 = Annotated[list[float], _fixed_vector(7, quat_at=3)]
 FiniteList = Annotated[list[float], AfterValidator(_finite_list)]
-ImgResolution = Annotated[tuple[int, ...], AfterValidator(_resolution)]
+if TYPE_CHECKING:
+    ImgResolution = tuple[int, int]  # what validation gives
+else:  # any length is parsed, so that a wrong one fails with our message
+    ImgResolution = Annotated[tuple[int, ...], AfterValidator(_resolution)]
 StrictInt = Annotated[int, Strict()]  # JSON true is not the integer 1
 
 
@@ -190,6 +193,10 @@ class BaseTaskSpec(_Model):
     robot_base_pose: Pose7
     task_horizon_sec: float | None = Field(default=None, gt=0, le=MAX_TASK_HORIZON_SEC)
 
+    if TYPE_CHECKING:
+        # A task may get its fields as extras (a GenericTaskSpec, extra="allow"): any other name reads as Any.
+        def __getattr__(self, name: str) -> Any: ...
+
     @property
     def task_name(self) -> str:
         """The key to look the task type up by in the plugin registry."""
@@ -234,7 +241,8 @@ def _typed_task(value: Any, info: ValidationInfo) -> BaseTaskSpec:
     pick = (info.context or {}).get(TASK_MODEL)
     tag, model = pick(value) if pick is not None and isinstance(value, dict) else ("generic", GenericTaskSpec)
     # Validated as {tag: value}, so that errors name the tag, as a discriminated union's do.
-    return TypeAdapter(dict[str, model]).validate_python({tag: value}, context=info.context)[tag]
+    adapter = TypeAdapter(dict[str, model])  # type: ignore[valid-type]  # the model is picked at run time
+    return adapter.validate_python({tag: value}, context=info.context)[tag]
 
 
 #: A task spec: the model of the task's plugin (see :data:`TASK_MODEL`), dumped as that model.

@@ -71,11 +71,12 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, scenes: SceneContex
             elif len(values) != sizes[group]:
                 warning(field, f"expected {sizes[group]} values, got {len(values)}")
 
-    if "base_size" in (episode.robot.model_extra or {}):
+    robot_extra = episode.robot.model_extra or {}
+    if "base_size" in robot_extra:
         from molmo_lerobot.robots.base import parse_base_size
 
         try:
-            parse_base_size(episode.robot.model_extra["base_size"])
+            parse_base_size(robot_extra["base_size"])
         except ValueError as exc:
             problem("robot.base_size", str(exc))
 

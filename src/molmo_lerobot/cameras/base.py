@@ -16,6 +16,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.hashing import episode_digest
+from molmo_lerobot.poses import Vector
 
 STANDARD = "standard"
 
@@ -52,7 +53,7 @@ class CameraSystem(ABC):
         """This system set up by the run's ``camera`` options (e.g. ``rand_level``); most take none."""
         return self
 
-    def place(self, env: Any) -> dict[str, tuple[Sequence[float], Sequence[float], float]]:
+    def place(self, env: Any) -> dict[str, tuple[Vector, Vector, float]]:
         """Poses that depend on the compiled scene in its initial state (``env``: a reset
         :class:`~molmo_lerobot.sim.env.Env` on a scratch copy of the model): camera name ->
         (position, wxyz quaternion in its parent body's frame, fovy). Called once per built

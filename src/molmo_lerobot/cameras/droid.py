@@ -46,7 +46,7 @@ from molmo_lerobot.cameras.franka_mounts import (
     wrist_mount,
 )
 from molmo_lerobot.hashing import episode_digest
-from molmo_lerobot.poses import look_rotation, mat_to_quat
+from molmo_lerobot.poses import Vector, look_rotation, mat_to_quat
 
 FIXED_WRIST_FOV = 56.74
 RANDOM_WRIST_FOV = 52.0
@@ -110,7 +110,7 @@ class FrankaRandomizedDroidCameraSystem(CameraSystem):
             world.worldbody.add_camera(name=cam.name, pos=[0.0, 0.0, 0.0])
         return ["wrist_camera"] + [cam.name for cam in RANDOM_EXO_CAMERAS]
 
-    def place(self, env: Any) -> dict[str, tuple[Sequence[float], Sequence[float], float]]:
+    def place(self, env: Any) -> dict[str, tuple[Vector, Vector, float]]:
         objects = task_objects(env.spec)
         centre = np.mean([*(env.data.xpos[env.body_id(name, "task_relevant_objects")] for name in objects),
                           env.data.site_xpos[env.robot.tcp_site]], axis=0)

@@ -49,7 +49,7 @@ from molmo_lerobot.cameras.franka_mounts import (
     wrist_mount,
 )
 from molmo_lerobot.hashing import episode_digest
-from molmo_lerobot.poses import look_rotation, mat_to_quat
+from molmo_lerobot.poses import Vector, look_rotation, mat_to_quat
 
 #: (width, height) their eval cameras render at, whatever the episode's ``img_resolution``
 EVAL_IMG_RESOLUTION = (640, 368)
@@ -194,11 +194,11 @@ class FrankaEvalCameraSystem(CameraSystem):
         world.worldbody.add_camera(name="exo_camera_1", pos=[0.0, 0.0, 0.0])
         return ["wrist_camera", "exo_camera_1"]
 
-    def place(self, env: Any) -> dict[str, tuple[Sequence[float], Sequence[float], float]]:
+    def place(self, env: Any) -> dict[str, tuple[Vector, Vector, float]]:
         m, d, spec = env.model, env.data, env.spec
         rng = np.random.RandomState(episode_camera_seed(spec))
         wrist = m.camera("wrist_camera").id
-        poses: dict[str, tuple[Sequence[float], Sequence[float], float]] = {
+        poses: dict[str, tuple[Vector, Vector, float]] = {
             "wrist_camera": noisy_mount(m.cam_pos[wrist], m.cam_quat[wrist], WRIST_FOV, wrist_noise(self.level), rng)}
         root = _model_body(m, ARM_ROOT)
         offset, quat, _ = EXO_CAMERA_1

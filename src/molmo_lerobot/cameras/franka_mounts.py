@@ -13,6 +13,8 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from molmo_lerobot.poses import Vector
+
 WRIST_MJCF_NAME = "gripper/wrist_camera"
 ARM_ROOT = "fr3_link0"
 #: DROID's shoulder camera: offset and wxyz quaternion in fr3_link0's frame, fov
@@ -47,16 +49,16 @@ def arm_root(find_body: Callable[[str], mujoco.MjsBody | None]) -> mujoco.MjsBod
     return body
 
 
-def noisy_mount(pos: Sequence[float], quat: Sequence[float], fov: float, noise: MountNoise,
+def noisy_mount(pos: Vector, quat: Vector, fov: float, noise: MountNoise,
                 rng: Any) -> tuple[np.ndarray, np.ndarray, float]:
     """A mounted camera's pose (position, wxyz quaternion in its parent's frame) and fov with
     ``noise`` drawn from ``rng`` in MolmoSpaces' order: fov, position, orientation."""
     fov = fov + rng.uniform(*noise.fov)
     rot = Rotation.from_quat(np.asarray(quat, dtype=np.float64), scalar_first=True)
-    pos = np.asarray(pos, dtype=np.float64) + rot.apply(rng.uniform(*noise.pos, size=3))
+    moved = np.asarray(pos, dtype=np.float64) + rot.apply(rng.uniform(*noise.pos, size=3))
     limit = np.asarray(noise.rot_deg, dtype=np.float64)
     rot = rot * Rotation.from_euler("xyz", rng.uniform(-limit, limit, size=3), degrees=True)
-    return pos, rot.as_quat(scalar_first=True), float(fov)
+    return moved, rot.as_quat(scalar_first=True), float(fov)
 
 
 def gripper_body(env: Any) -> str:
@@ -66,7 +68,7 @@ def gripper_body(env: Any) -> str:
 
 
 def place_until_seen(env: Any, camera: str, must_see: Sequence[str], attempts: int,
-                     draw: Callable[[], tuple[Sequence[float], Sequence[float], float]],
+                     draw: Callable[[], tuple[Vector, Vector, float]],
                      system: str) -> tuple[list[float], list[float], float]:
     """Set ``camera`` (a world camera of the probe scene ``env``) to ``draw()``'s pose until every
     body of ``must_see`` covers :data:`MIN_VISIBLE_FRACTION` of its image, at most ``attempts``
@@ -81,7 +83,7 @@ def place_until_seen(env: Any, camera: str, must_see: Sequence[str], attempts: i
                      f"(each must cover {MIN_VISIBLE_FRACTION:g} of the image)")
 
 
-def add_wrist(world: mujoco.MjSpec, pos: Sequence[float], quat: Sequence[float], fov: float) -> None:
+def add_wrist(world: mujoco.MjSpec, pos: Vector, quat: Vector, fov: float) -> None:
     mount = wrist_mount(world)
     mount.parent.add_camera(name="wrist_camera", pos=list(pos), quat=list(quat), fovy=float(fov))
 

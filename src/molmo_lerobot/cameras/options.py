@@ -30,7 +30,7 @@ def episode_camera_system(episode: Any, camera: Mapping[str, Any] | None, resolv
     """The camera system ``episode`` runs with (see :func:`~molmo_lerobot.cameras.base.choose_camera_system`),
     set up by the run's ``camera`` options; ``resolve`` looks a system up by name or alias."""
     configured = run_camera_system(camera)
-    replaces = bool(configured) and resolve(configured).replaces_recorded
+    replaces = resolve(configured).replaces_recorded if configured else False
     return resolve(choose_camera_system(episode, configured, robot_default, replaces)).configured(camera or {})
 
 

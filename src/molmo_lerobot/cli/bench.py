@@ -157,7 +157,7 @@ def _validate(path: str, *, schema_only: bool, overrides: list[str] | None = Non
 
 def _grouped(warnings: list[Problem]) -> list[str]:
     """One ``warning:`` line per (file, field, message), listing the episodes it concerns."""
-    groups: dict[tuple[str, str | None, str], list[int]] = {}
+    groups: dict[tuple[str, str | None, str], list[int | None]] = {}
     for p in warnings:
         groups.setdefault((p.file, p.field, p.message), []).append(p.episode_index)
     lines = []
@@ -216,7 +216,7 @@ def _generate(args: argparse.Namespace) -> int:
         print(f"molmo-bench: error: {exc}", file=sys.stderr)
         return 2
     plugins = Plugins()
-    bad = []
+    bad: list[Problem] = []
     for i, ep in enumerate(episodes):
         try:
             parse_episode(ep, plugins)

@@ -14,6 +14,8 @@ import json
 import os
 import sys
 import warnings
+from pathlib import Path
+from typing import Any
 
 _EPILOG = """the store: --root, else $MOLMO_DATASETS_PATH, else $MOLMO_LEROBOT_HOME/datasets, else
 ~/.cache/molmo_lerobot/datasets; the Hub remote: --remote, else $MOLMO_DATASETS_REMOTE (hf://<user or org>;
@@ -66,6 +68,8 @@ def _run(args: argparse.Namespace) -> None:
 
     store = ns.DatasetStore()
     if args.command == "list":
+        datasets: list[str] | dict[str, dict[str, Any]]
+        where: str | Path
         if args.remote is not None:
             hub = ns.HubRemote.from_remote(args.remote or None)
             names, datasets = sorted(set(hub.list_namespaces())), hub.list_datasets(args.prefix)
@@ -76,7 +80,7 @@ def _run(args: argparse.Namespace) -> None:
         for name in names:
             print(f"namespace  {name}")
         for dataset_id in datasets:
-            meta = datasets[dataset_id] if isinstance(datasets, dict) else {}
+            meta: dict[str, Any] = datasets[dataset_id] if isinstance(datasets, dict) else {}
             score = f"  success {meta['success_rate']:.3f} ({meta.get('n_episodes')} episodes)" \
                 if isinstance(meta.get("success_rate"), float | int) else ""
             policy = f"  {meta.get('benchmark', {}).get('name')} · {meta['policy']}" if meta.get("policy") else ""

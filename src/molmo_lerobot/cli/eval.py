@@ -108,9 +108,10 @@ def _override_message(override: str, message: str) -> str:
 def _job(cfg: Any, jobs: list[dict[str, Any]]) -> int:
     """One run, validated here (a sweep job writes to its sweep subdir unless ``output_dir`` is set);
     appends its row to ``jobs``."""
-    row = {"job": len(jobs), "policy": str(cfg.get("policy", {}).get("name", "?")),
-           "benchmark": str(cfg.get("benchmark", {}).get("path") or cfg.get("benchmark", {}).get("name", "?")),
-           "success": "error", "exit": 2, "outputs": "-"}
+    row: dict[str, Any] = {"job": len(jobs), "policy": str(cfg.get("policy", {}).get("name", "?")),
+                           "benchmark": str(cfg.get("benchmark", {}).get("path")
+                                            or cfg.get("benchmark", {}).get("name", "?")),
+                           "success": "error", "exit": 2, "outputs": "-"}
     jobs.append(row)
     from hydra.core.hydra_config import HydraConfig
     from hydra.types import RunMode

@@ -9,6 +9,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 from molmo_lerobot.paths import molmospaces_assets_dir
 from molmo_lerobot.resources import molmospaces as ms
@@ -93,7 +94,7 @@ def _run(args: argparse.Namespace) -> int:
         return 1 if problems else 0
     if args.command == "list":
         mgr = ResourceManager(args.cache_dir, args.install_dir)
-        listing = {"cache": mgr.installed(), "linked": mgr.linked()}
+        listing: dict[str, dict[str, dict[str, Any]]] = {"cache": mgr.installed(), "linked": mgr.linked()}
         if args.remote:
             files = open_remote(args.remote).list_files()
             remote: dict[str, dict[str, list[str]]] = {}

@@ -144,12 +144,13 @@ class LeRobotRecorderFactory(RecorderFactory):
         the report read it there), then, with ``push=true``, upload it with its namespace chain."""
         from molmo_lerobot.namespaces import DatasetStore, upload_dataset
 
-        store = DatasetStore(self.store_root)
+        store, dataset_id = DatasetStore(self.store_root), self.dataset_id
+        assert dataset_id is not None  # finalize() stores only with one
         if root is None:
             raise RuntimeError(f"dataset_id {self.dataset_id!r}: no episode finished without error, so there is "
                                "no dataset to store")
         bench = summary.benchmark
-        store.add_dataset(self.dataset_id, root, {
+        store.add_dataset(dataset_id, root, {
             "benchmark": {"name": bench and bench.name, "sha256": bench and bench.sha256}, "policy": self.policy,
             "success_rate": summary.success_rate, "n_success": summary.n_success,
             "n_episodes": summary.n_episodes, "run_id": output_dir.resolve().name,
@@ -158,7 +159,7 @@ class LeRobotRecorderFactory(RecorderFactory):
             return None
         target = f"{self.remote}/{self.dataset_id}"
         try:
-            upload_dataset(self.dataset_id, store=store, remote=self.remote, private=self.private)
+            upload_dataset(dataset_id, store=store, remote=self.remote, private=self.private)
             error = None
         except Exception as exc:  # a push must never cost the local results
             from molmo_lerobot.export.hub import failure_line

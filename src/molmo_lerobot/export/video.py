@@ -255,7 +255,8 @@ class _CameraStream(threading.Thread):
 
     def run(self) -> None:
         forgo_realtime()
-        container = stream = None
+        container: Any = None  # PyAV's output container and video stream, opened on the first frame
+        stream: Any = None
         while (frame := self.frames.get()) is not None:
             if self.error is not None or self.cancelled:
                 continue  # keep draining so a producer blocked on put() is released

@@ -273,8 +273,9 @@ def _geometry(uid: str) -> dict:
             if direction[1] > -0.99:
                 raise AssetError(f"{fx.xml_path}: joint {label.name!r} does not open towards the front (-y)")
         centre = data.xmat[body].reshape(3, 3).T @ (centre_world - data.xpos[body])
-        joints.append(JointInfo(label.name, kind, model.body(body).name, open_q,
-                                tuple(round(float(v), 6) for v in centre), axis, round(half, 6), label.label))
+        cx, cy, cz = (round(float(v), 6) for v in centre)
+        joints.append(JointInfo(label.name, kind, model.body(body).name, open_q, (cx, cy, cz), axis, round(half, 6),
+                                label.label))
     handle_front = min(float(data.xpos[model.body(j.body).id][1] + data.xmat[model.body(j.body).id].reshape(3, 3)[1]
                              @ np.asarray(j.handle_pos)) for j in joints)
     return {"joints": tuple(joints), "root_z": round(float(-lo[2]), 6),
@@ -328,13 +329,13 @@ class FixtureGraspLibrary(GraspLibrary):
         return self._analytic(uid, robot, joint) or super().has(uid, robot, joint)
 
     def load(self, uid: str, robot: str = "franka", joint: str | None = None) -> np.ndarray | None:
-        if self._analytic(uid, robot, joint):
+        if joint is not None and self._analytic(uid, robot, joint):
             return handle_grasps(LIBERO_FIXTURES[uid], joint)
         return super().load(uid, robot, joint)
 
     def count(self, uid: str, robot: str = "franka", joint: str | None = None) -> int | None:
-        if self._analytic(uid, robot, joint):
-            return len(self.load(uid, robot, joint))
+        if joint is not None and self._analytic(uid, robot, joint):
+            return len(handle_grasps(LIBERO_FIXTURES[uid], joint))
         return super().count(uid, robot, joint)
 
 

@@ -36,7 +36,7 @@ def install_problem(distributions: Iterable[md.Distribution] | None = None) -> s
             if not row or not row[0].startswith(f"{PACKAGE}/"):
                 continue
             size = int(row[2]) if len(row) > 2 and row[2].isdigit() else None
-            why = _fault(Path(dist.locate_file(row[0])), size)
+            why = _fault(Path(str(dist.locate_file(row[0]))), size)
             if why:
                 faults.append((why, name))
     if not faults:

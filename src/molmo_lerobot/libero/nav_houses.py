@@ -87,7 +87,7 @@ def layout(house_index: int) -> dict[str, Any]:
             doors.append({"axis": "y", "at": float(ys[j]), "centre": float(rng.uniform(lo, hi))})
     floor = _FLOORS[int(rng.integers(len(_FLOORS)))]
     wall = _WALLS[int(rng.integers(len(_WALLS)))]
-    furniture = []
+    furniture: list[dict] = []
     for room in rooms:
         for _ in range(int(rng.integers(2, 4))):
             piece = _place_furniture(rng, room, doors, furniture)

@@ -193,10 +193,10 @@ class Primitive:
 
 def _frame(el: ElementTree.Element) -> tuple[np.ndarray, Rotation]:
     pos = np.array([float(v) for v in el.get("pos", "0 0 0").split()])
-    if el.get("quat"):
-        rot = Rotation.from_quat([float(v) for v in el.get("quat").split()], scalar_first=True)
-    elif el.get("euler"):
-        rot = Rotation.from_euler("XYZ", [float(v) for v in el.get("euler").split()], degrees=True)
+    if quat := el.get("quat"):
+        rot = Rotation.from_quat([float(v) for v in quat.split()], scalar_first=True)
+    elif euler := el.get("euler"):
+        rot = Rotation.from_euler("XYZ", [float(v) for v in euler.split()], degrees=True)
     else:
         rot = Rotation.identity()
     for attr in ("axisangle", "xyaxes", "zaxis"):
@@ -301,7 +301,8 @@ class LiberoObject:
     def half_extents(self) -> tuple[float, float, float]:
         """Half extents of the collision geometry's bounding box in the body frame (origin at its centre)."""
         corners = np.concatenate([p.corners() for p in self.primitives])
-        return tuple(float(v) for v in np.max(np.abs(corners), axis=0))
+        x, y, z = (float(v) for v in np.max(np.abs(corners), axis=0))
+        return x, y, z
 
     @cached_property
     def opening_radius(self) -> float:
@@ -364,7 +365,7 @@ class LiberoObject:
         """Every file the object's MJCF reads (in the package; textures before downscaling)."""
         root = self._tree()
         base = self.xml_path.parent
-        return [base / el.get("file") for el in root.iter() if el.tag in ("mesh", "texture") and el.get("file")]
+        return [base / file for el in root.iter() if el.tag in ("mesh", "texture") and (file := el.get("file"))]
 
     def mjcf(self, tex_size: int | None = None) -> str:
         """A standalone MJCF document: one free body ``uid`` (see the module docstring)."""
@@ -376,16 +377,16 @@ class LiberoObject:
         used_textures = {m.get("texture") for m in materials.values() if m.get("texture")}
         asset = ElementTree.Element("asset")
         for el in root.iter("texture"):
-            if el.get("name") in used_textures and el.get("file"):
+            if el.get("name") in used_textures and (file := el.get("file")):
                 attrs = {k: v for k, v in el.attrib.items() if k in ("name", "type", "file")}
-                attrs["file"] = str(texture_file(base / el.get("file"), tex_size))
+                attrs["file"] = str(texture_file(base / file, tex_size))
                 ElementTree.SubElement(asset, "texture", attrs)
         for el in materials.values():
             ElementTree.SubElement(asset, "material", dict(el.attrib))
         for el in root.iter("mesh"):
             if el.get("name") in used_meshes:
                 attrs = dict(el.attrib)
-                attrs["file"] = str(base / el.get("file"))
+                attrs["file"] = str(base / el.attrib["file"])
                 ElementTree.SubElement(asset, "mesh", attrs)
         doc = ElementTree.Element("mujoco", model=self.uid)
         ElementTree.SubElement(doc, "compiler", angle="radian")
@@ -402,14 +403,14 @@ class LiberoObject:
             quat = _fmt(rot.as_quat(scalar_first=True))
             if _collides(el):
                 ElementTree.SubElement(body, "geom", name=f"{self.uid}_col{k}", type=el.get("type", "sphere"),
-                                       size=el.get("size"), pos=_fmt(pos - centre), quat=quat,
+                                       size=el.attrib["size"], pos=_fmt(pos - centre), quat=quat,
                                        friction=_fmt(FRICTION), condim=str(CONDIM), group=str(COLLISION_GROUP),
                                        contype="1", conaffinity="1", rgba="0.5 0.5 0.5 1")
                 k += 1
             else:
-                attrs = {key: el.get(key) for key in ("type", "mesh", "material", "rgba", "size") if el.get(key)}
-                ElementTree.SubElement(body, "geom", **attrs, pos=_fmt(pos - centre), quat=quat, group="1",
-                                       contype="0", conaffinity="0", mass="0")
+                attrs = {key: value for key in ("type", "mesh", "material", "rgba", "size") if (value := el.get(key))}
+                ElementTree.SubElement(body, "geom", attrs | {"pos": _fmt(pos - centre), "quat": quat, "group": "1",
+                                                              "contype": "0", "conaffinity": "0", "mass": "0"})
         return ElementTree.tostring(doc, encoding="unicode")
 
 

@@ -117,9 +117,13 @@ class ObjathorMetadata:
             if raw is None:
                 return None
             try:
-                return _DataUnpickler.loads(zstandard.decompress(raw))
+                entry = _DataUnpickler.loads(zstandard.decompress(raw))
             except (pickle.UnpicklingError, zstandard.ZstdError) as exc:
                 raise AssetError(f"{self.assets}/.lmdb/objathor_metadata: entry {uid!r} unreadable ({exc})") from None
+            if not isinstance(entry, dict):
+                raise AssetError(f"{self.assets}/.lmdb/objathor_metadata: entry {uid!r} is a "
+                                 f"{type(entry).__name__}, not a mapping")
+            return entry
         return self._store.get(uid) if self._store is not None else None
 
 
@@ -153,6 +157,7 @@ class MolmoSpacesObjects(AssetLibrary):
 
     def __init__(self, name: str, settings: MolmoSpacesSettings) -> None:
         self.name = name
+        self.enumerable = name == "thor"
         self.settings = settings
         self._index: dict[str, Path] | None = None
 
@@ -231,10 +236,6 @@ class MolmoSpacesObjects(AssetLibrary):
         if path is None:
             raise AssetError(f"object {uid!r}: installed {spec} but {self.root} has no {uid}.xml")
         return UidLocation(self.name, None, path)
-
-    @property
-    def enumerable(self) -> bool:
-        return self.name == "thor"
 
 
 class MolmoSpacesGrasps(GraspLibrary):

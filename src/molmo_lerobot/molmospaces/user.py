@@ -212,7 +212,7 @@ def register_user_grasp_library(catalog: AssetCatalog, name: str, path: str | os
 
 def run_asset_libraries(settings: MolmoSpacesSettings, catalog: AssetCatalog) -> list[AssetLibrary]:
     """The ``user`` asset library type: one library per ``asset_libraries`` entry of the run."""
-    out = []
+    out: list[AssetLibrary] = []
     for name, path in settings.asset_libraries.items():
         try:
             out.append(user_asset_library(catalog, name, Path(path).resolve()))

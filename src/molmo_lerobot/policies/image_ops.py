@@ -42,5 +42,6 @@ def resize_with_pad_pil(image: np.ndarray, height: int, width: int) -> np.ndarra
     src = Image.fromarray(np.ascontiguousarray(image, dtype=np.uint8))
     out = np.zeros((height, width, 3), dtype=np.uint8)
     top, left = max(0, int((height - new_h) / 2)), max(0, int((width - new_w) / 2))
-    out[top : top + new_h, left : left + new_w] = np.asarray(src.resize((new_w, new_h), resample=Image.BILINEAR))
+    resized = src.resize((new_w, new_h), resample=Image.Resampling.BILINEAR)
+    out[top : top + new_h, left : left + new_w] = np.asarray(resized)
     return out

@@ -101,7 +101,9 @@ class ScriptedArticulated(PhasedExpert):
             T_pre = world[i].copy()
             T_pre[:3, 3] -= PREGRASP_DISTANCE * world[i][:3, 2]
             q_pre = self.ik.solve(T_pre, q_now, iters=IK_ITERS)
-            q = None if q_pre is None else self.ik.solve(world[i], q_pre, iters=IK_ITERS)
+            if q_pre is None:
+                continue
+            q = self.ik.solve(world[i], q_pre, iters=IK_ITERS)
             if q is None:
                 continue
             reached = 0
@@ -173,6 +175,8 @@ class ScriptedArticulated(PhasedExpert):
             q0 = float(self.env.data.qpos[self.qadr])
             n = max(2, int(np.ceil(abs(self.q_goal - q0) / VIA_STEP[self.kind])))
             duration = max(1.0, abs(self.q_goal - q0) * ARTICULATE_TIME[self.kind])
+            if self.grasp_local is None:
+                raise RuntimeError("articulated expert: articulating before a grasp was chosen")
             self._via(self._arc(self.grasp_local, n), 1.0, duration, partial=True, gentle=True)
             self._move(self.q_cmd, 1.0, 0.3)
         elif phase == "release":

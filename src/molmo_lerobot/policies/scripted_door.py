@@ -103,7 +103,7 @@ class ScriptedDoor(PhasedExpert):
         env = self._start(ctx, ["drive", "reach", "insert", "close", "swing", "release", "retreat", "hold"])
         if "base" not in env.move_groups:
             raise ValueError(f"scripted door expert: robot {env.robot_type.name!r} has no base move group")
-        self.ik = BaseFrozenIK(env.robot_type, tuple(float(v) for v in env.spec.task.robot_base_pose),
+        self.ik: BaseFrozenIK = BaseFrozenIK(env.robot_type, tuple(float(v) for v in env.spec.task.robot_base_pose),
                                env.robot_type.base_size(env.spec.robot))
         m, d = env.model, env.data
         self.door = env.body_id(env.spec.task.door_body_name, "task.door_body_name")
@@ -208,6 +208,7 @@ class ScriptedDoor(PhasedExpert):
             at = np.array([lane, max(depth_min, ideal[1])])
             if best is None or np.linalg.norm(at - ideal) < np.linalg.norm(best - ideal) - 1e-9:
                 best = at
+        assert best is not None  # LANES >= 1
         xy = self.anchor + best[0] * self.leaf_dir + best[1] * out
         return np.array([xy[0], xy[1], _yaw_of(self.approach0)])
 
@@ -269,9 +270,11 @@ class ScriptedDoor(PhasedExpert):
                 seed = self.q_cmd.copy()
                 seed[-1] += roll
                 q_pre = self.ik.solve_at(T_pre, self.b_cmd, seed)
-                q = None if q_pre is None else self.ik.solve_at(T, self.b_cmd, q_pre)
-                if q is not None and (best is None or self._margin(q) > best[0]):
-                    best = (self._margin(q), grasp, q_pre, q)
+                if q_pre is None:
+                    continue
+                q_at = self.ik.solve_at(T, self.b_cmd, q_pre)
+                if q_at is not None and (best is None or self._margin(q_at) > best[0]):
+                    best = (self._margin(q_at), grasp, q_pre, q_at)
             if best is None:
                 raise RuntimeError("scripted door expert: the handle is out of reach from the grasp stand")
             _, self.grasp_local, q_pre, self.q_grasp = best
@@ -283,7 +286,8 @@ class ScriptedDoor(PhasedExpert):
             self._move_all(self.b_cmd, self.q_cmd, 1.0, 0.2)
         elif phase == "swing":
             n = max(2, int(np.ceil(abs(self.q_goal - q_door) / VIA_STEP)))
-            bases, arms = [], []
+            bases: list[np.ndarray] = []
+            arms: list[np.ndarray] = []
             stand, q_arm = self.b_cmd.copy(), self.q_cmd.copy()
             for k in range(1, n + 1):
                 q = q_door + (self.q_goal - q_door) * k / n
@@ -302,8 +306,8 @@ class ScriptedDoor(PhasedExpert):
         elif phase == "retreat":
             T = self._tcp_T()
             T[:3, 3] -= PREGRASP_DISTANCE * T[:3, 2]
-            q = self.ik.solve_at(T, self.b_cmd, self.q_cmd)
-            self._move_all(self.b_cmd, self.q_cmd if q is None else q, 0.0, 0.8)
+            q_back = self.ik.solve_at(T, self.b_cmd, self.q_cmd)
+            self._move_all(self.b_cmd, self.q_cmd if q_back is None else q_back, 0.0, 0.8)
         else:  # hold
             self._move_all(self.b_cmd, self.q_cmd, self.g_cmd, self.chunk * self.dt)
 

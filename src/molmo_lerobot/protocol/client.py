@@ -76,7 +76,8 @@ class PolicyClient:
         unanswered connection (a server still starting) is retried."""
         self.close()
         deadline = time.monotonic() + self.connect_timeout_s
-        delay, attempts, last = self.backoff_s, 0, None
+        delay, attempts = self.backoff_s, 0
+        last: BaseException | None = None
         while True:
             attempts += 1
             remaining = deadline - time.monotonic()
@@ -168,6 +169,7 @@ class PolicyClient:
         for attempt in (0, 1):
             if self._conn is None:
                 self.connect()
+            assert self._conn is not None  # connect() made it
             try:
                 try:
                     self._conn.send(payload)

@@ -223,8 +223,8 @@ def send(sock: socket.socket, message: dict[str, Any], fd: int | None = None) ->
 
 def parse(data: bytes, fds: list[int], flags: int) -> tuple[dict[str, Any], int | None]:
     """A received control message and the fd it carried; closes extra fds, refuses the malformed."""
-    for fd in fds[1:]:
-        os.close(fd)
+    for extra in fds[1:]:
+        os.close(extra)
     fd = fds[0] if fds else None
     try:
         if flags & (socket.MSG_TRUNC | socket.MSG_CTRUNC):

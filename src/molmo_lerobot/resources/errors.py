@@ -8,6 +8,9 @@ from molmo_lerobot.errors import MolmoError
 class ResourceError(MolmoError, RuntimeError):
     """A resource could not be packed, fetched, installed or verified."""
 
+    #: whether fetching the archive again may help (a download fault); False for what a retry repeats
+    retryable: bool = True
+
 
 class CorruptArchiveError(ResourceError):
     """An archive's size or sha256 does not match its manifest, or it cannot be decompressed."""

@@ -15,4 +15,4 @@ LAYOUTS: Mapping[int | str, type[Layout]] = MappingProxyType(
 
 def layout_for(fmt: int | str | None) -> type[Layout]:
     """The layout of manifest format ``fmt`` (ours where no layout claims it)."""
-    return LAYOUTS.get(fmt, OwnLayout)
+    return OwnLayout if fmt is None else LAYOUTS.get(fmt, OwnLayout)

@@ -155,6 +155,7 @@ def check_links(place: VersionPlace, new: list[str], where: str) -> None:
         return
     path = place.meta_dir / "links.json"
     known = read_json(path) if path.is_file() else []
+    known = known if isinstance(known, list) else []
     links = sorted({r for r in known if isinstance(r, str) and os.path.islink(vdir / r)} | set(new))
     bad = [r for r in links if not fileio.resolves_inside(vdir, r)]
     if bad:

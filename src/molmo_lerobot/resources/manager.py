@@ -139,6 +139,8 @@ class ResourceManager:
             raise ResourceError(f"remote {self.remote.url} has no {spec} ({self._remote_versions(spec)})")
 
     def _remote_versions(self, spec: ResourceSpec) -> str:
+        if self.remote is None:
+            return "no remote was given"
         try:
             files = self.remote.list_files(f"{spec.data_type}/{spec.source}")
         except ResourceError:
@@ -330,8 +332,8 @@ class ResourceManager:
                         problems.append(f"{spec}: {exc}")
                         continue
                     problems += version_problems(self.place(spec), self.layout(spec), index, self.is_complete(spec))
-        for data_type, sources in sorted(self.linked().items()):
-            for source, version in sorted(sources.items()):
+        for data_type, links in sorted(self.linked().items()):
+            for source, version in sorted(links.items()):
                 spec = ResourceSpec(data_type, source, version)
                 problems += link_problems(self.place(spec), self.manifest(spec)["link"])
         return problems

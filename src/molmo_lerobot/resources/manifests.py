@@ -147,14 +147,13 @@ def _entry_ok(entry: object) -> bool:
 
 def check_local(data: object, path: Path, values: Literal["list", "str"]) -> dict:
     """A local manifest ``{data_type: {source: [versions]}}`` (cache) or ``{…: version}`` (install dir)."""
-    ok = isinstance(data, dict) and all(
+    if not (isinstance(data, dict) and all(
         isinstance(sources, dict) and all(
             isinstance(src, str) and (
                 (values == "list" and isinstance(v, list) and all(isinstance(x, str) for x in v))
                 or (values == "str" and (v is None or isinstance(v, str))))
             for src, v in sources.items())
-        for sources in data.values())
-    if not ok:
+        for sources in data.values())):
         shape = "{data_type: {source: [versions]}}" if values == "list" else "{data_type: {source: version}}"
         raise ResourceError(f"local manifest {path}: must hold {shape}; fix or delete it")
     return data

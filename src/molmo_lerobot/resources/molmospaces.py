@@ -264,17 +264,17 @@ class MolmoSpacesLayout(Layout):
         update_record(root / LOCAL_MANIFEST, add, "list", root=root, indent=2)
 
     def link_lock(self):
-        return self.locks.hold(self.place.install_dir / LOCK)
+        return self.locks.hold(self.place.install_root / LOCK)
 
     def link_files(self) -> list[str]:
         return [REMOTE_MANIFEST, TRIES]
 
     def flag_links(self, link_dir: Path, archives: list[str]) -> None:
         for archive in archives:
-            atomic_write(link_flag(link_dir, archive), "", root=self.place.install_dir)
+            atomic_write(link_flag(link_dir, archive), "", root=self.place.install_root)
 
     def record_link(self, point: Edit, previous: str | None) -> None:
-        install, spec = self.place.install_dir, self.place.spec
+        install, spec = self.place.install_root, self.place.spec
         if previous is not None and previous != spec.version:  # their cached tries index is per version
             fileio.rmtree(install / ".lmdb" / spec.data_type / spec.source, root=install, ignore_errors=True)
         update_record(install / LOCAL_MANIFEST, point, "str", root=install, indent=2)

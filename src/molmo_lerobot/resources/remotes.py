@@ -19,11 +19,15 @@ import tempfile
 import uuid
 from abc import ABC, abstractmethod
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import quote, unquote, urlparse
 
 from molmo_lerobot import fileio
 from molmo_lerobot.fileio import atomic_open, atomic_write
 from molmo_lerobot.resources.errors import RemoteNotFoundError, ResourceError
+
+if TYPE_CHECKING:
+    import httpx
 
 #: A version in MolmoSpaces' layout has this manifest ``format`` (ours: an integer).
 MOLMOSPACES = "molmospaces"
@@ -105,7 +109,7 @@ class LocalRemote(Remote):
         base = self._path(prefix) if prefix else self.root
         if not base.is_dir():
             return []
-        out = []
+        out: list[str] = []
         for dirpath, dirnames, filenames in os.walk(base):
             dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
             out.extend(Path(dirpath, f).relative_to(self.root).as_posix() for f in filenames)
@@ -150,8 +154,8 @@ class HfRemote(Remote):
                 got = hf_hub_download(self.repo_id, self._full(rel), repo_type=self.repo_type, revision=self.revision,
                                       local_dir=tmp, endpoint=self.endpoint)
             except (EntryNotFoundError, RepositoryNotFoundError, RevisionNotFoundError) as exc:
-                if _status(exc) in (401, 403):
-                    raise ResourceError(_denied(self.url, rel, _status(exc))) from None
+                if (status := _status(exc)) in (401, 403):
+                    raise ResourceError(_denied(self.url, rel, status)) from None
                 raise RemoteNotFoundError(f"remote {self.url}: {rel} not found ({type(exc).__name__})") from None
             except HfHubHTTPError as exc:
                 raise ResourceError(_http_failure(self.url, rel, _status(exc), exc)) from None
@@ -253,9 +257,10 @@ class HttpRemote(Remote):
 
     def __init__(self, base_url: str, timeout: float = 60.0) -> None:
         self.url, self.timeout = base_url.rstrip("/"), timeout
-        self._client, self._pid = None, -1
+        self._client: httpx.Client | None = None
+        self._pid = -1
 
-    def client(self):
+    def client(self) -> httpx.Client:
         """One connection-pooling client per process (a client must not cross a fork)."""
         import httpx
 

@@ -66,8 +66,13 @@ class VersionPlace:
         return self.cache_dir / META / self.spec.rel
 
     @property
-    def link_path(self) -> Path:
-        """``<install>/<data_type>/<source>``: the version-free path that points at the version."""
+    def install_root(self) -> Path:
+        """The install dir; :class:`ResourceError` when none is configured."""
         if self.install_dir is None:
             raise ResourceError("no install dir configured")
-        return self.install_dir / self.spec.data_type / self.spec.source
+        return self.install_dir
+
+    @property
+    def link_path(self) -> Path:
+        """``<install>/<data_type>/<source>``: the version-free path that points at the version."""
+        return self.install_root / self.spec.data_type / self.spec.source

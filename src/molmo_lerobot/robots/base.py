@@ -190,11 +190,11 @@ def parse_base_size(value: object) -> tuple[float, float, float] | None:
         return None
     numbers = isinstance(value, list | tuple) and all(
         isinstance(v, int | float) and not isinstance(v, bool) for v in value)
-    size = tuple(float(v) for v in value) if numbers else ()  # type: ignore[union-attr]
+    size = tuple(float(v) for v in value) if numbers and isinstance(value, list | tuple) else ()
     if len(size) != 3 or not all(math.isfinite(v) and 0 < v <= MAX_BASE_SIZE_M for v in size):
         raise ValueError(f"base_size must be null or three positive sizes in metres [x, y, z] "
                          f"(each at most {MAX_BASE_SIZE_M:g}), got {value!r}")
-    return size  # type: ignore[return-value]
+    return size[0], size[1], size[2]
 
 
 #: the pedestal's colour (MolmoSpaces textures theirs with a dark wood)
@@ -222,13 +222,13 @@ class RobotType(ABC):
     name: str
     aliases: tuple[str, ...] = ()
     #: move group -> action dimension
-    move_groups: dict[str, int]
+    move_groups: ClassVar[dict[str, int]]
     #: move group -> public joint names (no "/": they become LeRobot feature names)
-    joint_names: dict[str, list[str]]
+    joint_names: ClassVar[dict[str, list[str]]]
     #: groups of the robot that take no actions (group -> size): set from ``init_qpos`` at reset and held
     held_groups: ClassVar[dict[str, int]] = {}
     #: move group (and held group) -> default initial positions, used where an episode gives none
-    default_init_qpos: dict[str, list[float]]
+    default_init_qpos: ClassVar[dict[str, list[float]]]
     #: camera system for episodes that name no cameras and no ``source.camera_system_class``
     default_camera_system: str | None = None
     #: MolmoSpaces' ``base_size``: the box pedestal (x, y, z extents, metres) between the base

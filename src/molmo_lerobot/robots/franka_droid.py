@@ -107,9 +107,11 @@ def _robotiq_spec() -> mujoco.MjSpec:
     root = ElementTree.parse(path).getroot()
     root.insert(0, ElementTree.Element("compiler", angle="radian"))  # robosuite's top-level model says so
     asset = root.find("asset")
-    seen: set[str] = set()
+    if asset is None:
+        raise ValueError(f"{path}: no <asset> element")
+    seen: set[str | None] = set()
     for mesh in list(asset.iter("mesh")):  # absolute paths; drop the repeated base mesh (its file is absent)
-        mesh.set("file", str(path.parent / mesh.get("file")))
+        mesh.set("file", str(path.parent / mesh.attrib["file"]))
         if mesh.get("name") in seen:
             asset.remove(mesh)
         seen.add(mesh.get("name"))

@@ -54,7 +54,7 @@ class Episode:
 
     @property
     def horizon(self) -> int:
-        return self.plan.horizon
+        return self.plan.steps
 
     @property
     def prompt(self) -> str:

@@ -116,7 +116,8 @@ def plugin_option_problems(cfg: dict[str, Any], ctx: RunContext) -> list[str]:
     """The run options only the installed plugins can check, one line each naming its key: the
     policy's own options (its ``PolicyType.check``), ``camera.system``, ``horizons.<task type>``."""
     policy = ctx.plugins.policy(str(cfg["policy"]["name"]))
-    out = list(policy.check(cfg["policy"])) if getattr(policy, "check", None) else []
+    check = getattr(policy, "check", None)  # a duck-typed descriptor may lack it
+    out = list(check(cfg["policy"])) if check is not None else []
     system = (cfg.get("camera") or {}).get("system")
     if system is not None:
         try:
@@ -134,7 +135,8 @@ def plugin_option_problems(cfg: dict[str, Any], ctx: RunContext) -> list[str]:
 
 def _make_executor(cfg: dict[str, Any]) -> Any:
     ex = cfg.get("executor") or {"name": "local"}
-    common = dict(timeout_s=float(cfg.get("episode_timeout_s", 900)), retries=int(cfg.get("episode_retries", 1)))
+    common: dict[str, Any] = dict(timeout_s=float(cfg.get("episode_timeout_s", 900)),
+                                  retries=int(cfg.get("episode_retries", 1)))
     if ex["name"] == "local":
         from molmo_lerobot.runner.local import LocalExecutor
 
@@ -146,7 +148,7 @@ def _make_executor(cfg: dict[str, Any]) -> Any:
     if ex["name"] == "ray":
         from molmo_lerobot.runner.ray_executor import RayExecutor
 
-        options = {k: v for k, v in ex.items() if k != "name"}
+        options: dict[str, Any] = {k: v for k, v in ex.items() if k != "name"}
         try:
             return RayExecutor(int(cfg["workers"]), **options, **common)
         except TypeError as exc:
@@ -243,7 +245,7 @@ def _plan_run(planner: EpisodePlanner, indices: list[int]) -> tuple[dict[int, Ep
     for i, plan in plans.items():
         if plan.error is not None:  # recorded as such, never simulated
             continue
-        work = episode_work_problem(plan.horizon, timing, f"{bench.where(i)} ({plan.horizon_source})")
+        work = episode_work_problem(plan.steps, timing, f"{bench.where(i)} ({plan.horizon_source})")
         if work:
             too_long.append(work)
         task_type = ctx.plugins.task_type(plan.task_type)

@@ -26,6 +26,9 @@ The server forks from its main thread; importing LeRobot leaves it idle library 
 (OpenCV's, jemalloc's, OpenBLAS's), which re-initialise in a forked child: a forked worker runs
 OpenCV's and torch's parallel kernels (``tests/runner/test_worker_start.py``, slow). A policy whose
 libraries cannot be forked that way runs with ``executor.start_method=spawn``.
+
+It drives CPython's private multiprocessing API, which typeshed does not declare: hence the
+``type: ignore[attr-defined]`` on those lines.
 """
 
 from __future__ import annotations
@@ -89,7 +92,7 @@ class PreloadedForkServer:
 
     @property
     def pid(self) -> int | None:
-        return self._server._forkserver_pid
+        return self._server._forkserver_pid  # type: ignore[attr-defined]
 
     def state(self) -> str | None:
         """Why the server cannot fork now (``gone``, ``stopped``, ...), or None while it runs."""
@@ -105,7 +108,7 @@ class PreloadedForkServer:
         """A daemon process running ``target(*args)``, forked from this server once started. Its
         ``start()`` raises :class:`ForkServerLost` (or ``EOFError``) when the server is lost first."""
         proc = ForkServerProcess(target=target, args=args, name=name, daemon=True)
-        proc._Popen = _Launcher(self)  # type: ignore[attr-defined,method-assign]
+        proc._Popen = _Launcher(self)  # type: ignore[method-assign]
         return proc
 
     def restart(self) -> None:
@@ -117,7 +120,7 @@ class PreloadedForkServer:
                 os.kill(pid, signal.SIGKILL)
             with contextlib.suppress(ChildProcessError):
                 os.waitpid(pid, 0)
-            os.close(self._server._forkserver_alive_fd)
+            os.close(self._server._forkserver_alive_fd)  # type: ignore[attr-defined]
         self._server = self._new()
         self.start()
 
@@ -136,7 +139,7 @@ class PreloadedForkServer:
         pid = self.pid
         if pid is None:
             return
-        os.close(self._server._forkserver_alive_fd)
+        os.close(self._server._forkserver_alive_fd)  # type: ignore[attr-defined]
         deadline = time.monotonic() + timeout_s
         try:
             while not os.waitpid(pid, os.WNOHANG)[0]:
@@ -180,7 +183,7 @@ class _Popen(popen_forkserver.Popen):
         super().__init__(process_obj)
 
     def _launch(self, process_obj: process.BaseProcess) -> None:
-        prep_data = spawn.get_preparation_data(process_obj._name)
+        prep_data = spawn.get_preparation_data(process_obj._name)  # type: ignore[attr-defined]
         buf = io.BytesIO()
         set_spawning_popen(self)
         try:
@@ -188,12 +191,12 @@ class _Popen(popen_forkserver.Popen):
             reduction.dump(process_obj, buf)
         finally:
             set_spawning_popen(None)
-        self._status, w = self._server._server.connect_to_new_process(self._fds)
+        self._status, w = self._server._server.connect_to_new_process(self._fds)  # type: ignore[attr-defined]
         parent_w = os.dup(w)  # the child's "parent alive" sentinel, as the standard Popen keeps
         try:
             self.pid = self._server.wait_pid(self._status)  # before the job is written: a stopped server
         except BaseException:                                # never forks a child to read it
-            util.close_fds(w, parent_w, self._status)
+            util.close_fds(w, parent_w, self._status)  # type: ignore[attr-defined]
             raise
         self._server.forked = True
         try:
@@ -201,7 +204,7 @@ class _Popen(popen_forkserver.Popen):
         except (ProcessLookupError, AttributeError):  # already gone (the server has its status), or no pidfds
             self.sentinel = self._status
         fds = (parent_w, self._status) + ((self.sentinel,) if self.sentinel != self._status else ())
-        self.finalizer = util.Finalize(self, util.close_fds, fds)
+        self.finalizer = util.Finalize(self, util.close_fds, fds)  # type: ignore[attr-defined]
         with contextlib.suppress(BrokenPipeError), open(w, "wb", closefd=True) as f:
             f.write(buf.getbuffer())  # a worker that died before reading its job: its sentinel says so
 
@@ -211,7 +214,7 @@ class _Popen(popen_forkserver.Popen):
             with contextlib.suppress(ProcessLookupError):
                 signal.pidfd_send_signal(self.sentinel, sig)
         else:
-            super()._send_signal(sig)
+            super()._send_signal(sig)  # type: ignore[misc]
 
     def poll(self, flag: int = os.WNOHANG) -> int | None:
         if self.returncode is None:

@@ -28,6 +28,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
+from multiprocessing.context import ForkServerContext, SpawnContext
 from typing import Any
 
 from molmo_lerobot.gl import use_headless_gl
@@ -99,7 +100,10 @@ def _exit_when_orphaned() -> None:
     has gone. That is its parent with ``spawn``; with ``forkserver`` its parent is the server,
     which lives while any worker does, so the supervisor's end is read from multiprocessing's
     parent sentinel (a pipe only the supervisor writes to: it reads EOF once the supervisor is gone)."""
-    wait([mp.parent_process().sentinel])
+    parent = mp.parent_process()
+    if parent is None:
+        raise RuntimeError("a worker watches the supervisor that started it: run it in a child process")
+    wait([parent.sentinel])
     os.kill(os.getpid(), signal.SIGTERM)
     time.sleep(ORPHAN_GRACE_S)
     os._exit(1)
@@ -123,7 +127,8 @@ class ProcessTransport(Transport):
         if start_method == "forkserver" and start_method not in mp.get_all_start_methods():
             start_method = "spawn"  # the platform has no fork server
         self.start_method = start_method
-        self.ctx = mp.get_context(start_method)
+        self.ctx: SpawnContext | ForkServerContext = (mp.get_context("spawn") if start_method == "spawn"
+                                                       else mp.get_context("forkserver"))
         self.server: PreloadedForkServer | None = None
 
     def start(self, worker_id: str, job: WorkerJob) -> _Worker:

@@ -54,6 +54,13 @@ class EpisodePlan:
     error: str | None = None
 
     @property
+    def steps(self) -> int:
+        """:attr:`horizon` of an episode that can run (one whose task type a plugin provides)."""
+        if self.horizon is None:
+            raise ValueError(f"episode {self.episode_index}: no plugin provides task type {self.task_type!r}")
+        return self.horizon
+
+    @property
     def house_index(self) -> int | None:
         return self.spec.get("house_index")
 

@@ -248,6 +248,8 @@ def _short(exc: BaseException) -> str:
 class RayExecutor(Supervisor):
     """The supervisor over Ray actors: ``RayExecutor(workers, address=…, timeout_s=…)``."""
 
+    transport: RayTransport
+
     def __init__(self, workers: int, address: str | None = None, include_dashboard: bool = False,
                  num_cpus_per_worker: float = 1.0, num_gpus_per_worker: float = 0.0, **options: Any) -> None:
         super().__init__(RayTransport(address, include_dashboard, num_cpus_per_worker, num_gpus_per_worker),

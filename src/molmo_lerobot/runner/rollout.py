@@ -50,7 +50,11 @@ def check_divergence(data: Any, when: str) -> None:
 DONE_KEY = "done"
 
 
-def split_actions(out: Any, move_groups: dict[str, int], policy: str) -> list[Action]:
+#: one step of a policy's output: its action, with ``DONE_KEY: True`` on the step that ends the episode
+ChunkStep = dict[str, np.ndarray | bool]
+
+
+def split_actions(out: Any, move_groups: dict[str, int], policy: str) -> list[ChunkStep]:
     """Validate a policy's output and split it into single-step actions.
 
     Accepts one action ``{group: (dim,)}`` or a chunk ``{group: (H, dim)}`` (same H for
@@ -100,7 +104,7 @@ def split_actions(out: Any, move_groups: dict[str, int], policy: str) -> list[Ac
             done[-1] = bool(flag)
         else:
             done[:] = flag.astype(bool)
-    steps: list[Action] = [{g: a[t] for g, a in arrays.items()} for t in range(horizon)]
+    steps: list[ChunkStep] = [{g: a[t] for g, a in arrays.items()} for t in range(horizon)]
     for t in np.flatnonzero(done):
         steps[int(t)][DONE_KEY] = True
     return steps
@@ -162,14 +166,15 @@ def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: i
         return obs
 
     obs = observe(0, policy.needs_images or record_images(0))
-    queue: deque[Action] = deque()
+    queue: deque[ChunkStep] = deque()
     success = success_once = any_step = False
     ended_by, steps = "horizon", horizon
     for step in range(horizon):
         if not queue:
             queue.extend(split_actions(policy.act(obs), env.move_groups, policy_name))
-        action = dict(queue.popleft())
-        said_done = bool(action.pop(DONE_KEY, False))
+        planned = queue.popleft()
+        said_done = bool(planned.get(DONE_KEY, False))
+        action: Action = {g: a for g, a in planned.items() if isinstance(a, np.ndarray)}
         for group in env.move_groups:  # a left-out group holds its target
             if group not in action:
                 action[group] = env.robot.targets(env.data, group)
@@ -199,7 +204,7 @@ def resolve_horizon(override: int | None, task_spec: Any, default_sec: float, po
     return horizon_with_source(override, task_spec, default_sec, policy_dt_ms, task_sec)[0]
 
 
-def horizon_with_source(override: int | None, task_spec: Any, default_sec: float, policy_dt_ms: float,
+def horizon_with_source(override: int | None, task_spec: Any, default_sec: float | None, policy_dt_ms: float,
                         task_sec: float | None = None) -> tuple[int, str]:
     """:func:`resolve_horizon` and where it came from: ``cli``, ``task_horizons``,
     ``task_horizon_sec`` or ``default``."""
@@ -208,4 +213,6 @@ def horizon_with_source(override: int | None, task_spec: Any, default_sec: float
     episode_sec = getattr(task_spec, "task_horizon_sec", None)
     seconds, source = ((task_sec, "task_horizons") if task_sec else
                        (episode_sec, "task_horizon_sec") if episode_sec else (default_sec, "default"))
+    if seconds is None:
+        raise ValueError("no horizon: set horizon=, horizons.<task type> or the episode's task_horizon_sec")
     return max(1, round(float(seconds) * 1000.0 / policy_dt_ms)), source

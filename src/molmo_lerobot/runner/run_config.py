@@ -306,8 +306,8 @@ class RunConfig(_OpenSection):
 
     policy: Annotated[dict[str, Any], BeforeValidator(_policy)] = {"name": "scripted"}
     benchmark: BenchmarkConfig = BenchmarkConfig(name="pick_v1")
-    executor: ExecutorConfig = ExecutorConfig(name="local", start_method="forkserver", egl_devices=None,
-                                              cuda_devices=None)
+    executor: ExecutorConfig = ExecutorConfig.model_validate(
+        {"name": "local", "start_method": "forkserver", "egl_devices": None, "cuda_devices": None})
     horizons: Annotated[dict[str, TaskSeconds], _rule(
         lambda v: isinstance(v, Mapping), "{key}: expected a mapping of task type to seconds, got {got}")] = {}
     camera: CameraConfig = CameraConfig()

@@ -367,7 +367,7 @@ def reaping_children(timeout_s: float = 10.0) -> Iterator[None]:
         for helper in helpers:
             if _helper_pid(helper) is not None:
                 with suppress(OSError, ChildProcessError):
-                    helper._stop()
+                    helper._stop()  # type: ignore[union-attr]
         deadline = time.monotonic() + timeout_s
         done: set[int] = set(before)
         while pids := [p for p in _children() if p not in done]:

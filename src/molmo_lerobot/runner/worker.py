@@ -140,11 +140,12 @@ class EpisodeWorker:
         from molmo_lerobot.runner.episode import start_episode
 
         t0 = time.perf_counter()
-        house, task_cls, horizon, prompt = plan.house_index, plan.task_cls, plan.horizon, plan.prompt
+        house, task_cls, prompt = plan.house_index, plan.task_cls, plan.prompt
         result: EpisodeResult
         try:
             spec = plan.episode(self.ctx.plugins)
             task_type = self.ctx.plugins.task_type(plan.task_type)
+            horizon = plan.steps
             t_scene = time.perf_counter()
             env, task = start_episode(spec, plan.seed, task_type, self.ctx)
             scene_s = time.perf_counter() - t_scene
@@ -163,7 +164,7 @@ class EpisodeWorker:
                 info = EpisodeInfo(
                     episode_index=plan.episode_index, house_index=house, seed=plan.seed, prompt=prompt,
                     task_type=task_type.name, fps=1000.0 / self.timing.policy_dt_ms, horizon=horizon,
-                    camera_names=list(env.camera_names), img_resolution=tuple(spec.img_resolution),
+                    camera_names=list(env.camera_names), img_resolution=spec.img_resolution,
                     joint_names=dict(env.joint_names), move_groups=dict(env.move_groups),
                     expert=self.policy.needs_simulator,
                     extra={"task_cls": task_cls, "policy": self.policy_name, "robot": spec.robot.robot_name,

@@ -61,7 +61,9 @@ class PolicyServerActor:
 
     def address(self) -> tuple[str, int | str]:
         """``("ready", port)`` or ``("error", why)``."""
-        return ("error", self.error) if self.server is None else ("ready", int(self.server.port))
+        if self.server is None:
+            return "error", self.error or "the policy server did not start"
+        return "ready", int(self.server.port)
 
     def stats(self) -> dict[str, Any]:
         return {**self.server.stats(), "gpu_ids": self.gpu_ids}

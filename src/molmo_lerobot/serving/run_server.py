@@ -93,7 +93,10 @@ def _exit_when_orphaned() -> None:
     """Stop this server gracefully (then for sure) once the run that started it has gone, however
     it went (``kill -9`` included): its parent sentinel, a pipe only the parent holds open, reads
     EOF. A server left behind would hold its model (GPU memory) and the run's resource tracker."""
-    wait([mp.parent_process().sentinel])
+    parent = mp.parent_process()
+    if parent is None:
+        raise RuntimeError("a policy server watches the run that started it: run it in a child process")
+    wait([parent.sentinel])
     os.kill(os.getpid(), signal.SIGTERM)
     time.sleep(ORPHAN_GRACE_S)
     os._exit(1)

@@ -124,10 +124,11 @@ class PolicyServer:
                             ("max_message_bytes", max_message_bytes), ("max_batch", max_batch)):
             if value < 1:
                 raise ValueError(f"{name} must be at least 1, got {value}")
-        for name, value in (("first_request_timeout_s", first_request_timeout_s), ("idle_timeout_s", idle_timeout_s),
-                            ("evict_idle_s", evict_idle_s), ("batch_timeout_ms", batch_timeout_ms)):
-            if not value >= 0:
-                raise ValueError(f"{name} must be >= 0, got {value}")
+        for name, seconds in (("first_request_timeout_s", first_request_timeout_s),
+                              ("idle_timeout_s", idle_timeout_s), ("evict_idle_s", evict_idle_s),
+                              ("batch_timeout_ms", batch_timeout_ms)):
+            if not seconds >= 0:
+                raise ValueError(f"{name} must be >= 0, got {seconds}")
         self.factory = factory
         self.host, self.port = host, port
         self.metadata = dict(metadata or {})

@@ -452,7 +452,8 @@ class Env:
     def scene_metadata(self) -> dict[str, Any]:
         """The episode's scene metadata from its scene dataset (``objects``: body -> asset_id, category, …)."""
         if self._scene_metadata is None:
-            self._scene_metadata = (self._scene.episode_metadata(self.spec, self._scene_ctx) if self._scene
+            scene, ctx = self._scene, self._scene_ctx
+            self._scene_metadata = (scene.episode_metadata(self.spec, ctx) if scene and ctx is not None
                                     else {"objects": {}})
         return self._scene_metadata
 

@@ -52,7 +52,8 @@ class Grid:
         nx, ny = self.blocked.shape
         xs = self.x0 + (np.arange(nx) + 0.5) * self.res
         ys = self.y0 + (np.arange(ny) + 0.5) * self.res
-        return np.meshgrid(xs, ys, indexing="ij")
+        x, y = np.meshgrid(xs, ys, indexing="ij")
+        return x, y
 
     def sees(self, a: Iterable[float], b: Iterable[float]) -> bool:
         """Whether the segment from ``a`` to ``b`` (x, y) crosses no tall cell."""

@@ -15,6 +15,7 @@ import os
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import mujoco
 import numpy as np
@@ -25,6 +26,13 @@ from molmo_lerobot.gl import gl_error
 _MODEL_SLOTS = 4
 #: the process's GL context and render contexts, keyed by process id (a forked child makes its own)
 _PROCESS_RENDERERS: dict[int, FrameRenderer] = {}
+
+
+class GLContext(Protocol):
+    """MuJoCo's GL context of a backend (``mujoco.egl.GLContext``, …)."""
+
+    def make_current(self) -> None: ...
+    def free(self) -> None: ...
 
 
 @dataclass
@@ -38,7 +46,7 @@ class _Slot:
 class FrameRenderer:
     """The process's GL context and a render context per compiled model (module docstring)."""
 
-    gl: object
+    gl: GLContext
     slots: OrderedDict[int, _Slot] = field(default_factory=OrderedDict)
     #: seconds spent making the GL context and render contexts
     setup_s: float = 0.0

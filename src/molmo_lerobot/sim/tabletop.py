@@ -75,7 +75,7 @@ class ProceduralTabletop(SceneDataset):
     """A table, a Franka-sized workspace and a handful of built-in objects per house."""
 
     name = "procedural_tabletop"
-    aliases = ("tabletop",)
+    aliases: tuple[str, ...] = ("tabletop",)
     #: whether houses include their three receptacles (a separate, named scene dataset, so
     #: that adding receptacles never changed the scenes of benchmarks made without them)
     WITH_RECEPTACLES = False

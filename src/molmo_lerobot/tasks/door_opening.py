@@ -24,7 +24,7 @@ benchmark schema, accepted unchanged).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import mujoco
@@ -144,7 +144,7 @@ class DoorOpeningTask(Task):
         return OPEN_REWARD * float(self.success())
 
 
-def start_warnings(joint_range: tuple[float, float] | list[float] | None, start: float,
+def start_warnings(joint_range: Sequence[float] | None, start: float,
                    threshold: float) -> list[tuple[str, str]]:
     """``(field, what)`` the episode's own numbers show is odd about its start (MolmoSpaces runs it as it is)."""
     if joint_range is None or len(joint_range) != 2 or joint_range[0] == joint_range[1]:

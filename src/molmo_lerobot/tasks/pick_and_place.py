@@ -35,7 +35,7 @@ import math
 from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
-from pydantic import BeforeValidator, Field
+from pydantic import BaseModel, BeforeValidator, Field
 from scipy.spatial.transform import Rotation
 from shapely.geometry import Point
 
@@ -78,16 +78,16 @@ class PickAndPlaceTaskSpec(PickTaskSpec):
     max_place_receptacle_rot_displacement: float = Field(default=math.radians(60), ge=0)  # radians, yaw ignored
 
 
-def _gap_default(default: float) -> Any:
+def _gap_default(default: float) -> BeforeValidator:
     """A surface gap in metres; ``null`` in a file means the task's default."""
-    return Annotated[float, BeforeValidator(lambda v: default if v is None else v)]
+    return BeforeValidator(lambda v: default if v is None else v)
 
 
 class PickAndPlaceNextToTaskSpec(PickAndPlaceTaskSpec):
     """Next to: the object ends beside the receptacle, XY surface gap within [min, max]."""
 
-    min_surface_to_surface_gap: _gap_default(0.0) = 0.0
-    max_surface_to_surface_gap: _gap_default(0.05) = 0.05
+    min_surface_to_surface_gap: Annotated[float, _gap_default(0.0)] = 0.0
+    max_surface_to_surface_gap: Annotated[float, _gap_default(0.05)] = 0.05
 
 
 class PickAndPlaceColorTaskSpec(PickAndPlaceTaskSpec):
@@ -106,7 +106,7 @@ _PLACE_FIELDS = ("receptacle_supported_weight_frac", "max_place_receptacle_pos_d
 _GAP_FIELDS = ("min_surface_to_surface_gap", "max_surface_to_surface_gap")
 
 
-def _resolved(spec: EpisodeSpec, fields: tuple[str, ...], model: type) -> dict[str, float]:
+def _resolved(spec: EpisodeSpec, fields: tuple[str, ...], model: type[BaseModel]) -> dict[str, float]:
     """Each field from the episode's task, else ``model``'s default."""
     out = {}
     for name in fields:
