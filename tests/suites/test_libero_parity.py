@@ -1,0 +1,107 @@
+"""LIBERO in molmo-eval's env suite against LeRobot's own LIBERO evaluation (``lerobot-eval --env.type=libero``).
+
+Both sides run in the LIBERO venv (``make .libero-venv``): ours is ``LiberoSuite`` + ``play`` (our own
+episode plan, reset, settle, observation conventions and step loop over LIBERO's env); theirs is
+``lerobot_libero_reference.py`` (LeRobot's ``make_env``, env processors and ``rollout``). For a seeded random
+and a fixed replay policy every episode must agree on success and step count, and bit for bit on each 8-D
+state the policy saw and on the first camera images. The default run plays two short episodes; the ≥50-episode
+run across the five suites is ``-m slow`` (``MOLMO_LIBERO_PARITY_HORIZON`` shortens its episodes).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from parity_policies import POLICIES  # noqa: E402
+
+from molmo_lerobot.suites.libero import MAX_STEPS, LiberoSuite, libero_venv, plan_episodes, play  # noqa: E402
+
+HERE = Path(__file__).parent
+SIZE = 128  # smaller than lerobot-eval's 360² to keep the test cheap; both sides render at it
+
+
+@pytest.fixture(scope="module")
+def venv() -> Path:
+    path = libero_venv()
+    if not (path / "bin" / "python").exists():
+        pytest.skip(f"no LIBERO venv at {path} (build it: make .libero-venv)")
+    return path
+
+
+def theirs(venv: Path, suite: str, task_id: int, episodes: int, seed: int, horizon: int, policy: str) -> dict:
+    args = {"suite": suite, "task_id": task_id, "episodes": episodes, "seed": seed, "horizon": horizon,
+            "policy": policy, "size": SIZE}
+    env = {**os.environ, "LIBERO_CONFIG_PATH": str(venv / "libero-config"), "MUJOCO_GL": "egl"}
+    proc = subprocess.run([str(venv / "bin" / "python"), str(HERE / "lerobot_libero_reference.py"), json.dumps(args)],
+                          env=env, capture_output=True, text=True, timeout=3600)
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
+    assert proc.returncode == 0 and lines, proc.stdout[-2000:] + proc.stderr[-3000:]
+    return json.loads(lines[-1])
+
+
+def ours(suite_env: LiberoSuite, suite: str, task_id: int, episodes: int, seed: int, horizon: int,
+         policy: str) -> list[dict]:
+    task = suite_env.tasks(suite)[task_id]
+    out = []
+    for episode in plan_episodes(suite, [task], episodes, seed=seed, horizon=horizon):
+        seen: dict = {"states": [], "first_images": {}}
+
+        def act(obs: dict, step: int, episode=episode, seen=seen):
+            seen["states"].append([float(v) for v in obs["observation.state"]])
+            if step == 0:
+                seen["first_images"] = {k: hashlib.sha256(obs[k].tobytes()).hexdigest()
+                                        for k in ("observation.images.image", "observation.images.image2")}
+            return POLICIES[policy](episode.seed, step)
+
+        outcome = play(suite_env, episode, act)
+        out.append({"success": outcome.success, "steps": outcome.steps, **seen})
+    return out
+
+
+def assert_same(mine: list[dict], reference: list[dict], where: str) -> None:
+    assert len(mine) == len(reference)
+    for k, (a, b) in enumerate(zip(mine, reference, strict=True)):
+        label = f"{where} episode {k}"
+        assert (a["success"], a["steps"]) == (b["success"], b["steps"]), label
+        assert b["done_at"] == b["steps"], label  # LeRobot's own two counts agree
+        assert a["first_images"] == b["first_images"], f"{label}: first camera images differ"
+        assert a["states"] == b["states"], f"{label}: 8-D state trajectories differ"
+
+
+def test_two_short_episodes_match_lerobot_eval(venv):
+    """libero_object task 0, init states 0 and 1, 12 steps of a seeded random policy."""
+    reference = theirs(venv, "libero_object", 0, 2, 7, 12, "random")
+    assert MAX_STEPS == reference["max_steps"]
+    with LiberoSuite(venv, image_size=SIZE) as suite_env:
+        mine = ours(suite_env, "libero_object", 0, 2, 7, 12, "random")
+    assert_same(mine, reference["episodes"], "libero_object task 0")
+
+
+#: (suite, task id) pairs of the long run: two tasks of each suite, five episodes each = 50 episodes
+LONG = [(s, t) for s in ("libero_spatial", "libero_object", "libero_goal", "libero_10", "libero_90") for t in (0, 1)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("hard_reset", [True, False], ids=["hard_reset", "reused_model"])
+def test_fifty_episodes_match_lerobot_eval(venv, hard_reset):
+    """Five episodes of two tasks of every suite, random and replay policies alternating; ours with LeRobot's
+    hard reset, and with the task's model reused across its episodes (``hard_reset=False``)."""
+    horizon = os.environ.get("MOLMO_LIBERO_PARITY_HORIZON")
+    rows = []
+    with LiberoSuite(venv, image_size=SIZE, hard_reset=hard_reset) as suite_env:
+        for i, (suite, task_id) in enumerate(LONG):
+            steps = int(horizon) if horizon else MAX_STEPS[suite]
+            policy = ("random", "replay")[i % 2]
+            reference = theirs(venv, suite, task_id, 5, 1000 * i, steps, policy)
+            mine = ours(suite_env, suite, task_id, 5, 1000 * i, steps, policy)
+            rows.append((suite, task_id, policy, [(m["success"], m["steps"]) for m in mine]))
+            assert_same(mine, reference["episodes"], f"{suite} task {task_id}")
+    print("\n".join(f"{s} task {t} {p}: {o}" for s, t, p, o in rows))
