@@ -16,7 +16,6 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
 import torch
 from lerobot.envs.configs import LiberoEnv as LiberoEnvConfig
 from lerobot.envs.factory import make_env
@@ -25,7 +24,7 @@ from lerobot.processor.converters import policy_action_to_transition, transition
 from lerobot.scripts.lerobot_eval import rollout
 
 sys.path.insert(0, str(Path(__file__).parent))
-from parity_policies import POLICIES  # noqa: E402
+from parity_policies import POLICIES
 
 
 class Recorded(torch.nn.Module):

@@ -20,9 +20,9 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from parity_policies import POLICIES  # noqa: E402
+from parity_policies import POLICIES
 
-from molmo_lerobot.suites.libero import MAX_STEPS, LiberoSuite, libero_venv, plan_episodes, play  # noqa: E402
+from molmo_lerobot.suites.libero import MAX_STEPS, LiberoSuite, libero_venv, plan_episodes, play
 
 HERE = Path(__file__).parent
 SIZE = 128  # smaller than lerobot-eval's 360² to keep the test cheap; both sides render at it
@@ -79,7 +79,7 @@ def assert_same(mine: list[dict], reference: list[dict], where: str) -> None:
 def test_two_short_episodes_match_lerobot_eval(venv):
     """libero_object task 0, init states 0 and 1, 12 steps of a seeded random policy."""
     reference = theirs(venv, "libero_object", 0, 2, 7, 12, "random")
-    assert MAX_STEPS == reference["max_steps"]
+    assert reference["max_steps"] == MAX_STEPS
     with LiberoSuite(venv, image_size=SIZE) as suite_env:
         mine = ours(suite_env, "libero_object", 0, 2, 7, 12, "random")
     assert_same(mine, reference["episodes"], "libero_object task 0")

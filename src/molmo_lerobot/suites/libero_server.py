@@ -73,7 +73,7 @@ class LiberoServer:
             task = s.get_task(i)
             out.append({"task_id": i, "name": task.name, "instruction": task.language,
                         "bddl_file": f"{task.problem_folder}/{task.bddl_file}",
-                        "init_states": int(len(s.get_task_init_states(i)))})
+                        "init_states": len(s.get_task_init_states(i))})
         return {"suite": suite, "tasks": out}
 
     def reset(self, suite: str, task_id: int, init_state_index: int, seed: int, width: int, height: int,

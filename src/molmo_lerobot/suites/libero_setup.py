@@ -34,17 +34,17 @@ def config_paths(package: Path, config_dir: Path, assets: Path) -> dict[str, str
 
 def write_config(config_dir: Path) -> Path:
     """Write ``config_dir/config.yaml`` and link LIBERO's ``assets`` to the registry tree; returns the config."""
+    from molmo_lerobot.fileio import atomic_write, symlink
     from molmo_lerobot.libero.objects import assets_root
 
     package, assets = libero_package_dir(), assets_root()
     link = package / "assets"
-    if link.is_symlink() and link.resolve() != assets.resolve():
-        link.unlink()
     if not link.exists():
-        link.symlink_to(assets, target_is_directory=True)
-    config_dir.mkdir(parents=True, exist_ok=True)
+        symlink(assets, link, root=package)
+    elif link.resolve() != assets.resolve():
+        raise SystemExit(f"libero_setup: {link} exists and is not the registry's tree {assets}")
     config = config_dir / "config.yaml"
-    config.write_text(json.dumps(config_paths(package, config_dir, assets), indent=1) + "\n")  # JSON is YAML
+    atomic_write(config, json.dumps(config_paths(package, config_dir, assets), indent=1) + "\n", parents=True)
     return config
 
 

@@ -10,6 +10,7 @@ one env process, and it dies with its parent (its stdin closes).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import struct
 import subprocess
@@ -98,10 +99,8 @@ class SuiteProcess:
 
     def close(self) -> None:
         if self._proc.poll() is None:
-            try:
+            with contextlib.suppress(SuiteError):
                 self.request("close")
-            except SuiteError:
-                pass
             try:
                 self._proc.wait(timeout=30)
             except subprocess.TimeoutExpired:
