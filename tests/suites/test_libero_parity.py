@@ -1,11 +1,12 @@
-"""LIBERO in molmo-eval's env suite against LeRobot's own LIBERO evaluation (``lerobot-eval --env.type=libero``).
+"""The LIBERO env suite against LeRobot's own LIBERO evaluation (``lerobot-eval --env.type=libero``).
 
 Both sides run in the LIBERO venv (``make .libero-venv``): ours is ``LiberoSuite`` + ``play`` (our own
 episode plan, reset, settle, observation conventions and step loop over LIBERO's env); theirs is
 ``lerobot_libero_reference.py`` (LeRobot's ``make_env``, env processors and ``rollout``). For a seeded random
 and a fixed replay policy every episode must agree on success and step count, and bit for bit on each 8-D
 state the policy saw and on the first camera images. The default run plays two short episodes; the ≥50-episode
-run across the five suites is ``-m slow`` (``MOLMO_LIBERO_PARITY_HORIZON`` shortens its episodes).
+run across the five suites is ``-m slow`` (``MOLMO_LIBERO_PARITY_HORIZON`` shortens its episodes), and so is the
+check that the registry asset tree holds every file LIBERO loads (``molmo_lerobot.suites.libero_assets``).
 """
 
 from __future__ import annotations
@@ -105,3 +106,45 @@ def test_fifty_episodes_match_lerobot_eval(venv, hard_reset):
             rows.append((suite, task_id, policy, [(m["success"], m["steps"]) for m in mine]))
             assert_same(mine, reference["episodes"], f"{suite} task {task_id}")
     print("\n".join(f"{s} task {t} {p}: {o}" for s, t, p, o in rows))
+
+
+@pytest.mark.slow
+def test_registry_assets_hold_every_file_libero_loads(venv):
+    """LIBERO's ControlEnv builds and compiles every task of the five suites from the registry's asset tree."""
+    env = {**os.environ, "LIBERO_CONFIG_PATH": str(venv / "libero-config"), "MUJOCO_GL": "egl"}
+    proc = subprocess.run([str(venv / "bin" / "python"), "-m", "molmo_lerobot.suites.libero_assets"], env=env,
+                          capture_output=True, text=True, timeout=3600)
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
+    assert proc.returncode == 0 and lines, proc.stderr[-3000:]
+    report = json.loads(lines[-1])
+    print(report)
+    assert report["failed"] == {} and report["files_missing"] == []
+    assert report["tasks_built"] == 130
+
+
+def test_a_lerobot_checkpoint_runs_unchanged(venv, tmp_path):
+    """A LeRobot ACT (random init) with the features of LeRobot's LIBERO datasets, loaded as ``policy=lerobot
+    policy.path=…`` loads it, plays a short LIBERO episode through the suite."""
+    from lerobot.configs.types import FeatureType, PolicyFeature
+    from lerobot.policies.act.configuration_act import ACTConfig
+    from lerobot.policies.act.modeling_act import ACTPolicy
+    from lerobot.policies.factory import make_pre_post_processors
+
+    from molmo_lerobot.policies.lerobot_policy import LeRobotPolicy
+    from molmo_lerobot.suites.libero import PolicyActor
+
+    image = PolicyFeature(FeatureType.VISUAL, (3, SIZE, SIZE))
+    cfg = ACTConfig(input_features={"observation.images.image": image, "observation.images.image2": image,
+                                    "observation.state": PolicyFeature(FeatureType.STATE, (8,))},
+                    output_features={"action": PolicyFeature(FeatureType.ACTION, (7,))},
+                    pretrained_backbone_weights=None, dim_model=16, n_heads=2, dim_feedforward=32, n_encoder_layers=1,
+                    n_decoder_layers=1, chunk_size=4, n_action_steps=4, use_vae=False, device="cpu")
+    pre, post = make_pre_post_processors(cfg, dataset_stats=None)
+    for obj in (ACTPolicy(cfg), pre, post):
+        obj.save_pretrained(tmp_path)
+    policy = LeRobotPolicy({"name": "lerobot", "path": str(tmp_path), "device": "cpu"})
+    with LiberoSuite(venv, image_size=SIZE) as suite_env:
+        [episode] = plan_episodes("libero_object", suite_env.tasks("libero_object")[:1], 1, horizon=6)
+        outcome = play(suite_env, episode, PolicyActor(policy, episode))
+    assert outcome.steps == 6 and not outcome.success
+    assert len(outcome.final_state) == 8

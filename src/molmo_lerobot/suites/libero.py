@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from molmo_lerobot.hashing import content_sha256
+from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.suites.pipe import SuiteProcess
 
 #: LeRobot's per-suite step limits (``lerobot.envs.libero.TASK_SUITE_MAX_STEPS``; the test checks they agree)
@@ -28,6 +29,11 @@ MAX_STEPS = {"libero_spatial": 280, "libero_object": 280, "libero_goal": 300, "l
 #: LeRobot's ``LiberoEnv`` image size for ``lerobot-eval`` (its ``LiberoEnv`` config's default)
 IMAGE_SIZE = 360
 ACTION_DIM = 7
+#: LIBERO's control rate (robosuite's ``control_freq``)
+CONTROL_HZ = 20
+#: the one move group a molmo-eval policy sees: LeRobot's 7-D action (delta end-effector position and
+#: axis-angle, gripper -1 open … +1 closed) is its command, the 8-D ``observation.state`` its observed ``qpos``
+MOVE_GROUP = "eef"
 _REPO = Path(__file__).resolve().parents[3]
 
 
@@ -114,3 +120,34 @@ def play(suite: LiberoSuite, episode: LiberoEpisode,
             steps = step + 1
             break
     return Outcome(bool(success), steps, float(reward), tuple(float(v) for v in obs["observation.state"]))
+
+
+def policy_observation(obs: Mapping[str, Any], step: int) -> dict[str, Any]:
+    """A LIBERO observation in our policy interface (:mod:`molmo_lerobot.policies.base`): cameras ``image``
+    and ``image2`` (so ``policy=lerobot`` feeds them to ``observation.images.image``/``image2``), the 8-D state
+    as ``qpos["eef"]`` (its ``observation.state``)."""
+    return {"images": {"image": obs["observation.images.image"], "image2": obs["observation.images.image2"]},
+            "qpos": {MOVE_GROUP: obs["observation.state"]}, "prompt": obs["task"], "step": step}
+
+
+class PolicyActor:
+    """A molmo-eval :class:`~molmo_lerobot.policies.base.Policy` as :func:`play`'s policy: reset at an
+    episode's first step, its chunks run open loop, one 7-D action per step."""
+
+    def __init__(self, policy: Policy, episode: LiberoEpisode, episode_index: int = 0) -> None:
+        self.policy, self.episode, self.index = policy, episode, episode_index
+        self._queue: list[np.ndarray] = []
+
+    def __call__(self, obs: dict[str, Any], step: int) -> np.ndarray:
+        if step == 0:
+            self._queue.clear()
+            self.policy.reset(EpisodeContext(spec=None, episode_index=self.index, seed=self.episode.seed,
+                                             prompt=self.episode.instruction, move_groups={MOVE_GROUP: ACTION_DIM},
+                                             policy_dt_s=1.0 / CONTROL_HZ))
+        if not self._queue:
+            out = self.policy.act(policy_observation(obs, step))
+            if not isinstance(out, dict) or MOVE_GROUP not in out:
+                raise ValueError(f"episode {self.episode.digest[:12]}: the policy returned no {MOVE_GROUP!r} action")
+            actions = np.asarray(out[MOVE_GROUP], dtype=np.float64)
+            self._queue = list(actions[None] if actions.ndim == 1 else actions)
+        return self._queue.pop(0)
