@@ -28,4 +28,5 @@ pip_install --no-deps -r tests/suites/libero-requirements.txt
 # site dir, so the main venv's own .pth files (its editable installs) apply too.
 echo "import site; site.addsitedir('$MAIN_SITE')" > "$SITE/zz_main_venv.pth"
 PYTHONPATH="$PWD/src" "$VENV_DIR/bin/python" -m molmo_lerobot.suites.libero_setup "$VENV_ABS/libero-config"
-"$VENV_DIR/bin/python" -c "import robosuite, libero.libero; print('libero venv $VENV_DIR: robosuite', robosuite.__version__)"
+LIBERO_CONFIG_PATH="$VENV_ABS/libero-config" "$VENV_DIR/bin/python" -c \
+  "import robosuite, libero.libero; print('libero venv $VENV_DIR: robosuite', robosuite.__version__)" </dev/null

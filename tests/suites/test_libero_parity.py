@@ -37,6 +37,13 @@ def venv() -> Path:
     return path
 
 
+@pytest.fixture(scope="module")
+def suite_env(venv):
+    """One LIBERO env process for the default tests (its libero_object task 0 env is built once)."""
+    with LiberoSuite(venv, image_size=SIZE) as proc:
+        yield proc
+
+
 def theirs(venv: Path, suite: str, task_id: int, episodes: int, seed: int, horizon: int, policy: str) -> dict:
     args = {"suite": suite, "task_id": task_id, "episodes": episodes, "seed": seed, "horizon": horizon,
             "policy": policy, "size": SIZE}
@@ -77,12 +84,11 @@ def assert_same(mine: list[dict], reference: list[dict], where: str) -> None:
         assert a["states"] == b["states"], f"{label}: 8-D state trajectories differ"
 
 
-def test_two_short_episodes_match_lerobot_eval(venv):
+def test_two_short_episodes_match_lerobot_eval(venv, suite_env):
     """libero_object task 0, init states 0 and 1, 12 steps of a seeded random policy."""
     reference = theirs(venv, "libero_object", 0, 2, 7, 12, "random")
     assert reference["max_steps"] == MAX_STEPS
-    with LiberoSuite(venv, image_size=SIZE) as suite_env:
-        mine = ours(suite_env, "libero_object", 0, 2, 7, 12, "random")
+    mine = ours(suite_env, "libero_object", 0, 2, 7, 12, "random")
     assert_same(mine, reference["episodes"], "libero_object task 0")
 
 
@@ -91,6 +97,7 @@ LONG = [(s, t) for s in ("libero_spatial", "libero_object", "libero_goal", "libe
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(8 * 3600)  # ~20 min per task pair at full horizon on a loaded 2-core machine
 @pytest.mark.parametrize("hard_reset", [True, False], ids=["hard_reset", "reused_model"])
 def test_fifty_episodes_match_lerobot_eval(venv, hard_reset):
     """Five episodes of two tasks of every suite, random and replay policies alternating; ours with LeRobot's
@@ -109,6 +116,7 @@ def test_fifty_episodes_match_lerobot_eval(venv, hard_reset):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(3 * 3600)
 def test_registry_assets_hold_every_file_libero_loads(venv):
     """LIBERO's ControlEnv builds and compiles every task of the five suites from the registry's asset tree."""
     env = {**os.environ, "LIBERO_CONFIG_PATH": str(venv / "libero-config"), "MUJOCO_GL": "egl"}
@@ -122,7 +130,7 @@ def test_registry_assets_hold_every_file_libero_loads(venv):
     assert report["tasks_built"] == 130
 
 
-def test_a_lerobot_checkpoint_runs_unchanged(venv, tmp_path):
+def test_a_lerobot_checkpoint_runs_unchanged(suite_env, tmp_path):
     """A LeRobot ACT (random init) with the features of LeRobot's LIBERO datasets, loaded as ``policy=lerobot
     policy.path=…`` loads it, plays a short LIBERO episode through the suite."""
     from lerobot.configs.types import FeatureType, PolicyFeature
@@ -143,8 +151,7 @@ def test_a_lerobot_checkpoint_runs_unchanged(venv, tmp_path):
     for obj in (ACTPolicy(cfg), pre, post):
         obj.save_pretrained(tmp_path)
     policy = LeRobotPolicy({"name": "lerobot", "path": str(tmp_path), "device": "cpu"})
-    with LiberoSuite(venv, image_size=SIZE) as suite_env:
-        [episode] = plan_episodes("libero_object", suite_env.tasks("libero_object")[:1], 1, horizon=6)
-        outcome = play(suite_env, episode, PolicyActor(policy, episode))
+    [episode] = plan_episodes("libero_object", suite_env.tasks("libero_object")[:1], 1, horizon=6)
+    outcome = play(suite_env, episode, PolicyActor(policy, episode))
     assert outcome.steps == 6 and not outcome.success
     assert len(outcome.final_state) == 8
