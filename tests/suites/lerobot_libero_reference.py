@@ -1,12 +1,13 @@
 """LeRobot's own LIBERO evaluation, for the parity test: run with the LIBERO venv's Python.
 
 ``python lerobot_libero_reference.py '<json>'`` with ``{"suite", "task_id", "episodes", "seed", "horizon",
-"policy", "size"}`` builds the env exactly as ``lerobot-eval --env.type=libero --env.task=<suite>
---env.task_ids=[<task_id>] --env.episode_length=<horizon> --eval.batch_size=1`` does (``make_env`` over
-LeRobot's ``LiberoEnv`` config, its env processors) and plays ``episodes`` rollouts with ``lerobot_eval.rollout``,
-seeding rollout ``k`` with ``seed + k`` as ``eval_policy`` does. The policy (``parity_policies.py``) records
-what it is shown. Prints one JSON line: per episode, success (any step's ``is_success`` up to the first done,
-``eval_policy``'s rule), steps (``select_action`` calls), the 8-D states seen and a digest of the first images.
+"policy", "size", "hard_reset"}`` builds the env exactly as ``lerobot-eval --env.type=libero --env.task=<suite>
+--env.task_ids=[<task_id>] --env.episode_length=<horizon> --env.hard_reset=<hard_reset> --eval.batch_size=1``
+does (``make_env`` over LeRobot's ``LiberoEnv`` config, its env processors) and plays ``episodes`` rollouts
+with ``lerobot_eval.rollout``, seeding rollout ``k`` with ``seed + k`` as ``eval_policy`` does. The policy
+(``parity_policies.py``) records what it is shown. Prints one JSON line: per episode, success (any step's
+``is_success`` up to the first done, ``eval_policy``'s rule), steps (``select_action`` calls), the 8-D
+states seen and a digest of the first images.
 """
 
 from __future__ import annotations
@@ -52,7 +53,8 @@ class Recorded(torch.nn.Module):
 
 def main(args: dict) -> None:
     cfg = LiberoEnvConfig(task=args["suite"], task_ids=[args["task_id"]], episode_length=args["horizon"],
-                          observation_height=args["size"], observation_width=args["size"])
+                          observation_height=args["size"], observation_width=args["size"],
+                          hard_reset=args.get("hard_reset", True))
     envs = make_env(cfg, n_envs=1)
     env = envs[args["suite"]][args["task_id"]]
     env_pre, env_post = cfg.get_env_processors()
