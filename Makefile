@@ -1,6 +1,8 @@
 # Set-up is two commands on a fresh machine: `make eval` and `make test`.
 SHELL := /bin/bash
 VENV := .venv
+# LIBERO's own venv (robosuite 1.4 beside our 1.5): the LIBERO suite and its parity tests (docs/suites.md).
+LIBERO_VENV := .libero-venv
 PY := $(VENV)/bin/python
 export MUJOCO_GL ?= egl
 
@@ -34,7 +36,7 @@ $(VENV): pyproject.toml $(PLUGINS)
 eval: $(VENV)
 	$(VENV)/bin/molmo-eval policy=scripted benchmark=pick_v1 workers=2
 
-test: $(VENV)
+test: $(VENV) $(LIBERO_VENV)
 	$(PY) -m pytest -q
 
 test-all: $(VENV)
@@ -58,12 +60,18 @@ $(PARITY_VENV): scripts/parity-venv.sh tests/parity/requirements.txt
 	PYTHON312=$(PYTHON312) scripts/parity-venv.sh $(PARITY_VENV)
 	touch $(PARITY_VENV)
 
-parity: $(VENV) $(PARITY_VENV)
+# Built by scripts/libero-venv.sh: LIBERO's packages there, the rest read from $(VENV).
+$(LIBERO_VENV): $(VENV) scripts/libero-venv.sh tests/suites/libero-requirements.txt
+	PYTHON312=$(PYTHON312) scripts/libero-venv.sh $(LIBERO_VENV) $(VENV)
+	touch $(LIBERO_VENV)
+
+parity: $(VENV) $(PARITY_VENV) $(LIBERO_VENV)
 	MOLMO_PARITY_REQUIRED=1 $(PY) -m pytest -q -m parity tests/parity
+	$(PY) -m pytest -q -s -m slow tests/suites/test_libero_parity.py
 
 # Expert recordings -> lerobot-train ACT -> trained vs random on pick_v1 (knobs: scripts/train_demo.sh).
 train-demo: $(VENV)
 	PYTHON=$(PY) scripts/train_demo.sh
 
 clean:
-	rm -rf $(VENV) $(PARITY_VENV) outputs runs .mypy_cache
+	rm -rf $(VENV) $(PARITY_VENV) $(LIBERO_VENV) outputs runs .mypy_cache

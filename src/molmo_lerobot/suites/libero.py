@@ -1,0 +1,153 @@
+"""LIBERO as an env suite: its episodes as plain episode specs, played in LIBERO's own venv.
+
+An episode is (suite, task id, init-state index, seed, horizon, instruction) and its identity is the SHA-256 of
+that content (:attr:`LiberoEpisode.digest`). :func:`plan_episodes` lays them out the way ``lerobot-eval
+--env.type=libero --eval.n_episodes=N --eval.batch_size=1 --seed=S`` plays them: per task, episode ``k`` starts
+from init state ``k`` with seed ``S + k`` and runs for at most LeRobot's step limit for the suite
+(:data:`MAX_STEPS`). :class:`LiberoSuite` runs them through ``libero_server`` in the LIBERO venv
+(``make .libero-venv``; ``MOLMO_LIBERO_VENV`` names another), and :func:`play` is the step loop, with
+``lerobot-eval``'s accounting: an episode ends at its first terminated step (LIBERO's goal reached) or at the
+horizon, and succeeds when its last step did.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from molmo_lerobot.hashing import content_sha256
+from molmo_lerobot.policies.base import EpisodeContext, Policy
+from molmo_lerobot.suites.pipe import SuiteProcess
+
+#: LeRobot's per-suite step limits (``lerobot.envs.libero.TASK_SUITE_MAX_STEPS``; the test checks they agree)
+MAX_STEPS = {"libero_spatial": 280, "libero_object": 280, "libero_goal": 300, "libero_10": 520, "libero_90": 400}
+#: LeRobot's ``LiberoEnv`` image size for ``lerobot-eval`` (its ``LiberoEnv`` config's default)
+IMAGE_SIZE = 360
+ACTION_DIM = 7
+#: LIBERO's control rate (robosuite's ``control_freq``)
+CONTROL_HZ = 20
+#: the one move group a molmo-eval policy sees: LeRobot's 7-D action (delta end-effector position and
+#: axis-angle, gripper -1 open … +1 closed) is its command, the 8-D ``observation.state`` its observed ``qpos``
+MOVE_GROUP = "eef"
+_REPO = Path(__file__).resolve().parents[3]
+
+
+def libero_venv() -> Path:
+    """The LIBERO venv: ``$MOLMO_LIBERO_VENV``, else ``.libero-venv`` at the repository root."""
+    return Path(os.environ.get("MOLMO_LIBERO_VENV") or _REPO / ".libero-venv")
+
+
+@dataclass(frozen=True)
+class LiberoEpisode:
+    suite: str
+    task_id: int
+    init_state_index: int
+    seed: int
+    horizon: int
+    instruction: str
+
+    @property
+    def digest(self) -> str:
+        """SHA-256 of the episode's canonical JSON: its identity."""
+        return content_sha256(asdict(self), ensure_ascii=True).hex()
+
+
+def plan_episodes(suite: str, tasks: Iterable[Mapping[str, Any]], episodes_per_task: int, seed: int = 0,
+                  horizon: int | None = None) -> list[LiberoEpisode]:
+    """``episodes_per_task`` episodes of each of ``tasks`` (the server's ``tasks`` catalogue entries), in
+    ``lerobot-eval``'s order and seeding; ``horizon`` overrides LeRobot's step limit (``episode_length``)."""
+    if suite not in MAX_STEPS:
+        raise ValueError(f"unknown LIBERO suite {suite!r} (known: {', '.join(MAX_STEPS)})")
+    steps = MAX_STEPS[suite] if horizon is None else int(horizon)
+    out = []
+    for task in tasks:
+        n = int(task["init_states"])
+        out += [LiberoEpisode(suite, int(task["task_id"]), k % n, seed + k, steps, str(task["instruction"]))
+                for k in range(episodes_per_task)]
+    return out
+
+
+@dataclass(frozen=True)
+class Outcome:
+    success: bool
+    steps: int
+    reward: float
+    #: the 8-D state after the last step (the parity test compares it bit for bit)
+    final_state: tuple[float, ...]
+
+
+class LiberoSuite(SuiteProcess):
+    """``libero_server`` in the LIBERO venv, configured offline (the venv's own LIBERO config)."""
+
+    def __init__(self, venv: Path | None = None, image_size: int = IMAGE_SIZE, hard_reset: bool = True) -> None:
+        venv = venv or libero_venv()
+        self.image_size, self.hard_reset = image_size, hard_reset
+        super().__init__(venv / "bin" / "python", "molmo_lerobot.suites.libero_server",
+                         env={"LIBERO_CONFIG_PATH": str(venv / "libero-config"),
+                              "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},
+                         pythonpath=[_REPO / "src"])
+
+    def tasks(self, suite: str) -> list[dict[str, Any]]:
+        return self.request("tasks", suite=suite)["tasks"]
+
+    def reset(self, episode: LiberoEpisode) -> dict[str, np.ndarray]:
+        return self.request("reset", suite=episode.suite, task_id=episode.task_id,
+                            init_state_index=episode.init_state_index, seed=episode.seed, width=self.image_size,
+                            height=self.image_size, hard_reset=self.hard_reset)["observation"]
+
+    def step(self, action: np.ndarray) -> dict[str, Any]:
+        return self.request("step", action=np.asarray(action, dtype=np.float64))
+
+
+def play(suite: LiberoSuite, episode: LiberoEpisode,
+         policy: Callable[[dict[str, Any], int], np.ndarray]) -> Outcome:
+    """Run ``episode``; ``policy(observation, step)`` returns a 7-D action (the observation carries ``task``)."""
+    obs = suite.reset(episode)
+    reward, success, steps = 0.0, False, episode.horizon
+    for step in range(episode.horizon):
+        action = np.asarray(policy({**obs, "task": episode.instruction}, step), dtype=np.float64)
+        if action.shape != (ACTION_DIM,):
+            raise ValueError(f"episode {episode.digest[:12]}: the policy returned shape {action.shape}, "
+                             f"expected ({ACTION_DIM},)")
+        reply = suite.step(action)
+        obs, reward, success = reply["observation"], reward + reply["reward"], reply["success"]
+        if reply["terminated"]:
+            steps = step + 1
+            break
+    return Outcome(bool(success), steps, float(reward), tuple(float(v) for v in obs["observation.state"]))
+
+
+def policy_observation(obs: Mapping[str, Any], step: int) -> dict[str, Any]:
+    """A LIBERO observation in our policy interface (:mod:`molmo_lerobot.policies.base`): cameras ``image``
+    and ``image2`` (so ``policy=lerobot`` feeds them to ``observation.images.image``/``image2``), the 8-D state
+    as ``qpos["eef"]`` (its ``observation.state``)."""
+    return {"images": {"image": obs["observation.images.image"], "image2": obs["observation.images.image2"]},
+            "qpos": {MOVE_GROUP: obs["observation.state"]}, "prompt": obs["task"], "step": step}
+
+
+class PolicyActor:
+    """A molmo-eval :class:`~molmo_lerobot.policies.base.Policy` as :func:`play`'s policy: reset at an
+    episode's first step, its chunks run open loop, one 7-D action per step."""
+
+    def __init__(self, policy: Policy, episode: LiberoEpisode, episode_index: int = 0) -> None:
+        self.policy, self.episode, self.index = policy, episode, episode_index
+        self._queue: list[np.ndarray] = []
+
+    def __call__(self, obs: dict[str, Any], step: int) -> np.ndarray:
+        if step == 0:
+            self._queue.clear()
+            self.policy.reset(EpisodeContext(spec=None, episode_index=self.index, seed=self.episode.seed,
+                                             prompt=self.episode.instruction, move_groups={MOVE_GROUP: ACTION_DIM},
+                                             policy_dt_s=1.0 / CONTROL_HZ))
+        if not self._queue:
+            out = self.policy.act(policy_observation(obs, step))
+            if not isinstance(out, dict) or MOVE_GROUP not in out:
+                raise ValueError(f"episode {self.episode.digest[:12]}: the policy returned no {MOVE_GROUP!r} action")
+            actions = np.asarray(out[MOVE_GROUP], dtype=np.float64)
+            self._queue = list(actions[None] if actions.ndim == 1 else actions)
+        return self._queue.pop(0)
