@@ -106,6 +106,10 @@ def summarize(results: list[EpisodeResult], **context: Any) -> dict[str, Any]:
         {"episode_index": r.episode_index, "warnings": r.extra["start_warnings"]}
         for r in results if r.extra.get("start_warnings")
     ]
+    summary["parity_notes"] = [  # episodes the other task_rules would judge otherwise (Task.parity_notes)
+        {"episode_index": r.episode_index, "notes": r.extra["parity_notes"]}
+        for r in results if r.extra.get("parity_notes")
+    ]
     summary["output_errors"] = [
         {"episode_index": r.episode_index, "errors": r.output_errors} for r in results if r.output_errors
     ]
@@ -139,6 +143,10 @@ def summary_lines(s: dict[str, Any], max_errors: int = 10) -> list[str]:
     if n_infra:
         lines.append(f"  {n_infra} of the errors are infrastructure failures (worker, disk, policy server): "
                      "fix the cause and rerun with resume=true to run those episodes again")
+    notes = s.get("parity_notes") or []
+    if notes:
+        lines.append(f"  {len(notes)} episode{'s' * (len(notes) != 1)} judged otherwise by the other task_rules "
+                     f"(episode {notes[0]['episode_index']}: {notes[0]['notes'][0]}; all in results.json parity_notes)")
     outputs = s.get("output_errors") or []
     if outputs:
         first = outputs[0]
