@@ -66,6 +66,10 @@ def test_rollouts_match_their_loop(theirs, task, tmp_path):
         assert diff <= TOL, f"{benchmark} episode {index} ({kind}): states differ by {diff:g}"
         assert got[f"success_{k}"].tolist() == r.success, f"{benchmark} episode {index} ({kind}): success per step"
         assert got["final"][k] == r.final, f"{benchmark} episode {index} ({kind}): final outcome"
+    if FULL:  # the table in docs/parity.md counts the full set
+        steps = sum(n for _, _, n, *_ in rows)
+        assert theirs.table_row(f"rollouts {task}") == {
+            "episodes": len(rows), "steps": steps, "flags agreed": steps, "outcomes agreed": len(rows)}
     print(f"\n{benchmark}: their seconds per episode {got['seconds']}")
     print(f"{benchmark}: " + "; ".join(f"#{i} {kind} {n} steps, start |d| {d0:.1e}, after {d:.1e}, "
                                          f"success {o}/{t}" for i, kind, n, d0, d, o, t in rows))

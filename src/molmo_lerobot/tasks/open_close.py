@@ -94,7 +94,8 @@ class OpenCloseTask(Task):
                              f"{len(self.joints)} articulated joints)")
         #: the joint the close rule judges (MolmoSpaces: the joint_index-th joint of the object)
         self.close_joint = self.joints[index]
-        #: joints the open rule judges: the object's, or every articulated object's of its category
+        #: joints the open rule judges: the object's, or every articulated object's of its category,
+        #: objects in model order (MolmoSpaces' scan of the top-level bodies)
         self.open_joints = list(self.joints)
         if getattr(t, "any_inst_of_category", False):
             objects = env.scene_metadata.get("objects", {})
@@ -102,10 +103,9 @@ class OpenCloseTask(Task):
             if category is None:
                 raise ValueError(f"task.any_inst_of_category: no category for {self.object_name!r} in the "
                                  "scene metadata")
-            for other, meta in objects.items():
-                if other != self.object_name and meta.get("category") == category and \
-                        mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, other) >= 0:
-                    self.open_joints += articulated_joints(env, other)
+            same = sorted((bid, name) for name, meta in objects.items() if meta.get("category") == category
+                          and (bid := mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)) >= 0)
+            self.open_joints = [j for _, name in same for j in articulated_joints(env, name)]
         self.start = t.joint_start_position
 
     def _resolve_joint(self, name: str) -> int:
