@@ -47,6 +47,7 @@ def cases(task: str) -> list[tuple[int, str]]:
     return [(0, "expert")] * (task in ("pick", "open")) + [(1, "fixed"), (2, "random")]
 
 
+@pytest.mark.timeout(3600)  # the full set's expert episodes run 606 steps on each side
 @pytest.mark.parametrize("task", list(BENCHMARKS))
 def test_rollouts_match_their_loop(theirs, task, tmp_path):
     benchmark = BENCHMARKS[task]
