@@ -158,7 +158,8 @@ def raw_episode(bench: Any, index: int, task_type: str) -> dict:
     """Episode ``index`` as its file has it (what their ``EpisodeSpec`` reads), made runnable by their
     JSON eval: ``task_cls`` in MolmoSpaces' spelling (our pick and pick-and-place files name our classes,
     ``molmo_lerobot.tasks.pick.PickTask``, which their eval cannot import), for pick a
-    ``pickup_obj_goal_pose``, and a ``joint_start_position`` given as a number as a one-value list.
+    ``pickup_obj_goal_pose``, for next-to the referral names ``pickup_name`` / ``place_name``, and a
+    ``joint_start_position`` given as a number as a one-value list.
     docs/parity.md, "Our files in their eval"."""
     origin = bench.origins[index]
     raw = json.loads(Path(origin.file).read_text())
@@ -170,6 +171,10 @@ def raw_episode(bench: Any, index: int, task_type: str) -> dict:
         goal = list(raw["task"]["pickup_obj_start_pose"])
         goal[2] += 0.05
         raw["task"]["pickup_obj_goal_pose"] = goal
+    names = raw.get("language", {}).get("referral_expressions", {})
+    if task_type == "pick_and_place_next_to":  # their next-to task reads these two names at reset
+        names.setdefault("pickup_name", names.get("pickup_obj_name"))
+        names.setdefault("place_name", names.get("place_receptacle_name"))
     start = raw["task"].get("joint_start_position")
     if isinstance(start, int | float):  # their sampler reads joint_start_position[0]; ours takes a number too
         raw["task"]["joint_start_position"] = [start]
