@@ -206,6 +206,13 @@ class StartWarnings(_Part):
     warnings: list[str]
 
 
+class ParityNotes(_Part):
+    """Why the other ``task_rules`` would have judged this episode otherwise (Task.parity_notes)."""
+
+    episode_index: int
+    notes: list[str]
+
+
 class OutputErrors(_Part):
     episode_index: int
     errors: list[str]
@@ -248,6 +255,7 @@ class RunSummary(Rates):
     per_task: dict[str, Rates]
     errors: list[EpisodeError]
     start_warnings: list[StartWarnings] | None = None  # episodes that started oddly (Task.start_warnings)
+    parity_notes: list[ParityNotes] | None = None  # episodes the other task_rules would judge otherwise
     output_errors: list[OutputErrors] | None = None
     # what the run was (run.json)
     benchmark: BenchmarkRef | None = None
@@ -333,6 +341,8 @@ def summarize(results: list[EpisodeResult], **context: Any) -> RunSummary:
                    for r in results if r.error is not None],
         "start_warnings": [{"episode_index": r.episode_index, "warnings": r.extra["start_warnings"]}
                            for r in results if r.extra.get("start_warnings")],
+        "parity_notes": [{"episode_index": r.episode_index, "notes": r.extra["parity_notes"]}
+                         for r in results if r.extra.get("parity_notes")],
         "output_errors": [{"episode_index": r.episode_index, "errors": r.output_errors}
                           for r in results if r.output_errors],
         **context,
@@ -365,6 +375,10 @@ def summary_lines(s: RunSummary, max_errors: int = 10) -> list[str]:
     if n_infra:
         lines.append(f"  {n_infra} of the errors are infrastructure failures (worker, disk, policy server): "
                      "fix the cause and rerun with resume=true to run those episodes again")
+    notes = s.parity_notes or []
+    if notes:
+        lines.append(f"  {len(notes)} episode{'s' * (len(notes) != 1)} judged otherwise by the other task_rules "
+                     f"(episode {notes[0].episode_index}: {notes[0].notes[0]}; all in results.json parity_notes)")
     outputs = s.output_errors or []
     if outputs:
         first = outputs[0]

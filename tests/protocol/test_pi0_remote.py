@@ -65,6 +65,16 @@ def test_joint_velocity_is_integrated_and_gripper_mapped():
         droid_actions(raw[:, :5], q0, velocity, DT, "test")
 
 
+def test_gripper_threshold_compares_in_the_answers_float_type():
+    """MolmoSpaces' PI_Policy compares a float32 answer with its threshold in float32: 0.3f is not
+    above 0.3 (in float64 it is), so the gripper stays open; a float64 answer compares in float64."""
+    cfg = DroidConfig(action_mode="joint_position", open_loop_horizon=None, gripper={"threshold": 0.3})
+    raw = np.zeros((3, 8), np.float32)
+    raw[:, 7] = [0.3, np.nextafter(np.float32(0.3), np.float32(1)), 0.29]
+    assert droid_actions(raw, np.zeros(7), cfg, DT, "test")["gripper"][:, 0].tolist() == [0.0, 1.0, 0.0]
+    assert droid_actions(raw.astype(np.float64), np.zeros(7), cfg, DT, "test")["gripper"][:, 0].tolist() == [1, 1, 0]
+
+
 def test_remote_episode_chunks_come_from_the_server():
     with FakeDroidServer(horizon=15).running() as srv:
         policy = pi0(srv.port, open_loop_horizon=None)

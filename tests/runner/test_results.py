@@ -91,3 +91,30 @@ def test_infrastructure_errors_and_output_failures_are_told_apart():
     assert "  outputs not written for 1 episode, outcomes kept (episode 0: GlanceRecorder: OSError: [Errno 28] No " \
            "space left on device; all in results.json output_errors)" in lines
     assert EpisodeResult.from_dict(died.to_dict()) == died
+
+
+def test_parity_notes_are_listed_and_counted():
+    """An episode the other task_rules would judge otherwise keeps its score and is listed, in results.json
+    and in the summary."""
+    from molmo_lerobot.results import summary_lines
+
+    note = "open: zero-range joint 'knob' at 0 comes first (MolmoSpaces' fraction is NaN); task_rules=fixed ..."
+    noted = EpisodeResult(0, 1, "a.Open", False, False, 10, 1, task_type="open", extra={"parity_notes": [note]})
+    plain = EpisodeResult(1, 1, "a.Open", True, True, 10, 2, task_type="open")
+    summary = summarize([noted, plain], benchmark={"name": "b"}, policy={"name": "p"})
+    s = summary.document()
+    assert s["n_success"] == 1 and s["parity_notes"] == [{"episode_index": 0, "notes": [note]}]
+    assert f"  1 episode judged otherwise by the other task_rules (episode 0: {note}; all in results.json " \
+           "parity_notes)" in summary_lines(summary)
+
+
+def test_the_report_lists_parity_notes():
+    from molmo_lerobot.export.report import render_report
+
+    note = "open: zero-range joint 'knob' at 0 comes first (MolmoSpaces' fraction is NaN)"
+    results = [EpisodeResult(0, 1, "a.Open", False, False, 10, 1, task_type="open", extra={"parity_notes": [note]}),
+               EpisodeResult(1, 1, "a.Open", True, True, 10, 2, task_type="open")]
+    page = render_report(summarize(results, benchmark={"name": "b"}, policy={"name": "p"}), results, {}, None)
+    assert "1 episode judged otherwise by the other <code>task_rules</code>" in page and "zero-range joint" in page
+    plain = render_report(summarize(results[1:], benchmark={"name": "b"}, policy={"name": "p"}), results[1:], {}, None)
+    assert "judged otherwise" not in plain

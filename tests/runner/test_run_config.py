@@ -87,6 +87,7 @@ def test_the_schema_defaults_are_eval_yaml_and_validation_keeps_a_composed_confi
                                 "randomization)")),
         (["workers=abc"], "workers: expected a positive integer, got 'abc'"),
         (["end_on_success=yes"], "end_on_success: expected true or false, got 'yes'"),
+        (["task_rules=ours"], "task_rules: expected one of molmospaces, fixed, got 'ours'"),
         (["custom_object.name=5"], "custom_object.name: input should be a valid string, got 5"),
     ],
 )

@@ -73,7 +73,7 @@ def test_a_fresh_summary_has_every_field_of_mains_results_json():
     doc = json.loads((DATA / OLD[0]).read_text())
     summary = RunSummary.from_document(doc)
     assert summary.model_extra == {}
-    assert set(RunSummary.model_fields) - set(doc) == {"schema_version", "push", "export_errors"}
+    assert set(RunSummary.model_fields) - set(doc) == {"schema_version", "push", "export_errors", "parity_notes"}
 
 
 @pytest.mark.parametrize(("edit", "message"), [

@@ -318,6 +318,7 @@ def render_report(summary: RunSummary, results: list[EpisodeResult],
         f"(95% CI {_pct(lo)} – {_pct(hi)}) · {_pct(summary.success_once_rate)} at any chunk end · "
         f"{summary.n_success}/{summary.n_episodes}</p>",
         f"<p class=sub>{_e(summary.primary_metric)}. Errored episodes count as failures.</p>",
+        _parity_notes(summary),
         "<h2>Per task</h2>", _task_table(summary), "<div style='margin-top:1rem'>", _bars_svg(summary), "</div>",
         "<h2>Failures</h2>", failures,
         _breakdowns(results),
@@ -325,6 +326,16 @@ def render_report(summary: RunSummary, results: list[EpisodeResult],
         "<h2>Episodes</h2>", _FILTER, _episode_rows(results, videos or {}, groups, policy_dt_s, output_dir),
         f"<p class=sub style='margin-top:2rem'>{_e(versions)}</p></body></html>\n",
     ])
+
+
+def _parity_notes(summary: RunSummary) -> str:
+    """The episodes the other ``task_rules`` would have judged otherwise (their scores stand)."""
+    notes = summary.parity_notes or []
+    if not notes:
+        return ""
+    items = "".join(f"<li>episode {n.episode_index}: {_e('; '.join(n.notes))}</li>" for n in notes)
+    return (f"<p class=sub>{len(notes)} episode{'s' * (len(notes) != 1)} judged otherwise by the other "
+            f"<code>task_rules</code> (scored by this run's rules; <code>parity_notes</code>):</p><ul>{items}</ul>")
 
 
 def write_report(output_dir: Path | str, summary: RunSummary, results: list[EpisodeResult]) -> Path:

@@ -9,7 +9,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.cameras.options import episode_camera_system
-from molmo_lerobot.sim.env import Env, Timing, make_env
+from molmo_lerobot.sim.env import TASK_RULES, Env, Timing, make_env
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
@@ -23,4 +23,6 @@ def build_env(spec: EpisodeSpec, timing: Timing, ctx: RunContext, camera: Mappin
     robot = plugins.robot(spec.robot.robot_name).configured(ctx.settings)
     cameras = episode_camera_system(spec, camera, plugins.camera_system, robot.default_camera_system)
     scene = plugins.scene_dataset(spec.scene_dataset)
-    return make_env(spec, timing, scene, robot, cameras, ctx, ctx.render_profile)
+    env = make_env(spec, timing, scene, robot, cameras, ctx, ctx.render_profile)
+    env.task_rules = ctx.config.get("task_rules") or TASK_RULES[0]
+    return env

@@ -48,6 +48,7 @@ from molmo_lerobot.runner.selection import selection_of
 from molmo_lerobot.runner.supervisor import RunInterrupted
 from molmo_lerobot.runner.worker import WorkerJob, startup_summary
 from molmo_lerobot.serving.run_server import ServeError, served_policy
+from molmo_lerobot.sim.env import TASK_RULES
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
@@ -274,6 +275,8 @@ def _run_info(cfg: dict[str, Any], ctx: RunContext, planner: EpisodePlanner) -> 
         "eval_options": {"horizons": planner.horizons, "custom_object": cfg.get("custom_object"),
                          "camera": cfg.get("camera"), "robot": cfg.get("robot"),
                          "end_on_success": bool(cfg.get("end_on_success", False)),
+                         **({"task_rules": rules} if (rules := cfg.get("task_rules", TASK_RULES[0])) != TASK_RULES[0]
+                            else {}),  # the default is left out: runs from before the option resume unchanged
                          "molmospaces": ctx.settings.to_config(),
                          **({"plugins_prefer": prefer} if prefer else {})},  # pinned providers
     }

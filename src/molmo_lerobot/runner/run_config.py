@@ -40,7 +40,7 @@ from molmo_lerobot.benchmark.schema import MAX_TASK_HORIZON_SEC
 from molmo_lerobot.cameras.options import camera_option_problems
 from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.robots.base import parse_base_size
-from molmo_lerobot.sim.env import CONTROL_MODES, Timing
+from molmo_lerobot.sim.env import CONTROL_MODES, TASK_RULES, Timing
 
 #: Most policy steps an episode may run (``horizon=``): about two hours at 66 ms per step.
 MAX_HORIZON_STEPS = 100_000
@@ -355,6 +355,8 @@ class RunConfig(_OpenSection):
     timing: TimingConfig = TimingConfig()
     custom_object: CustomObjectConfig = CustomObjectConfig()
     end_on_success: Flag = False
+    task_rules: Annotated[str, _rule(lambda v: v in TASK_RULES,
+                                     f"{{key}}: expected one of {', '.join(TASK_RULES)}, got {{got}}")] = "molmospaces"
     robot: RobotConfig = RobotConfig()
     video: VideoConfig = VideoConfig()
     scene_xml_paths: list[str] = []

@@ -192,7 +192,8 @@ class EpisodeWorker:
                 seed=plan.seed, task_type=task_type.name, prompt=prompt, horizon=horizon,
                 extra={"ended_by": outcome.ended_by, "end_on_success": self.end_on_success,
                        "success_any_step": outcome.success_any_step, "camera_system": env.camera_system,
-                       **({"start_warnings": list(odd)} if (odd := getattr(task, "start_warnings", ())) else {})},
+                       **({"start_warnings": list(odd)} if (odd := getattr(task, "start_warnings", ())) else {}),
+                       **({"parity_notes": list(notes)} if (notes := getattr(task, "parity_notes", tuple)()) else {})},
             )
         except (Exception, KeyboardInterrupt, SystemExit) as exc:
             result = plan.failed(describe(exc), error_kind(exc))

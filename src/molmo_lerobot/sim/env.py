@@ -61,6 +61,9 @@ def _ratio(num: float, den: float, what: str) -> int:
 
 #: how a policy step's targets reach the actuators (see the module docstring)
 CONTROL_MODES = ("hold", "ramp")
+#: whose success rules the tasks apply (``task_rules``): MolmoSpaces' as their code has them, quirks
+#: included, or ours where we corrected one (a task's ``parity_notes`` say where the two differ)
+TASK_RULES = ("molmospaces", "fixed")
 #: MolmoSpaces' sleep tolerance for rollouts (MuJoCo 3.5's default is 1e-4, 4.0's 1e-3)
 SLEEP_TOLERANCE = 1e-3
 
@@ -250,6 +253,8 @@ class Env:
         self.camera_names = camera_names
         #: name of the camera system that built the cameras
         self.camera_system = ""
+        #: whose success rules the episode's task applies (:data:`TASK_RULES`; the run's ``task_rules``)
+        self.task_rules = TASK_RULES[0]
         self._scene: SceneDataset | None = None
         self._scene_ctx: SceneContext | None = None
         self._scene_metadata: dict[str, Any] | None = None

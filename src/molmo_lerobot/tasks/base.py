@@ -44,6 +44,12 @@ class Task(ABC):
     #: (``start_warnings``) and listed in ``results.json``; set when the task is created
     start_warnings: tuple[str, ...] = ()
 
+    def parity_notes(self) -> tuple[str, ...]:
+        """Where the other rules of ``env.task_rules`` (MolmoSpaces' or our corrected one) would judge the
+        current state otherwise, one line each; read at the episode's end into its result
+        (``parity_notes``) and counted in ``results.json``. Empty where the rules agree."""
+        return ()
+
     #: the names of :meth:`environment_state`'s values; empty: the task defines no environment state
     environment_state_names: tuple[str, ...] = ()
 

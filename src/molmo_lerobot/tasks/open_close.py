@@ -7,7 +7,11 @@ convention: every articulated joint closes at 0, its range runs from 0 to fully 
 * open: success when the largest opening fraction over the hinge and slide joints of
   ``task.pickup_obj_name`` — or, with ``task.any_inst_of_category``, of every articulated
   object of its category (scene metadata ``category``) — is at least ``task_success_threshold``
-  (default 0.2). Joints with a zero range are skipped.
+  (default 0.2). A zero-range (unlimited) joint turned away from 0 is skipped; one at exactly 0
+  gives MolmoSpaces ``0 / 0 = NaN``, which their ``max`` keeps when it comes first (the object's
+  first joint; with ``any_inst_of_category`` the first of all), and the check fails whatever the
+  other joints do. ``task_rules=molmospaces`` (the default) judges so; ``task_rules=fixed`` skips
+  every zero-range joint. Where the two differ the episode's ``parity_notes`` say so.
 * close: success when ``1 -`` the opening fraction of the object's ``task.joint_index``-th
   articulated joint is at least ``task_success_threshold``; a zero-range joint never counts as
   closed (MolmoSpaces divides by the zero range).
@@ -90,7 +94,8 @@ class OpenCloseTask(Task):
                              f"{len(self.joints)} articulated joints)")
         #: the joint the close rule judges (MolmoSpaces: the joint_index-th joint of the object)
         self.close_joint = self.joints[index]
-        #: joints the open rule judges: the object's, or every articulated object's of its category
+        #: joints the open rule judges: the object's, or every articulated object's of its category,
+        #: objects in model order (MolmoSpaces' scan of the top-level bodies)
         self.open_joints = list(self.joints)
         if getattr(t, "any_inst_of_category", False):
             objects = env.scene_metadata.get("objects", {})
@@ -98,10 +103,9 @@ class OpenCloseTask(Task):
             if category is None:
                 raise ValueError(f"task.any_inst_of_category: no category for {self.object_name!r} in the "
                                  "scene metadata")
-            for other, meta in objects.items():
-                if other != self.object_name and meta.get("category") == category and \
-                        mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, other) >= 0:
-                    self.open_joints += articulated_joints(env, other)
+            same = sorted((bid, name) for name, meta in objects.items() if meta.get("category") == category
+                          and (bid := mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)) >= 0)
+            self.open_joints = [j for _, name in same for j in articulated_joints(env, name)]
         self.start = t.joint_start_position
 
     def _resolve_joint(self, name: str) -> int:
@@ -137,7 +141,7 @@ class OpenCloseTask(Task):
         """Nothing to remember: the rule depends on the current joint state only."""
 
     def fraction(self) -> float:
-        """The opening fraction the rule judges: max over the open rule's joints (zero ranges
+        """The opening fraction our rule judges: max over the open rule's joints (zero ranges
         skipped), or of the close rule's joint."""
         m, d = self.env.model, self.env.data
         if self.mode == "open":
@@ -145,13 +149,35 @@ class OpenCloseTask(Task):
             return max(fractions, default=0.0)
         return opening_fraction(m, d, self.close_joint)
 
+    def nan_joint(self) -> str | None:
+        """open: the zero-range joint at exactly 0 that comes first among the open rule's joints,
+        which makes MolmoSpaces' fraction NaN (their ``max`` keeps a NaN it starts from); else None."""
+        m, d = self.env.model, self.env.data
+        for j in self.open_joints:
+            if opening_fraction(m, d, j) != math.inf:
+                return None  # a judged joint comes first
+            if d.qpos[m.jnt_qposadr[j]] == 0.0:
+                return m.joint(j).name
+        return None
+
     def reward(self) -> float:
-        """MolmoSpaces' reward: the opening fraction (open) or one minus it (close)."""
+        """MolmoSpaces' reward: the opening fraction (open) or one minus it (close); our rule's fraction."""
         f = self.fraction()
         return f if self.mode == "open" else 1.0 - f
 
     def success(self) -> bool:
+        if self.env.task_rules == "molmospaces" and self.mode == "open" and self.nan_joint() is not None:
+            return False
         return self.reward() >= self.threshold
+
+    def parity_notes(self) -> tuple[str, ...]:
+        joint = self.nan_joint() if self.mode == "open" else None
+        if joint is None or self.reward() < self.threshold:
+            return ()
+        other = "fixed" if self.env.task_rules == "molmospaces" else "molmospaces"
+        verdict = "open" if other == "fixed" else "not open"
+        return (f"open: zero-range joint {joint!r} at 0 comes first (MolmoSpaces' fraction is NaN); "
+                f"task_rules={other} judges the final state {verdict}",)
 
 
 class _OpenCloseType(TaskType):

@@ -124,7 +124,11 @@ def droid_request(images: dict[str, np.ndarray], qpos: dict[str, Any], prompt: s
 
 
 def droid_actions(raw: Any, arm_qpos: np.ndarray, cfg: DroidConfig, dt_s: float, source: str) -> dict[str, np.ndarray]:
-    """(H, 8) DROID actions -> our chunk ``{"arm": (H, 7) joint targets, "gripper": (H, 1) in [0, 1]}``."""
+    """(H, 8) DROID actions -> our chunk ``{"arm": (H, 7) joint targets, "gripper": (H, 1) in [0, 1]}``.
+
+    The gripper is thresholded in the answer's own float type, as MolmoSpaces' ``PI_Policy`` compares
+    it: a float32 0.3 is not above a threshold of 0.3 (in float64 it is, by 1.2e-8)."""
+    received = np.asarray(raw).dtype
     actions = np.asarray(raw, dtype=np.float64)
     if actions.ndim == 1:
         actions = actions[None]
@@ -146,7 +150,11 @@ def droid_actions(raw: Any, arm_qpos: np.ndarray, cfg: DroidConfig, dt_s: float,
         arm = joints
     if cfg.gripper.invert:
         grip = 1.0 - grip
-    grip = (grip > cfg.gripper.threshold).astype(np.float64) if cfg.gripper.binarize else np.clip(grip, 0.0, 1.0)
+    if cfg.gripper.binarize:
+        own = grip.astype(received) if received.kind == "f" else grip  # float64 -> float32 -> float64 is exact
+        grip = (own > own.dtype.type(cfg.gripper.threshold)).astype(np.float64)
+    else:
+        grip = np.clip(grip, 0.0, 1.0)
     return {"arm": arm, "gripper": grip[:, None]}
 
 

@@ -1,0 +1,219 @@
+"""Our side of the rollout comparison (tests/parity/test_rollout_parity.py): an episode run by
+``molmo-eval``'s own loop (``runner.rollout.rollout``) with a policy replaying given actions, and the
+actions the comparison replays.
+
+Actions are in MolmoSpaces' convention (``arm`` 7 joint targets, ``gripper`` 0 … 255, one row of 8 per
+step); ours reads them through ``policy.convention=molmospaces``. Three kinds, none depending on
+floating-point noise of the run that replays them: ``fixed`` (a closed-form sweep of every joint about
+``init_qpos`` and the gripper closing and opening), ``random`` (a seeded random walk of the joint
+targets and random gripper commands), ``expert`` (our scripted expert's actions, recorded once by our
+loop and then replayed on both sides).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from molmo_lerobot.benchmark.molmospaces import TASK_CLS
+from molmo_lerobot.context import RunContext
+from molmo_lerobot.policies.base import EpisodeContext, Policy
+from molmo_lerobot.policies.convention import GRIPPER_CLOSED_CMD, get_convention
+from molmo_lerobot.recording import EpisodeInfo, Recorder
+from molmo_lerobot.runner.episode import load_run_benchmark, start_episode
+from molmo_lerobot.runner.plan import EpisodePlanner
+from molmo_lerobot.runner.rollout import rollout
+
+CONVENTION = get_convention("molmospaces")
+
+
+def state(data: Any) -> np.ndarray:
+    """What is compared per step: every joint position (arm, gripper, objects' free joints, articulated
+    joints) and velocity."""
+    return np.concatenate([data.qpos, data.qvel])
+
+
+def fixed_actions(init_arm: np.ndarray, steps: int) -> np.ndarray:
+    """Every joint swept about its start by up to 0.25 rad (its own phase); the gripper closes for 20
+    steps, then opens for 20, from step 10."""
+    t = np.arange(steps)[:, None]
+    arm = init_arm[None] + 0.25 * np.sin(2 * np.pi * t / 40.0 + np.arange(7)[None] * 0.7)
+    gripper = np.where(((t - 10) // 20) % 2 == 0, GRIPPER_CLOSED_CMD, 0.0) * (t >= 10)
+    return np.hstack([arm, gripper])
+
+
+def random_actions(init_arm: np.ndarray, steps: int, seed: int) -> np.ndarray:
+    """A seeded random walk of the arm targets (steps of N(0, 0.03) rad, kept within 0.6 rad of the
+    start) and a uniform random gripper command each step."""
+    rng = np.random.default_rng(seed)
+    arm = init_arm[None] + np.clip(np.cumsum(rng.normal(0.0, 0.03, (steps, 7)), axis=0), -0.6, 0.6)
+    return np.hstack([arm, rng.uniform(0.0, GRIPPER_CLOSED_CMD, (steps, 1))])
+
+
+class Replay(Policy):
+    """Replays rows of MolmoSpaces-convention actions through the convention adapter's mapping."""
+
+    needs_images = False
+
+    def __init__(self, actions: np.ndarray) -> None:
+        self.actions, self.t = actions, 0
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        self.t = 0
+
+    def act(self, obs) -> dict[str, np.ndarray]:
+        a = self.actions[self.t]
+        self.t += 1
+        return CONVENTION.action({"arm": a[:7], "gripper": a[7:8]})
+
+
+class StateRecorder(Recorder):
+    """The state at the start and after every step, the success flag after every step; with ``actions``
+    the policy's actions too (MolmoSpaces' convention)."""
+
+    wants_images = False
+
+    def __init__(self, env: Any) -> None:
+        self.env, self.states, self.success, self.actions = env, [], [], []
+
+    def start_episode(self, info: EpisodeInfo) -> None:
+        self.states.append(state(self.env.data))
+
+    def record_step(self, obs, action, reward, success, done) -> None:
+        self.states.append(state(self.env.data))
+        self.success.append(bool(success))
+        self.actions.append(np.concatenate([action["arm"], np.asarray(action["gripper"]) * GRIPPER_CLOSED_CMD]))
+
+    def end_episode(self, result) -> None:
+        pass
+
+
+@dataclass
+class Episode:
+    """One episode, run by our loop: what their side needs to run it too, and what ours saw."""
+
+    spec: dict
+    metadata: dict
+    mjb: Path | None
+    actions: np.ndarray
+    states: np.ndarray
+    success: list[bool]
+    final: bool
+
+
+def _context(benchmark: str, horizon: int | None):
+    ctx = RunContext.build({"seed": 0, "horizon": horizon, "timing": {"sleep": True}})
+    bench = load_run_benchmark(benchmark, ctx.plugins)
+    return ctx.for_benchmark(bench), bench
+
+
+def save_model(model: mujoco.MjModel, path: Path) -> None:
+    """The episode's compiled model as MJB (textures and meshes make it 100+ MB: a file, not an
+    input), body sleeping off (their loop turns it on itself)."""
+    m = copy.copy(model)
+    m.opt.enableflags &= ~int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+    mujoco.mj_saveModel(m, str(path), None)
+
+
+def run(benchmark: str, index: int, policy: Policy | str, horizon: int | None,
+        actions: np.ndarray | None = None, mjb: Path | None = None) -> Episode:
+    """Episode ``index`` of ``benchmark`` through our rollout loop for ``horizon`` steps (None: the
+    episode's own), body sleeping on as in their loop; ``policy`` is ``"scripted"`` or a Policy. With
+    ``mjb`` the compiled model is saved there."""
+    from molmo_lerobot.policies.factory import make_policy
+
+    ctx, bench = _context(benchmark, horizon)
+    plan = EpisodePlanner(ctx, bench).plan(index)
+    spec = plan.episode(ctx.plugins)
+    task_type = ctx.plugins.task_type(plan.task_type)
+    env, task = start_episode(spec, plan.seed, task_type, ctx)
+    try:
+        if mjb is not None:
+            save_model(env.model, mjb)
+        expert = policy == "scripted"
+        pol = make_policy(ctx.plugins, {"name": "scripted"}) if expert else policy
+        ectx = EpisodeContext(spec=spec, episode_index=index, seed=plan.seed, prompt=plan.prompt,
+                              move_groups=dict(env.move_groups), policy_dt_s=ctx.timing.policy_dt_s,
+                              env=env if expert else None, run=ctx if expert else None)
+        info = EpisodeInfo(episode_index=index, house_index=spec.house_index, seed=plan.seed, prompt=plan.prompt,
+                           task_type=task_type.name, fps=1000.0 / ctx.timing.policy_dt_ms, horizon=plan.horizon,
+                           camera_names=[], img_resolution=tuple(spec.img_resolution),
+                           joint_names=dict(env.joint_names), move_groups=dict(env.move_groups), expert=expert)
+        rec = StateRecorder(env)
+        outcome = rollout(env, task, pol, ectx, plan.horizon, [rec], info, "replay")
+        return Episode(spec=raw_episode(bench, index, task_type.name), metadata=their_metadata(env), mjb=mjb,
+                       actions=np.array(rec.actions) if actions is None else actions,
+                       states=np.array(rec.states), success=rec.success, final=outcome.success)
+    finally:
+        env.close()
+
+
+def raw_episode(bench: Any, index: int, task_type: str) -> dict:
+    """Episode ``index`` as its file has it (what their ``EpisodeSpec`` reads), made runnable by their
+    JSON eval: ``task_cls`` in MolmoSpaces' spelling (our pick and pick-and-place files name our classes,
+    ``molmo_lerobot.tasks.pick.PickTask``, which their eval cannot import), for pick a
+    ``pickup_obj_goal_pose``, for next-to the referral names ``pickup_name`` / ``place_name``, and a
+    ``joint_start_position`` given as a number as a one-value list.
+    docs/parity.md, "Our files in their eval"."""
+    origin = bench.origins[index]
+    raw = json.loads(Path(origin.file).read_text())
+    raw = raw[origin.position] if origin.position is not None else raw
+    raw["task"]["task_cls"] = TASK_CLS[task_type][0]
+    if task_type == "pick" and raw["task"].get("pickup_obj_goal_pose") is None:
+        # their PickTask.get_info (called after every step) reads it; no success rule does. Their pick
+        # sampler puts it 5 cm above the start pose; our pick files do not carry it
+        goal = list(raw["task"]["pickup_obj_start_pose"])
+        goal[2] += 0.05
+        raw["task"]["pickup_obj_goal_pose"] = goal
+    names = raw.get("language", {}).get("referral_expressions", {})
+    if task_type == "pick_and_place_next_to":  # their next-to task reads these two names at reset
+        names.setdefault("pickup_name", names.get("pickup_obj_name"))
+        names.setdefault("place_name", names.get("place_receptacle_name"))
+    start = raw["task"].get("joint_start_position")
+    if isinstance(start, int | float):  # their sampler reads joint_start_position[0]; ours takes a number too
+        raw["task"]["joint_start_position"] = [start]
+    return raw
+
+
+def their_metadata(env: Any) -> dict:
+    """The episode's scene metadata with the ``is_static`` flag their scene metadata gives every object
+    (their loop reads it at reset to list the movable objects): true unless the body has a free joint."""
+    meta = copy.deepcopy(env.scene_metadata)
+    m = env.model
+    for name, obj in meta.get("objects", {}).items():
+        bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
+        free = bid >= 0 and m.body_jntnum[bid] == 1 and m.jnt_type[m.body_jntadr[bid]] == mujoco.mjtJoint.mjJNT_FREE
+        obj.setdefault("is_static", not free)
+    return meta
+
+
+def init_arm(benchmark: str, index: int) -> np.ndarray:
+    """The episode's arm start (its ``init_qpos``)."""
+    _, bench = _context(benchmark, None)
+    return np.asarray(bench.episodes[index].robot.init_qpos["arm"], dtype=np.float64)
+
+
+def episode(benchmark: str, index: int, kind: str, steps: int, mjb: Path) -> Episode:
+    """Ours on one case: ``kind`` ``fixed`` / ``random`` replay ``steps`` actions; ``expert`` runs the
+    scripted expert over the episode's horizon and records its actions (their side replays them: the
+    gripper as ``255 g``, which our convention maps back to ``g`` within a rounding). The model goes to
+    ``mjb``."""
+    if kind == "expert":  # the expert's own run: its states, and its actions for their side to replay
+        return run(benchmark, index, "scripted", None, mjb=mjb)
+    else:
+        arm = init_arm(benchmark, index)
+        actions = fixed_actions(arm, steps) if kind == "fixed" else random_actions(arm, steps, seed=index)
+    return run(benchmark, index, Replay(actions), len(actions), actions, mjb)
+
+
+def arm_xml() -> str:
+    """Our franka_droid arm's MJCF, for their robot directory (their kinematics solvers load it)."""
+    from molmo_lerobot.robots.franka_droid import load_droid_spec
+
+    return load_droid_spec().to_xml()
