@@ -85,9 +85,11 @@ class SuiteProcess:
                                       env=child_env)
 
     def request(self, op: str, **fields: Any) -> Any:
+        stdin, stdout = self._proc.stdin, self._proc.stdout
+        assert stdin is not None and stdout is not None  # both are pipes (Popen above)
         try:
-            write_frame(self._proc.stdin, {"op": op, **fields})
-            reply = read_frame(self._proc.stdout)
+            write_frame(stdin, {"op": op, **fields})
+            reply = read_frame(stdout)
         except (BrokenPipeError, OSError) as exc:
             raise SuiteError(f"suite env {self.module}: the process died ({exc}); see its stderr") from exc
         if reply is None:
