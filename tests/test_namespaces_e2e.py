@@ -13,8 +13,8 @@ import pytest
 from molmo_lerobot import namespaces as ns
 from molmo_lerobot.config import compose
 from molmo_lerobot.export.recorder import RecordConfigError
+from molmo_lerobot.run_config import RunConfig, RunConfigError
 from molmo_lerobot.runner.evaluate import run_evaluation
-from molmo_lerobot.runner.run_config import RunConfig, RunConfigError
 
 TINY = ["policy=scripted", "benchmark=pick_v1", "workers=1", "limit=1", "horizon=4", "progress=false",
         "video.vcodec=h264"]

@@ -19,10 +19,11 @@ from molmo_lerobot.cli.plugins import format_table
 from molmo_lerobot.config import ConfigError
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.plugins import ENTRY_POINT_GROUP, PluginConflict, PluginError, Plugins
+from molmo_lerobot.run_config import RunConfig
 
 DATA = Path(__file__).resolve().parent / "data" / "molmospaces"
-#: what episode overrides see of a run with an empty config
-NO_RUN = SimpleNamespace(config={})
+#: what episode overrides see of a run with the default config
+NO_RUN = SimpleNamespace(config=RunConfig())
 
 
 @pytest.fixture

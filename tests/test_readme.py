@@ -116,7 +116,7 @@ def test_quickstart_commands_are_valid_as_written():
     from lerobot.configs.train import TrainPipelineConfig
 
     from molmo_lerobot.config import compose
-    from molmo_lerobot.runner.run_config import RunConfig
+    from molmo_lerobot.run_config import RunConfig
 
     lines = _quickstart()
     for line in lines:

@@ -135,7 +135,7 @@ def config_message(exc: BaseException) -> str:
 def _unknown_key_message(key: str, append: str) -> str | None:
     """One line for ``key`` the run config's schema does not know; ``None`` inside a section
     a plugin's config defines (Hydra's ``+key=value`` hint is the answer there)."""
-    from molmo_lerobot.runner.run_config import section_keys
+    from molmo_lerobot.run_config import section_keys
 
     section, _, name = key.rpartition(".")
     known = section_keys(section)

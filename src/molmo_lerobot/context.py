@@ -1,16 +1,16 @@
-"""The run context: everything run-wide, built once per process from the resolved run config.
+"""The run context: everything run-wide, built once per process from the validated run config.
 
-:meth:`RunContext.build` loads the plugins (with the run's ``plugins.prefer`` pins), resolves
+:meth:`RunContext.build` takes the :class:`~molmo_lerobot.run_config.RunConfig` (a mapping is
+validated into one first), loads the plugins (with the run's ``plugins.prefer`` pins), resolves
 the MolmoSpaces settings and composes the asset catalog from the asset and grasp library types
-the plugins provide (the run's user libraries among them). The main process builds one per run
-and hands it down; a worker, the run's policy server and the Gymnasium env rebuild theirs from
-the config they receive (:meth:`RunContext.portable_config`).
+the plugins provide (the run's user libraries among them). The main process builds one per run;
+a worker, the run's policy server and the Gymnasium env build theirs with the same constructor
+(a worker from :meth:`RunContext.portable_config` and the render profile's record).
 No module keeps run state of its own.
 """
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 from molmo_lerobot.assets.catalog import AssetCatalog
 from molmo_lerobot.molmospaces.settings import MolmoSpacesSettings, resolve
 from molmo_lerobot.plugins import Plugins
+from molmo_lerobot.run_config import MolmoSpacesConfig, RunConfig
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
@@ -28,66 +29,65 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class RunContext:
-    """One run's plugins, MolmoSpaces settings and asset catalog, and the config they came from."""
+    """One run's validated config, its plugins, MolmoSpaces settings and asset catalog."""
 
-    config: dict[str, Any]
+    config: RunConfig
     plugins: Plugins
     settings: MolmoSpacesSettings
     catalog: AssetCatalog
+    #: the render profile's record (:meth:`for_benchmark`: the one the benchmark names); ``None``: the
+    #: default profile with this process's overrides
+    render_record: dict[str, Any] | None = None
 
     @classmethod
-    def build(cls, config: Mapping[str, Any] | None = None) -> RunContext:
-        """A fresh context for ``config`` (a plain mapping or an OmegaConf config; ``None``: defaults).
+    def build(cls, config: RunConfig | Mapping[str, Any] | None = None,
+              render_record: dict[str, Any] | None = None) -> RunContext:
+        """A fresh context for ``config`` (a mapping or a composed ``DictConfig`` is validated first;
+        ``None``: the defaults).
 
-        Raises :class:`~molmo_lerobot.plugins.PluginError` for a bad ``plugins.prefer`` pin or a
+        Raises :class:`~molmo_lerobot.run_config.RunConfigError` listing every problem of the config,
+        :class:`~molmo_lerobot.plugins.PluginError` for a bad ``plugins.prefer`` pin or a
         library type several plugins provide,
         :class:`~molmo_lerobot.molmospaces.settings.SettingsError`, ``AssetError`` or ``GraspError``
         for bad MolmoSpaces settings or user libraries; each message names the key.
         """
-        cfg = _plain(config)
+        config = RunConfig.of(config)
         plugins = Plugins()
-        plugins.set_preferences((cfg.get("plugins") or {}).get("prefer"))
-        settings = resolve(cfg)
-        return cls(cfg, plugins, settings, build_catalog(plugins, settings))
+        plugins.set_preferences(config.plugins.prefer)
+        settings = resolve(config.model_dump())
+        return cls(config, plugins, settings, build_catalog(plugins, settings), render_record)
 
     @property
     def timing(self) -> Timing:
-        """The run's ``timing`` (defaults for the keys it leaves out)."""
+        """The run's ``timing``."""
         from molmo_lerobot.sim.env import Timing
 
-        return Timing(**(self.config.get("timing") or {}))
+        return Timing(**self.config.timing.model_dump())
 
     @property
     def render_profile(self) -> RenderProfile:
-        """The run's render profile (``render_profile`` of the config, set by :meth:`for_benchmark`;
-        else the default profile with this process's overrides)."""
+        """The run's render profile (:attr:`render_record`, else the default profile with this
+        process's overrides)."""
         from molmo_lerobot.sim.render_profile import RenderProfile, resolve_profile
 
-        record = self.config.get("render_profile")
+        record = self.render_record
         return RenderProfile.from_record(record) if record else resolve_profile(None)
 
     def for_benchmark(self, bench: Benchmark) -> RunContext:
-        """This context with the render profile ``bench`` names (with this process's overrides), which
-        workers rebuilding it from :meth:`portable_config` then use."""
+        """This context with the render profile ``bench`` names (with this process's overrides), whose
+        record workers build their context with."""
         from molmo_lerobot.sim.render_profile import RenderProfileError, resolve_profile
 
         try:
             profile = resolve_profile(bench.metadata.render_profile if bench.metadata else None)
         except RenderProfileError as exc:
             raise RenderProfileError(f"{bench.path}: benchmark_metadata.json: {exc}") from None
-        return dataclasses.replace(self, config={**self.config, "render_profile": profile.record()})
+        return dataclasses.replace(self, render_record=profile.record())
 
-    def portable_config(self) -> dict[str, Any]:
-        """The config with every data path absolute: what a worker rebuilds this context from."""
-        return {**self.config, **self.settings.to_config()}
-
-
-def _plain(config: Mapping[str, Any] | None) -> dict[str, Any]:
-    from omegaconf import DictConfig, OmegaConf
-
-    if isinstance(config, DictConfig):
-        return OmegaConf.to_container(config, resolve=True)  # type: ignore[return-value]
-    return copy.deepcopy(dict(config or {}))
+    def portable_config(self) -> RunConfig:
+        """The config with every data path absolute: what a worker builds its context from."""
+        portable = self.settings.to_config()
+        return self.config.model_copy(update={**portable, "molmospaces": MolmoSpacesConfig(**portable["molmospaces"])})
 
 
 def build_catalog(plugins: Plugins, settings: MolmoSpacesSettings) -> AssetCatalog:

@@ -52,7 +52,8 @@ from gymnasium import spaces  # noqa: E402
 from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.errors import MolmoError  # noqa: E402
 from molmo_lerobot.features import ENV_STATE_KEY, FeatureMap, is_wrist  # noqa: E402
-from molmo_lerobot.runner.episode import Episode, load_run_benchmark, open_episode  # noqa: E402
+from molmo_lerobot.molmospaces.preflight import preflight  # noqa: E402
+from molmo_lerobot.runner.episode import EpisodeSession, EpisodeSetupError, load_run_benchmark  # noqa: E402
 from molmo_lerobot.runner.plan import EpisodePlanner  # noqa: E402
 
 NAMESPACE = "molmo_lerobot"
@@ -75,25 +76,24 @@ class MolmoEnv(gym.Env):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         self.render_mode = render_mode
-        #: this env's run: molmo-eval's options (``eval_options``), seed, horizon and timing
-        self.context = RunContext.build({**(eval_options or {}), "seed": run_seed, "horizon": horizon,
-                                         "timing": timing or {}})
-        self.bench = load_run_benchmark(benchmark, self.context.plugins)
-        self.context = self.context.for_benchmark(self.bench)  # the look its metadata names
+        #: this env's run: molmo-eval's options (``eval_options``), seed, horizon and timing, validated as
+        #: molmo-eval validates its config (:class:`~molmo_lerobot.run_config.RunConfigError` names each problem)
+        self.run = RunContext.build({**(eval_options or {}), "seed": run_seed, "horizon": horizon,
+                                     "timing": timing or {}})
+        self.bench = load_run_benchmark(benchmark, self.run.plugins)
+        self.run = self.run.for_benchmark(self.bench)  # the look its metadata names
         self.end_on_success = bool(end_on_success)
         self.environment_state = bool(environment_state)
         self._n = len(self.bench.episodes)
         self._pinned = None if episode_index is None else self._check_index(episode_index)
-        planner = EpisodePlanner(self.context, self.bench)
+        planner = EpisodePlanner(self.run, self.bench)
         self._plans = [planner.plan(i) for i in range(self._n)]  # episode i is the same trial on every reset
         self._next = 0
-        self.metadata = {**self.metadata, "render_fps": round(1000.0 / self.context.timing.policy_dt_ms)}
+        self.metadata = {**self.metadata, "render_fps": round(1000.0 / self.run.timing.policy_dt_ms)}
         #: the longest horizon of the benchmark (LeRobot's rollout loop bound)
         self._max_episode_steps = max(plan.horizon or 0 for plan in self._plans)
-        self._episode: Episode | None = self._open(self._pinned or 0)  # spaces come from a real episode
+        self._episode: EpisodeSession | None = self._open(self._pinned or 0)  # spaces come from a real episode
         self.observation_space, self.action_space = self._spaces()
-        self._steps = 0
-        self._success_once = False
 
     # Gymnasium API --------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -107,8 +107,7 @@ class MolmoEnv(gym.Env):
         self._next = (index + 1) % self._n
         self._close_episode()
         self._episode = self._open(index)  # compiled models are cached: reopening is cheap
-        self._steps, self._success_once = 0, False
-        obs = self._observe()
+        obs = self._episode.observe()
         self._check_layout(obs)
         return self._obs(obs), self._info(False)
 
@@ -121,14 +120,10 @@ class MolmoEnv(gym.Env):
             raise ValueError(f"action has shape {np.shape(action)}, expected ({self.features.action_dim},): "
                              f"{self.features.action_layout()}")
         success = ep.step(self.features.split_action(a) if isinstance(a, np.ndarray) else a)
-        self._steps += 1
-        self._success_once |= success
-        terminated = bool(success and self.end_on_success)
-        truncated = self._steps >= ep.horizon and not terminated
+        ended = ep.end()
         reward = ep.task.reward()
-        obs = self._observe()
-        return (self._obs(obs), float(success if reward is None else reward), terminated, truncated,
-                self._info(success))
+        return (self._obs(ep.observe()), float(success if reward is None else reward), ended == "success",
+                ended == "horizon", self._info(success))
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None or self._episode is None:
@@ -142,31 +137,29 @@ class MolmoEnv(gym.Env):
 
     # LeRobot's vector env calls these by name ---------------------------------------------------------
     def task_description(self) -> str:
-        return self._episode.prompt if self._episode else ""
+        return self._episode.plan.prompt if self._episode else ""
 
     def task(self) -> str:
-        return self._episode.task_type.name if self._episode else ""
+        return self._episode.plan.task_type if self._episode else ""
 
     # Internals --------------------------------------------------------------------------------
-    def _open(self, index: int) -> Episode:
-        return open_episode(self._plans[index], self.bench, self.context)
+    def _open(self, index: int) -> EpisodeSession:
+        """Episode ``index``, checked to simulate here, open (as a ``molmo-eval`` worker opens it)."""
+        plan = self._plans[index]
+        if plan.error:
+            raise EpisodeSetupError(f"{self.bench.where(index)}: {plan.error}")
+        cannot = preflight(self.bench, self.run, [index])
+        if cannot:
+            raise EpisodeSetupError(cannot)
+        return EpisodeSession.open(plan, self.run, end_on_success=self.end_on_success,
+                                   environment_state="environment_state=True" if self.environment_state else None)
 
     @property
-    def _current(self) -> Episode:
+    def _current(self) -> EpisodeSession:
         """The open episode (a closed env has none)."""
         if self._episode is None:
             raise RuntimeError("the env is closed; reset() opens an episode")
         return self._episode
-
-    def _observe(self) -> dict[str, Any]:
-        ep = self._current
-        obs = ep.env.observe(images=True)
-        if self.environment_state:
-            if not ep.task.environment_state_names:
-                raise ValueError(f"{self.bench.where(ep.index)}: environment_state=True but task type "
-                                 f"{ep.task_type.name!r} defines no environment state")
-            obs[ENV_STATE_KEY] = ep.task.environment_state()
-        return obs
 
     def _check_index(self, index: int) -> int:
         if isinstance(index, bool) or not isinstance(index, int | np.integer) or not 0 <= index < self._n:
@@ -176,7 +169,7 @@ class MolmoEnv(gym.Env):
 
     def _spaces(self) -> tuple[spaces.Dict, spaces.Box]:
         #: the feature map of this env's episodes: ``agent_pos`` is its ``observation.state``, the action its ``action``
-        self.features = self._feature_map(self._observe())
+        self.features = self._feature_map(self._current.observe())
         cams = self.features.camera_shapes
         pixels = spaces.Dict({c: spaces.Box(0, 255, shape, np.uint8) for c, shape in cams.items()})
         obs_space = spaces.Dict({"pixels": pixels,
@@ -206,9 +199,10 @@ class MolmoEnv(gym.Env):
         new, ours = self._feature_map(obs), self.features
         if (new.camera_shapes != ours.camera_shapes or new.move_groups != ours.move_groups
                 or new.env_state_names != ours.env_state_names):
-            raise ValueError(f"{self.bench.where(self._current.index)}: cameras {new.camera_shapes} / move groups "
-                             f"{new.move_groups} differ from this env's spaces "
-                             f"({ours.camera_shapes} / {ours.move_groups}); pin episode_index to run it")
+            where = self.bench.where(self._current.plan.episode_index)
+            raise ValueError(f"{where}: cameras {new.camera_shapes} / move groups {new.move_groups} differ from "
+                             f"this env's spaces ({ours.camera_shapes} / {ours.move_groups}); "
+                             "pin episode_index to run it")
 
     def _obs(self, obs: dict[str, Any]) -> dict[str, Any]:
         out = {"pixels": {c: np.asarray(obs["images"][c], dtype=np.uint8) for c in self.features.camera_shapes},
@@ -218,10 +212,10 @@ class MolmoEnv(gym.Env):
         return out
 
     def _info(self, success: bool) -> dict[str, Any]:
-        ep = self._current
-        return {"is_success": bool(success), "success_once": bool(self._success_once or success),
-                "episode_index": ep.index, "task": ep.task_type.name, "task_description": ep.prompt,
-                "seed": ep.seed, "horizon": ep.horizon}
+        plan = self._current.plan
+        return {"is_success": bool(success), "success_once": self._current.success_once,
+                "episode_index": plan.episode_index, "task": plan.task_type, "task_description": plan.prompt,
+                "seed": plan.seed, "horizon": plan.horizon}
 
     def _close_episode(self) -> None:
         if self._episode is not None:

@@ -144,7 +144,7 @@ def molmo_recorders(config: dict[str, Any]) -> list[RecorderFactory]:
 def molmo_episode_overrides(episode: EpisodeSpec, config: Any, context: Any) -> EpisodeSpec | None:
     """Edit an episode before it runs (MolmoSpaces' robot eval overrides).
 
-    Called once per episode with the validated spec, the run config and the run's
+    Called once per episode with the validated spec, the run config (plain data) and the run's
     :class:`~molmo_lerobot.context.RunContext` (its asset catalog, settings; take only the
     arguments you need). Return a new
     :class:`EpisodeSpec` (e.g. ``episode.model_copy(update=...)``) to replace it, or

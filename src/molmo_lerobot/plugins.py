@@ -387,14 +387,15 @@ class Plugins:
 
     def apply_episode_overrides(self, episode: EpisodeSpec, context: Any) -> EpisodeSpec:
         """Run every ``molmo_episode_overrides`` implementation in pluggy's call order, with the
-        run's :class:`~molmo_lerobot.context.RunContext` and its config.
+        run's :class:`~molmo_lerobot.context.RunContext` and its config as plain data.
 
         Each sees the previous one's result. ``ValueError`` (an override that cannot apply
         to this episode) propagates, failing the episode; any other failure marks the plugin
         broken and skips it (with a warning), so a broken override never breaks every run.
         """
+        config = context.config.plain()
         for rec, impl in self._impls("molmo_episode_overrides"):
-            kwargs = {"episode": episode, "config": context.config, "context": context}
+            kwargs = {"episode": episode, "config": config, "context": context}
             ok, new = self._invoke(rec, "molmo_episode_overrides", impl, kwargs, run_time=True)
             if ok and new is not None:
                 episode = new

@@ -58,7 +58,7 @@ def test_their_nav_episode_runs_to_success_with_the_expert(run):
         task.setup()
         expert = ScriptedNav({})
         expert.reset(EpisodeContext(spec=spec, episode_index=0, seed=0, prompt=spec.prompt,
-                                    move_groups=env.move_groups, policy_dt_s=0.066, env=env, run=run))
+                                    move_groups=env.move_groups, policy_dt_s=0.066, env=env, catalog=run.catalog))
         success = False
         for _ in range(len(expert.plan) // expert.chunk + 2):
             chunk = expert.act({})

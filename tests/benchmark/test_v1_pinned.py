@@ -15,7 +15,7 @@ import pytest
 from molmo_lerobot.benchmark.load import Benchmark, load_benchmark
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
-from molmo_lerobot.runner.rollout import horizon_with_source
+from molmo_lerobot.runner.plan import horizon_with_source
 
 PLACE = {"max_place_receptacle_pos_displacement": 0.15, "max_place_receptacle_rot_displacement": 1.0472,
          "receptacle_supported_weight_frac": 0.5}

@@ -18,7 +18,7 @@ from molmo_lerobot.paths import data_path
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.scripted import ScriptedExpert
 from molmo_lerobot.runner.episode_env import build_env
-from molmo_lerobot.runner.rollout import resolve_horizon
+from molmo_lerobot.runner.plan import resolve_horizon
 from molmo_lerobot.sim.env import Timing
 
 CAMERAS = ("head_camera", "wrist_camera")
@@ -35,7 +35,7 @@ def _row(spec, ctx: RunContext) -> np.ndarray:
         policy = ScriptedExpert({})
         policy.reset(EpisodeContext(spec=spec, episode_index=0, seed=spec.seed, prompt=spec.prompt,
                                     move_groups=dict(env.move_groups), policy_dt_s=timing.policy_dt_s, env=env,
-                                    run=ctx))
+                                    catalog=ctx.catalog, expert=ctx.plugins.expert(spec.task_name)))
         for _ in range(resolve_horizon(None, spec.task, task_type.default_horizon_sec, timing.policy_dt_ms)):
             chunk = policy.act(env.observe(False))
             for k in range(len(chunk["arm"])):

@@ -18,11 +18,12 @@ from molmo_lerobot.context import RunContext
 from molmo_lerobot.doors.generate import generate_benchmark
 from molmo_lerobot.doors.scenes import DOOR_NAME, HINGE_JOINT, DoorRooms, door_geometry, layout
 from molmo_lerobot.libero.objects import assets_root
-from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.scripted import ScriptedExpert
+from molmo_lerobot.runner.episode import EpisodeSession
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.runner.evaluate import run_evaluation
-from molmo_lerobot.runner.rollout import resolve_horizon, rollout
+from molmo_lerobot.runner.plan import plan_spec, resolve_horizon
+from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.sim.env import Timing
 from molmo_lerobot.tasks.door_opening import door_handles, door_hinge
 
@@ -76,10 +77,11 @@ def _run_expert(raw: dict) -> tuple[bool, float]:
     try:
         env.reset(spec.seed)
         task = task_type.create(spec, env)
-        ctx = EpisodeContext(spec=spec, episode_index=0, seed=spec.seed, prompt=spec.prompt,
-                             move_groups=dict(env.move_groups), policy_dt_s=timing.policy_dt_s, env=env, run=run)
         horizon = resolve_horizon(None, spec.task, task_type.default_horizon_sec, timing.policy_dt_ms)
-        out = rollout(env, task, ScriptedExpert({}), ctx, horizon, [], None, "scripted")
+        expert = ScriptedExpert({})
+        plan = plan_spec(spec, run.plugins, seed=spec.seed, horizon=horizon)
+        session = EpisodeSession.start(plan, spec, env, task, run, policy=expert)
+        out = rollout(session, expert, [], "scripted")
         return out.success, task.openness()
     finally:
         env.close()

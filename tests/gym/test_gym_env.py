@@ -54,6 +54,18 @@ def test_bad_input_is_one_clear_error(env):
         env.step(np.zeros(7, np.float32))
 
 
+def test_eval_options_are_validated_as_molmo_eval_validates_its_config():
+    """The env's run config goes through RunConfig, as molmo-eval's does (it used to be taken unchecked)."""
+    from molmo_lerobot.run_config import RunConfigError
+
+    with pytest.raises(RunConfigError) as err:
+        MolmoEnv("pick_v1", eval_options={"horizons": {"pick": -5}, "camera": {"rand_level": 200}},
+                 timing={"policy_dt_ms": 0})
+    assert any(line.startswith("horizons.pick: expected a positive number of seconds") for line in err.value.problems)
+    assert any(line.startswith("timing.policy_dt_ms: expected a positive number") for line in err.value.problems)
+    assert len(err.value.problems) == 3
+
+
 def test_replayed_actions_give_molmo_evals_trial(tmp_path):
     """The same actions through the Gymnasium env and through molmo-eval (policy=replay): the same
     robot state at every step (from the recorded dataset) and the same outcome."""

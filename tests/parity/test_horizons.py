@@ -15,7 +15,7 @@ import pytest
 
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
-from molmo_lerobot.runner.rollout import horizon_with_source
+from molmo_lerobot.runner.plan import horizon_with_source
 
 pytestmark = pytest.mark.parity
 

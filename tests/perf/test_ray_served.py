@@ -76,9 +76,9 @@ def _bytes_per_episode(cfg, res) -> tuple[int, int]:
     """Pickled size of an episode's plan (head → worker) and of its result (worker → head)."""
     from molmo_lerobot.benchmark.load import load_benchmark
     from molmo_lerobot.context import RunContext
+    from molmo_lerobot.run_config import RunConfig
     from molmo_lerobot.runner.evaluate import resolve_benchmark_path
     from molmo_lerobot.runner.plan import EpisodePlanner
-    from molmo_lerobot.runner.run_config import RunConfig
 
     plain = RunConfig.of(cfg).plain()
     ctx = RunContext.build(plain)

@@ -15,10 +15,11 @@ import pytest
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import Plugins
-from molmo_lerobot.policies.base import EpisodeContext, Policy
-from molmo_lerobot.recording import EpisodeInfo, Recorder
+from molmo_lerobot.policies.base import Policy
+from molmo_lerobot.recording import Recorder
+from molmo_lerobot.runner.episode import EpisodeSession
 from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.runner.plan import plan_spec
 from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.sim.env import Timing
 
@@ -32,7 +33,7 @@ def episode(resolution=None):
         spec = spec.model_copy(update={"img_resolution": resolution})
     env = build_env(spec, Timing(), run)
     env.reset(0)
-    return spec, env
+    return spec, env, run
 
 
 class ImagePolicy(Policy):
@@ -64,17 +65,15 @@ class FrameRecorder(Recorder):
 
 
 def test_each_camera_is_rendered_once_per_observation(monkeypatch):
-    spec, env = episode()
+    spec, env, run = episode()
     renders: list[str] = []
     original = env.render
     monkeypatch.setattr(env, "render", lambda cam: renders.append(cam) or original(cam))
-    task = Plugins().task_type(spec.task_name).create(spec, env)
+    task = run.plugins.task_type(spec.task_name).create(spec, env)
     policy, recorder, horizon = ImagePolicy(), FrameRecorder(), 10
-    ctx = EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=dict(env.move_groups),
-                         policy_dt_s=0.066, env=env)
-    info = EpisodeInfo(0, spec.house_index, 0, "", "pick", 15.0, horizon, list(env.camera_names),
-                       tuple(spec.img_resolution), dict(env.joint_names), dict(env.move_groups))
-    rollout(env, task, policy, ctx, horizon, [recorder], info, "image_policy")
+    session = EpisodeSession.start(plan_spec(spec, run.plugins, seed=0, horizon=horizon), spec, env, task, run,
+                                   policy=policy)
+    rollout(session, policy, [recorder], "image_policy")
     env.close()
     assert len(recorder.frames) == horizon and len(policy.seen) == -(-horizon // CHUNK)
     assert renders == list(env.camera_names) * horizon  # one render per camera per observation
@@ -84,15 +83,13 @@ def test_each_camera_is_rendered_once_per_observation(monkeypatch):
 
 
 def test_policy_without_images_and_no_recorder_renders_nothing(monkeypatch):
-    spec, env = episode()
+    spec, env, run = episode()
     monkeypatch.setattr(env, "render", lambda cam: pytest.fail("rendered without a consumer"))
     policy = ImagePolicy()
     policy.needs_images = False
-    task = Plugins().task_type(spec.task_name).create(spec, env)
-    ctx = EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=dict(env.move_groups),
-                         policy_dt_s=0.066, env=env)
-    info = EpisodeInfo(0, spec.house_index, 0, "", "pick", 15.0, 5, [], (224, 224), {}, {})
-    rollout(env, task, policy, ctx, 5, [], info, "image_policy")
+    task = run.plugins.task_type(spec.task_name).create(spec, env)
+    session = EpisodeSession.start(plan_spec(spec, run.plugins, seed=0, horizon=5), spec, env, task, run, policy=policy)
+    rollout(session, policy, [], "image_policy")
     env.close()
 
 
@@ -101,7 +98,7 @@ def test_render_cost_per_frame():
     frames = 30
     rows = []
     for width, height in ((224, 224), (624, 352), (640, 368)):
-        _, env = episode([width, height])
+        _, env, _ = episode([width, height])
         renderer = mujoco.Renderer(env.model, height=height, width=width)
         for shadows in (True, False):
             renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows

@@ -27,8 +27,7 @@ from molmo_lerobot.paths import data_path
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.factory import make_policy
 from molmo_lerobot.runner.episode_env import build_env
-from molmo_lerobot.runner.plan import episode_seed
-from molmo_lerobot.runner.rollout import resolve_horizon
+from molmo_lerobot.runner.plan import episode_seed, resolve_horizon
 from molmo_lerobot.sim.env import Timing
 
 pytestmark = pytest.mark.perf
@@ -50,7 +49,8 @@ def _render_episode() -> dict[str, np.ndarray]:
     task = task_type.create(spec, env)
     policy = make_policy(plugins, {"name": "scripted"})
     policy.reset(EpisodeContext(spec=spec, episode_index=0, seed=seed, prompt=spec.language.task_description,
-                                move_groups=env.move_groups, policy_dt_s=timing.policy_dt_s, env=env, run=run))
+                                move_groups=env.move_groups, policy_dt_s=timing.policy_dt_s,
+                                env=env, catalog=run.catalog, expert=run.plugins.expert(spec.task_name)))
     task.setup()
     frames: dict[str, list[np.ndarray]] = {cam: [] for cam in env.camera_names}
     queue: list[dict] = []

@@ -14,7 +14,10 @@ from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.policies.base import EpisodeContext
+from molmo_lerobot.run_config import RunConfig
+from molmo_lerobot.runner.episode import EpisodeSession
 from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.runner.plan import plan_spec
 from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.sim.env import Timing
 
@@ -36,9 +39,8 @@ def _run(raw, policy_name, horizon=HORIZON, config=None):
     try:
         env.reset(spec.seed)
         task = plugins.task_type(spec.task.task_cls).create(spec, env)
-        ctx = EpisodeContext(spec=spec, episode_index=0, seed=spec.seed, prompt=spec.prompt,
-                             move_groups=env.move_groups, policy_dt_s=timing.policy_dt_s, env=env, run=run)
-        outcome = rollout(env, task, policy, ctx, horizon, [], None, policy_name)
+        plan = plan_spec(spec, plugins, seed=spec.seed, horizon=horizon)
+        outcome = rollout(EpisodeSession.start(plan, spec, env, task, run, policy=policy), policy, [], policy_name)
         return outcome, env.data.qpos.copy()
     finally:
         env.close()
@@ -60,7 +62,7 @@ def test_scripted_returns_chunks_without_images(episodes):
     try:
         env.reset(0)
         policy.reset(EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=env.move_groups,
-                                    policy_dt_s=0.066, env=env, run=run))
+                                    policy_dt_s=0.066, env=env, catalog=run.catalog, expert=plugins.expert("pick")))
         chunk = policy.act(env.observe(images=False))
         assert chunk["arm"].shape == (5, 7) and chunk["gripper"].shape == (5, 1)
         assert np.all(chunk["gripper"] == 0.0)  # open while approaching
@@ -123,9 +125,9 @@ def _loop(episodes, policy, task, horizon=12, **kw):
     env = build_env(spec, Timing(), run)
     try:
         env.reset(0)
-        ctx = EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=env.move_groups,
-                             policy_dt_s=0.066, env=None)
-        return rollout(env, task, policy, ctx, horizon, [], None, "test", **kw), env.robot.targets(env.data, "arm"), env
+        session = EpisodeSession.start(plan_spec(spec, run.plugins, seed=0, horizon=horizon), spec, env, task, run,
+                                       policy=policy, **kw)
+        return rollout(session, policy, [], "test"), env.robot.targets(env.data, "arm"), env
     finally:
         env.close()
 
@@ -139,24 +141,24 @@ def test_left_out_move_group_holds_its_target(episodes):
 def test_done_ends_the_episode_after_its_step(episodes):
     chunk = {"gripper": np.zeros((4, 1)), "done": [False, True, False, False]}
     out, _, _ = _loop(episodes, _Scripted([chunk]), _SuccessAt([]))
-    assert out.steps == 2 and out.ended_by == "done" and not out.success
+    assert out.steps == 2 and out.extra["ended_by"] == "done" and not out.success
 
 
 def test_end_on_success(episodes):
     out, _, _ = _loop(episodes, _Scripted([]), _SuccessAt([3]), end_on_success=True)
-    assert out.steps == 3 and out.ended_by == "success" and out.success and out.success_once
+    assert out.steps == 3 and out.extra["ended_by"] == "success" and out.success and out.success_once
     out, _, _ = _loop(episodes, _Scripted([]), _SuccessAt([3]))
-    assert out.steps == 12 and out.ended_by == "horizon" and not out.success
+    assert out.steps == 12 and out.extra["ended_by"] == "horizon" and not out.success
 
 
 def test_success_once_is_sampled_at_chunk_ends(episodes):
     """MolmoSpaces records success once per observation, i.e. after each chunk; the per-step figure is an extra."""
     chunks = [{"gripper": np.zeros((4, 1))} for _ in range(3)]
     out, _, _ = _loop(episodes, _Scripted(chunks), _SuccessAt([2]))  # mid-chunk only
-    assert not out.success_once and out.success_any_step
+    assert not out.success_once and out.extra["success_any_step"]
     chunks = [{"gripper": np.zeros((4, 1))} for _ in range(3)]
     out, _, _ = _loop(episodes, _Scripted(chunks), _SuccessAt([4]))  # a chunk's last step
-    assert out.success_once and out.success_any_step
+    assert out.success_once and out.extra["success_any_step"]
 
 
 def test_only_privileged_policies_get_the_simulator(tmp_path, episodes):
@@ -171,8 +173,8 @@ def test_only_privileged_policies_get_the_simulator(tmp_path, episodes):
     bench = Benchmark("t", [parse_episode(episodes[0], plugins)], None, "", tmp_path, [Origin("t.json")])
     plan = EpisodePlanner(RunContext.build(config), bench).plan(0)
     for name in ("scripted", "random"):
-        job = WorkerJob(config=config, policy={"name": name}, output_dir=str(tmp_path), benchmark_name="t",
-                        benchmark_sha256="0" * 64)
+        job = WorkerJob(config=RunConfig.of(config), policy={"name": name}, output_dir=str(tmp_path),
+                        benchmark_name="t", benchmark_sha256="0" * 64)
         worker = EpisodeWorker(job, "w0")
         original = worker.policy.reset
         worker.policy.reset = lambda ctx, _o=original, _n=name: (seen.__setitem__(_n, ctx.env), _o(ctx))

@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from molmo_lerobot.runner.rollout import ActionError, resolve_horizon, split_actions
+from molmo_lerobot.runner.plan import resolve_horizon
+from molmo_lerobot.runner.rollout import ActionError, split_actions
 
 GROUPS = {"arm": 7, "gripper": 1}
 

@@ -4,12 +4,13 @@ as one line each."""
 from __future__ import annotations
 
 from molmo_lerobot.results import Push, summarize
+from molmo_lerobot.run_config import RunConfig
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 
 
 def test_the_config_chooses_the_finalizers():
-    assert [f.label for f in run_finalizers({})] == ["report"]
-    assert [f.label for f in run_finalizers({"wandb": {"enable": True}})] == ["report", "W&B log"]
+    assert [f.label for f in run_finalizers(RunConfig())] == ["report"]
+    assert [f.label for f in run_finalizers(RunConfig.of({"wandb": {"enable": True}}))] == ["report", "W&B log"]
 
 
 def test_every_step_runs_and_each_failure_is_one_line(tmp_path):

@@ -16,7 +16,7 @@ import pytest
 from molmo_lerobot.cli.eval import main
 from molmo_lerobot.errors import RunError
 from molmo_lerobot.runner.evaluate import run_evaluation
-from molmo_lerobot.runner.rollout import horizon_with_source
+from molmo_lerobot.runner.plan import horizon_with_source
 
 PICK_CLS = "molmo_lerobot.tasks.pick.PickTask"
 

@@ -7,7 +7,7 @@ from omegaconf import OmegaConf
 
 from molmo_lerobot.cli.eval import main
 from molmo_lerobot.config import compose
-from molmo_lerobot.runner.run_config import config_problems
+from molmo_lerobot.run_config import config_problems
 
 
 def _problems(*overrides: str) -> list[str]:
@@ -57,12 +57,11 @@ def test_a_custom_object_must_be_an_mjcf_model(tmp_path):
 def test_plugin_checked_options_are_one_line_naming_the_key():
     """The policy's own options (its ``PolicyType.check``), camera systems and task types need the plugins."""
     from molmo_lerobot.context import RunContext
+    from molmo_lerobot.run_config import RunConfig
     from molmo_lerobot.runner.evaluate import plugin_option_problems
-    from molmo_lerobot.runner.run_config import RunConfig
 
     def problems(*overrides: str) -> list[str]:
-        cfg = RunConfig.of(compose(list(overrides))).plain()
-        return plugin_option_problems(cfg, RunContext.build(cfg))
+        return plugin_option_problems(RunContext.build(RunConfig.of(compose(list(overrides)))))
 
     assert problems("policy=random") == [] and problems() == []
     assert problems("policy=random", "+policy.scale=nan") == ["policy.scale: expected a number in 0..3.14159, got nan"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from molmo_lerobot.cli.eval import main
-from molmo_lerobot.runner.run_config import MAX_PHYSICS_STEPS, config_problems, episode_work_problem
+from molmo_lerobot.run_config import MAX_PHYSICS_STEPS, config_problems, episode_work_problem
 
 
 @pytest.mark.parametrize(
@@ -69,7 +69,7 @@ def test_the_schema_defaults_are_eval_yaml_and_validation_keeps_a_composed_confi
     from omegaconf import OmegaConf
 
     from molmo_lerobot.config import compose
-    from molmo_lerobot.runner.run_config import RunConfig
+    from molmo_lerobot.run_config import RunConfig
 
     composed = OmegaConf.to_container(compose([]), resolve=True)
     assert RunConfig().plain() == composed and list(RunConfig().plain()) == list(composed)
@@ -98,7 +98,7 @@ def test_an_unknown_key_or_a_wrongly_typed_value_is_one_line_naming_the_key(args
 
 
 def test_a_plugins_own_top_level_key_is_kept():
-    from molmo_lerobot.runner.run_config import RunConfig
+    from molmo_lerobot.run_config import RunConfig
 
     run = RunConfig.of({"trace_dir": "/tmp/t", "policy": {"name": "sine", "amplitude": 0.3}})
     assert run.plain()["trace_dir"] == "/tmp/t" and run.policy == {"name": "sine", "amplitude": 0.3}

@@ -13,9 +13,9 @@ from molmo_lerobot.config import compose
 from molmo_lerobot.errors import RunError
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
+from molmo_lerobot.run_config import RunConfig, RunConfigError
 from molmo_lerobot.runner.compare import compare_runs, load_run
 from molmo_lerobot.runner.evaluate import run_evaluation
-from molmo_lerobot.runner.run_config import RunConfig, RunConfigError
 from molmo_lerobot.runner.selection import selection_of, stratified_sample
 
 
@@ -27,9 +27,9 @@ def pick_v1():
 def test_limit_takes_one_house_and_sample_spreads_over_every_house(pick_v1):
     houses = [ep.house_index for ep in pick_v1.episodes]
     assert len(set(houses)) == 10
-    first, _ = selection_of({"limit": 10}, pick_v1)
+    first, _ = selection_of(RunConfig(limit=10), pick_v1)
     assert len({houses[i] for i in first}) <= 2  # the first K are grouped by house
-    chosen, record = selection_of({"sample": 10, "seed": 0}, pick_v1)
+    chosen, record = selection_of(RunConfig(sample=10, seed=0), pick_v1)
     assert len(chosen) == 10 and {houses[i] for i in chosen} == set(houses)
     assert record == {"kind": "sample", "sample": 10, "seed": 0, "strata": "house_index, task", "episodes": chosen}
     per_house = Counter(houses[i] for i in stratified_sample(pick_v1, 25, seed=3))

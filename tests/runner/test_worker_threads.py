@@ -42,12 +42,12 @@ def test_a_worker_loading_a_torch_policy_runs_it_with_the_cap(tmp_path):
 
     act = save_tiny_act(tmp_path / "act", image_hw=(32, 32))
     code = (
-        "from omegaconf import OmegaConf\n"
         "from molmo_lerobot.config import compose\n"
+        "from molmo_lerobot.run_config import RunConfig\n"
         "from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob\n"
-        f"cfg = OmegaConf.to_container(compose(['policy=lerobot', 'policy.path={act}', 'policy.device=cpu', "
-        "'worker_threads=1']), resolve=True)\n"
-        f"job = WorkerJob(config=cfg, policy=cfg['policy'], output_dir={str(tmp_path)!r}, "
+        f"cfg = RunConfig.of(compose(['policy=lerobot', 'policy.path={act}', 'policy.device=cpu', "
+        "'worker_threads=1']))\n"
+        f"job = WorkerJob(config=cfg, policy=cfg.policy, output_dir={str(tmp_path)!r}, "
         "benchmark_name='b', benchmark_sha256='0')\n"
         "EpisodeWorker(job, 'w0')\n"
         "import torch\nprint(torch.get_num_threads())")

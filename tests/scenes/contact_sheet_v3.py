@@ -23,7 +23,7 @@ from molmo_lerobot.sim.render_profile import resolve_profile
 
 
 def _views(spec, ctx: RunContext, profile: str) -> list[np.ndarray]:
-    ctx = dataclasses.replace(ctx, config={**ctx.config, "render_profile": resolve_profile(profile).record()})
+    ctx = dataclasses.replace(ctx, render_record=resolve_profile(profile).record())
     env = build_env(spec, Timing(), ctx)
     try:
         env.reset(spec.seed)

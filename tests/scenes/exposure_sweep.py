@@ -28,7 +28,7 @@ EXPOSURES = (1.0, 0.9, 0.8, 0.7, 0.6)
 def main(names: list[str]) -> None:
     ctx = RunContext.build()
     unscaled = dataclasses.replace(PROFILES["v3"], exposure=1.0)
-    ctx = dataclasses.replace(ctx, config={**ctx.config, "render_profile": unscaled.record()})
+    ctx = dataclasses.replace(ctx, render_record=unscaled.record())
     rows = []
     for name in names:
         bench = load_benchmark(data_path("benchmarks") / name, ctx.plugins)

@@ -53,7 +53,8 @@ def _row(spec, index: int, ctx: RunContext) -> np.ndarray:
         start = [_label(env.render(c), f"{index} start {c}") for c in env.camera_names]
         expert = ScriptedNav({})
         expert.reset(EpisodeContext(spec=spec, episode_index=index, seed=spec.seed or 0, prompt=spec.prompt,
-                                    move_groups=env.move_groups, policy_dt_s=env.timing.policy_dt_s, env=env, run=ctx))
+                                    move_groups=env.move_groups, policy_dt_s=env.timing.policy_dt_s,
+                                        env=env, catalog=ctx.catalog))
         for _ in range(len(expert.plan) // expert.chunk + 4):
             chunk = expert.act({})
             for k in range(expert.chunk):

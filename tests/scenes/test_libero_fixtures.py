@@ -23,10 +23,11 @@ from molmo_lerobot.libero.fixture_rooms import LiberoFixtureRooms
 from molmo_lerobot.libero.fixtures import LIBERO_FIXTURES, LOW_HANDLE, handle_grasps
 from molmo_lerobot.libero.objects import assets_root
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.scripted import ScriptedExpert
+from molmo_lerobot.runner.episode import EpisodeSession
 from molmo_lerobot.runner.episode_env import build_env
-from molmo_lerobot.runner.rollout import resolve_horizon, rollout
+from molmo_lerobot.runner.plan import plan_spec, resolve_horizon
+from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.sim.env import Env, Timing
 
 REPO = Path(__file__).resolve().parents[2]
@@ -148,10 +149,11 @@ def _rollout(raw: dict, run) -> tuple[bool, float]:
     try:
         env.reset(spec.seed)
         task = task_type.create(spec, env)
-        ctx = EpisodeContext(spec=spec, episode_index=0, seed=spec.seed, prompt=spec.prompt,
-                             move_groups=dict(env.move_groups), policy_dt_s=timing.policy_dt_s, env=env, run=run)
         horizon = resolve_horizon(None, spec.task, task_type.default_horizon_sec, timing.policy_dt_ms)
-        out = rollout(env, task, ScriptedExpert({}), ctx, horizon, [], None, "scripted")
+        expert = ScriptedExpert({})
+        plan = plan_spec(spec, run.plugins, seed=spec.seed, horizon=horizon)
+        session = EpisodeSession.start(plan, spec, env, task, run, policy=expert)
+        out = rollout(session, expert, [], "scripted")
         return out.success, task.fraction()
     finally:
         env.close()

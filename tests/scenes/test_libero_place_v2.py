@@ -125,7 +125,8 @@ def test_first_steps_of_one_color_v2_episode(run, tmp_path, monkeypatch):
         for n in names:
             np.testing.assert_allclose(start[n], spec.scene_modifications.object_poses[n], atol=2e-3)
         expert = ScriptedPlace({})
-        expert.reset(EpisodeContext(spec, 0, spec.seed, "", env.move_groups, Timing().policy_dt_s, env=env, run=run))
+        expert.reset(EpisodeContext(spec, 0, spec.seed, "", env.move_groups, Timing().policy_dt_s,
+                     env=env, catalog=run.catalog))
         for _ in range(3):
             chunk = expert.act(env.observe(images=False))
             for k in range(len(chunk["arm"])):

@@ -86,7 +86,8 @@ def test_a_few_steps_of_one_pick_v2_episode(run, tmp_path, monkeypatch):
         for image in obs["images"].values():
             assert image.shape == (224, 224, 3) and image.std() > 10  # a textured room, not a void
         expert = ScriptedPick({})
-        expert.reset(EpisodeContext(spec, 0, spec.seed, "", env.move_groups, Timing().policy_dt_s, env=env, run=run))
+        expert.reset(EpisodeContext(spec, 0, spec.seed, "", env.move_groups, Timing().policy_dt_s,
+                     env=env, catalog=run.catalog))
         for _ in range(3):
             chunk = expert.act(env.observe(images=False))
             for k in range(len(chunk["arm"])):

@@ -95,7 +95,7 @@ def test_sleep_is_off_by_default_and_drops_settled_contacts_when_on(pick_spec, r
 
 
 def test_control_options_are_checked_up_front():
-    from molmo_lerobot.runner.run_config import config_problems
+    from molmo_lerobot.run_config import config_problems
 
     base = {"workers": 1, "seed": 0}
     timing = {"policy_dt_ms": 66.0, "ctrl_dt_ms": 2.0, "sim_dt_ms": 2.0}

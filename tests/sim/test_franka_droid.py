@@ -219,17 +219,16 @@ def test_molmospaces_grasp_file_transfers(tmp_path):
         {"grasp_paths": {"droid": {uid: f"{uid}/droid/grasps.npz"}}, "articulated_grasp_paths": {}}))
     run = RunContext.build()
     register_user_grasp_library(run.catalog, "tutorial", lib, "builtin")
-    from molmo_lerobot.policies.base import EpisodeContext
     from molmo_lerobot.policies.expert_motion import object_grasps
     from molmo_lerobot.policies.scripted_pick import ScriptedPick
+    from molmo_lerobot.runner.episode import EpisodeSession
+    from molmo_lerobot.runner.plan import plan_spec
     from molmo_lerobot.runner.rollout import rollout
     env = _env(raw, run=run)
     try:
         assert object_grasps(env, uid, run.catalog) == pytest.approx(T[None])
         spec = env.spec
         task = run.plugins.task_type(spec.task_name).create(spec, env)
-        ctx = EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=dict(env.move_groups),
-                             policy_dt_s=0.066, env=env, run=run)
         env.step({g: env.robot.targets(env.data, g) for g in env.move_groups})  # the block settles
         support = env.contact_bodies(env.subtree_bodies(uid)) - env.robot.body_ids  # what it rests on
         assert support
@@ -241,7 +240,8 @@ def test_molmospaces_grasp_file_transfers(tmp_path):
 
         env.step = step_and_check
         expert = ScriptedPick({})
-        out = rollout(env, task, expert, ctx, 120, [], None, "scripted")
+        plan = plan_spec(spec, run.plugins, seed=0, horizon=120)
+        out = rollout(EpisodeSession.start(plan, spec, env, task, run, policy=expert), expert, [], "scripted")
         assert expert.grasp_local == pytest.approx(T)
         assert out.success
         assert not any(touched)  # the fingers never reach the table: the pads centre on the block

@@ -173,7 +173,7 @@ def test_bad_camera_options_stop_the_run(camera, problem):
 
 def test_good_camera_options_compose():
     from molmo_lerobot.config import compose
-    from molmo_lerobot.runner.run_config import config_problems
+    from molmo_lerobot.run_config import config_problems
 
     cfg = compose(["camera.eval=true", "camera.rand_level=50"])
     assert cfg.camera.eval is True and cfg.camera.rand_level == 50

@@ -24,8 +24,8 @@ def _env(bench_name: str, profile: str | None = None, index: int = 0):
     bench = load_benchmark(data_path("benchmarks") / bench_name, ctx.plugins)
     ctx = ctx.for_benchmark(bench)
     if profile is not None:
-        ctx = RunContext(config={**ctx.config, "render_profile": resolve_profile(profile).record()},
-                         plugins=ctx.plugins, settings=ctx.settings, catalog=ctx.catalog)
+        ctx = RunContext(config=ctx.config, plugins=ctx.plugins, settings=ctx.settings, catalog=ctx.catalog,
+                         render_record=resolve_profile(profile).record())
     env = build_env(bench.episodes[index], Timing(), ctx)
     env.reset(0)
     return env

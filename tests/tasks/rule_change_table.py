@@ -21,11 +21,11 @@ from pathlib import Path
 from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.scripted import ScriptedExpert
+from molmo_lerobot.runner.episode import EpisodeSession
 from molmo_lerobot.runner.episode_env import build_env
-from molmo_lerobot.runner.plan import episode_seed
-from molmo_lerobot.runner.rollout import resolve_horizon, rollout
+from molmo_lerobot.runner.plan import episode_seed, plan_spec, resolve_horizon
+from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.sim.env import Timing
 
 
@@ -82,13 +82,12 @@ def main(old_dir: str, bench: str, limit: int | None = None) -> dict:
         new = tt.create(spec, env)
         old = olds[tt.name].create(spec, env)
         task = BothRules(new, old)
-        ctx = EpisodeContext(spec=spec, episode_index=i, seed=seed, prompt="",
-                             move_groups=dict(env.move_groups), policy_dt_s=timing.policy_dt_s, env=env, run=run)
         horizon = resolve_horizon(None, spec.task, tt.default_horizon_sec, timing.policy_dt_ms)
         try:
-            out = rollout(env, task, policy, ctx, horizon, [], None, "scripted")
-            rows.append({"i": i, "new": out.success, "new_once": out.success_once, "new_any_step": out.success_any_step,
-                         "old": task.old_last, "old_once": task.old_any})
+            plan = plan_spec(spec, run.plugins, seed=seed, horizon=horizon)
+            out = rollout(EpisodeSession.start(plan, spec, env, task, run, policy=policy), policy, [], "scripted")
+            rows.append({"i": i, "new": out.success, "new_once": out.success_once,
+                         "new_any_step": out.extra["success_any_step"], "old": task.old_last, "old_once": task.old_any})
         except Exception as exc:  # an expert failure counts as a failure under both rules
             rows.append({"i": i, "new": False, "new_once": False, "new_any_step": False, "old": False,
                          "old_once": False, "error": f"{type(exc).__name__}: {exc}"})

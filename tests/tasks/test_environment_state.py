@@ -74,22 +74,24 @@ def test_recorder_env_and_policy_see_the_same_vector(genv, tmp_path):
     from molmo_lerobot.policies.lerobot_policy import LeRobotPolicy
 
     genv.reset()
-    genv.step(genv.action_space.sample() * 0 + genv._obs(genv._observe())["agent_pos"])  # hold: a later state
-    obs = genv._observe()
+    genv.step(genv.action_space.sample() * 0 + genv._obs(genv._episode.observe())["agent_pos"])  # hold: a later state
+    obs = genv._episode.observe()
     ep = genv._episode
-    info = EpisodeInfo(episode_index=ep.index, house_index=0, seed=ep.seed, prompt=ep.prompt, task_type="pick",
+    info = EpisodeInfo(episode_index=ep.plan.episode_index, house_index=0, seed=ep.plan.seed, prompt=ep.plan.prompt,
+                       task_type="pick",
                        fps=15.0, horizon=4, camera_names=list(ep.env.camera_names), img_resolution=(224, 224),
                        joint_names=dict(ep.env.joint_names), move_groups=dict(ep.env.move_groups),
                        environment_state_names=ep.task.environment_state_names)
     layout = FrameLayout.from_step(info, obs, None)
     assert layout.feature_map == genv.features
     assert layout.features()[ENV_STATE] == {"dtype": "float32", "shape": (13,), "names": NAMES}
-    recorded = layout.frame(obs, ep.env.observe(images=False)["qpos"], None, False, False, ep.prompt, info)[ENV_STATE]
+    qpos = ep.env.observe(images=False)["qpos"]
+    recorded = layout.frame(obs, qpos, None, False, False, ep.plan.prompt, info)[ENV_STATE]
     np.testing.assert_array_equal(genv._obs(obs)[ENV_STATE_KEY], recorded)
     policy = LeRobotPolicy({"name": "lerobot", "path": _tiny_state_act(tmp_path / "act", genv.features),
                             "device": "cpu"})
     assert policy.needs_environment_state and not policy.needs_images
-    policy.reset(EpisodeContext(spec=None, episode_index=0, seed=0, prompt=ep.prompt,
+    policy.reset(EpisodeContext(spec=None, episode_index=0, seed=0, prompt=ep.plan.prompt,
                                 move_groups=dict(ep.env.move_groups), policy_dt_s=0.066))
     np.testing.assert_array_equal(policy._batch(obs)[ENV_STATE].numpy(), recorded)
     with pytest.raises(KeyError, match=r"observation\.environment_state"):

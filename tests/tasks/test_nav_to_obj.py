@@ -44,7 +44,7 @@ def scene(run):
     env.reset(0)
     expert = ScriptedNav({})
     expert.reset(EpisodeContext(spec=spec, episode_index=EPISODE, seed=0, prompt=spec.prompt,
-                                move_groups=env.move_groups, policy_dt_s=0.066, env=env, run=run))
+                                move_groups=env.move_groups, policy_dt_s=0.066, env=env, catalog=run.catalog))
     yield env, raw, expert.plan[-1]
     env.close()
 

@@ -12,10 +12,11 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from molmo_lerobot.benchmark.generate_articulated import generate_benchmark
 from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.context import RunContext
-from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.scripted import ScriptedExpert
+from molmo_lerobot.runner.episode import EpisodeSession
 from molmo_lerobot.runner.episode_env import build_env
-from molmo_lerobot.runner.rollout import resolve_horizon, rollout
+from molmo_lerobot.runner.plan import plan_spec, resolve_horizon
+from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.sim.env import Timing
 
 
@@ -29,10 +30,9 @@ def _run(raw: dict, policy, control: str | None = None) -> tuple[bool, float]:
     try:
         env.reset(spec.seed)
         task = task_type.create(spec, env)
-        ctx = EpisodeContext(spec=spec, episode_index=0, seed=spec.seed, prompt=spec.prompt,
-                             move_groups=dict(env.move_groups), policy_dt_s=timing.policy_dt_s, env=env, run=run)
         horizon = resolve_horizon(None, spec.task, task_type.default_horizon_sec, timing.policy_dt_ms)
-        out = rollout(env, task, policy, ctx, horizon, [], None, "scripted")
+        plan = plan_spec(spec, run.plugins, seed=spec.seed, horizon=horizon)
+        out = rollout(EpisodeSession.start(plan, spec, env, task, run, policy=policy), policy, [], "scripted")
         return out.success, task.fraction()
     finally:
         env.close()

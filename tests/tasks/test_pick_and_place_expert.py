@@ -12,9 +12,10 @@ from molmo_lerobot.benchmark.generate import generate_benchmark
 from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.plugins import Plugins
-from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.scripted_place import ScriptedPlace
+from molmo_lerobot.runner.episode import EpisodeSession
 from molmo_lerobot.runner.episode_env import build_env
+from molmo_lerobot.runner.plan import plan_spec
 from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.sim.env import Timing
 
@@ -31,9 +32,8 @@ def _run(raw: dict, policy_name: str, horizon: int = HORIZON):
     try:
         env.reset(spec.seed)
         task = plugins.task_type(spec.task_name).create(spec, env)
-        ctx = EpisodeContext(spec=spec, episode_index=0, seed=spec.seed, prompt=spec.prompt,
-                             move_groups=env.move_groups, policy_dt_s=timing.policy_dt_s, env=env, run=run)
-        return rollout(env, task, policy, ctx, horizon, [], None, policy_name), policy
+        plan = plan_spec(spec, run.plugins, seed=spec.seed, horizon=horizon)
+        return rollout(EpisodeSession.start(plan, spec, env, task, run, policy=policy), policy, [], policy_name), policy
     finally:
         env.close()
 

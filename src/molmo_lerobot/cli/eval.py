@@ -3,7 +3,7 @@
 A Hydra app (``@hydra.main``) over ``conf/eval.yaml`` (plus the config dirs plugins add): ``-m`` sweeps
 (``molmo-eval -m policy=random,scripted limit=2`` writes one complete run per job under
 ``hydra.sweep.dir/hydra.sweep.subdir``), ``--cfg job|hydra|all``, ``--help``, ``--info``.
-Each job validates its config (:class:`~molmo_lerobot.runner.run_config.RunConfig`) before any
+Each job validates its config (:class:`~molmo_lerobot.run_config.RunConfig`) before any
 work. Bad overrides, config and run errors print one ``molmo-eval: error:`` message and exit 2.
 """
 
@@ -120,8 +120,8 @@ def _job(cfg: Any, jobs: list[dict[str, Any]]) -> int:
     from molmo_lerobot.errors import RunError
     from molmo_lerobot.plugins import PluginError
     from molmo_lerobot.results import summary_lines
+    from molmo_lerobot.run_config import RunConfig, RunConfigError
     from molmo_lerobot.runner.evaluate import run_evaluation
-    from molmo_lerobot.runner.run_config import RunConfig, RunConfigError
     from molmo_lerobot.runner.supervisor import WorkerStartError
 
     expected: tuple[type[BaseException], ...] = (ConfigError, PluginError, RunError, WorkerStartError,

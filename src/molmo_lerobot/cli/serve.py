@@ -79,10 +79,10 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
-        ctx = RunContext.build(compose(overrides))
-        policy_cfg: dict[str, Any] = ctx.config["policy"]
+        run = RunContext.build(compose(overrides))
+        policy_cfg: dict[str, Any] = run.config.policy
         name = policy_cfg.get("name")
-        server = build_server(ctx.plugins, policy_cfg, **options)
+        server = build_server(run.plugins, policy_cfg, **options)
     except (ConfigError, LookupError, ValueError, FileNotFoundError, ImportError) as exc:  # PluginError, AssetError
         print(f"molmo-serve: {exc}", file=sys.stderr)
         return 2

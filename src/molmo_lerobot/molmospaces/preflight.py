@@ -17,11 +17,11 @@ if TYPE_CHECKING:
     from molmo_lerobot.context import RunContext
 
 
-def _missing(spec: Any, ctx: RunContext, camera_system: str | None) -> tuple[str, str] | None:
+def _missing(spec: Any, run: RunContext, camera_system: str | None) -> tuple[str, str] | None:
     """(field, what is missing and how to get it) for the first thing ``spec`` lacks here, or ``None``."""
     from molmo_lerobot.plugins import PluginError
 
-    plugins = ctx.plugins
+    plugins = run.plugins
 
     checks = (("task type", "task_type", spec.task_name, "task.task_cls"),
               ("robot", "robot", spec.robot.robot_name, "robot.robot_name"),
@@ -34,8 +34,8 @@ def _missing(spec: Any, ctx: RunContext, camera_system: str | None) -> tuple[str
             return field, f"{what} {name!r}: {str(exc).splitlines()[0]} (install a plugin that provides it)"
     scene = found["scene_dataset"]
     if hasattr(scene, "fetch"):
-        scene.fetch(spec, ctx)  # scenes installed on demand arrive now, before any worker starts
-    reason = scene.missing(spec, ctx) if hasattr(scene, "missing") else None
+        scene.fetch(spec, run)  # scenes installed on demand arrive now, before any worker starts
+    reason = scene.missing(spec, run) if hasattr(scene, "missing") else None
     if reason:
         return ("house_index" if "scene_xml_paths" in reason else "scene_dataset"), reason
     if hasattr(scene, "missing") and spec.scene_modifications.added_objects:
@@ -44,7 +44,7 @@ def _missing(spec: Any, ctx: RunContext, camera_system: str | None) -> tuple[str
         for name, rel in spec.scene_modifications.added_objects.items():
             field = f"scene_modifications.added_objects[{name!r}]"
             try:
-                resolve_object_file(rel, field, ctx)
+                resolve_object_file(rel, field, run)
             except FileNotFoundError as exc:
                 return field, str(exc).removeprefix(f"{field}: ")
     if not spec.cameras:
@@ -60,7 +60,7 @@ def _missing(spec: Any, ctx: RunContext, camera_system: str | None) -> tuple[str
     return None
 
 
-def _install_problem(bench: Any, ctx: RunContext, indices: list[int]) -> str | None:
+def _install_problem(bench: Any, run: RunContext, indices: list[int]) -> str | None:
     """A fault of the installed files a scene dataset of these episodes reads in place (its
     ``install_problem``, once per dataset), or ``None``."""
     from molmo_lerobot.plugins import PluginError
@@ -68,7 +68,7 @@ def _install_problem(bench: Any, ctx: RunContext, indices: list[int]) -> str | N
     names = dict.fromkeys(bench.episodes[i].scene_dataset for i in indices)
     for name in names:
         try:
-            scene = ctx.plugins.scene_dataset(name)
+            scene = run.plugins.scene_dataset(name)
         except PluginError:
             continue  # reported per episode below
         check = getattr(scene, "install_problem", None)
@@ -78,21 +78,21 @@ def _install_problem(bench: Any, ctx: RunContext, indices: list[int]) -> str | N
     return None
 
 
-def preflight(bench: Any, ctx: RunContext, indices: Iterable[int], skip: Iterable[int] = ()) -> str | None:
+def preflight(bench: Any, run: RunContext, indices: Iterable[int], skip: Iterable[int] = ()) -> str | None:
     """One line saying why the run cannot simulate (and how to fix it), or ``None``.
 
     ``skip`` are episodes already failed as invalid (they are reported per episode instead).
     """
-    camera_system = (ctx.config.get("camera") or {}).get("system")
+    camera_system = run.config.camera.system
     skipped = set(skip)
-    broken = _install_problem(bench, ctx, [i for i in indices if i not in skipped])
+    broken = _install_problem(bench, run, [i for i in indices if i not in skipped])
     if broken:
         return broken
     reasons: dict[tuple[str, str, str], list[int]] = {}
     for i in indices:
         if i in skipped:
             continue
-        found = _missing(bench.episodes[i], ctx, camera_system)
+        found = _missing(bench.episodes[i], run, camera_system)
         if found:
             file = bench.origins[i].file if i < len(bench.origins) else str(bench.path)
             reasons.setdefault((file, *found), []).append(i)

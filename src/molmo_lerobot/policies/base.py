@@ -49,8 +49,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from molmo_lerobot.assets.catalog import AssetCatalog
     from molmo_lerobot.benchmark.schema import EpisodeSpec
-    from molmo_lerobot.context import RunContext
     from molmo_lerobot.sim.env import Env
 
 Observation = dict[str, Any]
@@ -61,19 +61,21 @@ Action = dict[str, np.ndarray]
 class EpisodeContext:
     """What a policy learns at reset.
 
-    ``env`` gives privileged simulator access and ``run`` the run's context (plugins, asset
-    catalog). Both are set only for policies that declare :attr:`Policy.needs_simulator`
+    ``env`` (privileged simulator access), ``catalog`` (the run's asset catalog: grasps, object
+    annotations) and ``expert`` (the scripted expert the plugins register for the episode's task
+    type, if any) are set only for policies that declare :attr:`Policy.needs_simulator`
     (scripted experts); a policy under evaluation gets ``None``.
     """
 
-    spec: EpisodeSpec
+    spec: EpisodeSpec | None  # None for an env suite's episode (LIBERO: no scene of ours)
     episode_index: int
     seed: int
     prompt: str
     move_groups: dict[str, int]
     policy_dt_s: float
     env: Env | None = None
-    run: RunContext | None = None
+    catalog: AssetCatalog | None = None
+    expert: PolicyType | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -86,7 +88,7 @@ class Policy(ABC):
     #: Whether ``act`` reads ``obs["environment_state"]``, the task's privileged ground truth
     #: (:mod:`molmo_lerobot.features`): the rollout then adds it to every observation.
     needs_environment_state: bool = False
-    #: Whether the policy reads the simulator (``ctx.env``): privileged scripted experts.
+    #: Whether the policy reads the simulator (``EpisodeContext.env``): privileged scripted experts.
     #: The runner hands the environment to no other policy; ``molmo-serve`` refuses such a
     #: policy (a server has no simulator).
     needs_simulator: bool = False

@@ -112,10 +112,10 @@ class PhasedExpert(Policy):
 
     def _start(self, ctx: EpisodeContext, phases: list[str]) -> Any:
         """Per-episode state every script shares; returns the (privileged) environment."""
-        if ctx.env is None or ctx.run is None:
-            raise ValueError("scripted policy needs privileged simulator access (ctx.env) and the run (ctx.run)")
+        if ctx.env is None or ctx.catalog is None:
+            raise ValueError("scripted policy needs privileged simulator access (EpisodeContext.env and .catalog)")
         env = self.env = ctx.env
-        self.catalog = ctx.run.catalog
+        self.catalog = ctx.catalog
         self.dt = ctx.policy_dt_s
         self.ik = IKSolver(env.robot_type, tuple(float(v) for v in env.spec.task.robot_base_pose),
                            env.robot_type.base_size(env.spec.robot))

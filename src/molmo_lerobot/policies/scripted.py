@@ -39,17 +39,13 @@ class ScriptedExpert(Policy):
         self.current: Policy | None = None
 
     def reset(self, ctx: EpisodeContext) -> None:
-        if ctx.run is None:
-            raise ValueError("scripted policy needs privileged simulator access (ctx.env) and the run (ctx.run)")
-        plugins = ctx.run.plugins
-        task_type = plugins.task_type(ctx.spec.task_name)
-        if task_type.name not in self.experts:
-            try:
-                expert = plugins.expert(task_type.name)
-            except LookupError:
-                raise ValueError(f"scripted policy: no scripted expert serves task type {task_type.name!r}") from None
-            self.experts[task_type.name] = expert.factory(self.config)
-        self.current = self.experts[task_type.name]
+        if ctx.env is None:
+            raise ValueError("scripted policy needs privileged simulator access (EpisodeContext.env)")
+        if ctx.expert is None:
+            raise ValueError(f"scripted policy: no scripted expert serves task type {ctx.spec.task_name if ctx.spec else None!r}")
+        if ctx.expert.name not in self.experts:
+            self.experts[ctx.expert.name] = ctx.expert.factory(self.config)
+        self.current = self.experts[ctx.expert.name]
         self.current.reset(ctx)
 
     def act(self, obs: Observation) -> Action:

@@ -1,26 +1,44 @@
-"""A planned episode set up for stepping: env built and reset, task ready. ``molmo-eval``'s
-workers and the Gymnasium env both start episodes with :func:`start_episode` from an
-:class:`~molmo_lerobot.runner.plan.EpisodePlan` and step them with
-:func:`~molmo_lerobot.runner.rollout.advance`, so episode ``i`` with run seed ``s`` is the same
-trial wherever it runs."""
+"""The episode session: one planned episode, live, the same wherever it runs.
+
+``molmo-eval``'s workers (:func:`~molmo_lerobot.runner.rollout.rollout`), the Gymnasium env
+(and through it LeRobot's ``--env.type=molmo``) and ``policy=remote`` all run an episode as an
+:class:`EpisodeSession`, so episode ``i`` with run seed ``s`` is the same trial everywhere:
+
+* :meth:`EpisodeSession.open`: plan → scene (built, reset with the plan's seed) → task (set up,
+  the start checked for divergence and, when asked, for an environment state) → policy reset;
+* :meth:`~EpisodeSession.observe` and :meth:`~EpisodeSession.step` (one policy step), which also
+  keep the episode's outcome: ``success`` (the last state), ``success_once`` (at the instants
+  the agent observes: after each action chunk, every step in the Gymnasium env, and at the end),
+  ``success_any_step`` (after every step) and what ended it (:meth:`~EpisodeSession.end`);
+* :meth:`~EpisodeSession.close` and :meth:`~EpisodeSession.result`, the
+  :class:`~molmo_lerobot.results.EpisodeResult`.
+
+Its identity (index, seed, digest, task type, prompt, horizon) is its frozen
+:class:`~molmo_lerobot.runner.plan.EpisodePlan`; the policy's
+:class:`~molmo_lerobot.policies.base.EpisodeContext`, the recorders'
+:class:`~molmo_lerobot.recording.EpisodeInfo` and the result are made from it here, once.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import contextlib
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.errors import InfrastructureError, MolmoError, describe
+from molmo_lerobot.features import ENV_STATE_KEY
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.context import RunContext
     from molmo_lerobot.plugins import Plugins
-    from molmo_lerobot.policies.base import Action
+    from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
+    from molmo_lerobot.recording import EpisodeInfo
+    from molmo_lerobot.results import EpisodeResult
     from molmo_lerobot.runner.plan import EpisodePlan
     from molmo_lerobot.sim.env import Env
-    from molmo_lerobot.tasks.base import Task, TaskType
+    from molmo_lerobot.tasks.base import Task
 
 
 class EpisodeSetupError(MolmoError, ValueError):
@@ -38,69 +56,12 @@ def load_run_benchmark(benchmark: str | Path, plugins: Plugins) -> Benchmark:
         raise EpisodeSetupError(str(exc)) from None
 
 
-@dataclass
-class Episode:
-    """A set-up episode. :meth:`step` is one policy step and returns success in the new state."""
-
-    plan: EpisodePlan
-    spec: EpisodeSpec
-    env: Env
-    task: Task
-    task_type: TaskType
-
-    @property
-    def index(self) -> int:
-        return self.plan.episode_index
-
-    @property
-    def horizon(self) -> int:
-        return self.plan.steps
-
-    @property
-    def prompt(self) -> str:
-        return self.plan.prompt
-
-    @property
-    def seed(self) -> int:
-        return self.plan.seed
-
-    def step(self, action: Action) -> bool:
-        from molmo_lerobot.runner.rollout import advance
-
-        return advance(self.env, self.task, action, "after a step")
-
-    def close(self) -> None:
-        self.env.close()
-
-
-def open_episode(plan: EpisodePlan, bench: Benchmark, ctx: RunContext) -> Episode:
-    """The planned episode of ``bench``, checked to simulate here, reset and ready for its first step."""
-    from molmo_lerobot.molmospaces.preflight import preflight
-    from molmo_lerobot.runner.rollout import check_divergence
-
-    if plan.error:
-        raise EpisodeSetupError(f"{bench.where(plan.episode_index)}: {plan.error}")
-    cannot = preflight(bench, ctx, [plan.episode_index])
-    if cannot:
-        raise EpisodeSetupError(cannot)
-    spec = plan.episode(ctx.plugins)
-    task_type = ctx.plugins.task_type(plan.task_type)
-    env, task = start_episode(spec, plan.seed, task_type, ctx)
-    try:
-        check_divergence(env.data, "at the initial state")
-        task.setup()
-    except Exception:
-        env.close()
-        raise
-    return Episode(plan, spec, env, task, task_type)
-
-
-def install_failure(exc: Exception, spec: EpisodeSpec, ctx: RunContext) -> Exception:
+def install_failure(exc: Exception, spec: EpisodeSpec, run: RunContext) -> Exception:
     """``exc``, raised building ``spec``'s scene, as an :class:`InfrastructureError` when the scene
     dataset's installed files are broken now (``resume=true`` reruns the episode once they are
     repaired), else ``exc`` itself."""
     try:
-        check = getattr(ctx.plugins.scene_dataset(spec.scene_dataset), "install_problem", None)
+        check = getattr(run.plugins.scene_dataset(spec.scene_dataset), "install_problem", None)
         problem = check() if check is not None else None
     except Exception:
         return exc
@@ -109,19 +70,155 @@ def install_failure(exc: Exception, spec: EpisodeSpec, ctx: RunContext) -> Excep
     return InfrastructureError(f"{problem} (the scene failed to build: {describe(exc)})")
 
 
-def start_episode(spec: EpisodeSpec, seed: int, task_type: TaskType, ctx: RunContext) -> tuple[Env, Task]:
-    """The episode's environment under the run ``ctx`` (its timing and camera options), reset with
-    ``seed``, and its task (not yet set up). The worker's rollout and :func:`open_episode` both
-    start episodes here."""
-    from molmo_lerobot.runner.episode_env import build_env
+class EpisodeSession:
+    """One planned episode, open: its env and task, its outcome so far. See the module docstring."""
 
-    try:
-        env = build_env(spec, ctx.timing, ctx, ctx.config.get("camera"))
-    except Exception as exc:
-        raise install_failure(exc, spec, ctx) from exc
-    try:
-        env.reset(seed)
-        return env, task_type.create(spec, env)
-    except BaseException:
-        env.close()
-        raise
+    def __init__(self, plan: EpisodePlan, spec: EpisodeSpec, env: Env, task: Task, run: RunContext, *,
+                 environment_state: bool = False, end_on_success: bool = False) -> None:
+        self.plan, self.spec, self.env, self.task, self.run = plan, spec, env, task, run
+        #: observations carry the task's environment state (``observation.environment_state``)
+        self.environment_state = environment_state
+        self.end_on_success = end_on_success
+        self.steps = 0
+        self.success = self.success_once = self.success_any_step = False
+        #: why the episode ended (``horizon``, ``success`` with end_on_success, ``done``); ``None`` while it runs
+        self.ended_by: str | None = None
+
+    @classmethod
+    def open(cls, plan: EpisodePlan, run: RunContext, *, policy: Policy | None = None,
+             environment_state: str | None = None, end_on_success: bool = False) -> EpisodeSession:
+        """``plan`` under ``run``: its scene built and reset with the plan's seed, its task made, then
+        :meth:`start`. Closes what it built if any of it fails."""
+        from molmo_lerobot.runner.episode_env import build_env
+
+        spec = plan.episode(run.plugins)
+        task_type = run.plugins.task_type(plan.task_type)
+        try:
+            env = build_env(spec, run.timing, run, run.config.camera.model_dump())
+        except Exception as exc:
+            raise install_failure(exc, spec, run) from exc
+        try:
+            env.reset(plan.seed)
+            return cls.start(plan, spec, env, task_type.create(spec, env), run, policy=policy,
+                             environment_state=environment_state, end_on_success=end_on_success)
+        except BaseException:
+            env.close()
+            raise
+
+    @classmethod
+    def start(cls, plan: EpisodePlan, spec: EpisodeSpec, env: Env, task: Task, run: RunContext, *,
+              policy: Policy | None = None, environment_state: str | None = None,
+              end_on_success: bool = False) -> EpisodeSession:
+        """The episode of a reset ``env`` and its ``task``: the task set up, the start checked (divergence;
+        an environment state when ``environment_state`` names who asks for one), then ``policy`` reset.
+        :meth:`open` starts every planned episode here; a test may start one it built itself."""
+        from molmo_lerobot.runner.rollout import check_divergence
+
+        task.setup()
+        check_divergence(env.data, "at the initial state")
+        if environment_state and not task.environment_state_names:
+            raise ValueError(f"task type {plan.task_type!r} defines no environment state "
+                             f"(asked for by {environment_state})")
+        session = cls(plan, spec, env, task, run, environment_state=bool(environment_state),
+                      end_on_success=end_on_success)
+        if policy is not None:
+            policy.reset(session.policy_context(privileged=policy.needs_simulator))
+        return session
+
+    @property
+    def horizon(self) -> int:
+        return int(self.plan.horizon or 0)
+
+    def policy_context(self, privileged: bool = False) -> EpisodeContext:
+        """What the policy learns at reset; ``privileged``: the simulator, the asset catalog and the
+        expert of the episode's task type too (scripted experts)."""
+        from molmo_lerobot.policies.base import EpisodeContext
+
+        expert = None
+        if privileged:
+            with contextlib.suppress(LookupError):  # none: the policy says whether it needs one
+                expert = self.run.plugins.expert(self.plan.task_type)
+        return EpisodeContext(spec=self.spec, episode_index=self.plan.episode_index, seed=self.plan.seed,
+                              prompt=self.plan.prompt, move_groups=dict(self.env.move_groups),
+                              policy_dt_s=self.run.timing.policy_dt_ms / 1000.0,
+                              env=self.env if privileged else None,
+                              catalog=self.run.catalog if privileged else None, expert=expert)
+
+    def recorder_info(self, *, expert: bool, extra: dict[str, Any]) -> EpisodeInfo:
+        """What a recorder learns when the episode starts (``extra``: the run's, e.g. policy and benchmark)."""
+        from molmo_lerobot.recording import EpisodeInfo
+
+        plan, env = self.plan, self.env
+        return EpisodeInfo(
+            episode_index=plan.episode_index, house_index=plan.house_index, seed=plan.seed, prompt=plan.prompt,
+            task_type=self.plan.task_type, fps=1000.0 / self.run.timing.policy_dt_ms, horizon=self.horizon,
+            camera_names=list(env.camera_names), img_resolution=(int(self.spec.img_resolution[0]), int(self.spec.img_resolution[1])),
+            joint_names=dict(env.joint_names), move_groups=dict(env.move_groups), expert=expert,
+            extra={"task_cls": plan.task_cls, "robot": self.spec.robot.robot_name,
+                   "object": getattr(self.spec.task, "pickup_obj_name", None), **extra},
+            catalog=self.run.catalog,
+            environment_state_names=tuple(self.task.environment_state_names) if self.environment_state else (),
+        )
+
+    def observe(self, images: bool = True) -> Observation:
+        """The observation now: the env's, with the prompt, the step and (if asked) the environment state."""
+        obs = self.env.observe(images=images)
+        obs["prompt"], obs["step"] = self.plan.prompt, self.steps
+        if self.environment_state:
+            obs[ENV_STATE_KEY] = self.task.environment_state()
+        return obs
+
+    def complete(self, action: Action) -> Action:
+        """``action`` with every move group it leaves out holding its current target."""
+        held = {g: self.env.robot.targets(self.env.data, g) for g in self.env.move_groups if g not in action}
+        return {**action, **held} if held else action
+
+    def step(self, action: Action, *, observed: bool = True) -> bool:
+        """One policy step towards ``action`` (:meth:`complete`); divergence is an error. ``observed``:
+        the agent observes the new state (a chunk's last step; every Gymnasium step), so it counts
+        for ``success_once``. Returns success in the new state."""
+        from molmo_lerobot.runner.rollout import check_divergence
+
+        self.env.step(self.complete(action))
+        check_divergence(self.env.data, f"at step {self.steps}")
+        self.success = bool(self.task.success())
+        self.steps += 1
+        self.success_any_step |= self.success
+        if observed:
+            self.success_once |= self.success
+        return self.success
+
+    def end(self, said_done: bool = False) -> str | None:
+        """Whether the episode ends after this step, and why: the action said ``done``, ``success``
+        (with ``end_on_success``) or the ``horizon``; ``None`` while it goes on. Its end is an
+        observation instant (``success_once``)."""
+        if said_done:
+            self.ended_by = "done"
+        elif self.end_on_success and self.success:
+            self.ended_by = "success"
+        elif self.steps >= self.horizon:
+            self.ended_by = "horizon"
+        else:
+            return None
+        self.success_once |= self.success
+        return self.ended_by
+
+    def result(self) -> EpisodeResult:
+        """The episode's outcome as a result (``duration_s`` and outputs are the worker's)."""
+        from molmo_lerobot.results import EpisodeResult
+
+        plan = self.plan
+        odd = tuple(self.task.start_warnings)
+        notes = self.task.parity_notes()  # judged now, in the final state
+        return EpisodeResult(
+            episode_index=plan.episode_index, house_index=plan.house_index, task_cls=plan.task_cls,
+            success=self.success, success_once=self.success_once, steps=self.steps, seed=plan.seed,
+            task_type=self.plan.task_type, prompt=plan.prompt, horizon=self.horizon,
+            extra={"ended_by": self.ended_by or "horizon", "end_on_success": self.end_on_success,
+                   "success_any_step": self.success_any_step, "camera_system": self.env.camera_system,
+                   **({"start_warnings": list(odd)} if odd else {}),
+                   **({"parity_notes": list(notes)} if notes else {})},
+        )
+
+    def close(self) -> None:
+        self.env.close()

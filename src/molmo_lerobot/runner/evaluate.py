@@ -36,13 +36,13 @@ from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import SettingsError
 from molmo_lerobot.plugins import PluginError, Plugins
 from molmo_lerobot.results import EpisodeResult, RunSummary, summarize
+from molmo_lerobot.run_config import RunConfig, episode_work_problem
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
 from molmo_lerobot.runner.forkserver import worker_preload
 from molmo_lerobot.runner.placement import check_devices
 from molmo_lerobot.runner.plan import EpisodePlan, EpisodePlanner
 from molmo_lerobot.runner.progress import Progress
-from molmo_lerobot.runner.run_config import RunConfig, episode_work_problem
 from molmo_lerobot.runner.run_directory import RunDirectory
 from molmo_lerobot.runner.selection import selection_of
 from molmo_lerobot.runner.supervisor import RunInterrupted
@@ -113,20 +113,20 @@ def resolve_benchmark_path(bench_cfg: dict[str, Any], plugins: Plugins) -> Path:
     return benchmark_dir(str(bench_cfg["name"]), plugins)
 
 
-def plugin_option_problems(cfg: dict[str, Any], ctx: RunContext) -> list[str]:
+def plugin_option_problems(run: RunContext) -> list[str]:
     """The run options only the installed plugins can check, one line each naming its key: the
     policy's own options (its ``PolicyType.check``), ``camera.system``, ``horizons.<task type>``."""
-    policy = ctx.plugins.policy(str(cfg["policy"]["name"]))
+    config = run.config
+    policy = run.plugins.policy(str(config.policy["name"]))
     check = getattr(policy, "check", None)  # a duck-typed descriptor may lack it
-    out = list(check(cfg["policy"])) if check is not None else []
-    system = (cfg.get("camera") or {}).get("system")
-    if system is not None:
+    out = list(check(config.policy)) if check is not None else []
+    if config.camera.system is not None:
         try:
-            ctx.plugins.camera_system(system)
+            run.plugins.camera_system(config.camera.system)
         except PluginError as exc:
             out.append(f"camera.system: {str(exc).splitlines()[0]}")
-    task_types = ctx.plugins.names("task")
-    for task in cfg.get("horizons") or {}:
+    task_types = run.plugins.names("task")
+    for task in config.horizons:
         if task not in task_types:
             close = difflib.get_close_matches(str(task), task_types, n=1)
             out.append(f"horizons.{task}: no task type {task!r}" + (f"; did you mean horizons.{close[0]}?" if close
@@ -134,16 +134,15 @@ def plugin_option_problems(cfg: dict[str, Any], ctx: RunContext) -> list[str]:
     return out
 
 
-def _make_executor(cfg: dict[str, Any]) -> Any:
-    ex = cfg.get("executor") or {"name": "local"}
-    common: dict[str, Any] = dict(timeout_s=float(cfg.get("episode_timeout_s", 900)),
-                                  retries=int(cfg.get("episode_retries", 1)))
+def _make_executor(config: RunConfig) -> Any:
+    ex = config.executor.model_dump()  # the executor's options are its own (conf/executor/<name>.yaml)
+    common: dict[str, Any] = dict(timeout_s=float(config.episode_timeout_s), retries=config.episode_retries)
     if ex["name"] == "local":
         from molmo_lerobot.runner.local import LocalExecutor
 
         try:
             check_devices(ex)  # read by each worker, checked here
-            return LocalExecutor(int(cfg["workers"]), start_method=ex.get("start_method", "forkserver"), **common)
+            return LocalExecutor(config.workers, start_method=ex.get("start_method", "forkserver"), **common)
         except ValueError as exc:
             raise RunError(str(exc)) from None
     if ex["name"] == "ray":
@@ -151,7 +150,7 @@ def _make_executor(cfg: dict[str, Any]) -> Any:
 
         options: dict[str, Any] = {k: v for k, v in ex.items() if k != "name"}
         try:
-            return RayExecutor(int(cfg["workers"]), **options, **common)
+            return RayExecutor(config.workers, **options, **common)
         except TypeError as exc:
             raise RunError(f"executor=ray: bad option ({exc}); see conf/executor/ray.yaml") from None
     raise RunError(f"unknown executor {ex['name']!r} (available: local, ray)")
@@ -161,39 +160,40 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     """Evaluate ``config.policy`` on ``config.benchmark``; see ``conf/eval.yaml`` for every option."""
     from molmo_lerobot.benchmark.load import load_benchmark
 
-    cfg = RunConfig.of(config).plain()  # validated once (unless given a RunConfig): nonsense stops here
-    if cfg.get("push") and not cfg.get("record"):
+    config = RunConfig.of(config)  # validated once (unless given a RunConfig): nonsense stops here
+    if config.push and not config.record:
         print("molmo-eval: push=true records the dataset it pushes (record=true)", file=sys.stderr)
-        cfg["record"] = True
-    cfg["record"] = bool(cfg.get("record") or cfg.get("dataset_id"))  # dataset_id stores what it records
-    if cfg.get("resume") and cfg.get("dataset_id") and not cfg.get("output_dir"):
-        cfg["output_dir"] = str(_stored_run_dir(cfg["dataset_id"]))  # resume the run that recorded it
-    try:  # workers rebuild the same context (plugin pins, MolmoSpaces data) from its portable config
-        ctx = RunContext.build(cfg)
+    update: dict[str, Any] = {"record": config.record or config.push or config.dataset_id is not None}
+    if config.resume and config.dataset_id and not config.output_dir:
+        update["output_dir"] = str(_stored_run_dir(config.dataset_id))  # resume the run that recorded it
+    config = config.model_copy(update=update)  # dataset_id stores what it records
+    try:  # workers build the same context (plugin pins, MolmoSpaces data) from its portable config
+        run = RunContext.build(config)
     except (SettingsError, AssetError, GraspError) as exc:
         raise RunError(f"cannot set up MolmoSpaces data: {exc}") from None
-    policy_name = str(cfg["policy"]["name"])
-    problems = plugin_option_problems(cfg, ctx)  # unknown or broken policy plugin: fail before any work
+    policy_name = str(config.policy["name"])
+    problems = plugin_option_problems(run)  # unknown or broken policy plugin: fail before any work
     if problems:
         raise RunError("\n".join(problems))
-    recorders = ctx.plugins.recorder_factories(cfg)  # e.g. a bad hub.repo_id fails here, before any output
-    executor = _make_executor(cfg)
-    bench = load_benchmark(resolve_benchmark_path(cfg["benchmark"], ctx.plugins), ctx.plugins)
-    try:  # the render profile it names travels to the workers in the config
-        ctx = ctx.for_benchmark(bench)
+    recorders = run.plugins.recorder_factories(config.plain())  # e.g. a bad hub.repo_id fails here, before any output
+    executor = _make_executor(config)
+    bench = load_benchmark(resolve_benchmark_path(config.benchmark.model_dump(), run.plugins), run.plugins)
+    try:  # the render profile it names travels to the workers
+        run = run.for_benchmark(bench)
     except ValueError as exc:  # an unknown profile, a bad MOLMO_SCENE_* override
         raise RunError(str(exc)) from None
     started = datetime.now(UTC)
-    run_dir = RunDirectory(Path(cfg.get("output_dir") or Path("runs") / f"{safe_name(bench.name)}-"
+    run_dir = RunDirectory(Path(config.output_dir or Path("runs") / f"{safe_name(bench.name)}-"
                                 f"{safe_name(policy_name)}-{started:%Y%m%d-%H%M%S}"))
-    cfg["output_dir"] = str(run_dir.path)
-    if cfg.get("resume") and cfg.get("limit") is None:  # a resume keeps the run's limit unless given a new one
-        cfg["limit"] = run_dir.recorded_limit()
-    planner = EpisodePlanner(ctx, bench)
-    indices, selection = selection_of(cfg, bench)
+    update = {"output_dir": str(run_dir.path)}
+    if config.resume and config.limit is None:  # a resume keeps the run's limit unless given a new one
+        update["limit"] = run_dir.recorded_limit()
+    config = config.model_copy(update=update)
+    planner = EpisodePlanner(run, bench)
+    indices, selection = selection_of(config, bench)
     plans, thresholds = _plan_run(planner, indices)
-    run_info = {**_run_info(cfg, ctx, planner), "selection": selection}
-    done = run_dir.open(run_info, bool(cfg.get("resume")), recorders)
+    run_info = {**_run_info(config, run, planner), "selection": selection}
+    done = run_dir.open(run_info, config.resume, recorders)
     outside = sorted(r.episode_index for r in done if r.episode_index not in plans)
     if outside:  # cannot happen with an unchanged benchmark, selection and limit check; never drop them silently
         raise RunError(f"cannot resume {run_dir.path}: it records episodes {outside[:10]} that this run would not "
@@ -201,13 +201,13 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
 
     t0 = time.perf_counter()
     startups: dict[str, dict[str, float]] = {}  # worker id -> where its start-up went
-    results = _run_plans(cfg, ctx, bench, plans, {r.episode_index: _complete(r, plans) for r in done}, run_dir,
+    results = _run_plans(config, run, bench, plans, {r.episode_index: _complete(r, plans) for r in done}, run_dir,
                          executor, recorders, startups)
     ordered = [results[i] for i in sorted(results)]
     summary = summarize(
-        ordered, **run_info, thresholds=thresholds, versions=_versions(), workers=cfg["workers"],
-        executor=(cfg.get("executor") or {}).get("name", "local"), output_dir=str(run_dir.path),
-        started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=cfg,
+        ordered, **run_info, thresholds=thresholds, versions=_versions(), workers=config.workers,
+        executor=config.executor.name, output_dir=str(run_dir.path),
+        started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=config.plain(),
         startup=startup_summary(startups),
     )
     odd = summary.start_warnings
@@ -215,7 +215,7 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
         print(f"molmo-eval: warning: {len(odd)} episode{'s' * (len(odd) != 1)} started oddly (results.json "
               f"start_warnings), e.g. episode {odd[0].episode_index}: {odd[0].warnings[0]}", file=sys.stderr)
     scored = run_dir.write_scored(ordered, summary)  # the score, before any export
-    summary = finalize_run(run_dir.path, ordered, summary, recorders, run_finalizers(cfg))
+    summary = finalize_run(run_dir.path, ordered, summary, recorders, run_finalizers(config))
     run_dir.update_results(summary, scored)
     if summary.export_errors:
         raise ExportError(f"export failed after the run was scored ({'; '.join(summary.export_errors)}); the score "
@@ -235,12 +235,12 @@ def _stored_run_dir(dataset_id: str) -> Path:
 def _plan_run(planner: EpisodePlanner, indices: list[int]) -> tuple[dict[int, EpisodePlan], dict[str, Any]]:
     """Every episode of the run planned, the run checked to simulate here (one :class:`RunError`
     line otherwise, before any output or worker), and each task type's thresholds and horizons."""
-    ctx, bench = planner.ctx, planner.bench
+    run, bench = planner.run, planner.bench
     plans = {i: planner.plan(i) for i in indices}
-    cannot = preflight(bench, ctx, indices, skip=[i for i, plan in plans.items() if plan.problems])
+    cannot = preflight(bench, run, indices, skip=[i for i, plan in plans.items() if plan.problems])
     if cannot:
         raise RunError(cannot)
-    timing = ctx.config["timing"]
+    timing = run.config.timing.model_dump()
     thresholds: dict[str, dict[str, Any]] = {}
     too_long: list[str] = []
     for i, plan in plans.items():
@@ -249,9 +249,9 @@ def _plan_run(planner: EpisodePlanner, indices: list[int]) -> tuple[dict[int, Ep
         work = episode_work_problem(plan.steps, timing, f"{bench.where(i)} ({plan.horizon_source})")
         if work:
             too_long.append(work)
-        task_type = ctx.plugins.task_type(plan.task_type)
+        task_type = run.plugins.task_type(plan.task_type)
         entry = thresholds.setdefault(task_type.name,
-                                      {**task_type.thresholds(plan.episode(ctx.plugins)), "horizon_steps": []})
+                                      {**task_type.thresholds(plan.episode(run.plugins)), "horizon_steps": []})
         if plan.horizon not in entry["horizon_steps"]:
             entry["horizon_steps"].append(plan.horizon)
     if too_long:
@@ -261,23 +261,23 @@ def _plan_run(planner: EpisodePlanner, indices: list[int]) -> tuple[dict[int, Ep
     return plans, thresholds
 
 
-def _run_info(cfg: dict[str, Any], ctx: RunContext, planner: EpisodePlanner) -> dict[str, Any]:
+def _run_info(config: RunConfig, run: RunContext, planner: EpisodePlanner) -> dict[str, Any]:
     """What the run is (``run.json``; a resume must match it)."""
-    bench, prefer = planner.bench, ctx.plugins.prefer
+    bench, prefer, plain = planner.bench, run.plugins.prefer, config.plain()
     return {
         "benchmark": {"name": bench.name, "sha256": bench.sha256, "n_episodes": len(bench.episodes),
                       "path": str(bench.path)},
-        "policy": cfg["policy"], "policy_checkpoint": policy_checkpoints(cfg["policy"]), "seed": cfg["seed"],
-        "limit": cfg.get("limit"), "horizon": cfg.get("horizon"),
-        "timing": cfg["timing"], "mujoco": mujoco.__version__, "code": code_version(),
-        "render_profile": ctx.config["render_profile"],
-        "recording": {key: cfg.get(key) for key in RECORDING_OPTIONS} if cfg.get("record") else None,
-        "eval_options": {"horizons": planner.horizons, "custom_object": cfg.get("custom_object"),
-                         "camera": cfg.get("camera"), "robot": cfg.get("robot"),
-                         "end_on_success": bool(cfg.get("end_on_success", False)),
-                         **({"task_rules": rules} if (rules := cfg.get("task_rules", TASK_RULES[0])) != TASK_RULES[0]
+        "policy": plain["policy"], "policy_checkpoint": policy_checkpoints(plain["policy"]), "seed": config.seed,
+        "limit": config.limit, "horizon": config.horizon,
+        "timing": plain["timing"], "mujoco": mujoco.__version__, "code": code_version(),
+        "render_profile": run.render_record,
+        "recording": {key: plain[key] for key in RECORDING_OPTIONS} if config.record else None,
+        "eval_options": {"horizons": planner.horizons, "custom_object": plain["custom_object"],
+                         "camera": plain["camera"], "robot": plain["robot"],
+                         "end_on_success": config.end_on_success,
+                         **({"task_rules": config.task_rules} if config.task_rules != TASK_RULES[0]
                             else {}),  # the default is left out: runs from before the option resume unchanged
-                         "molmospaces": ctx.settings.to_config(),
+                         "molmospaces": run.settings.to_config(),
                          **({"plugins_prefer": prefer} if prefer else {})},  # pinned providers
     }
 
@@ -290,16 +290,15 @@ def _complete(result: EpisodeResult, plans: dict[int, EpisodePlan]) -> EpisodeRe
     return result
 
 
-def _run_plans(cfg: dict[str, Any], ctx: RunContext, bench: Benchmark, plans: dict[int, EpisodePlan],
+def _run_plans(config: RunConfig, run: RunContext, bench: Benchmark, plans: dict[int, EpisodePlan],
                results: dict[int, EpisodeResult], run_dir: RunDirectory, executor: Any,
                recorders: list[Any], startups: dict[str, dict[str, float]]) -> dict[int, EpisodeResult]:
     """Record the plans that cannot run and run the others on ``executor``, each result appended to
     ``episodes.jsonl`` as it comes; ``results`` (those done before a resume) gains every episode,
     ``startups`` each worker's start-up breakdown."""
     todo = [p for p in plans.values() if p.error is None and p.episode_index not in results]
-    progress = Progress(len(plans), len(results), f"{bench.name} · {cfg['policy']['name']}", run_dir.path,
-                        enabled=bool(cfg.get("progress", True)),
-                        heartbeat_s=float(cfg.get("progress_interval_s") or 30.0))
+    progress = Progress(len(plans), len(results), f"{bench.name} · {config.policy['name']}", run_dir.path,
+                        enabled=config.progress, heartbeat_s=float(config.progress_interval_s or 30.0))
     progress.success = sum(r.success for r in results.values())
     progress.errors = sum(r.error is not None for r in results.values())
     log = run_dir.episode_log()
@@ -318,13 +317,13 @@ def _run_plans(cfg: dict[str, Any], ctx: RunContext, bench: Benchmark, plans: di
                 # executor=ray serves one per node instead (RayExecutor.served_policy)
                 serve = getattr(executor, "served_policy", served_policy)
                 try:
-                    with serve(ctx.portable_config(), int(cfg["workers"]), run_dir.path,
-                               threads=cfg.get("worker_threads", 1)) as worker_policy:
+                    portable = run.portable_config()
+                    with serve(portable, config.workers, run_dir.path, threads=config.worker_threads) as worker_policy:
                         factories = recorders + progress.factories()
-                        job = WorkerJob(config=ctx.portable_config(), policy=worker_policy,
-                                        output_dir=str(run_dir.path), benchmark_name=bench.name,
-                                        benchmark_sha256=bench.sha256, recorders=factories,
-                                        preload=worker_preload(ctx, worker_policy, factories))
+                        job = WorkerJob(config=portable, policy=worker_policy, output_dir=str(run_dir.path),
+                                        benchmark_name=bench.name, benchmark_sha256=bench.sha256,
+                                        render_record=run.render_record, recorders=factories,
+                                        preload=worker_preload(run, worker_policy, factories))
                         executor.run(job, todo, record, startups.__setitem__)
                 except ServeError as exc:
                     raise RunError(str(exc)) from None

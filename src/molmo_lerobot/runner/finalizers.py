@@ -12,9 +12,12 @@ goes to ``results.json`` (``export_errors``) and the run then fails with it.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from molmo_lerobot.results import EpisodeResult, RunSummary, SummaryPiece
+
+if TYPE_CHECKING:
+    from molmo_lerobot.run_config import RunConfig
 
 
 class Finalizer(Protocol):
@@ -46,10 +49,9 @@ class WandbFinalizer:
         log_run(output_dir, summary, results)
 
 
-def run_finalizers(config: dict[str, Any]) -> list[Finalizer]:
+def run_finalizers(config: RunConfig) -> list[Finalizer]:
     """The finalizers ``config`` asks for, in the order they run."""
-    wandb = bool((config.get("wandb") or {}).get("enable"))
-    return [ReportFinalizer(), *([WandbFinalizer()] if wandb else [])]
+    return [ReportFinalizer(), *([WandbFinalizer()] if config.wandb.enable else [])]
 
 
 def finalize_run(output_dir: Path, results: list[EpisodeResult], summary: RunSummary, recorders: list[Any],

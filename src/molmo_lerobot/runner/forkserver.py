@@ -245,12 +245,12 @@ def inherited_gpu_state() -> str | None:
     return None
 
 
-def worker_preload(ctx: RunContext, policy: dict[str, Any], recorders: Iterable[Any]) -> list[str]:
+def worker_preload(run: RunContext, policy: dict[str, Any], recorders: Iterable[Any]) -> list[str]:
     """What a worker of this run imports: the base, every plugin module, the policy's factory
     module and its declared ``preload``, and the recorders' modules (LeRobot's dataset writer)."""
     from types import ModuleType
 
-    plugins = [p.__name__ for p in ctx.plugins.pm.get_plugins() if isinstance(p, ModuleType)]
-    policy_type = ctx.plugins.policy(str(policy["name"]))
+    plugins = [p.__name__ for p in run.plugins.pm.get_plugins() if isinstance(p, ModuleType)]
+    policy_type = run.plugins.policy(str(policy["name"]))
     extra = [policy_type.factory.__module__, *policy_type.preload, *(type(r).__module__ for r in recorders)]
     return preload_modules(sorted(plugins), extra)

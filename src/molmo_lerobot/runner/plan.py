@@ -16,13 +16,33 @@ from typing import TYPE_CHECKING, Any
 from molmo_lerobot.errors import EPISODE
 from molmo_lerobot.hashing import content_sha256
 from molmo_lerobot.results import EpisodeResult
-from molmo_lerobot.runner.rollout import horizon_with_source
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.context import RunContext
     from molmo_lerobot.plugins import Plugins
+
+
+def resolve_horizon(override: int | None, task_spec: Any, default_sec: float, policy_dt_ms: float,
+                    task_sec: float | None = None) -> int:
+    """Policy steps: CLI override (steps), else the run's per-task horizon (``task_sec``), else
+    the episode's ``task_horizon_sec``, else the task type's default."""
+    return horizon_with_source(override, task_spec, default_sec, policy_dt_ms, task_sec)[0]
+
+
+def horizon_with_source(override: int | None, task_spec: Any, default_sec: float | None, policy_dt_ms: float,
+                        task_sec: float | None = None) -> tuple[int, str]:
+    """:func:`resolve_horizon` and where it came from: ``cli``, ``task_horizons``,
+    ``task_horizon_sec`` or ``default``."""
+    if override is not None:
+        return int(override), "cli"
+    episode_sec = getattr(task_spec, "task_horizon_sec", None)
+    seconds, source = ((task_sec, "task_horizons") if task_sec else
+                       (episode_sec, "task_horizon_sec") if episode_sec else (default_sec, "default"))
+    if seconds is None:
+        raise ValueError("no horizon: set horizon=, horizons.<task type> or the episode's task_horizon_sec")
+    return max(1, round(float(seconds) * 1000.0 / policy_dt_ms)), source
 
 
 def episode_seed(run_seed: int, spec: dict[str, Any]) -> int:
@@ -87,17 +107,25 @@ class EpisodePlan:
                                     **self.described(), **kw)
 
 
+def plan_spec(spec: EpisodeSpec, plugins: Plugins, *, seed: int, horizon: int, index: int = 0) -> EpisodePlan:
+    """A plan for ``spec`` outside any benchmark run (a test, a contact sheet), with the given seed
+    and horizon: what :meth:`EpisodeSession.start <molmo_lerobot.runner.episode.EpisodeSession.start>`
+    starts an episode built by hand from."""
+    raw = spec.model_dump(mode="json", exclude_unset=False)
+    return EpisodePlan(index, raw, int(seed), plugins.task_type(spec.task_name).name, spec.language.task_description,
+                       int(horizon), "cli", content_sha256(raw, ensure_ascii=True).hex())
+
+
 class EpisodePlanner:
     """Plans the episodes of one benchmark under one run (its seed, horizon options and timing)."""
 
-    def __init__(self, ctx: RunContext, bench: Benchmark) -> None:
-        cfg = ctx.config
-        self.ctx = ctx
+    def __init__(self, run: RunContext, bench: Benchmark) -> None:
+        self.run = run
         self.bench = bench
-        self.run_seed = int(cfg.get("seed", 0))
-        self.horizon = cfg.get("horizon")
-        self.horizons = {str(task): float(sec) for task, sec in (cfg.get("horizons") or {}).items()}
-        self.policy_dt_ms = ctx.timing.policy_dt_ms
+        self.run_seed = run.config.seed
+        self.horizon = run.config.horizon
+        self.horizons = {str(task): float(sec) for task, sec in run.config.horizons.items()}
+        self.policy_dt_ms = run.timing.policy_dt_ms
 
     def plan(self, index: int) -> EpisodePlan:
         """Episode ``index`` of the benchmark, planned (never raises for the episode's own faults)."""
@@ -105,11 +133,11 @@ class EpisodePlanner:
 
         original = self.bench.episodes[index]
         problems = tuple(f"{p.field}: {p.message}" if p.field else p.message
-                         for p in validate_episode(original, self.ctx.plugins, self.ctx, index=index,
+                         for p in validate_episode(original, self.run.plugins, self.run, index=index,
                                                    file=self.bench.origins[index].file)
                          if not p.warning)  # warnings (not runnable here) are the preflight's
         try:
-            spec = self.ctx.plugins.apply_episode_overrides(original, self.ctx)
+            spec = self.run.plugins.apply_episode_overrides(original, self.run)
         except Exception as exc:  # an override that cannot apply to this episode fails it, not the run
             return self._plan(index, original, problems, f"episode override failed: {type(exc).__name__}: {exc}")
         return self._plan(index, spec, problems, "invalid episode: " + "; ".join(problems) if problems else None)
@@ -130,7 +158,7 @@ class EpisodePlanner:
         from molmo_lerobot.plugins import PluginError
 
         try:
-            task_type = self.ctx.plugins.task_type(spec.task_name)
+            task_type = self.run.plugins.task_type(spec.task_name)
         except PluginError:  # no plugin for it: the episode cannot run, but it still belongs to its task
             return known_task_type(spec.task.task_cls, spec.task.task_type) or spec.task_name, None
         return task_type.name, task_type.default_horizon_sec

@@ -21,7 +21,7 @@ import os
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.gl import use_headless_gl
 from molmo_lerobot.runner.plan import EpisodePlan
@@ -39,6 +39,9 @@ from molmo_lerobot.runner.supervisor import (
 from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob
 from molmo_lerobot.serving.ray_servers import CLIENT_CONFIG, node_servers
 from molmo_lerobot.serving.run_server import serve_options
+
+if TYPE_CHECKING:
+    from molmo_lerobot.run_config import RunConfig
 
 
 class SimulatorActor:
@@ -256,13 +259,13 @@ class RayExecutor(Supervisor):
                          workers, **options)
 
     @contextlib.contextmanager
-    def served_policy(self, config: dict[str, Any], workers: int, output_dir: str | Path | None = None,
+    def served_policy(self, config: RunConfig, workers: int, output_dir: str | Path | None = None,
                       threads: int | None = 1) -> Iterator[dict[str, Any]]:
         """:func:`~molmo_lerobot.serving.run_server.served_policy` on the cluster: with ``policy.serve``
         one server per node (``serve_stats.json`` by node) and each actor routed to its own node's."""
-        options = serve_options(config["policy"], workers)
+        options = serve_options(config.policy, workers)
         if options is None:
-            yield config["policy"]
+            yield config.policy
             return
         t = self.transport
         with t.held(workers), node_servers(config, options, threads, output_dir, t.num_cpus_per_worker,

@@ -3,18 +3,18 @@
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
 
 from molmo_lerobot.errors import MolmoError
-from molmo_lerobot.features import ENV_STATE_KEY
 
 if TYPE_CHECKING:
-    from molmo_lerobot.policies.base import Action, EpisodeContext, Policy
-    from molmo_lerobot.recording import EpisodeInfo, Recorder, RecorderGroup
+    from molmo_lerobot.policies.base import Action, Policy
+    from molmo_lerobot.recording import Recorder, RecorderGroup
+    from molmo_lerobot.results import EpisodeResult
+    from molmo_lerobot.runner.episode import EpisodeSession
 
 
 class ActionError(MolmoError, ValueError):
@@ -110,109 +110,34 @@ def split_actions(out: Any, move_groups: dict[str, int], policy: str) -> list[Ch
     return steps
 
 
-@dataclass
-class RolloutOutcome:
-    """``success_once`` is sampled where MolmoSpaces samples it (after each action chunk and at
-    the episode's end); ``success_any_step`` after every policy step (finer, an extra)."""
+def rollout(session: EpisodeSession, policy: Policy, recorders: RecorderGroup | list[Recorder],
+            policy_name: str) -> EpisodeResult:
+    """Play ``session`` (open, its policy reset) with ``policy`` until it ends; its result.
 
-    success: bool
-    success_once: bool
-    steps: int
-    success_any_step: bool = False
-    ended_by: str = "horizon"  # "horizon" | "success" (end_on_success) | "done" (the policy said so)
-
-
-def advance(env: Any, task: Any, action: Action, when: str) -> bool:
-    """One policy step of ``env`` towards a complete ``action``; divergence is an error naming
-    ``when``. Returns the task's success in the new state. The rollout and the Gymnasium env both
-    step episodes here."""
-    env.step(action)
-    data = getattr(env, "data", None)
-    if data is not None:
-        check_divergence(data, when)
-    return bool(task.success())
-
-
-def rollout(env: Any, task: Any, policy: Policy, ctx: EpisodeContext, horizon: int,
-            recorders: RecorderGroup | list[Recorder], info: EpisodeInfo, policy_name: str,
-            end_on_success: bool = False, environment_state: bool = False) -> RolloutOutcome:
-    """Run one episode for up to ``horizon`` policy steps; report success at the end and at any step.
-
-    A move group the policy leaves out holds its current target. The episode ends early
-    after a step whose action says ``done``, or, with ``end_on_success``, after the first
-    successful step. Images are rendered only when someone needs them: the policy at the
-    steps where it is asked for a new action (chunks run open loop), recorders at the steps
-    they ask for. A recorder that raises fails its output, not the episode (:class:`RecorderGroup`).
-    With ``environment_state`` every observation carries the task's (``Task.environment_state``).
+    Chunks run open loop: the policy is asked for a new action (and gets a new observation) when
+    the queue is empty. The episode ends after a step whose action says ``done``, with
+    ``end_on_success`` after the first successful step, else at the horizon
+    (:meth:`EpisodeSession.end <molmo_lerobot.runner.episode.EpisodeSession.end>`). Images are
+    rendered only when someone needs them: the policy at the steps where it gets an observation,
+    recorders at the steps they ask for. A recorder that raises fails its output, not the episode
+    (:class:`RecorderGroup`).
     """
     from molmo_lerobot.recording import RecorderGroup
 
     recs = recorders if isinstance(recorders, RecorderGroup) else RecorderGroup(recorders)
-    policy.reset(ctx)
-    task.setup()
-    data = getattr(env, "data", None)
-    if data is not None:
-        check_divergence(data, "at the initial state")
-    recs.start_episode(info)
-
-    def record_images(step: int) -> bool:
-        return recs.wants_images_at(step, horizon)
-
-    def observe(step: int, images: bool) -> dict[str, Any]:
-        obs = env.observe(images=images)
-        obs["prompt"], obs["step"] = ctx.prompt, step
-        if environment_state:
-            obs[ENV_STATE_KEY] = task.environment_state()
-        return obs
-
-    obs = observe(0, policy.needs_images or record_images(0))
+    horizon = session.horizon
+    obs = session.observe(policy.needs_images or recs.wants_images_at(0, horizon))
     queue: deque[ChunkStep] = deque()
-    success = success_once = any_step = False
-    ended_by, steps = "horizon", horizon
-    for step in range(horizon):
+    while True:
         if not queue:
-            queue.extend(split_actions(policy.act(obs), env.move_groups, policy_name))
+            queue.extend(split_actions(policy.act(obs), session.env.move_groups, policy_name))
         planned = queue.popleft()
         said_done = bool(planned.get(DONE_KEY, False))
-        action: Action = {g: a for g, a in planned.items() if isinstance(a, np.ndarray)}
-        for group in env.move_groups:  # a left-out group holds its target
-            if group not in action:
-                action[group] = env.robot.targets(env.data, group)
-        success = advance(env, task, action, f"at step {step}")
-        any_step |= success
-        if said_done:
-            ended_by = "done"
-        elif end_on_success and success:
-            ended_by = "success"
-        done = step == horizon - 1 or ended_by != "horizon"
-        if not queue or done:  # an observation instant: MolmoSpaces samples success here
-            success_once |= success
+        action = session.complete({g: a for g, a in planned.items() if isinstance(a, np.ndarray)})
+        success = session.step(action, observed=not queue)
+        ended = session.end(said_done)
         if recs.recorders:
-            recs.record_step(obs, action, task.reward(), success, done)
-        if done:
-            steps = step + 1
-            break
-        obs = observe(step + 1, record_images(step + 1) or (policy.needs_images and not queue))
-    return RolloutOutcome(success=success, success_once=success_once, steps=steps, success_any_step=any_step,
-                          ended_by=ended_by)
-
-
-def resolve_horizon(override: int | None, task_spec: Any, default_sec: float, policy_dt_ms: float,
-                    task_sec: float | None = None) -> int:
-    """Policy steps: CLI override (steps), else the run's per-task horizon (``task_sec``), else
-    the episode's ``task_horizon_sec``, else the task type's default."""
-    return horizon_with_source(override, task_spec, default_sec, policy_dt_ms, task_sec)[0]
-
-
-def horizon_with_source(override: int | None, task_spec: Any, default_sec: float | None, policy_dt_ms: float,
-                        task_sec: float | None = None) -> tuple[int, str]:
-    """:func:`resolve_horizon` and where it came from: ``cli``, ``task_horizons``,
-    ``task_horizon_sec`` or ``default``."""
-    if override is not None:
-        return int(override), "cli"
-    episode_sec = getattr(task_spec, "task_horizon_sec", None)
-    seconds, source = ((task_sec, "task_horizons") if task_sec else
-                       (episode_sec, "task_horizon_sec") if episode_sec else (default_sec, "default"))
-    if seconds is None:
-        raise ValueError("no horizon: set horizon=, horizons.<task type> or the episode's task_horizon_sec")
-    return max(1, round(float(seconds) * 1000.0 / policy_dt_ms)), source
+            recs.record_step(obs, action, session.task.reward(), success, ended is not None)
+        if ended:
+            return session.result()
+        obs = session.observe(recs.wants_images_at(session.steps, horizon) or (policy.needs_images and not queue))

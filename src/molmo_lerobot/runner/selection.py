@@ -17,32 +17,34 @@ the same one.
 from __future__ import annotations
 
 from collections import defaultdict
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from molmo_lerobot.benchmark.load import Benchmark
 from molmo_lerobot.errors import RunError
 
+if TYPE_CHECKING:
+    from molmo_lerobot.run_config import RunConfig
 
-def selection_of(cfg: dict[str, Any], bench: Benchmark) -> tuple[list[int], dict[str, Any] | None]:
-    """The benchmark indices the run ``cfg`` evaluates, in order, and the ``selection`` record
-    (None for ``limit`` or every episode: ``limit`` is recorded by itself). Raises :class:`RunError`
-    (one line naming the benchmark file and the index) for an index outside the benchmark."""
+
+def selection_of(config: RunConfig, bench: Benchmark) -> tuple[list[int], dict[str, Any] | None]:
+    """The benchmark indices the run evaluates, in order, and the ``selection`` record (None for
+    ``limit`` or every episode: ``limit`` is recorded by itself). Raises :class:`RunError` (one line
+    naming the benchmark file and the index) for an index outside the benchmark."""
     n = len(bench.episodes)
-    if cfg.get("episodes") is not None:
-        chosen = [int(i) for i in cfg["episodes"]]
-        outside = [i for i in chosen if not 0 <= i < n]
+    if config.episodes is not None:
+        outside = [i for i in config.episodes if not 0 <= i < n]
         if outside:
             raise RunError(f"episodes: index {outside[0]} is outside benchmark {bench.name!r} "
                            f"({bench.origins[0].file if bench.origins else bench.path}: {n} episodes, 0..{n - 1})")
-        chosen = sorted(chosen)
+        chosen = sorted(config.episodes)
         return chosen, {"kind": "episodes", "episodes": chosen}
-    if cfg.get("sample") is not None:
-        chosen = stratified_sample(bench, int(cfg["sample"]), int(cfg.get("seed", 0)))
-        return chosen, {"kind": "sample", "sample": int(cfg["sample"]), "seed": int(cfg.get("seed", 0)),
+    if config.sample is not None:
+        chosen = stratified_sample(bench, config.sample, config.seed)
+        return chosen, {"kind": "sample", "sample": config.sample, "seed": config.seed,
                         "strata": "house_index, task", "episodes": chosen}
-    return list(range(n))[:cfg.get("limit")], None
+    return list(range(n))[:config.limit], None
 
 
 def stratified_sample(bench: Benchmark, k: int, seed: int) -> list[int]:

@@ -20,13 +20,13 @@ from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.cpu_threads import cap_threads
 from molmo_lerobot.errors import describe, error_kind
-from molmo_lerobot.policies.base import EpisodeContext
-from molmo_lerobot.recording import EpisodeInfo, RecorderFactory, RecorderGroup
+from molmo_lerobot.recording import RecorderFactory, RecorderGroup
 from molmo_lerobot.results import EpisodeResult
 from molmo_lerobot.runner.placement import nvidia_gpus, place, slot_of
 from molmo_lerobot.runner.rollout import rollout
 
 if TYPE_CHECKING:
+    from molmo_lerobot.run_config import RunConfig
     from molmo_lerobot.runner.plan import EpisodePlan
 
 
@@ -34,14 +34,15 @@ if TYPE_CHECKING:
 class WorkerJob:
     """Everything a worker needs, picklable (plain data + recorder factories)."""
 
-    #: the run config the worker rebuilds its RunContext from (data paths absolute, plugins.prefer pins,
-    #: timing, camera options, end_on_success, worker_threads)
-    config: dict[str, Any]
+    #: the run config the worker builds its RunContext from (:meth:`RunContext.portable_config`: data paths absolute)
+    config: RunConfig
     #: the policy the worker builds: the run's, or a client of the run's policy server
     policy: dict[str, Any]
     output_dir: str
     benchmark_name: str
     benchmark_sha256: str
+    #: the render profile's record the run's benchmark names (:attr:`RunContext.render_record`)
+    render_record: dict[str, Any] | None = None
     recorders: list[RecorderFactory] = field(default_factory=list)
     #: modules a worker imports before building itself (a fork server imports them once for all)
     preload: list[str] = field(default_factory=list)
@@ -103,15 +104,12 @@ class EpisodeWorker:
         #: where this worker's start-up went; complete after its first episode (:attr:`first_done`)
         self.startup = startup or Startup()
         self.first_done = False
-        threads = job.config.get("worker_threads", 1)
-        cap_threads(threads)
+        config = job.config
+        cap_threads(config.worker_threads)
         with self.startup.phase("context_s"):
-            self.ctx = RunContext.build(job.config)
-        self.timing = self.ctx.timing
-        self.end_on_success = bool(job.config.get("end_on_success", False))
-        self.record_environment_state = bool(job.config.get("record_environment_state", False))
+            self.run_context = RunContext.build(config, job.render_record)
         self.policy_name = str(job.policy["name"])
-        self.placement = place(slot_of(worker_id), nvidia_gpus(), os.environ, job.config.get("executor") or {},
+        self.placement = place(slot_of(worker_id), nvidia_gpus(), os.environ, config.executor.model_dump(),
                                job.policy.get("device"))
         policy_config = dict(job.policy)
         if self.placement.egl_device is not None:
@@ -119,8 +117,13 @@ class EpisodeWorker:
         if self.placement.policy_device is not None:
             policy_config["device"] = self.placement.policy_device
         with self.startup.phase("policy_s"):
-            self.policy = make_policy(self.ctx.plugins, policy_config)
-        cap_threads(threads)  # a policy that imported torch reads the cap now
+            self.policy = make_policy(self.run_context.plugins, policy_config)
+        #: who asks every episode's observations to carry the task's environment state (``None``: no one)
+        self.environment_state_asker = (
+            "record_environment_state=true" if config.record_environment_state else
+            f"policy {self.policy_name!r}, which reads observation.environment_state"
+            if self.policy.needs_environment_state else None)
+        cap_threads(config.worker_threads)  # a policy that imported torch reads the cap now
         with self.startup.phase("recorders_s"):
             self.recorders = RecorderGroup([f.make(worker_id, Path(job.output_dir)) for f in job.recorders])
         self.stopping = False
@@ -137,64 +140,33 @@ class EpisodeWorker:
         """Run one planned episode; any exception (a policy's ``KeyboardInterrupt`` or ``SystemExit``
         too) becomes this episode's recorded error, with its ``error_kind``. A recorder that fails
         changes only ``output_errors``, never the outcome. :class:`WorkerStop` propagates."""
-        from molmo_lerobot.runner.episode import start_episode
+        from molmo_lerobot.runner.episode import EpisodeSession
 
         t0 = time.perf_counter()
-        house, task_cls, prompt = plan.house_index, plan.task_cls, plan.prompt
         result: EpisodeResult
         try:
-            spec = plan.episode(self.ctx.plugins)
-            task_type = self.ctx.plugins.task_type(plan.task_type)
-            horizon = plan.steps
             t_scene = time.perf_counter()
-            env, task = start_episode(spec, plan.seed, task_type, self.ctx)
+            session = EpisodeSession.open(plan, self.run_context, policy=self.policy,
+                                          environment_state=self.environment_state_asker,
+                                          end_on_success=self.run_context.config.end_on_success)
             scene_s = time.perf_counter() - t_scene
             try:
-                privileged = self.policy.needs_simulator
-                env_state = self.record_environment_state or self.policy.needs_environment_state
-                if env_state and not task.environment_state_names:
-                    who = ("record_environment_state=true" if self.record_environment_state
-                           else f"policy {self.policy_name!r}, which reads observation.environment_state")
-                    raise ValueError(f"task type {task_type.name!r} defines no environment state (asked for by {who})")
-                ctx = EpisodeContext(
-                    spec=spec, episode_index=plan.episode_index, seed=plan.seed, prompt=prompt,
-                    move_groups=dict(env.move_groups), policy_dt_s=self.timing.policy_dt_ms / 1000.0,
-                    env=env if privileged else None, run=self.ctx if privileged else None,
-                )
-                info = EpisodeInfo(
-                    episode_index=plan.episode_index, house_index=house, seed=plan.seed, prompt=prompt,
-                    task_type=task_type.name, fps=1000.0 / self.timing.policy_dt_ms, horizon=horizon,
-                    camera_names=list(env.camera_names), img_resolution=spec.img_resolution,
-                    joint_names=dict(env.joint_names), move_groups=dict(env.move_groups),
+                self.recorders.start_episode(session.recorder_info(
                     expert=self.policy.needs_simulator,
-                    extra={"task_cls": task_cls, "policy": self.policy_name, "robot": spec.robot.robot_name,
-                           "object": getattr(spec.task, "pickup_obj_name", None),
-                           "benchmark": self.job.benchmark_name, "benchmark_sha256": self.job.benchmark_sha256},
-                    catalog=self.ctx.catalog,
-                    environment_state_names=tuple(task.environment_state_names) if env_state else (),
-                )
+                    extra={"policy": self.policy_name, "benchmark": self.job.benchmark_name,
+                           "benchmark_sha256": self.job.benchmark_sha256}))
                 if self.stopping:
                     raise WorkerStop
                 self._in_rollout = True
                 try:
-                    outcome = rollout(env, task, self.policy, ctx, horizon, self.recorders, info, self.policy_name,
-                                      end_on_success=self.end_on_success, environment_state=env_state)
+                    result = rollout(session, self.policy, self.recorders, self.policy_name)
                 finally:
                     self._in_rollout = False
             finally:
-                env.close()
+                session.close()
             if not self.first_done:
                 self.first_done = True
-                self.startup.phases.update(first_scene_s=scene_s, renderer_s=env.renderer_setup_s)
-            result = EpisodeResult(
-                episode_index=plan.episode_index, house_index=house, task_cls=task_cls,
-                success=outcome.success, success_once=outcome.success_once, steps=outcome.steps,
-                seed=plan.seed, task_type=task_type.name, prompt=prompt, horizon=horizon,
-                extra={"ended_by": outcome.ended_by, "end_on_success": self.end_on_success,
-                       "success_any_step": outcome.success_any_step, "camera_system": env.camera_system,
-                       **({"start_warnings": list(odd)} if (odd := getattr(task, "start_warnings", ())) else {}),
-                       **({"parity_notes": list(notes)} if (notes := getattr(task, "parity_notes", tuple)()) else {})},
-            )
+                self.startup.phases.update(first_scene_s=scene_s, renderer_s=session.env.renderer_setup_s)
         except (Exception, KeyboardInterrupt, SystemExit) as exc:
             result = plan.failed(describe(exc), error_kind(exc))
             if os.environ.get("MOLMO_DEBUG"):

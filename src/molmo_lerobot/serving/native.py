@@ -69,7 +69,7 @@ def episode_context(request: dict[str, Any]) -> EpisodeContext:
         raise RequestError(f"policy_dt_s must be a number in (0, {MAX_POLICY_DT_S:g}], got {_show(dt)}")
     is_reset = request.get("endpoint") == "reset"
     return EpisodeContext(
-        spec=None,  # type: ignore[arg-type]  # remote clients never share their episode spec
+        spec=None,  # remote clients never share their episode spec
         episode_index=_int(request.get("episode_index", -1), "episode_index", -1, 2**63 - 1),
         seed=_int(request.get("seed", 0), "seed", 0, 2**63 - 1),
         prompt=prompt,

@@ -25,11 +25,14 @@ from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.cpu_threads import cap_threads
 from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.serving.run_server import STATS_FILE, ServeError
+
+if TYPE_CHECKING:
+    from molmo_lerobot.run_config import RunConfig
 
 #: what each worker's ``policy=remote`` gets besides its node's port
 CLIENT_CONFIG = {"name": "remote", "host": "127.0.0.1", "timeout_s": 600.0, "connect_timeout_s": 15.0}
@@ -38,7 +41,7 @@ CLIENT_CONFIG = {"name": "remote", "host": "127.0.0.1", "timeout_s": 600.0, "con
 class PolicyServerActor:
     """Body of one node's Ray actor: the run's policy behind :func:`build_server`, served on a thread."""
 
-    def __init__(self, config: dict[str, Any], options: dict[str, Any], threads: int | None,
+    def __init__(self, config: RunConfig, options: dict[str, Any], threads: int | None,
                  start_timeout_s: float) -> None:
         import ray
 
@@ -52,7 +55,7 @@ class PolicyServerActor:
         self.error: str | None = None
         cap_threads(threads)
         try:
-            server = build_server(RunContext.build(config).plugins, config["policy"], host="127.0.0.1", port=0,
+            server = build_server(RunContext.build(config).plugins, config.policy, host="127.0.0.1", port=0,
                                   **options)
             self.server = self._stack.enter_context(serve_in_thread(server, start_timeout_s))
         except Exception as exc:  # reported by address(): the run fails with this line
@@ -92,7 +95,7 @@ def server_nodes(nodes: list[dict[str, Any]], num_cpus_per_worker: float,
             and n["Resources"].get("GPU", 0.0) >= num_gpus_per_worker]
 
 
-def _start(config: dict[str, Any], options: dict[str, Any], threads: int | None, node: dict[str, Any],
+def _start(config: RunConfig, options: dict[str, Any], threads: int | None, node: dict[str, Any],
            start_timeout_s: float) -> NodeServer:
     import ray
     from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
@@ -106,7 +109,7 @@ def _start(config: dict[str, Any], options: dict[str, Any], threads: int | None,
 
 
 @contextlib.contextmanager
-def node_servers(config: dict[str, Any], options: dict[str, Any], threads: int | None = 1,
+def node_servers(config: RunConfig, options: dict[str, Any], threads: int | None = 1,
                  output_dir: str | Path | None = None, num_cpus_per_worker: float = 1.0,
                  num_gpus_per_worker: float = 0.0, start_timeout_s: float = 900.0) -> Iterator[dict[str, int]]:
     """Start one server per node of the connected Ray cluster that can host a simulator actor and

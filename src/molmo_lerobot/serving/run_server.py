@@ -24,12 +24,15 @@ import time
 from collections.abc import Iterator
 from multiprocessing.connection import Connection, wait
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.cpu_threads import cap_threads
 from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.protocol import shm
+
+if TYPE_CHECKING:
+    from molmo_lerobot.run_config import RunConfig
 
 STATS_FILE = "serve_stats.json"
 #: Seconds a server whose run has gone has to stop gracefully before it exits regardless.
@@ -65,7 +68,7 @@ def serve_options(policy_cfg: dict[str, Any], workers: int) -> dict[str, Any] | 
             "max_clients": max(8, workers + 2), "first_request_timeout_s": 600.0, "idle_timeout_s": 3600.0}
 
 
-def _serve(config: dict[str, Any], transport: str, options: dict[str, Any], threads: int | None,
+def _serve(config: RunConfig, transport: str, options: dict[str, Any], threads: int | None,
            conn: Connection) -> None:
     """Server process: rebuild the run's context from its ``config``, build the server, report where
     it listens (or the error), serve until SIGTERM (or its run's end), then send its statistics."""
@@ -77,7 +80,7 @@ def _serve(config: dict[str, Any], transport: str, options: dict[str, Any], thre
     cap_threads(threads)  # as many as each in-process worker would use: the same rounding
     try:
         cls, where = (ShmPolicyServer, {}) if transport == "shm" else (PolicyServer, {"host": "127.0.0.1", "port": 0})
-        server = build_server(RunContext.build(config).plugins, config["policy"], cls, **where, **options)
+        server = build_server(RunContext.build(config).plugins, config.policy, cls, **where, **options)
         server.run(ready=lambda srv: conn.send(
             ("ready", srv.address if isinstance(srv, ShmPolicyServer) else srv.port)))
     except BaseException as exc:  # reported to the run, which fails with this line
@@ -113,18 +116,18 @@ def _stats(conn: Connection, timeout_s: float) -> dict[str, Any] | None:
 
 
 @contextlib.contextmanager
-def served_policy(config: dict[str, Any], workers: int, output_dir: str | Path | None = None,
+def served_policy(config: RunConfig, workers: int, output_dir: str | Path | None = None,
                   start_timeout_s: float = 900.0, threads: int | None = 1) -> Iterator[dict[str, Any]]:
     """Yield the policy config workers should use: the run ``config``'s ``policy`` itself, or
     (``serve: true``) a ``remote`` config for a server process started here (with the context
     rebuilt from ``config``, a portable run config) and stopped (and reaped) on exit.
     The server runs torch/BLAS on ``threads`` CPU threads (the run's ``worker_threads``)."""
-    policy_cfg = config["policy"]
+    policy_cfg = config.policy
     options = serve_options(policy_cfg, workers)
     if options is None:
         yield policy_cfg
         return
-    transport = serve_transport(policy_cfg, (config.get("executor") or {}).get("name", "local"))
+    transport = serve_transport(policy_cfg, config.executor.name)
     ctx = mp.get_context("spawn")
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_serve, args=(config, transport, options, threads, child), name="molmo-serve",
