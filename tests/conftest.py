@@ -1,13 +1,29 @@
-"""Shared pytest fixtures."""
+"""Shared pytest fixtures, and the one place that puts the tests' helper folders on ``sys.path``."""
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import pytest
 
-try:  # tests/ is a rootdir-inserted path (no __init__.py) or a package
-    from hub_standin import HubStandin, pinned_client_factory
-except ImportError:
-    from tests.hub_standin import HubStandin, pinned_client_factory
+#: Folders whose helper modules tests elsewhere import by name: ``hub_standin`` (here), ``droid_variants``
+#: (tasks/), ``save_tiny_act`` of ``test_lerobot_policy`` (policies/), ``rby1_standin`` (sim/),
+#: ``droid_server`` (protocol/), ``export_synthetic`` (export/). Module names are unique across tests/.
+TESTS = Path(__file__).resolve().parent
+sys.path[:0] = [str(TESTS / sub) for sub in ("", "tasks", "policies", "sim", "protocol", "export")
+                if str(TESTS / sub) not in sys.path]
+
+from hub_standin import HubStandin, pinned_client_factory  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def run():
+    """A run context of the default config, shared by the session (tests that need other settings
+    build their own)."""
+    from molmo_lerobot.context import RunContext
+
+    return RunContext.build()
 
 
 @pytest.fixture

@@ -5,12 +5,12 @@ and a mobile robot's extra move group needs no code."""
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
 import pytest
+from droid_variants import droid_episode
 
 from molmo_lerobot.config import compose
 from molmo_lerobot.export.frames import FrameLayout
@@ -20,9 +20,6 @@ from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.recording import EpisodeInfo
 from molmo_lerobot.robots.franka_droid import FrankaDroid
 from molmo_lerobot.runner.evaluate import run_evaluation
-
-sys.path.insert(0, str(Path(__file__).resolve().parent / "tasks"))
-from droid_variants import droid_episode
 
 #: the cameras franka_droid's DROID camera system builds, in its order
 DROID_CAMERAS = ["wrist_camera", "exo_camera_1"]

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
@@ -37,7 +36,6 @@ def test_null_leaves_the_default():
 
 def test_a_worker_loading_a_torch_policy_runs_it_with_the_cap(tmp_path):
     """What a spawned worker does: build the policy (it imports torch), then run with the cap."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
     from test_lerobot_policy import save_tiny_act
 
     act = save_tiny_act(tmp_path / "act", image_hw=(32, 32))
