@@ -26,6 +26,29 @@ def run():
     return RunContext.build()
 
 
+@pytest.fixture(scope="session")
+def pick_recording(tmp_path_factory):
+    """One recorded multi-worker run, shared by the tests that read a recording of the defaults:
+    ``molmo-eval policy=scripted benchmark=pick_v1 workers=2 limit=4 horizon=30 record=true``.
+
+    Returns ``(output_dir, result, shards)``, ``shards`` the number of dataset shards the run merged."""
+    import lerobot.datasets.aggregate as aggregate
+
+    from molmo_lerobot.config import compose
+    from molmo_lerobot.runner.evaluate import run_evaluation
+
+    merged: list[int] = []
+    inner = aggregate.aggregate_datasets
+    out = tmp_path_factory.mktemp("pick_recording") / "run"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(aggregate, "aggregate_datasets",
+                   lambda repo_ids, *a, **k: merged.append(len(repo_ids)) or inner(repo_ids, *a, **k))
+        res = run_evaluation(compose(["policy=scripted", "benchmark=pick_v1", "workers=2", "limit=4", "horizon=30",
+                                      "record=true", "progress=false", f"output_dir={out}"]))
+    assert len(merged) == 1, merged
+    return out, res, merged[0]
+
+
 @pytest.fixture
 def hub_standin(tmp_path_factory, monkeypatch):
     """A running local stand-in of the Hugging Face Hub; ``huggingface_hub`` is pointed at it.
