@@ -20,7 +20,9 @@ def _threads_in_fresh_process(code: str, env_threads: str | None = None) -> int:
     return int(out.stdout.strip().splitlines()[-1])
 
 
-@pytest.mark.parametrize("torch_first", [False, True], ids=["before-torch", "after-torch"])
+# before torch's import is also what a worker does (the last test): the default run keeps the other order
+@pytest.mark.parametrize("torch_first", [pytest.param(False, marks=pytest.mark.slow), True],
+                         ids=["before-torch", "after-torch"])
 def test_cap_threads_sets_torch_threads_before_or_after_its_import(torch_first):
     code = ("import torch; torch.set_num_threads(3)\n" if torch_first else "") + (
         "from molmo_lerobot.cpu_threads import cap_threads\ncap_threads(1)\n"
