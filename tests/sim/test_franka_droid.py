@@ -271,7 +271,7 @@ def test_molmospaces_pick_episode_runs_and_records_an_open_gripper(tmp_path):
     bench = tmp_path / "ms_pick"
     bench.mkdir()
     (bench / "benchmark.json").write_text(json.dumps([ms_pick_episode(0)]))
-    cfg = compose(["policy=scripted", f"benchmark.path={bench}", "workers=1", "record=true",
+    cfg = compose(["policy=scripted", f"benchmark.path={bench}", "workers=1", "record=true", "end_on_success=true",
                    f"output_dir={tmp_path / 'run'}", "progress=false"])
     res = run_evaluation(cfg)
     assert res.summary["n_errors"] == 0 and res.summary["n_success"] == 1
