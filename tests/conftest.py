@@ -49,6 +49,34 @@ def pick_recording(tmp_path_factory):
     return out, res, merged[0]
 
 
+@pytest.fixture(scope="session")
+def droid_recording(tmp_path_factory):
+    """One recorded franka_droid run with the DROID cameras (``cameras: []``), shared by the tests that read
+    one: ``policy=pi0_droid`` over openpi's protocol against a fake DROID server (gripper commands 0 … 1 over
+    15 steps), the first two pick_v1 episodes, 30 steps each.
+
+    Returns ``(benchmark dir, output_dir, result, server)``."""
+    import json
+
+    from droid_server import FakeDroidServer
+    from droid_variants import droid_episode
+
+    from molmo_lerobot.config import compose
+    from molmo_lerobot.paths import data_path
+    from molmo_lerobot.runner.evaluate import run_evaluation
+
+    tmp = tmp_path_factory.mktemp("droid_recording")
+    bench, out = tmp / "droid_pick", tmp / "run"
+    bench.mkdir()
+    episodes = json.loads((data_path("benchmarks") / "pick_v1" / "benchmark.json").read_text())[:2]
+    (bench / "benchmark.json").write_text(json.dumps([droid_episode(e) for e in episodes]))
+    with FakeDroidServer(horizon=15, velocity=0.0).running() as srv:
+        res = run_evaluation(compose(["policy=pi0_droid", "policy.open_loop_horizon=null", f"policy.port={srv.port}",
+                                      "workers=1", f"benchmark.path={bench}", "horizon=30", "record=true",
+                                      f"output_dir={out}", "progress=false"]))
+    return bench, out, res, srv
+
+
 @pytest.fixture
 def hub_standin(tmp_path_factory, monkeypatch):
     """A running local stand-in of the Hugging Face Hub; ``huggingface_hub`` is pointed at it.

@@ -281,23 +281,14 @@ def test_molmospaces_pick_episode_runs_and_records_an_open_gripper(tmp_path):
     assert first[-1] < 0.01  # gripper entry: 0 = open
 
 
-def test_pi0_against_a_droid_server_on_franka_droid(tmp_path):
+def test_pi0_against_a_droid_server_on_franka_droid(droid_recording):
     """Must-show: policy=pi0 over openpi's protocol on franka_droid with the DROID cameras (cameras: []),
     0 errors; the server's gripper commands 0 … 1 drive the Robotiq over its full travel."""
-    from droid_server import FakeDroidServer
-
-    bench = tmp_path / "droid_pick"
-    bench.mkdir()
-    (bench / "benchmark.json").write_text(json.dumps([droid_episode(pick_episode(k)) for k in (0, 1)]))
-    with FakeDroidServer(horizon=15, velocity=0.0).running() as srv:
-        cfg = compose(["policy=pi0_droid", "policy.open_loop_horizon=null", f"policy.port={srv.port}", "workers=1",
-                       f"benchmark.path={bench}",
-                       "horizon=30", "record=true", f"output_dir={tmp_path / 'run'}", "progress=false"])
-        res = run_evaluation(cfg)
+    _, out, res, srv = droid_recording
     assert srv.errors == [] and res.summary["n_errors"] == 0 and res.summary["n_episodes"] == 2
     assert all(e.extra["camera_system"] == "FrankaDroidCameraSystem" for e in res.episodes)
     import pandas as pd
-    frames = pd.concat(pd.read_parquet(p) for p in sorted((tmp_path / "run" / "dataset" / "data").rglob("*.parquet")))
+    frames = pd.concat(pd.read_parquet(p) for p in sorted((out / "dataset" / "data").rglob("*.parquet")))
     commanded = np.stack(frames["action"].to_numpy())[:, -1]
     observed = np.stack(frames["observation.state"].to_numpy())[:, -1]
     assert commanded.min() == pytest.approx(0.0, abs=1e-6) and commanded.max() == pytest.approx(1.0, abs=1e-6)
