@@ -55,6 +55,9 @@ MAX_SERVE_BATCH = 4096
 MAX_SERVE_BATCH_TIMEOUT_MS = 60_000
 MAX_VIDEO_CRF = 63  # libsvtav1's range (0-63); h264/hevc stop at 51 and the encoder says so
 SERVE_TRANSPORTS = ("auto", "shm", "websocket")
+#: ``policy.serve*`` when the policy's config leaves them out (any policy may be served)
+SERVE_DEFAULTS: Mapping[str, Any] = {"serve": False, "serve_max_batch": None, "serve_batch_timeout_ms": 50.0,
+                                     "serve_transport": "auto"}
 
 
 class RunConfigError(MolmoError, ValueError):
@@ -317,18 +320,19 @@ def _dataset_id(value: Any) -> Any:
 def serve_problems(policy: Mapping[str, Any]) -> list[str]:
     """Problems of the run's serving keys in ``policy`` (``policy.serve=true``; any policy may be served)."""
     out = []
-    serve = policy.get("serve", False)
+    policy = {**SERVE_DEFAULTS, **policy}
+    serve = policy["serve"]
     if not isinstance(serve, bool):
         out.append(f"policy.serve: expected true or false, got {serve!r}")
-    batch = policy.get("serve_max_batch")
+    batch = policy["serve_max_batch"]
     if not (batch is None or (_is_int(batch) and 1 <= batch <= MAX_SERVE_BATCH)):
         out.append(f"policy.serve_max_batch: expected an integer in 1..{MAX_SERVE_BATCH} "
                    f"(or null: the number of workers), got {batch!r}")
-    wait = policy.get("serve_batch_timeout_ms", 50.0)
+    wait = policy["serve_batch_timeout_ms"]
     if not (_is_number(wait) and 0 <= wait <= MAX_SERVE_BATCH_TIMEOUT_MS):
         out.append(f"policy.serve_batch_timeout_ms: expected milliseconds in 0..{MAX_SERVE_BATCH_TIMEOUT_MS}, "
                    f"got {wait!r}")
-    transport = policy.get("serve_transport", "auto")
+    transport = policy["serve_transport"]
     if transport not in SERVE_TRANSPORTS:
         out.append(f"policy.serve_transport: expected one of {', '.join(SERVE_TRANSPORTS)}, got {transport!r}")
     return out
