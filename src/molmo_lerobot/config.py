@@ -30,8 +30,13 @@ from molmo_lerobot.benchmark.registry import benchmark_names
 from molmo_lerobot.hookspecs import ConfigError
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
+from molmo_lerobot.run_config import RunConfig
 
 __all__ = ["ConfigError", "PluginConfigDirs", "compose", "config_message", "primary_config_dir"]
+
+
+#: the run config's keys that pick a file of ``conf/<group>/`` (or a plugin's config dir)
+CONFIG_GROUPS = ("policy", "benchmark", "executor")
 
 
 def primary_config_dir() -> Path:
@@ -80,10 +85,18 @@ def _default_benchmark_configs(plugins: Plugins, config_dirs: list[Path]) -> Non
             store.store(group="benchmark", name=name, node={"name": name, "path": None}, provider="molmo_lerobot")
 
 
+def run_defaults() -> dict[str, object]:
+    """``RunConfig``'s defaults, the one statement of them, as the ``molmo_run_defaults`` node
+    ``conf/eval.yaml`` lists; the config groups (``policy``, ``benchmark``, ``executor``) are its own."""
+    return {k: v for k, v in RunConfig().plain().items() if k not in CONFIG_GROUPS}
+
+
 def _register() -> None:
     open_map = OmegaConf.create({})
     OmegaConf.set_struct(open_map, False)  # keys may be added below it without `+`
-    ConfigStore.instance().store(name="molmo_open_map", node=open_map, provider="molmo_lerobot")
+    store = ConfigStore.instance()
+    store.store(name="molmo_open_map", node=open_map, provider="molmo_lerobot")
+    store.store(name="molmo_run_defaults", node=run_defaults(), provider="molmo_lerobot")
     HydraPlugins.instance().register(PluginConfigDirs)
 
 

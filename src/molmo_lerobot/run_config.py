@@ -1,4 +1,4 @@
-"""The typed ``molmo-eval`` run config (``conf/eval.yaml``), validated once before any work.
+"""The typed ``molmo-eval`` run config, validated once before any work; its defaults, stated once.
 
 Hydra composes the config (groups, overrides, interpolations, sweeps); :meth:`RunConfig.of`
 validates the composed result and lists every problem, one line each naming its key, so a
@@ -13,7 +13,8 @@ range and cross-field checks (timing ratios, camera options, the work one episod
 for) would stay a second pass; here one pass reports everything. The core's own sections
 are closed (an unknown key is a problem); ``policy``, ``benchmark`` and ``executor`` (config
 groups plugins extend) and the top level (``+key=value`` for a plugin's own key) stay open.
-Missing keys take ``conf/eval.yaml``'s defaults (a test keeps the two equal).
+Missing keys take the fields' defaults: the only place they are stated (``conf/eval.yaml``
+lists them as Hydra's ``molmo_run_defaults`` node, :func:`molmo_lerobot.config.run_defaults`).
 
 :func:`episode_work_problem` bounds the physics steps one episode may ask for (a horizon
 of 1e12 seconds or a 0.1 µs physics step would otherwise run until the watchdog).
@@ -54,6 +55,9 @@ MAX_SERVE_BATCH = 4096
 MAX_SERVE_BATCH_TIMEOUT_MS = 60_000
 MAX_VIDEO_CRF = 63  # libsvtav1's range (0-63); h264/hevc stop at 51 and the encoder says so
 SERVE_TRANSPORTS = ("auto", "shm", "websocket")
+#: ``policy.serve*`` when the policy's config leaves them out (any policy may be served)
+SERVE_DEFAULTS: Mapping[str, Any] = {"serve": False, "serve_max_batch": None, "serve_batch_timeout_ms": 50.0,
+                                     "serve_transport": "auto"}
 
 
 class RunConfigError(MolmoError, ValueError):
@@ -126,11 +130,17 @@ class _OpenSection(BaseModel):
 class TimingConfig(_Section):
     """How a policy step advances the simulation (:class:`~molmo_lerobot.sim.env.Timing`)."""
 
+    #: one policy step
     policy_dt_ms: Millis = 66.0
+    #: one controller tick
     ctrl_dt_ms: Millis = 2.0
+    #: one physics step (sets model.opt.timestep)
     sim_dt_ms: Millis = 2.0
+    #: hold: a step's targets applied at once and held (MolmoSpaces); ramp: moved in over the ticks
     control: Annotated[str, _rule(lambda v: v in CONTROL_MODES,
                                   f"timing: control must be one of {', '.join(CONTROL_MODES)}, got {{got}}")] = "hold"
+    #: MuJoCo body sleeping from the reset state on, as MolmoSpaces' rollouts (off: a sleeping body's
+    #: contacts leave data.contact, so settled objects read unsupported; docs/parity.md)
     sleep: Annotated[bool, _rule(lambda v: isinstance(v, bool),
                                  "timing: sleep must be true or false, got {got}")] = False
 
@@ -146,10 +156,18 @@ class TimingConfig(_Section):
 class CameraConfig(_Section):
     """Which camera system each episode runs with, set up how (:mod:`molmo_lerobot.cameras.options`)."""
 
+    #: {camera_name: {field: value}}, e.g. {exterior: {fov: 60}}
     overrides: dict[str, dict[str, Any]] = {}
+    #: camera system for episodes without cameras (default: source.camera_system_class, else the robot's:
+    #: franka_droid -> FrankaDroidCameraSystem); FrankaRandomizedDroidCameraSystem; FrankaEvalCameraSystem
+    #: replaces every episode's cameras (= camera.eval=true)
     system: str | None = None
+    #: MolmoSpaces' --use_eval_cameras: their FrankaEvalCameraSystem replaces the recorded cameras
     eval: bool = False
+    #: MolmoSpaces' --camera_rand_level 0-100 (with eval=true): 0 calibrated rig, 100 exterior camera
+    #: anywhere around the scene, up to 1.5 m further, fov 64-78; seeded per episode as theirs
     rand_level: int | float = 0
+    #: 0 off; 1-3: our own small jitter of the episode's recorded cameras (not MolmoSpaces')
     randomization: int = 0
 
     @model_validator(mode="before")
@@ -171,6 +189,8 @@ def _base_size(value: Any) -> Any:
 
 
 class RobotConfig(_Section):
+    #: the robot's pedestal, as MolmoSpaces' robot configs: [x, y, z] metres, null for none; default:
+    #: the episode's robot.base_size, else the robot's (franka_droid [0.5, 0.5, 0.58], franka none)
     base_size: Annotated[str | list[int | float] | None, BeforeValidator(_base_size)] = "default"
 
 
@@ -203,47 +223,66 @@ def _mjcf_file(value: Any) -> Any:
 
 
 class CustomObjectConfig(_Section):
+    #: an MJCF file whose top body has a freejoint
     path: Annotated[str | None, BeforeValidator(_mjcf_file)] = None
+    #: the new body name; the task's target is renamed to it
     name: str = "custom_object"
+    #: new instruction text (default: keep the episode's)
     description: str | None = None
 
 
 class MolmoSpacesConfig(_Section):
     """MolmoSpaces' data; :func:`~molmo_lerobot.molmospaces.settings.resolve` checks the values."""
 
+    #: override the scene XML's <option> (e.g. {integrator: implicitfast}); timestep is sim_dt_ms
     physics_options: dict[str, Any] = {}
+    #: null: $MLSPACES_ASSETS_DIR, else ~/.cache/molmo_lerobot/molmospaces/assets
     assets_dir: str | None = None
+    #: ceiling | base: which ProcTHOR/Holodeck scene file (MolmoSpaces' default: ceiling)
     house_variant: str | None = "ceiling"
+    #: with remote: install missing objects per UID through our resource manager
     cache_dir: str | None = None
     remote: str | None = None
 
 
 class PluginsConfig(_Section):
+    #: pin the provider of a name several plugins provide: plugins.prefer.<kind>.<name>=<plugin>
+    #: (kind: task|robot|camera|scene|policy; plugin: its name in `molmo-plugins`)
     prefer: dict[str, dict[str, str]] = {}  # checked against the plugins by RunContext.build
 
 
 class HubConfig(_Section):
     repo_id: str | None = None  # the recorder checks it (push=true)
     private: bool = False
+    #: push=true with dataset_id: hf://<user or org> (null: $MOLMO_DATASETS_REMOTE)
     remote: str | None = None  # push=true with dataset_id: hf://<owner>; the recorder checks it
 
 
 class WandbConfig(_Section):
+    #: log scores and the episode table to Weights & Biases
     enable: bool = False
     project: str = "molmo-eval"
+    #: W&B team or user (null: your default entity)
     entity: str | None = None
 
 
 class VideoConfig(_Section):
     """How camera streams are encoded (record=true); the recorder checks the values with the encoder."""
 
+    #: LeRobot's default (AV1: merges with datasets LeRobot records) | h264 (a third of the CPU, 28 % larger
+    #: files; merges only with h264 datasets) | hevc | h264_nvenc | auto (h264_nvenc where it encodes a test
+    #: frame: an NVIDIA GPU; else libsvtav1)
     vcodec: str = "libsvtav1"
+    #: quality, lower is better (null: libsvtav1 30, h264 18; same picture quality)
     crf: Annotated[int | float | None,
                    _rule(_optional(lambda v: _is_number(v) and 0 <= v <= MAX_VIDEO_CRF),
                          f"{{key}}: expected a number in 0..{MAX_VIDEO_CRF} or null, got {{got}}")] = None
+    #: keyframe interval; 2 keeps training-time random access cheap (LeRobot's default)
     g: int | None = 2
+    #: speed preset (null: libsvtav1 12, h264 veryfast)
     preset: Annotated[int | str | None, _rule(lambda v: v is None or isinstance(v, str) or _is_int(v),
                                               "{key}: expected a preset name, a number or null, got {got}")] = None
+    #: codec threads per camera stream (null: the codec decides)
     encoder_threads: int | None = 1
 
 
@@ -281,25 +320,26 @@ def _dataset_id(value: Any) -> Any:
 def serve_problems(policy: Mapping[str, Any]) -> list[str]:
     """Problems of the run's serving keys in ``policy`` (``policy.serve=true``; any policy may be served)."""
     out = []
-    serve = policy.get("serve", False)
+    policy = {**SERVE_DEFAULTS, **policy}
+    serve = policy["serve"]
     if not isinstance(serve, bool):
         out.append(f"policy.serve: expected true or false, got {serve!r}")
-    batch = policy.get("serve_max_batch")
+    batch = policy["serve_max_batch"]
     if not (batch is None or (_is_int(batch) and 1 <= batch <= MAX_SERVE_BATCH)):
         out.append(f"policy.serve_max_batch: expected an integer in 1..{MAX_SERVE_BATCH} "
                    f"(or null: the number of workers), got {batch!r}")
-    wait = policy.get("serve_batch_timeout_ms", 50.0)
+    wait = policy["serve_batch_timeout_ms"]
     if not (_is_number(wait) and 0 <= wait <= MAX_SERVE_BATCH_TIMEOUT_MS):
         out.append(f"policy.serve_batch_timeout_ms: expected milliseconds in 0..{MAX_SERVE_BATCH_TIMEOUT_MS}, "
                    f"got {wait!r}")
-    transport = policy.get("serve_transport", "auto")
+    transport = policy["serve_transport"]
     if transport not in SERVE_TRANSPORTS:
         out.append(f"policy.serve_transport: expected one of {', '.join(SERVE_TRANSPORTS)}, got {transport!r}")
     return out
 
 
 class RunConfig(_OpenSection):
-    """``conf/eval.yaml``, typed; fields in the composed config's order (its defaults list first).
+    """The run config, typed; fields in the composed config's order (the config groups first).
 
     Keys plugins add at the top level (``+trace_dir=...``) are kept as given.
     """
@@ -308,18 +348,26 @@ class RunConfig(_OpenSection):
     benchmark: BenchmarkConfig = BenchmarkConfig(name="pick_v1")
     executor: ExecutorConfig = ExecutorConfig.model_validate(
         {"name": "local", "start_method": "forkserver", "egl_devices": None, "cuda_devices": None})
+    #: seconds per task type, e.g. {pick: 15, pick_and_place: 40}
     horizons: Annotated[dict[str, TaskSeconds], _rule(
         lambda v: isinstance(v, Mapping), "{key}: expected a mapping of task type to seconds, got {got}")] = {}
+    #: which camera system each episode runs with, set up how
     camera: CameraConfig = CameraConfig()
     plugins: PluginsConfig = PluginsConfig()
+    #: MolmoSpaces user asset libraries: {name: dir with assets_index.json}
     asset_libraries: dict[str, Any] = {}  # checked with the MolmoSpaces settings by RunContext.build
+    #: MolmoSpaces user grasp libraries: {name: {path: dir with grasps_index.json, asset_library: name}}
     grasp_libraries: dict[str, Any] = {}
+    #: MolmoSpaces' own data (scenes ithor, procthor-*, holodeck-*, thor/objaverse objects)
     molmospaces: MolmoSpacesConfig = MolmoSpacesConfig()
+    #: worker processes (local) or simulator actors (ray)
     workers: Annotated[int, BeforeValidator(_workers)] = 2
+    #: CPU threads for torch/BLAS per worker and in the policy.serve server (null: one per core)
     worker_threads: Annotated[int | None, _rule(
         _optional(lambda v: _is_int(v) and 1 <= v <= MAX_WORKER_THREADS),
         f"{{key}}: expected an integer in 1..{MAX_WORKER_THREADS} (or null for the libraries' default), "
         "got {got}")] = 1
+    #: evaluate only the first K (>= 1) episodes; a resume keeps the recorded one unless given a larger one
     limit: Annotated[int | None, _rule(
         _optional(lambda v: _is_int(v) and v >= 1),
         "{key}: expected a positive integer (or null for every episode), got {got}")] = None
@@ -332,33 +380,64 @@ class RunConfig(_OpenSection):
     sample: Annotated[int | None, _rule(
         _optional(lambda v: _is_int(v) and v >= 1),
         "{key}: expected a positive number of episodes (or null), got {got}")] = None
+    #: run seed; per-episode seeds derive from it and the episode's content
     seed: Annotated[int, _rule(_is_int, "{key}: expected an integer, got {got}")] = 0
+    #: default: runs/<benchmark>-<policy>-<timestamp>
     output_dir: Annotated[str | None, _rule(_optional(lambda v: isinstance(v, str) and v.strip() != ""),
                                             "{key}: expected a path (or null for runs/<benchmark>-<policy>-"
                                             "<time>), got {got}")] = None
+    #: write output_dir/dataset as a LeRobot v3 dataset
     record: Flag = False
-    record_hold_steps: Any = 10  # the recorder checks it (record=true)
-    record_min_frames: Any = 100  # the recorder checks it (record=true)
+    #: record=true: a scripted expert's recording ends this many steps after its first success (null:
+    #: the whole rollout); other policies are recorded in full. Scores are unchanged: the rollout
+    #: still runs to the horizon (end_on_success ends it)
+    record_hold_steps: Annotated[int | None, _rule(
+        _optional(lambda v: _is_int(v) and v >= 0), "{key}: expected a non-negative integer or null, got {got}")] = 10
+    #: ... but it keeps at least this many frames (the horizon permitting): the action chunk of
+    #: LeRobot's ACT and SmolVLA, which lerobot-doctor's gate asks of each episode
+    record_min_frames: Annotated[int, _rule(
+        lambda v: _is_int(v) and v >= 0, "{key}: expected a non-negative integer, got {got}")] = 100
+    #: record=true: also record the task's observation.environment_state (pick: the object's
+    #: pose in the robot base frame): privileged ground truth for state-only policies, not a
+    #: camera's view. A policy that reads it gets it either way
     record_environment_state: Flag = False
+    #: push the dataset and scores to the Hub (hub.repo_id; with dataset_id: hub.remote)
     push: Flag = False
+    #: ns/sub/name: also store the recording in the local dataset store under this id
+    #: ($MOLMO_DATASETS_PATH, else $MOLMO_LEROBOT_HOME/datasets; molmo-datasets --help)
     dataset_id: Annotated[str | None, BeforeValidator(_dataset_id)] = None
+    #: rerun only the episodes missing from output_dir/episodes.jsonl
     resume: Flag = False
+    #: policy steps; else horizons.<task>; else task_horizon_sec; else the task's default
     horizon: Annotated[int | None, _rule(
         _optional(lambda v: _is_int(v) and 1 <= v <= MAX_HORIZON_STEPS),
         f"{{key}}: expected a whole number of policy steps in 1..{MAX_HORIZON_STEPS} (or null), got {{got}}")] = None
+    #: wall-clock limit per episode; past it the episode is an error
     episode_timeout_s: TimeoutSeconds = 900
+    #: reruns of an episode whose worker died (SIGKILL, segfault)
     episode_retries: Annotated[int, _rule(lambda v: _is_int(v) and 0 <= v <= MAX_EPISODE_RETRIES,
                                           f"{{key}}: expected an integer in 0..{MAX_EPISODE_RETRIES}, got {{got}}")] = 1
+    #: a bar on a terminal; else one line per finished episode
     progress: Flag = True
+    #: not a terminal: a line with the running episodes' steps this often
     progress_interval_s: Annotated[int | float | None, _rule(
         _optional(lambda v: _is_number(v) and v > 0), "{key}: expected a positive number of seconds, got {got}")] = 30
+    #: how a policy step advances the simulation (part of the trial: molmo-compare checks it)
     timing: TimingConfig = TimingConfig()
+    #: swap every episode's target object for this MJCF (keeping its pose)
     custom_object: CustomObjectConfig = CustomObjectConfig()
+    #: end an episode at its first success (MolmoSpaces' end_on_success / terminate_upon_success);
+    #: Hydra's default is the policy preset's (policy.end_on_success; pi0: true), else false
     end_on_success: Flag = False
+    #: molmospaces: success judged as MolmoSpaces' code judges it, quirks included (open: a zero-range
+    #: joint at 0 listed first makes their fraction NaN, the episode fails); an episode our corrected
+    #: rule would judge otherwise says so in parity_notes. fixed: our corrected rules
     task_rules: Annotated[str, _rule(lambda v: v in TASK_RULES,
                                      f"{{key}}: expected one of {', '.join(TASK_RULES)}, got {{got}}")] = "molmospaces"
     robot: RobotConfig = RobotConfig()
+    #: record=true: how camera streams are encoded (LeRobot's RGBEncoderConfig)
     video: VideoConfig = VideoConfig()
+    #: scene_dataset "user": house_index i is scene_xml_paths[i] (+ <name>_metadata.json beside it)
     scene_xml_paths: list[str] = []
     hub: HubConfig = HubConfig()
     wandb: WandbConfig = WandbConfig()

@@ -11,7 +11,8 @@ import pytest
 
 from molmo_lerobot.config import compose
 from molmo_lerobot.export.merge import read_eval_records
-from molmo_lerobot.export.recorder import LeRobotRecorderFactory, RecordConfigError
+from molmo_lerobot.export.recorder import LeRobotRecorderFactory
+from molmo_lerobot.run_config import RunConfigError
 from molmo_lerobot.runner.evaluate import run_evaluation
 
 CFG = {"benchmark": {"name": "synth_v1"}, "policy": {"name": "scripted"},
@@ -87,13 +88,13 @@ def test_an_experts_recording_keeps_record_min_frames(tmp_path):
     w.close()
     factory.finalize(tmp_path, results, S.summary_for(results))
     assert {e: n for e, (n, _, _) in _episodes(tmp_path / "dataset", factory.repo_id).items()} == {0: 9, 1: 7, 2: 11}
-    with pytest.raises(RecordConfigError, match="record_min_frames"):
+    with pytest.raises(RunConfigError, match="record_min_frames: expected a non-negative integer, got -1"):
         LeRobotRecorderFactory.from_config({**CFG, "record_min_frames": -1})
 
 
 @pytest.mark.parametrize("hold", [-1, True, 2.5, "10"])
 def test_record_hold_steps_is_validated(hold):
-    with pytest.raises(RecordConfigError, match="record_hold_steps"):
+    with pytest.raises(RunConfigError, match="record_hold_steps: expected a non-negative integer or null"):
         LeRobotRecorderFactory.from_config({**CFG, "record_hold_steps": hold})
 
 

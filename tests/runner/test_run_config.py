@@ -65,7 +65,7 @@ def test_episode_work_bound():
     assert episode_work_problem(MAX_PHYSICS_STEPS // 33 + 1, timing, "x") is not None
 
 
-def test_the_schema_defaults_are_eval_yaml_and_validation_keeps_a_composed_config_as_it_is():
+def test_hydra_composes_the_schema_defaults_and_validation_keeps_a_composed_config_as_it_is():
     from omegaconf import OmegaConf
 
     from molmo_lerobot.config import compose
@@ -89,6 +89,7 @@ def test_the_schema_defaults_are_eval_yaml_and_validation_keeps_a_composed_confi
         (["end_on_success=yes"], "end_on_success: expected true or false, got 'yes'"),
         (["task_rules=ours"], "task_rules: expected one of molmospaces, fixed, got 'ours'"),
         (["custom_object.name=5"], "custom_object.name: input should be a valid string, got 5"),
+        (["record_hold_steps=-1"], "record_hold_steps: expected a non-negative integer or null, got -1"),
     ],
 )
 def test_an_unknown_key_or_a_wrongly_typed_value_is_one_line_naming_the_key(args, line, capsys, tmp_path):

@@ -30,6 +30,7 @@ from molmo_lerobot.export.video import RecordingDataset, VideoSettings
 from molmo_lerobot.hookspecs import ConfigError
 from molmo_lerobot.recording import EpisodeInfo, Recorder, RecorderFactory
 from molmo_lerobot.results import EpisodeResult, Push, RunSummary
+from molmo_lerobot.run_config import RunConfig
 
 log = logging.getLogger(__name__)
 
@@ -79,40 +80,33 @@ class LeRobotRecorderFactory(RecorderFactory):
     shard_episodes: int = 8
     video: VideoSettings = field(default_factory=VideoSettings)
     #: an expert's recording ends this many steps after its first success (None: the whole rollout)
-    hold_steps: int | None = 10
+    hold_steps: int | None = RunConfig.model_fields["record_hold_steps"].default
     #: ``dataset_id=ns/sub/name``: the merged dataset is also copied into the dataset store (``store_root``),
     #: and ``push=true`` uploads it there with its namespaces (``remote``: ``hf://<owner>``)
     dataset_id: str | None = None
     store_root: str | None = None
     remote: str | None = None
     #: ... but an expert's recording keeps at least this many frames (the horizon permitting)
-    min_frames: int = 100
+    min_frames: int = RunConfig.model_fields["record_min_frames"].default
 
     @classmethod
-    def from_config(cls, cfg: dict[str, Any]) -> LeRobotRecorderFactory:
-        """Build from the resolved run config (``record``, ``push``, ``hub``, ``video``, ``timing`` …)."""
-        bench = str((cfg.get("benchmark") or {}).get("name") or "benchmark")
-        policy = str((cfg.get("policy") or {}).get("name") or "policy")
-        hub = cfg.get("hub") or {}
-        push = bool(cfg.get("push"))
-        repo_id = hub.get("repo_id")
-        dataset_id, store_root, remote = _store_target(cfg, push)
-        if push and not repo_id and dataset_id is None:
+    def from_config(cls, cfg: RunConfig | dict[str, Any]) -> LeRobotRecorderFactory:
+        """Build from the run config (``record``, ``push``, ``hub``, ``video``, ``timing`` …), validated
+        first (:meth:`RunConfig.of <molmo_lerobot.run_config.RunConfig.of>`: the missing keys take its defaults)."""
+        run = RunConfig.of(cfg)
+        bench, policy = run.benchmark.name, str(run.policy["name"])
+        repo_id = run.hub.repo_id
+        dataset_id, store_root, remote = _store_target(run)
+        if run.push and not repo_id and dataset_id is None:
             raise RecordConfigError("push=true needs hub.repo_id=<namespace>/<name>")
         if repo_id:
-            validate_repo_id(str(repo_id))
+            validate_repo_id(repo_id)
         else:
             repo_id = f"local/{_slug(bench)}-{_slug(policy)}"
-        hold = cfg.get("record_hold_steps", cls.hold_steps)
-        if hold is not None and (isinstance(hold, bool) or not isinstance(hold, int) or hold < 0):
-            raise RecordConfigError(f"record_hold_steps: expected a non-negative integer or null, got {hold!r}")
-        least = cfg.get("record_min_frames", cls.min_frames)
-        if isinstance(least, bool) or not isinstance(least, int) or least < 0:
-            raise RecordConfigError(f"record_min_frames: expected a non-negative integer, got {least!r}")
-        return cls(repo_id=str(repo_id), policy_dt_ms=float(cfg["timing"]["policy_dt_ms"]), benchmark=bench,
-                   policy=policy, push=push, private=bool(hub.get("private", False)),
-                   video=VideoSettings.from_config(cfg.get("video")), hold_steps=hold, dataset_id=dataset_id,
-                   store_root=store_root, remote=remote, min_frames=least)
+        return cls(repo_id=repo_id, policy_dt_ms=float(run.timing.policy_dt_ms), benchmark=bench,
+                   policy=policy, push=run.push, private=run.hub.private,
+                   video=VideoSettings.from_config(run.video.model_dump()), hold_steps=run.record_hold_steps,
+                   dataset_id=dataset_id, store_root=store_root, remote=remote, min_frames=run.record_min_frames)
 
     @property
     def fps(self) -> int:
@@ -178,29 +172,29 @@ class LeRobotRecorderFactory(RecorderFactory):
         return {r.episode_index for r in results if r.error is None and r.episode_index not in stored}
 
 
-def _store_target(cfg: dict[str, Any], push: bool) -> tuple[str | None, str | None, str | None]:
+def _store_target(run: RunConfig) -> tuple[str | None, str | None, str | None]:
     """``(dataset_id, store root, remote)`` of a ``dataset_id=`` run, checked before any output: a valid id
     that is free in the store (or this run's own recording, on ``resume``), and a remote to push to."""
     from molmo_lerobot.namespaces import DatasetStore, HubRemote, NamespaceError
 
-    dataset_id = cfg.get("dataset_id")
+    dataset_id = run.dataset_id
     if dataset_id is None:
         return None, None, None
     store = DatasetStore()
-    remote = (cfg.get("hub") or {}).get("remote") or os.environ.get("MOLMO_DATASETS_REMOTE")
-    if (cfg.get("hub") or {}).get("repo_id"):
+    remote = run.hub.remote or os.environ.get("MOLMO_DATASETS_REMOTE")
+    if run.hub.repo_id:
         raise RecordConfigError(f"dataset_id {dataset_id!r} and hub.repo_id both say where the dataset goes; "
                                 "set one (dataset_id pushes to hub.remote)")
     try:
-        store.check_new_dataset(str(dataset_id), cfg.get("output_dir") if cfg.get("resume") else None)
-        if push:
+        store.check_new_dataset(dataset_id, run.output_dir if run.resume else None)
+        if run.push:
             if not remote:
                 raise NamespaceError(f"dataset_id {dataset_id!r} with push=true needs hub.remote=hf://<user or org> "
                                      "(or $MOLMO_DATASETS_REMOTE)")
             HubRemote.from_remote(remote)
     except NamespaceError as exc:
         raise RecordConfigError(str(exc)) from None
-    return str(dataset_id), str(store.root), remote
+    return dataset_id, str(store.root), remote
 
 
 def quiet_libraries() -> None:

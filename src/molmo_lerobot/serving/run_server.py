@@ -30,6 +30,7 @@ from molmo_lerobot.cpu_threads import cap_threads
 from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.protocol import shm
+from molmo_lerobot.run_config import SERVE_DEFAULTS
 
 if TYPE_CHECKING:
     from molmo_lerobot.run_config import RunConfig
@@ -45,7 +46,7 @@ class ServeError(MolmoError, RuntimeError):
 
 def serve_transport(policy_cfg: dict[str, Any], executor: str) -> str:
     """``shm`` or ``websocket``: ``policy.serve_transport``, ``auto`` resolved for ``executor``."""
-    requested = policy_cfg.get("serve_transport") or "auto"
+    requested = {**SERVE_DEFAULTS, **policy_cfg}["serve_transport"]
     if requested == "websocket":
         return requested
     if requested == "shm" and executor != "local":
@@ -61,10 +62,11 @@ def serve_transport(policy_cfg: dict[str, Any], executor: str) -> str:
 
 def serve_options(policy_cfg: dict[str, Any], workers: int) -> dict[str, Any] | None:
     """Server options when ``policy_cfg`` asks to be served for the run, else None."""
-    if not policy_cfg.get("serve"):
+    serve = {**SERVE_DEFAULTS, **policy_cfg}
+    if not serve["serve"]:
         return None
-    return {"max_batch": int(policy_cfg.get("serve_max_batch") or workers),
-            "batch_timeout_ms": float(policy_cfg.get("serve_batch_timeout_ms", 50.0)),
+    return {"max_batch": int(serve["serve_max_batch"] or workers),
+            "batch_timeout_ms": float(serve["serve_batch_timeout_ms"]),
             "max_clients": max(8, workers + 2), "first_request_timeout_s": 600.0, "idle_timeout_s": 3600.0}
 
 
