@@ -12,9 +12,6 @@ import grimp
 
 #: circles not yet broken, each as its set of modules (``molmo_lerobot.`` left out)
 KNOWN: list[frozenset[str]] = [
-    # context -> plugins -> hookspecs -> policies.base -> context (EpisodeContext.run)
-    frozenset({"benchmark.load", "benchmark.task_specs", "context", "hookspecs", "plugins", "policies.base",
-               "recording"}),
     # the library types take the catalog their libraries join (TYPE_CHECKING), the catalog makes them
     frozenset({"assets.catalog", "assets.grasps", "assets.libraries"}),
     # merging the shards takes the recorder factory (TYPE_CHECKING); the recorder merges

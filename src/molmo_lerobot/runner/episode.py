@@ -25,6 +25,9 @@ import contextlib
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import mujoco
+import numpy as np
+
 from molmo_lerobot.errors import InfrastructureError, MolmoError, describe
 from molmo_lerobot.features import ENV_STATE_KEY
 
@@ -39,6 +42,31 @@ if TYPE_CHECKING:
     from molmo_lerobot.runner.plan import EpisodePlan
     from molmo_lerobot.sim.env import Env
     from molmo_lerobot.tasks.base import Task
+
+
+class SimulationDiverged(MolmoError, RuntimeError):
+    """The physics blew up (non-finite state or a MuJoCo instability warning): the episode is an error."""
+
+
+#: MuJoCo warnings that mean the simulation state can no longer be trusted (MuJoCo resets
+#: the state after a bad acceleration, so a blow-up can look like a calm, failed episode).
+DIVERGENCE_WARNINGS = {name: int(getattr(mujoco.mjtWarning, name))
+                       for name in ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC", "mjWARN_BADCTRL")}
+
+
+def check_divergence(data: Any, when: str) -> None:
+    """Raise :class:`SimulationDiverged` if ``data`` (an ``MjData``) holds non-finite state or
+    has raised one of :data:`DIVERGENCE_WARNINGS` since it was reset; ``when`` locates it."""
+    for name, index in DIVERGENCE_WARNINGS.items():
+        info = data.warning[index]
+        if info.number > 0:
+            raise SimulationDiverged(f"simulation diverged {when} (t={data.time:.3f}s): MuJoCo {name} "
+                                     f"x{info.number} (dof/index {info.lastinfo}); check init_qpos and object poses")
+    for field in ("qpos", "qvel", "qacc"):
+        values = getattr(data, field)
+        if not np.all(np.isfinite(values)):
+            bad = int(np.flatnonzero(~np.isfinite(values))[0])
+            raise SimulationDiverged(f"simulation diverged {when} (t={data.time:.3f}s): non-finite {field}[{bad}]")
 
 
 class EpisodeSetupError(MolmoError, ValueError):
@@ -112,8 +140,6 @@ class EpisodeSession:
         """The episode of a reset ``env`` and its ``task``: the task set up, the start checked (divergence;
         an environment state when ``environment_state`` names who asks for one), then ``policy`` reset.
         :meth:`open` starts every planned episode here; a test may start one it built itself."""
-        from molmo_lerobot.runner.rollout import check_divergence
-
         task.setup()
         check_divergence(env.data, "at the initial state")
         if environment_state and not task.environment_state_names:
@@ -178,8 +204,6 @@ class EpisodeSession:
         """One policy step towards ``action`` (:meth:`complete`); divergence is an error. ``observed``:
         the agent observes the new state (a chunk's last step; every Gymnasium step), so it counts
         for ``success_once``. Returns success in the new state."""
-        from molmo_lerobot.runner.rollout import check_divergence
-
         self.env.step(self.complete(action))
         check_divergence(self.env.data, f"at step {self.steps}")
         self.success = bool(self.task.success())

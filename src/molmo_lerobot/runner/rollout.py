@@ -5,7 +5,6 @@ from __future__ import annotations
 from collections import deque
 from typing import TYPE_CHECKING, Any
 
-import mujoco
 import numpy as np
 
 from molmo_lerobot.errors import MolmoError
@@ -19,31 +18,6 @@ if TYPE_CHECKING:
 
 class ActionError(MolmoError, ValueError):
     """A policy returned something that is not a valid action or chunk."""
-
-
-class SimulationDiverged(MolmoError, RuntimeError):
-    """The physics blew up (non-finite state or a MuJoCo instability warning): the episode is an error."""
-
-
-#: MuJoCo warnings that mean the simulation state can no longer be trusted (MuJoCo resets
-#: the state after a bad acceleration, so a blow-up can look like a calm, failed episode).
-DIVERGENCE_WARNINGS = {name: int(getattr(mujoco.mjtWarning, name))
-                       for name in ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC", "mjWARN_BADCTRL")}
-
-
-def check_divergence(data: Any, when: str) -> None:
-    """Raise :class:`SimulationDiverged` if ``data`` (an ``MjData``) holds non-finite state or
-    has raised one of :data:`DIVERGENCE_WARNINGS` since it was reset; ``when`` locates it."""
-    for name, index in DIVERGENCE_WARNINGS.items():
-        info = data.warning[index]
-        if info.number > 0:
-            raise SimulationDiverged(f"simulation diverged {when} (t={data.time:.3f}s): MuJoCo {name} "
-                                     f"x{info.number} (dof/index {info.lastinfo}); check init_qpos and object poses")
-    for field in ("qpos", "qvel", "qacc"):
-        values = getattr(data, field)
-        if not np.all(np.isfinite(values)):
-            bad = int(np.flatnonzero(~np.isfinite(values))[0])
-            raise SimulationDiverged(f"simulation diverged {when} (t={data.time:.3f}s): non-finite {field}[{bad}]")
 
 
 #: the optional action key that ends the episode after its step (MolmoSpaces' ``done``)
