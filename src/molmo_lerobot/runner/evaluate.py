@@ -18,7 +18,7 @@ import re
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
@@ -49,8 +49,16 @@ from molmo_lerobot.runner.supervisor import RunInterrupted
 from molmo_lerobot.runner.worker import WorkerJob, startup_summary
 from molmo_lerobot.serving.run_server import ServeError, served_policy
 from molmo_lerobot.sim.env import TASK_RULES
-from molmo_lerobot.suites.benchmark import (SuiteBenchmark, SuiteBenchmarkError, is_suite, load_suite_benchmark,
-                                             suite_plan)
+from molmo_lerobot.suites.benchmark import (
+    SUITE_KEY,
+    SUITES,
+    SuiteBenchmark,
+    SuiteBenchmarkError,
+    is_suite,
+    load_suite_benchmark,
+    task_label,
+)
+from molmo_lerobot.suites.libero import LiberoEpisode
 from molmo_lerobot.suites.pipe import SuiteError
 
 if TYPE_CHECKING:
@@ -198,7 +206,7 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     config = config.model_copy(update=update)
     indices, selection = selection_of(config, bench)  # type: ignore[arg-type]  # episodes, origins, path, name
     if isinstance(bench, SuiteBenchmark):
-        plans = {i: suite_plan(i, bench.episodes[i], config.horizon is not None) for i in indices}
+        plans = {i: _suite_plan(i, bench.episodes[i], config.horizon is not None) for i in indices}
         thresholds: dict[str, Any] = {}
         horizons: dict[str, float] = {}
     else:
@@ -286,6 +294,13 @@ def _suite_benchmark(config: RunConfig) -> SuiteBenchmark:
         return load_suite_benchmark(config)
     except (SuiteBenchmarkError, InfrastructureError, SuiteError) as exc:
         raise RunError(str(exc)) from None
+
+
+def _suite_plan(index: int, episode: LiberoEpisode, horizon_from_cli: bool) -> EpisodePlan:
+    """Episode ``index`` of an env-suite benchmark as a plan: its spec the episode's fields plus
+    ``env_suite``, its seed and digest the episode's own, its task ``<suite>/task_<id>``."""
+    return EpisodePlan(index, {**asdict(episode), SUITE_KEY: SUITES[0]}, episode.seed, task_label(episode),
+                       episode.instruction, episode.horizon, "cli" if horizon_from_cli else "lerobot", episode.digest)
 
 
 def _run_info(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBenchmark,

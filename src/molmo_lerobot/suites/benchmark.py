@@ -15,7 +15,7 @@ Options (``benchmark.<key>=``): ``episodes_per_task`` (default 1; ``lerobot-eval
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -23,8 +23,16 @@ import numpy as np
 
 from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.hashing import content_sha256
-from molmo_lerobot.suites.libero import (ACTION_DIM, CONTROL_HZ, IMAGE_SIZE, MOVE_GROUP, LiberoEpisode,
-                                         LiberoSuite, plan_episodes, policy_observation)
+from molmo_lerobot.suites.libero import (
+    ACTION_DIM,
+    CONTROL_HZ,
+    IMAGE_SIZE,
+    MOVE_GROUP,
+    LiberoEpisode,
+    LiberoSuite,
+    plan_episodes,
+    policy_observation,
+)
 
 if TYPE_CHECKING:
     from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
@@ -48,7 +56,8 @@ def suite_options(config: RunConfig) -> dict[str, Any]:
     """The suite benchmark's options from ``benchmark.*``, checked (one clear error naming the key)."""
     bench = config.benchmark.model_dump()
     if bench.get("suite") not in SUITES:
-        raise SuiteBenchmarkError(f"benchmark.suite: unknown env suite {bench.get('suite')!r} (known: {', '.join(SUITES)})")
+        raise SuiteBenchmarkError(f"benchmark.suite: unknown env suite {bench.get('suite')!r} "
+                                  f"(known: {', '.join(SUITES)})")
     out = {"episodes_per_task": bench.get("episodes_per_task", 1), "image_size": bench.get("image_size", IMAGE_SIZE),
            "hard_reset": bench.get("hard_reset", True)}
     for key in ("episodes_per_task", "image_size"):
@@ -110,14 +119,6 @@ def task_label(episode: LiberoEpisode) -> str:
     return f"{episode.suite}/task_{episode.task_id:02d}"
 
 
-def suite_plan(index: int, episode: LiberoEpisode, horizon_from_cli: bool) -> EpisodePlan:
-    """Episode ``index`` of a suite benchmark as a plan (seed and digest the episode's own)."""
-    from molmo_lerobot.runner.plan import EpisodePlan
-
-    return EpisodePlan(index, {**asdict(episode), SUITE_KEY: SUITES[0]}, episode.seed, task_label(episode),
-                       episode.instruction, episode.horizon, "cli" if horizon_from_cli else "lerobot", episode.digest)
-
-
 def plan_episode(plan: EpisodePlan) -> LiberoEpisode:
     """The suite episode a plan carries."""
     return LiberoEpisode(**{f.name: plan.spec[f.name] for f in fields(LiberoEpisode)})
@@ -126,8 +127,9 @@ def plan_episode(plan: EpisodePlan) -> LiberoEpisode:
 class _SuiteEnv:
     """What the rollout loop and the worker read of a session's env."""
 
-    move_groups = {MOVE_GROUP: ACTION_DIM}
-    renderer_setup_s = 0.0
+    def __init__(self) -> None:
+        self.move_groups = {MOVE_GROUP: ACTION_DIM}
+        self.renderer_setup_s = 0.0
 
 
 class _SuiteTask:
