@@ -108,8 +108,11 @@ def load_suite_benchmark(config: RunConfig) -> SuiteBenchmark:
     ``episodes_per_task`` episodes per task with the run's seed, ``horizon`` overriding LeRobot's step limit."""
     options = suite_options(config)
     name = str(config.benchmark.name)
-    with LiberoSuite() as suite:
+    suite = LiberoSuite()
+    try:
         tasks = suite.tasks(name)
+    finally:
+        suite.close()
     episodes = plan_episodes(name, tasks, options["episodes_per_task"], seed=config.seed, horizon=config.horizon)
     return SuiteBenchmark(name, episodes, Path(f"{SUITES[0]}:{name}"))
 
@@ -239,6 +242,6 @@ class SuiteSessions:
         return session
 
     def close(self) -> None:
-        if self._suite is not None:
-            self._suite, suite = None, self._suite
+        suite, self._suite = self._suite, None
+        if suite is not None:
             suite.close()
