@@ -1,13 +1,80 @@
-"""Shared pytest fixtures."""
+"""Shared pytest fixtures, and the one place that puts the tests' helper folders on ``sys.path``."""
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import pytest
 
-try:  # tests/ is a rootdir-inserted path (no __init__.py) or a package
-    from hub_standin import HubStandin, pinned_client_factory
-except ImportError:
-    from tests.hub_standin import HubStandin, pinned_client_factory
+#: Folders whose helper modules tests elsewhere import by name: ``hub_standin`` (here), ``droid_variants``
+#: (tasks/), ``save_tiny_act`` of ``test_lerobot_policy`` (policies/), ``rby1_standin`` (sim/),
+#: ``droid_server`` (protocol/), ``export_synthetic`` (export/). Module names are unique across tests/.
+TESTS = Path(__file__).resolve().parent
+sys.path[:0] = [str(TESTS / sub) for sub in ("", "tasks", "policies", "sim", "protocol", "export")
+                if str(TESTS / sub) not in sys.path]
+
+from hub_standin import HubStandin, pinned_client_factory  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def run():
+    """A run context of the default config, shared by the session (tests that need other settings
+    build their own)."""
+    from molmo_lerobot.context import RunContext
+
+    return RunContext.build()
+
+
+@pytest.fixture(scope="session")
+def pick_recording(tmp_path_factory):
+    """One recorded multi-worker run, shared by the tests that read a recording of the defaults:
+    ``molmo-eval policy=scripted benchmark=pick_v1 workers=2 limit=4 horizon=30 record=true``.
+
+    Returns ``(output_dir, result, shards)``, ``shards`` the number of dataset shards the run merged."""
+    import lerobot.datasets.aggregate as aggregate
+
+    from molmo_lerobot.config import compose
+    from molmo_lerobot.runner.evaluate import run_evaluation
+
+    merged: list[int] = []
+    inner = aggregate.aggregate_datasets
+    out = tmp_path_factory.mktemp("pick_recording") / "run"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(aggregate, "aggregate_datasets",
+                   lambda repo_ids, *a, **k: merged.append(len(repo_ids)) or inner(repo_ids, *a, **k))
+        res = run_evaluation(compose(["policy=scripted", "benchmark=pick_v1", "workers=2", "limit=4", "horizon=30",
+                                      "record=true", "progress=false", f"output_dir={out}"]))
+    assert len(merged) == 1, merged
+    return out, res, merged[0]
+
+
+@pytest.fixture(scope="session")
+def droid_recording(tmp_path_factory):
+    """One recorded franka_droid run with the DROID cameras (``cameras: []``), shared by the tests that read
+    one: ``policy=pi0_droid`` over openpi's protocol against a fake DROID server (gripper commands 0 … 1 over
+    15 steps), the first two pick_v1 episodes, 30 steps each.
+
+    Returns ``(benchmark dir, output_dir, result, server)``."""
+    import json
+
+    from droid_server import FakeDroidServer
+    from droid_variants import droid_episode
+
+    from molmo_lerobot.config import compose
+    from molmo_lerobot.paths import data_path
+    from molmo_lerobot.runner.evaluate import run_evaluation
+
+    tmp = tmp_path_factory.mktemp("droid_recording")
+    bench, out = tmp / "droid_pick", tmp / "run"
+    bench.mkdir()
+    episodes = json.loads((data_path("benchmarks") / "pick_v1" / "benchmark.json").read_text())[:2]
+    (bench / "benchmark.json").write_text(json.dumps([droid_episode(e) for e in episodes]))
+    with FakeDroidServer(horizon=15, velocity=0.0).running() as srv:
+        res = run_evaluation(compose(["policy=pi0_droid", "policy.open_loop_horizon=null", f"policy.port={srv.port}",
+                                      "workers=1", f"benchmark.path={bench}", "horizon=30", "record=true",
+                                      f"output_dir={out}", "progress=false"]))
+    return bench, out, res, srv
 
 
 @pytest.fixture

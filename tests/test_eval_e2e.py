@@ -31,7 +31,7 @@ def two_worker_run(tmp_path_factory):
     env = {**os.environ, "MUJOCO_GL": "egl"}
     proc = subprocess.run(
         [sys.executable, "-m", "molmo_lerobot.cli.eval", "policy=scripted", "benchmark=pick_v1", "workers=2",
-         "limit=4", f"output_dir={out}", "progress=false"],
+         "limit=2", f"output_dir={out}", "progress=false"],
         capture_output=True, text=True, env=env, timeout=600,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -42,7 +42,7 @@ def test_contract_outputs(two_worker_run):
     out, stdout = two_worker_run
     results = json.loads((out / "results.json").read_text())
     assert set(results) >= RESULT_KEYS
-    assert results["n_episodes"] == 4 and results["n_errors"] == 0
+    assert results["n_episodes"] == 2 and results["n_errors"] == 0
     assert results["benchmark"]["name"] == "pick_v1" and len(results["benchmark"]["sha256"]) == 64
     assert results["benchmark"]["n_episodes"] >= 50
     assert results["policy"]["name"] == "scripted"
@@ -52,7 +52,7 @@ def test_contract_outputs(two_worker_run):
     assert results["thresholds"]["pick"]["horizon_steps"] == [303]
     assert {"mujoco", "lerobot", "python"} <= set(results["versions"])
     rows = _episodes(out)
-    assert [r["episode_index"] for r in rows] == [0, 1, 2, 3]
+    assert [r["episode_index"] for r in rows] == [0, 1]
     assert all(set(r) >= EPISODE_KEYS for r in rows)
     assert all(r["steps"] == 303 for r in rows)
     assert "pick_v1 · scripted: success" in stdout
@@ -76,7 +76,7 @@ def test_workers_do_not_change_outcomes(two_worker_run, tmp_path):
     """Nor does how workers start: two forked from the preloaded fork server (the default) against
     one spawned; each reports where its start-up went."""
     out2, _ = two_worker_run
-    res1 = run_evaluation(compose(["policy=scripted", "workers=1", "limit=4", f"output_dir={tmp_path / 'w1'}",
+    res1 = run_evaluation(compose(["policy=scripted", "workers=1", "limit=2", f"output_dir={tmp_path / 'w1'}",
                                    "progress=false", "executor.start_method=spawn"]))
     assert _outcomes(_episodes(tmp_path / "w1")) == _outcomes(_episodes(out2))
     assert [r.success for r in res1.episodes] == [r["success"] for r in _episodes(out2)]

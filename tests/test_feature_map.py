@@ -5,24 +5,17 @@ and a mobile robot's extra move group needs no code."""
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
 import pytest
 
-from molmo_lerobot.config import compose
 from molmo_lerobot.export.frames import FrameLayout
 from molmo_lerobot.features import ACTION, STATE, FeatureError, FeatureMap, image_feature
-from molmo_lerobot.paths import data_path
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.recording import EpisodeInfo
 from molmo_lerobot.robots.franka_droid import FrankaDroid
-from molmo_lerobot.runner.evaluate import run_evaluation
-
-sys.path.insert(0, str(Path(__file__).resolve().parent / "tasks"))
-from droid_variants import droid_episode
 
 #: the cameras franka_droid's DROID camera system builds, in its order
 DROID_CAMERAS = ["wrist_camera", "exo_camera_1"]
@@ -100,18 +93,11 @@ def _assert_parts_equal(got: dict, expected: dict) -> None:
 
 
 @pytest.fixture(scope="module")
-def droid_run(tmp_path_factory):
+def droid_run(droid_recording):
     """franka_droid with its DROID cameras, recorded by molmo-eval: (benchmark dir, dataset root, feature map)."""
-    tmp = tmp_path_factory.mktemp("droid")
-    episode = json.loads((data_path("benchmarks") / "pick_v1" / "benchmark.json").read_text())[0]
-    bench = tmp / "pick_droid"
-    bench.mkdir()
-    (bench / "benchmark.json").write_text(json.dumps([droid_episode(episode)]))
-    out = tmp / "run"
-    res = run_evaluation(compose(["policy=scripted", f"benchmark.path={bench}", "workers=1", f"horizon={STEPS}",
-                                  "record=true", "progress=false", f"output_dir={out}"]))
+    bench, out, res, _ = droid_recording
     assert res.summary["n_errors"] == 0
-    width, height = episode["img_resolution"]
+    width, height = json.loads((bench / "benchmark.json").read_text())[0]["img_resolution"]
     fmap = FeatureMap.build(FrankaDroid.move_groups, FrankaDroid.joint_names,
                             [(c, height, width) for c in DROID_CAMERAS])
     return bench, out / "dataset", fmap
@@ -161,7 +147,8 @@ def test_the_adapters_agree_on_franka_droid_with_droid_cameras(droid_run, tmp_pa
     finally:
         genv.close()
     frames = pd.concat(pd.read_parquet(p) for p in sorted((root / "data").rglob("*.parquet")))
-    np.testing.assert_array_equal(frames.sort_values("frame_index").iloc[0][STATE], first["agent_pos"])
+    episode_0 = frames[frames["episode_index"] == 0]  # benchmark episode 0, the env's on reset(seed=0)
+    np.testing.assert_array_equal(episode_0.sort_values("frame_index").iloc[0][STATE], first["agent_pos"])
     # lerobot-eval's env (--env.type=molmo) maps its keys onto the recorded features
     lerobot_env = pytest.importorskip("lerobot_env_molmo")
     cfg = lerobot_env.MolmoEnvConfig(task=str(bench), horizon=STEPS)

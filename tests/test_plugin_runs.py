@@ -12,8 +12,6 @@ from pathlib import Path
 import pytest
 
 from molmo_lerobot.cli.eval import main
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_plugins import IMPOSTOR, write_dist
 
 FAST = ["policy=random", "limit=2", "horizon=3", "workers=1", "progress=false"]

@@ -12,14 +12,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import export_synthetic as S  # the synthetic rollouts of tests/export
 import pytest
 
 from molmo_lerobot import fileio
 from molmo_lerobot.fileio import UnsafePathError, atomic_write
-
-if str(Path(__file__).parent / "export") not in sys.path:
-    sys.path.insert(0, str(Path(__file__).parent / "export"))
-import export_synthetic as S  # the synthetic rollouts of tests/export
 
 SRC = Path(__file__).parents[1] / "src" / "molmo_lerobot"
 

@@ -13,7 +13,6 @@ import pytest
 
 from molmo_lerobot.benchmark.load import BenchmarkError, load_benchmark
 from molmo_lerobot.benchmark.validate import validate_benchmark
-from molmo_lerobot.context import RunContext
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.scripted_nav import ScriptedNav
 from molmo_lerobot.runner.episode_env import build_env
@@ -21,11 +20,6 @@ from molmo_lerobot.sim.env import Timing
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "molmospaces" / "nav_legacy"
 FILE = "house_290/episode_00000000.json"
-
-
-@pytest.fixture(scope="module")
-def run() -> RunContext:
-    return RunContext.build()
 
 
 def test_their_nav_episode_validates_and_builds(run):

@@ -19,18 +19,10 @@ from molmo_lerobot.runner.evaluate import run_evaluation
 REPO_ID = "local/pick_v1-scripted"
 
 
-@pytest.fixture(scope="module")
-def recorded(tmp_path_factory):
-    out = tmp_path_factory.mktemp("e2e") / "run"
-    res = run_evaluation(compose(["policy=scripted", "benchmark=pick_v1", "workers=2", "limit=4", "horizon=30",
-                                  "record=true", "progress=false", f"output_dir={out}"]))
-    return out, res
-
-
-def test_multi_worker_recording_loads_and_agrees_with_episodes_jsonl(recorded):
+def test_multi_worker_recording_loads_and_agrees_with_episodes_jsonl(pick_recording):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    out, res = recorded
+    out, res, shards = pick_recording
     episodes = {e["episode_index"]: e for e in map(json.loads, (out / "episodes.jsonl").read_text().splitlines())}
     ds = LeRobotDataset(REPO_ID, root=out / "dataset", video_backend="pyav")
     records = read_eval_records(out / "dataset")
@@ -52,12 +44,14 @@ def test_multi_worker_recording_loads_and_agrees_with_episodes_jsonl(recorded):
     assert [(r["episode_index"], r["benchmark_episode_index"]) for r in stored] == [(i, i) for i in range(4)]
     firsts = [int(ds.meta.episodes[i]["dataset_from_index"]) for i in range(4)]
     assert [int(ds[first]["eval.episode_index"]) for first in firsts] == [0, 1, 2, 3]
+    assert shards < 4  # workers play stretches of consecutive episodes into one shard, not one shard per episode
     assert json.loads((out / "dataset" / "meta" / "info.json").read_text())["robot_type"] == "franka"
     page = write_report(out, res.run_summary, res.episodes).read_text()
     assert page.count("<video") == 8
 
 
-def test_a_dataset_about_to_be_pushed_names_no_path_of_this_machine(recorded, hub_standin, tmp_path_factory, tmp_path):
+def test_a_dataset_about_to_be_pushed_names_no_path_of_this_machine(pick_recording, hub_standin, tmp_path_factory,
+                                                                    tmp_path):
     """Every file pushed (and every file of the local dataset) is free of the run's, the temp
     dir's, the home dir's and the repository's absolute paths, which the run config holds."""
     from huggingface_hub import snapshot_download
@@ -65,7 +59,7 @@ def test_a_dataset_about_to_be_pushed_names_no_path_of_this_machine(recorded, hu
     import molmo_lerobot
     from molmo_lerobot.export.hub import push_dataset
 
-    out, res = recorded
+    out, res, _ = pick_recording
     assert str(out) in json.dumps(res.summary)  # the run's own summary names them; the dataset must not
     assert push_dataset(out / "dataset", REPO_ID.replace("local/", "molmo-test/")) is None
     pushed = Path(snapshot_download(REPO_ID.replace("local/", "molmo-test/"), repo_type="dataset",
@@ -98,10 +92,10 @@ def readme_command(program: str, section: str = "### LeRobot's tools on the data
 
 
 @pytest.mark.slow
-def test_the_readme_lerobot_train_command_trains_on_the_export_and_its_checkpoint_evaluates(recorded, tmp_path):
+def test_the_readme_lerobot_train_command_trains_on_the_export_and_its_checkpoint_evaluates(pick_recording, tmp_path):
     """README.md's copy-paste ``lerobot-train`` command, offline, on our recording: only its
     paths and step counts are replaced."""
-    out, _ = recorded
+    out, _, _ = pick_recording
     train = tmp_path / "train"
     cmd = readme_command("lerobot-train")
     assert f"--dataset.repo_id={REPO_ID}" in cmd

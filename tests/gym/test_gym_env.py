@@ -88,7 +88,7 @@ def test_replayed_actions_give_molmo_evals_trial(tmp_path):
 
     out = tmp_path / "run"
     res = run_evaluation(compose(["policy=replay", f"policy.actions={tmp_path / 'actions.npy'}", "benchmark=pick_v1",
-                                  "workers=1", f"limit={index + 1}", f"horizon={steps}", "record=true",
+                                  "workers=1", f"episodes=[{index}]", f"horizon={steps}", "record=true",
                                   "progress=false", f"output_dir={out}"]))
     ep = next(e for e in res.episodes if e.episode_index == index)
     assert ep.error is None and ep.seed == info["seed"]

@@ -10,12 +10,12 @@ the arm), built by us; their side gets the poses of the bodies its cameras hang 
 from __future__ import annotations
 
 import json
-import sys
-from pathlib import Path
 
+import camera_oracle
 import mujoco
 import numpy as np
 import pytest
+from droid_variants import droid_episode
 
 from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.cameras import droid, franka_mounts
@@ -26,11 +26,6 @@ from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim import env as sim_env
 from molmo_lerobot.sim.env import Timing
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tasks"))
-import camera_oracle
-from droid_variants import droid_episode
 
 pytestmark = pytest.mark.parity
 

@@ -10,14 +10,11 @@ length wraps at ±π, ctrl range ±π).
 from __future__ import annotations
 
 import math
-import sys
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "sim"))
 from rby1_standin import FILES, standin_spec, write_standin
 
 from molmo_lerobot.robots.rby1 import BASE_ACTUATORS, GROUPS, RBY1

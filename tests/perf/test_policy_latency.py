@@ -8,9 +8,7 @@ encoding, the websocket round trip and the server's thread hop.
 from __future__ import annotations
 
 import statistics
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,7 +19,6 @@ from molmo_lerobot.serving.server import PolicyServer, serve_in_thread
 
 pytestmark = pytest.mark.perf
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
 
 CTX = EpisodeContext(spec=None, episode_index=0, seed=0, prompt="pick", move_groups={"arm": 7, "gripper": 1},
                      policy_dt_s=0.066)

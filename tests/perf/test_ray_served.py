@@ -33,14 +33,12 @@ import json
 import os
 import pickle
 import resource
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
 pytest.importorskip("torch")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
 from perf_rows import append_rows, run_rates
 from test_lerobot_policy import save_tiny_act
 

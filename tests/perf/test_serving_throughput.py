@@ -19,13 +19,11 @@ from __future__ import annotations
 
 import os
 import re
-import sys
 from pathlib import Path
 
 import pytest
 
 pytest.importorskip("torch")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
 from perf_rows import append_rows, run_rates
 from test_lerobot_policy import save_tiny_act
 

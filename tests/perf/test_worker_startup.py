@@ -30,7 +30,6 @@ from pathlib import Path
 import pytest
 
 pytest.importorskip("torch")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
 from test_lerobot_policy import save_tiny_act
 
 pytestmark = pytest.mark.perf

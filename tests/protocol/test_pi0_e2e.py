@@ -45,9 +45,11 @@ def test_pi0_remote_completes_episodes_with_two_workers(bench_dir, tmp_path):
     assert results["policy"]["convention"] == "molmospaces" and results["eval_options"]["end_on_success"] is True
 
 
+# each answer's error is checked on the policy in tests/protocol/test_pi0_remote.py; through a run, one stays
+# in the default run (a server that never answers: the worker must not hang)
 @pytest.mark.parametrize("mode, reason", [
-    ("nan", "non-finite value at step 1"),
-    ("bad_shape", "'actions' has shape (10, 5), expected (H, 8)"),
+    pytest.param("nan", "non-finite value at step 1", marks=pytest.mark.slow),
+    pytest.param("bad_shape", "'actions' has shape (10, 5), expected (H, 8)", marks=pytest.mark.slow),
     ("silent", "sent no inference response within 1 s"),
 ])
 def test_bad_server_answers_become_episode_errors(bench_dir, tmp_path, mode, reason):

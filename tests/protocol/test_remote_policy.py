@@ -73,11 +73,12 @@ def outcome(e) -> tuple:
 
 
 def test_served_random_gives_the_in_process_outcomes(bench_dir, tmp_path):
-    local = evaluate(bench_dir, tmp_path / "local", "policy=random", "workers=1")
+    local = evaluate(bench_dir, tmp_path / "local", "policy=random", "workers=1", "limit=2")
     with serve_in_thread(build_server(Plugins(), {"name": "random"}, port=0)) as srv:
-        served = evaluate(bench_dir, tmp_path / "served", "policy=remote", f"policy.port={srv.port}", "workers=2")
-        assert srv.served == 4 * -(-HORIZON // 8)  # chunks of 8 run open loop: one request per chunk
-    assert served.summary["n_errors"] == 0 and len(served.episodes) == 4
+        served = evaluate(bench_dir, tmp_path / "served", "policy=remote", f"policy.port={srv.port}", "workers=2",
+                          "limit=2")
+        assert srv.served == 2 * -(-HORIZON // 8)  # chunks of 8 run open loop: one request per chunk
+    assert served.summary["n_errors"] == 0 and len(served.episodes) == 2
     assert [outcome(e) for e in served.episodes] == [outcome(e) for e in local.episodes]
 
 

@@ -9,16 +9,13 @@ import json
 import multiprocessing as mp
 import os
 import signal
-import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 pytest.importorskip("torch")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
 from test_lerobot_policy import save_tiny_act
 
 from molmo_lerobot.config import compose

@@ -33,6 +33,7 @@ def test_retried_item_is_continued_by_its_slot():
     assert take_next(_pending(3, 4, 5), 2, [None]) == 3
 
 
+@pytest.mark.slow  # the default run checks it on the recording tests/export/test_export_e2e.py reads
 def test_a_recorded_run_merges_a_few_shards_in_benchmark_order(tmp_path, monkeypatch):
     """6 episodes on 2 workers: each worker's consecutive episodes share a shard."""
     pytest.importorskip("lerobot")

@@ -105,29 +105,23 @@ def test_torn_last_line_is_rerun_and_finished_episodes_are_kept(faulty_policy, s
     assert runs == {i: 1 if i == first else 2 for i in range(3)}
 
 
-def test_resume_refuses_a_different_run(faulty_policy, small_bench, tmp_path, eval_config):
+def test_resume_refuses_a_different_run(faulty_policy, small_bench, tmp_path, eval_config, monkeypatch):
     out = tmp_path / "run"
     common = ["policy=faulty", "workers=1", "horizon=2", "limit=1", f"policy.marker_dir={faulty_policy.marker_dir}"]
-    run_evaluation(eval_config(small_bench, out, *common))
+    first = run_evaluation(eval_config(small_bench, out, *common))
     with pytest.raises(RunError, match="already holds a run"):
         run_evaluation(eval_config(small_bench, out, *common))
     with pytest.raises(RunError, match="seed differs"):
         run_evaluation(eval_config(small_bench, out, *common, "resume=true", "seed=1"))
     with pytest.raises(RunError, match="timing differs"):
         run_evaluation(eval_config(small_bench, out, *common, "resume=true", "timing.policy_dt_ms=100"))
-    assert (out / "results.json").exists(), "a refused resume leaves the finished run alone"
-
-
-def test_resume_refuses_a_different_render_profile(faulty_policy, small_bench, tmp_path, eval_config, monkeypatch):
-    """Issue 36: an environment override of the look (here shadows off) is part of the run, never silent."""
-    out = tmp_path / "run"
-    common = ["policy=faulty", "workers=1", "horizon=2", "limit=1", f"policy.marker_dir={faulty_policy.marker_dir}"]
-    first = run_evaluation(eval_config(small_bench, out, *common))
+    # issue 36: an environment override of the look (here shadows off) is part of the run, never silent
     assert first.summary["render_profile"]["name"] == "v2" and first.summary["render_profile"]["overrides"] == {}
     monkeypatch.setenv("MOLMO_SCENE_SHADOWS", "0")
     with pytest.raises(RunError, match="render_profile differs") as info:
         run_evaluation(eval_config(small_bench, out, *common, "resume=true"))
     assert "\n" not in str(info.value) and "MOLMO_SCENE_SHADOWS" in str(info.value)
+    assert (out / "results.json").exists(), "a refused resume leaves the finished run alone"
 
 
 @pytest.mark.slow

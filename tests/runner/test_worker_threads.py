@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
@@ -21,7 +20,9 @@ def _threads_in_fresh_process(code: str, env_threads: str | None = None) -> int:
     return int(out.stdout.strip().splitlines()[-1])
 
 
-@pytest.mark.parametrize("torch_first", [False, True], ids=["before-torch", "after-torch"])
+# before torch's import is also what a worker does (the last test): the default run keeps the other order
+@pytest.mark.parametrize("torch_first", [pytest.param(False, marks=pytest.mark.slow), True],
+                         ids=["before-torch", "after-torch"])
 def test_cap_threads_sets_torch_threads_before_or_after_its_import(torch_first):
     code = ("import torch; torch.set_num_threads(3)\n" if torch_first else "") + (
         "from molmo_lerobot.cpu_threads import cap_threads\ncap_threads(1)\n"
@@ -37,7 +38,6 @@ def test_null_leaves_the_default():
 
 def test_a_worker_loading_a_torch_policy_runs_it_with_the_cap(tmp_path):
     """What a spawned worker does: build the policy (it imports torch), then run with the cap."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "policies"))
     from test_lerobot_policy import save_tiny_act
 
     act = save_tiny_act(tmp_path / "act", image_hw=(32, 32))

@@ -17,7 +17,6 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.task_specs import parse_episode
-from molmo_lerobot.context import RunContext
 from molmo_lerobot.libero import generate_articulated as gen
 from molmo_lerobot.libero.fixture_rooms import LiberoFixtureRooms
 from molmo_lerobot.libero.fixtures import LIBERO_FIXTURES, LOW_HANDLE, handle_grasps
@@ -31,11 +30,6 @@ from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.sim.env import Env, Timing
 
 REPO = Path(__file__).resolve().parents[2]
-
-
-@pytest.fixture(scope="module")
-def run():
-    return RunContext.build()
 
 
 def _published(task: str) -> tuple[list[dict], dict]:

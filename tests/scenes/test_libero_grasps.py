@@ -7,13 +7,8 @@ graspable object with each gripper."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from grasp_lift import LIFT, lift_height
 
 from molmo_lerobot.libero.grasps import GRIPPERS, LiberoGraspLibrary, compute_grasps

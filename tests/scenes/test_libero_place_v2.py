@@ -16,7 +16,6 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.benchmark.validate import validate_benchmark
-from molmo_lerobot.context import RunContext
 from molmo_lerobot.libero.generate import TASKS, generate_benchmark
 from molmo_lerobot.libero.objects import LIBERO_OBJECTS
 from molmo_lerobot.libero.rooms import LiberoRooms, resting_radius
@@ -26,11 +25,6 @@ from molmo_lerobot.sim.env import Timing
 
 #: benchmark -> its ``--task``
 BENCHMARKS = {"pick_and_place_v2": "pick_and_place", "next_to_v2": "next_to", "color_v2": "color"}
-
-
-@pytest.fixture(scope="module")
-def run():
-    return RunContext.build()
 
 
 def _files(name: str) -> tuple[list[dict], dict]:

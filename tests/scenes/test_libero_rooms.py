@@ -12,17 +12,11 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.task_specs import parse_episode
-from molmo_lerobot.context import RunContext
 from molmo_lerobot.libero.rooms import LiberoRooms
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim.env import Env, Timing
 from molmo_lerobot.sim.render_profile import resolve_profile
-
-
-@pytest.fixture(scope="module")
-def run():
-    return RunContext.build()
 
 
 def pick_v2() -> list[dict]:

@@ -5,8 +5,6 @@ from __future__ import annotations
 import copy
 import json
 import os
-import sys
-from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -14,27 +12,16 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+from droid_variants import droid_episode
+
 from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.cameras.base import choose_camera_system
-from molmo_lerobot.context import RunContext
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
-from molmo_lerobot.runner.episode_env import build_env
-from molmo_lerobot.sim.env import Timing
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tasks"))
-from droid_variants import droid_episode
 
 
 def _pick(k: int = 0) -> dict:
     return json.loads((data_path("benchmarks") / "pick_v1" / "benchmark.json").read_text())[k]
-
-
-def _env(raw: dict, system: str | None = None):
-    run = RunContext.build()
-    env = build_env(parse_episode(raw, run.plugins), Timing(), run, {"system": system})
-    env.reset(0)
-    return env
 
 
 def _cam_pose(env, name: str) -> np.ndarray:
@@ -60,8 +47,8 @@ def test_plugins_and_aliases():
     assert plugins.camera_system("droid_randomized") is plugins.camera_system("FrankaRandomizedDroidCameraSystem")
 
 
-def test_empty_cameras_run_with_the_droid_system():
-    env = _env(droid_episode(_pick()))
+def test_empty_cameras_run_with_the_droid_system(episode_env):
+    env = episode_env(droid_episode(_pick()))
     try:
         assert env.camera_system == "FrankaDroidCameraSystem"
         assert env.camera_names == ["wrist_camera", "exo_camera_1"]  # MolmoSpaces' FrankaDroidCameraSystem
@@ -79,13 +66,14 @@ def test_empty_cameras_run_with_the_droid_system():
 EXO = ("exo_camera_1", "exo_camera_2", "exo_camera_3")
 
 
-def test_randomized_placement_is_reproducible_per_episode():
+def test_randomized_placement_is_reproducible_per_episode(episode_env):
     a, b = droid_episode(_pick(0)), droid_episode(_pick(1))
-    e1, e2, e3 = _env(a, "FrankaRandomizedDroidCameraSystem"), _env(copy.deepcopy(a), "droid_randomized"), \
-        _env(b, "FrankaRandomizedDroidCameraSystem")
+    e1, e2, e3 = (episode_env(a, {"system": "FrankaRandomizedDroidCameraSystem"}),
+                  episode_env(copy.deepcopy(a), {"system": "droid_randomized"}),
+                  episode_env(b, {"system": "FrankaRandomizedDroidCameraSystem"}))
     try:
         assert e1.camera_names == ["wrist_camera", *EXO]
-        fixed = _env(a)
+        fixed = episode_env(a)
         for name in ("wrist_camera", *EXO):
             assert _cam_pose(e1, name) == pytest.approx(_cam_pose(e2, name))  # same episode, same cameras
             assert not np.allclose(_cam_pose(e1, name), _cam_pose(e3, name))  # another episode, others
@@ -120,11 +108,11 @@ class _Scene:
         return {b: (0.0 if len(self.draws) <= self.hidden else 0.5) for b in bodies}
 
 
-def test_an_occluded_draw_is_drawn_again_and_a_hopeless_one_fails_the_episode():
+def test_an_occluded_draw_is_drawn_again_and_a_hopeless_one_fails_the_episode(episode_env):
     from molmo_lerobot.cameras.droid import FrankaRandomizedDroidCameraSystem
 
     system = FrankaRandomizedDroidCameraSystem()
-    env = _env(droid_episode(_pick(0)), "FrankaRandomizedDroidCameraSystem")
+    env = episode_env(droid_episode(_pick(0)), {"system": "FrankaRandomizedDroidCameraSystem"})
     try:
         scene = _Scene(env, hidden=3)
         poses = system.place(scene)
@@ -137,11 +125,11 @@ def test_an_occluded_draw_is_drawn_again_and_a_hopeless_one_fails_the_episode():
         env.close()
 
 
-def test_no_debug_geometry_in_camera_images():
+def test_no_debug_geometry_in_camera_images(episode_env):
     """The Panda model's `end_effector` site (site group 0) used to show as a grey ball in every wrist
     frame. Cameras render only geoms of groups 0-2: images equal a render with every site removed."""
     raw = _pick(0)
-    env = _env(raw)
+    env = episode_env(raw)
     try:
         m, d = env.model, env.data
         site = m.site("robot/end_effector").id

@@ -5,8 +5,6 @@ from __future__ import annotations
 import copy
 import json
 import os
-import sys
-from pathlib import Path
 from xml.etree import ElementTree
 
 import mujoco
@@ -15,19 +13,15 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.benchmark.task_specs import parse_episode
+from droid_variants import OPEN_DRIVERS, droid_episode, on_pedestal
+
 from molmo_lerobot.config import compose
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.molmospaces.user import register_user_grasp_library
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.robots import franka_droid
-from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.runner.evaluate import run_evaluation
-from molmo_lerobot.sim.env import Timing
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tasks"))
-from droid_variants import OPEN_DRIVERS, droid_episode, on_pedestal
 
 #: MolmoSpaces' FrankaRobotConfig.init_qpos and a wrist camera as their benchmark files write it
 MS_INIT_QPOS = {"base": [], "arm": [0, -0.7853, 0, -2.35619, 0, 1.57079, 0.0], "gripper": [0.00296, 0.00296]}
@@ -51,22 +45,14 @@ def ms_pick_episode(k: int = 0) -> dict:
     return raw
 
 
-def _env(raw: dict, camera_system: str | None = None, run: RunContext | None = None):
-    run = run or RunContext.build()
-    spec = parse_episode(raw, run.plugins)
-    env = build_env(spec, Timing(), run, {"system": camera_system})
-    env.reset(0)
-    return env
-
-
 def _pad_gap(env) -> float:
     m, d = env.model, env.data
     left, right = (m.geom(f"robot_0/gripper/{s}_fingerpad_collision").id for s in ("left", "right"))
     return float(np.linalg.norm(d.geom_xpos[left] - d.geom_xpos[right]))
 
 
-def test_molmospaces_names_resolve():
-    env = _env(ms_pick_episode())
+def test_molmospaces_names_resolve(episode_env):
+    env = episode_env(ms_pick_episode())
     m = env.model
     try:
         for body in ("robot_0/base", "robot_0/fr3_link0", "robot_0/gripper/base"):
@@ -85,8 +71,8 @@ def test_molmospaces_names_resolve():
         env.close()
 
 
-def test_molmospaces_init_qpos_starts_open():
-    env = _env(ms_pick_episode())
+def test_molmospaces_init_qpos_starts_open(episode_env):
+    env = episode_env(ms_pick_episode())
     try:
         assert env.observe(images=False)["qpos"]["gripper"][0] < 0.01
         assert _pad_gap(env) > 0.08  # a 2F-85 opens to 85 mm
@@ -95,8 +81,8 @@ def test_molmospaces_init_qpos_starts_open():
         env.close()
 
 
-def test_gripper_command_spans_the_full_robotiq_travel():
-    env = _env(ms_pick_episode())
+def test_gripper_command_spans_the_full_robotiq_travel(episode_env):
+    env = episode_env(ms_pick_episode())
     u = env.model.actuator("robot_0/gripper/fingers_actuator").id
     try:
         arm = env.robot.targets(env.data, "arm")
@@ -131,13 +117,13 @@ def _geom_points(m, d, g):
     return local @ d.geom_xmat[g].reshape(3, 3).T + d.geom_xpos[g]
 
 
-def test_tcp_is_the_pinch_point_in_the_unified_convention():
+def test_tcp_is_the_pinch_point_in_the_unified_convention(episode_env):
     """The TCP is where the pad centres meet when the fingers close (MolmoSpaces' gripping centre):
     +z towards the fingertips, fingers along ±y; ROBOTIQ_2F85 (the hand the built-in grasps and the
     expert assume) matches the model: fingertip reach, palm distance, open span."""
     from molmo_lerobot.assets.builtin import ROBOTIQ_2F85
 
-    env = _env(ms_pick_episode())
+    env = episode_env(ms_pick_episode())
     m, d = env.model, env.data
     site = env.robot.tcp_site
     pads = [m.geom(f"robot_0/gripper/{s}_fingerpad_collision").id for s in ("left", "right")]
@@ -163,13 +149,13 @@ def test_tcp_is_the_pinch_point_in_the_unified_convention():
         env.close()
 
 
-def test_panda_hand_geometry_matches_the_model():
+def test_panda_hand_geometry_matches_the_model(episode_env):
     """PANDA_HAND (franka's analytic grasps and expert): the tcp site sits mid-way along the
     fingers' contact capsules, with the fingertips tcp_to_fingertip beyond it."""
     from molmo_lerobot.assets.builtin import PANDA_HAND
 
     raw = pick_episode(0)
-    env = _env(raw)
+    env = episode_env(raw)
     m, d = env.model, env.data
     try:
         mujoco.mj_forward(m, d)
@@ -195,7 +181,7 @@ def test_a_base_pose_without_7_values_is_one_clear_error(robot):
         Plugins().robot(robot).add_to(mujoco.MjSpec(), [0.0, 0.0, 0.0])
 
 
-def test_molmospaces_grasp_file_transfers(tmp_path):
+def test_molmospaces_grasp_file_transfers(tmp_path, episode_env):
     """A user grasp library exactly as MolmoSpaces' custom-assets tutorial writes one
     (``<uid>/droid/grasps.npz`` + ``grasps_index.json``, ``transforms`` float16 as their pipeline
     saves them): one top-down grasp with the TCP at the block's origin, +y fingers along the
@@ -224,7 +210,7 @@ def test_molmospaces_grasp_file_transfers(tmp_path):
     from molmo_lerobot.runner.episode import EpisodeSession
     from molmo_lerobot.runner.plan import plan_spec
     from molmo_lerobot.runner.rollout import rollout
-    env = _env(raw, run=run)
+    env = episode_env(raw, run=run)
     try:
         assert object_grasps(env, uid, run.catalog) == pytest.approx(T[None])
         spec = env.spec
@@ -285,7 +271,7 @@ def test_molmospaces_pick_episode_runs_and_records_an_open_gripper(tmp_path):
     bench = tmp_path / "ms_pick"
     bench.mkdir()
     (bench / "benchmark.json").write_text(json.dumps([ms_pick_episode(0)]))
-    cfg = compose(["policy=scripted", f"benchmark.path={bench}", "workers=1", "record=true",
+    cfg = compose(["policy=scripted", f"benchmark.path={bench}", "workers=1", "record=true", "end_on_success=true",
                    f"output_dir={tmp_path / 'run'}", "progress=false"])
     res = run_evaluation(cfg)
     assert res.summary["n_errors"] == 0 and res.summary["n_success"] == 1
@@ -295,24 +281,14 @@ def test_molmospaces_pick_episode_runs_and_records_an_open_gripper(tmp_path):
     assert first[-1] < 0.01  # gripper entry: 0 = open
 
 
-def test_pi0_against_a_droid_server_on_franka_droid(tmp_path):
+def test_pi0_against_a_droid_server_on_franka_droid(droid_recording):
     """Must-show: policy=pi0 over openpi's protocol on franka_droid with the DROID cameras (cameras: []),
     0 errors; the server's gripper commands 0 … 1 drive the Robotiq over its full travel."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "protocol"))
-    from droid_server import FakeDroidServer
-
-    bench = tmp_path / "droid_pick"
-    bench.mkdir()
-    (bench / "benchmark.json").write_text(json.dumps([droid_episode(pick_episode(k)) for k in (0, 1)]))
-    with FakeDroidServer(horizon=15, velocity=0.0).running() as srv:
-        cfg = compose(["policy=pi0_droid", "policy.open_loop_horizon=null", f"policy.port={srv.port}", "workers=1",
-                       f"benchmark.path={bench}",
-                       "horizon=30", "record=true", f"output_dir={tmp_path / 'run'}", "progress=false"])
-        res = run_evaluation(cfg)
+    _, out, res, srv = droid_recording
     assert srv.errors == [] and res.summary["n_errors"] == 0 and res.summary["n_episodes"] == 2
     assert all(e.extra["camera_system"] == "FrankaDroidCameraSystem" for e in res.episodes)
     import pandas as pd
-    frames = pd.concat(pd.read_parquet(p) for p in sorted((tmp_path / "run" / "dataset" / "data").rglob("*.parquet")))
+    frames = pd.concat(pd.read_parquet(p) for p in sorted((out / "dataset" / "data").rglob("*.parquet")))
     commanded = np.stack(frames["action"].to_numpy())[:, -1]
     observed = np.stack(frames["observation.state"].to_numpy())[:, -1]
     assert commanded.min() == pytest.approx(0.0, abs=1e-6) and commanded.max() == pytest.approx(1.0, abs=1e-6)

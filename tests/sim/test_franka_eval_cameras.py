@@ -8,13 +8,13 @@ import copy
 import json
 import math
 import os
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+
+from droid_variants import droid_episode
 
 from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.cameras.franka_eval import (
@@ -27,23 +27,11 @@ from molmo_lerobot.cameras.options import camera_option_problems, episode_camera
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
-from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim import env as sim_env
-from molmo_lerobot.sim.env import Timing
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tasks"))
-from droid_variants import droid_episode
 
 
 def _pick(k: int = 0) -> dict:
     return droid_episode(json.loads((data_path("benchmarks") / "pick_v1" / "benchmark.json").read_text())[k])
-
-
-def _env(raw: dict, camera: dict):
-    run = RunContext.build()
-    env = build_env(parse_episode(raw, run.plugins), Timing(), run, camera)
-    env.reset(0)
-    return env
 
 
 def _pose(env, name: str) -> np.ndarray:
@@ -85,11 +73,11 @@ def test_eval_cameras_replace_recorded_cameras_and_take_the_level():
     assert episode_camera_system(recorded, {"eval": True}, plugins.camera_system).level == 0.0
 
 
-def test_level_zero_is_the_calibrated_droid_rig_and_level_100_sees_the_task():
+def test_level_zero_is_the_calibrated_droid_rig_and_level_100_sees_the_task(episode_env):
     raw = _pick(0)
-    fixed = _env(raw, {})
-    calm = _env(raw, {"eval": True, "rand_level": 0})
-    wild = _env(raw, {"eval": True, "rand_level": 100})
+    fixed = episode_env(raw, {})
+    calm = episode_env(raw, {"eval": True, "rand_level": 0})
+    wild = episode_env(raw, {"eval": True, "rand_level": 100})
     try:
         assert calm.camera_system == "FrankaEvalCameraSystem"
         assert calm.camera_names == ["wrist_camera", "exo_camera_1"]
@@ -109,13 +97,13 @@ def test_level_zero_is_the_calibrated_droid_rig_and_level_100_sees_the_task():
             env.close()
 
 
-def test_same_episode_same_cameras_in_any_order_and_the_seed_is_theirs():
+def test_same_episode_same_cameras_in_any_order_and_the_seed_is_theirs(episode_env):
     a, b = _pick(0), _pick(1)
     opts = {"eval": True, "rand_level": 75}
-    first = _env(a, opts)
+    first = episode_env(a, opts)
     sim_env._MODEL_CACHE.clear()  # as a fresh worker: nothing cached
-    other = _env(b, opts)
-    again = _env(copy.deepcopy(a), opts)
+    other = episode_env(b, opts)
+    again = episode_env(copy.deepcopy(a), opts)
     try:
         for name in ("wrist_camera", "exo_camera_1"):
             assert _pose(first, name) == pytest.approx(_pose(again, name))
@@ -144,8 +132,8 @@ class _Scene:
         return {b: (0.0 if len(self.draws) <= self.hidden else 0.5) for b in bodies}
 
 
-def test_an_occluded_draw_is_drawn_again_and_fifty_hopeless_ones_fail_the_episode():
-    env = _env(_pick(0), {"eval": True, "rand_level": 100})
+def test_an_occluded_draw_is_drawn_again_and_fifty_hopeless_ones_fail_the_episode(episode_env):
+    env = episode_env(_pick(0), {"eval": True, "rand_level": 100})
     try:
         system = FrankaEvalCameraSystem(100)
         scene = _Scene(env, hidden=2)

@@ -11,12 +11,8 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.benchmark.task_specs import parse_episode
-from molmo_lerobot.context import RunContext
 from molmo_lerobot.features import FeatureMap
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.runner.episode_env import build_env
-from molmo_lerobot.sim.env import Timing
 
 YAW = 0.4
 START = [-1.2, 0.3, 0.005, math.cos(YAW / 2), 0.0, 0.0, math.sin(YAW / 2)]
@@ -34,19 +30,8 @@ def _episode(init_base: list[float] | None = None) -> dict:
     return raw
 
 
-@pytest.fixture(scope="module")
-def run() -> RunContext:
-    return RunContext.build()
-
-
-def _env(run: RunContext, raw: dict):
-    env = build_env(parse_episode(raw, run.plugins), Timing(), run, {})
-    env.reset(0)
-    return env
-
-
-def test_base_starts_at_the_base_pose_and_drives_where_commanded(run):
-    env = _env(run, _episode())
+def test_base_starts_at_the_base_pose_and_drives_where_commanded(episode_env):
+    env = episode_env(_episode())
     try:
         assert list(env.move_groups) == ["base", "arm", "gripper"]
         assert env.observe(images=False)["qpos"]["base"] == pytest.approx([START[0], START[1], YAW], abs=1e-9)
@@ -67,8 +52,8 @@ def test_base_starts_at_the_base_pose_and_drives_where_commanded(run):
         env.close()
 
 
-def test_robot_base_pose_wins_over_init_qpos_base_and_features_list_the_base(run):
-    env = _env(run, _episode([0.0, 0.0, 0.0]))  # what their files write; their eval then sets robot_base_pose
+def test_robot_base_pose_wins_over_init_qpos_base_and_features_list_the_base(episode_env):
+    env = episode_env(_episode([0.0, 0.0, 0.0]))  # what their files write; their eval then sets robot_base_pose
     try:
         obs = env.observe(images=True)
         assert obs["qpos"]["base"] == pytest.approx([START[0], START[1], YAW], abs=1e-9)
@@ -86,6 +71,6 @@ def test_robot_base_pose_wins_over_init_qpos_base_and_features_list_the_base(run
         env.close()
 
 
-def test_a_base_init_qpos_of_another_size_is_an_error_naming_the_field(run):
+def test_a_base_init_qpos_of_another_size_is_an_error_naming_the_field(episode_env):
     with pytest.raises(ValueError, match=r"robot\.init_qpos\['base'\]: expected \[\] or \[x, y, yaw\], got 2"):
-        _env(run, _episode([1.0, 2.0]))
+        episode_env(_episode([1.0, 2.0]))

@@ -15,15 +15,12 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from rby1_standin import write_standin
 
-from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.config import compose
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.features import FeatureMap
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.robots.rby1 import GROUPS, RBY1
-from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.runner.evaluate import run_evaluation
-from molmo_lerobot.sim.env import Timing
 
 YAW = -0.5
 START = [-0.9, 0.2, 0.0, math.cos(YAW / 2), 0.0, 0.0, math.sin(YAW / 2)]
@@ -53,14 +50,8 @@ def run(assets) -> RunContext:
     return RunContext.build({"molmospaces": {"assets_dir": str(assets)}})
 
 
-def _env(run: RunContext, raw: dict):
-    env = build_env(parse_episode(raw, run.plugins), Timing(), run, {})
-    env.reset(0)
-    return env
-
-
-def test_rby1_loads_their_model_and_its_groups_move_where_commanded(run):
-    env = _env(run, _episode())
+def test_rby1_loads_their_model_and_its_groups_move_where_commanded(episode_env):
+    env = episode_env(_episode())
     try:
         assert list(env.move_groups) == GROUP_ORDER
         assert env.joint_names["left_arm"] == [f"left_arm_{i}" for i in range(7)]
@@ -87,8 +78,8 @@ def test_rby1_loads_their_model_and_its_groups_move_where_commanded(run):
         env.close()
 
 
-def test_features_list_every_group_and_the_head_camera_renders(run):
-    env = _env(run, _episode())
+def test_features_list_every_group_and_the_head_camera_renders(episode_env):
+    env = episode_env(_episode())
     try:
         obs = env.observe(images=True)
         assert env.camera_system == "RBY1MjcfCameraSystem"
@@ -115,11 +106,11 @@ def test_rby1m_reads_its_own_file(run, assets):
         (assets / "moved.xml").rename(assets / "robots" / "rby1m" / "rby1_v1.2_site_control.xml")
 
 
-def test_a_missing_model_is_one_line_naming_the_path_and_the_install(tmp_path, monkeypatch):
+def test_a_missing_model_is_one_line_naming_the_path_and_the_install(tmp_path, monkeypatch, episode_env):
     monkeypatch.setenv("MLSPACES_ASSETS_DIR", str(tmp_path / "none"))
     run = RunContext.build()  # the episode of the tests above: their compiled model is cached for another dir
     with pytest.raises(FileNotFoundError) as err:
-        _env(run, _episode())
+        episode_env(_episode(), run=run)
     msg = str(err.value)
     assert "\n" not in msg and str(tmp_path / "none" / "robots" / "rby1" / "rby1_site_control.xml") in msg
     assert "molmo-resources install robots/rby1@20251224" in msg
@@ -138,9 +129,9 @@ def test_a_model_without_their_names_is_refused_naming_the_file_and_the_names(tm
     ({"base": [1.0, 2.0]}, r"robot\.init_qpos\['base'\]: expected \[\] or \[x, y, yaw\], got 2"),
     ({"head": [0.1]}, r"robot\.init_qpos\['head'\]: expected 2 values, got 1"),
     ({"neck": [0.1]}, r"unknown move group\(s\) \['neck'\]")])
-def test_bad_init_qpos_names_the_field(run, init, match):
+def test_bad_init_qpos_names_the_field(init, match, episode_env):
     with pytest.raises(ValueError, match=match):
-        _env(run, _episode(**init))
+        episode_env(_episode(**init))
 
 
 def test_gripper_init_qpos_takes_their_metres():

@@ -15,7 +15,6 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.task_specs import parse_episode
-from molmo_lerobot.context import RunContext
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.scripted_nav import ScriptedNav
@@ -28,11 +27,6 @@ EPISODE = 1  # "Navigate to any orange juice carton (2 available)"
 
 def nav_v1() -> list[dict]:
     return json.loads((data_path("benchmarks") / "nav_v1" / "benchmark.json").read_text())
-
-
-@pytest.fixture(scope="module")
-def run() -> RunContext:
-    return RunContext.build()
 
 
 @pytest.fixture(scope="module")

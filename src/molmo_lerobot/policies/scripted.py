@@ -42,7 +42,8 @@ class ScriptedExpert(Policy):
         if ctx.env is None:
             raise ValueError("scripted policy needs privileged simulator access (EpisodeContext.env)")
         if ctx.expert is None:
-            raise ValueError(f"scripted policy: no scripted expert serves task type {ctx.spec.task_name if ctx.spec else None!r}")
+            task = ctx.spec.task_name if ctx.spec else None
+            raise ValueError(f"scripted policy: no scripted expert serves task type {task!r}")
         if ctx.expert.name not in self.experts:
             self.experts[ctx.expert.name] = ctx.expert.factory(self.config)
         self.current = self.experts[ctx.expert.name]

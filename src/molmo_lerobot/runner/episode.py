@@ -152,7 +152,8 @@ class EpisodeSession:
         return EpisodeInfo(
             episode_index=plan.episode_index, house_index=plan.house_index, seed=plan.seed, prompt=plan.prompt,
             task_type=self.plan.task_type, fps=1000.0 / self.run.timing.policy_dt_ms, horizon=self.horizon,
-            camera_names=list(env.camera_names), img_resolution=(int(self.spec.img_resolution[0]), int(self.spec.img_resolution[1])),
+            camera_names=list(env.camera_names),
+            img_resolution=(int(self.spec.img_resolution[0]), int(self.spec.img_resolution[1])),
             joint_names=dict(env.joint_names), move_groups=dict(env.move_groups), expert=expert,
             extra={"task_cls": plan.task_cls, "robot": self.spec.robot.robot_name,
                    "object": getattr(self.spec.task, "pickup_obj_name", None), **extra},

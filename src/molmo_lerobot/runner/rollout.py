@@ -11,7 +11,7 @@ import numpy as np
 from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:
-    from molmo_lerobot.policies.base import Action, Policy
+    from molmo_lerobot.policies.base import Policy
     from molmo_lerobot.recording import Recorder, RecorderGroup
     from molmo_lerobot.results import EpisodeResult
     from molmo_lerobot.runner.episode import EpisodeSession
