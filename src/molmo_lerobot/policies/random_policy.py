@@ -1,8 +1,10 @@
 """The random policy (a policy plugin): a baseline that should essentially never succeed.
 
 Each chunk moves the arm to a random joint target near the current pose (uniform within
-``scale`` radians per joint) and sets the gripper to a random command; draws come from a
-generator seeded by the episode seed, so episodes replay exactly.
+``scale`` radians per joint) and sets the gripper to a random command; a move group whose actions
+are deltas (an env suite's, named in ``EpisodeContext.extra["delta_groups"]``: LIBERO's 7-D delta
+end-effector command) gets a random delta within ``scale`` instead. Draws come from a generator
+seeded by the episode seed, so episodes replay exactly.
 """
 
 from __future__ import annotations
@@ -36,15 +38,19 @@ class RandomPolicy(Policy):
             raise ValueError("random policy: scale must be >= 0 and chunk >= 1")
         self.rng = np.random.default_rng(0)
         self.move_groups: dict[str, int] = {}
+        self.delta_groups: frozenset[str] = frozenset()
 
     def reset(self, ctx: EpisodeContext) -> None:
         self.rng = np.random.default_rng(ctx.seed)
         self.move_groups = dict(ctx.move_groups)
+        self.delta_groups = frozenset(ctx.extra.get("delta_groups", ()))
 
     def act(self, obs: Observation) -> Action:
         out: Action = {}
         for group, dim in self.move_groups.items():
-            if group == "gripper":
+            if group in self.delta_groups:
+                goal = self.rng.uniform(-self.scale, self.scale, dim)
+            elif group == "gripper":
                 goal = self.rng.uniform(0.0, 1.0, dim)
             else:
                 goal = np.asarray(obs["qpos"][group], dtype=np.float64) + self.rng.uniform(-self.scale, self.scale, dim)

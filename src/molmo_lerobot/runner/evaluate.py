@@ -18,7 +18,7 @@ import re
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
@@ -31,7 +31,7 @@ from molmo_lerobot.assets.grasps import GraspError
 from molmo_lerobot.assets.libraries import AssetError
 from molmo_lerobot.benchmark.registry import benchmark_dir
 from molmo_lerobot.context import RunContext
-from molmo_lerobot.errors import ExportError, RunError
+from molmo_lerobot.errors import ExportError, InfrastructureError, RunError
 from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import SettingsError
 from molmo_lerobot.plugins import PluginError, Plugins
@@ -49,6 +49,17 @@ from molmo_lerobot.runner.supervisor import RunInterrupted
 from molmo_lerobot.runner.worker import WorkerJob, startup_summary
 from molmo_lerobot.serving.run_server import ServeError, served_policy
 from molmo_lerobot.sim.env import TASK_RULES
+from molmo_lerobot.suites.benchmark import (
+    SUITE_KEY,
+    SUITES,
+    SuiteBenchmark,
+    SuiteBenchmarkError,
+    is_suite,
+    load_suite_benchmark,
+    task_label,
+)
+from molmo_lerobot.suites.libero import LiberoEpisode
+from molmo_lerobot.suites.pipe import SuiteError
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
@@ -177,11 +188,15 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
         raise RunError("\n".join(problems))
     recorders = run.plugins.recorder_factories(config.plain())  # e.g. a bad hub.repo_id fails here, before any output
     executor = _make_executor(config)
-    bench = load_benchmark(resolve_benchmark_path(config.benchmark.model_dump(), run.plugins), run.plugins)
-    try:  # the render profile it names travels to the workers
-        run = run.for_benchmark(bench)
-    except ValueError as exc:  # an unknown profile, a bad MOLMO_SCENE_* override
-        raise RunError(str(exc)) from None
+    bench: Benchmark | SuiteBenchmark
+    if is_suite(config):  # an env suite's episodes (LIBERO), played in each worker's suite process
+        bench = _suite_benchmark(config)
+    else:
+        bench = load_benchmark(resolve_benchmark_path(config.benchmark.model_dump(), run.plugins), run.plugins)
+        try:  # the render profile it names travels to the workers
+            run = run.for_benchmark(bench)
+        except ValueError as exc:  # an unknown profile, a bad MOLMO_SCENE_* override
+            raise RunError(str(exc)) from None
     started = datetime.now(UTC)
     run_dir = RunDirectory(Path(config.output_dir or Path("runs") / f"{safe_name(bench.name)}-"
                                 f"{safe_name(policy_name)}-{started:%Y%m%d-%H%M%S}"))
@@ -189,10 +204,16 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     if config.resume and config.limit is None:  # a resume keeps the run's limit unless given a new one
         update["limit"] = run_dir.recorded_limit()
     config = config.model_copy(update=update)
-    planner = EpisodePlanner(run, bench)
-    indices, selection = selection_of(config, bench)
-    plans, thresholds = _plan_run(planner, indices)
-    run_info = {**_run_info(config, run, planner), "selection": selection}
+    indices, selection = selection_of(config, bench)  # type: ignore[arg-type]  # episodes, origins, path, name
+    if isinstance(bench, SuiteBenchmark):
+        plans = {i: _suite_plan(i, bench.episodes[i], config.horizon is not None) for i in indices}
+        thresholds: dict[str, Any] = {}
+        horizons: dict[str, float] = {}
+    else:
+        planner = EpisodePlanner(run, bench)
+        plans, thresholds = _plan_run(planner, indices)
+        horizons = planner.horizons
+    run_info = {**_run_info(config, run, bench, horizons), "selection": selection}
     done = run_dir.open(run_info, config.resume, recorders)
     outside = sorted(r.episode_index for r in done if r.episode_index not in plans)
     if outside:  # cannot happen with an unchanged benchmark, selection and limit check; never drop them silently
@@ -261,9 +282,31 @@ def _plan_run(planner: EpisodePlanner, indices: list[int]) -> tuple[dict[int, Ep
     return plans, thresholds
 
 
-def _run_info(config: RunConfig, run: RunContext, planner: EpisodePlanner) -> dict[str, Any]:
+def _suite_benchmark(config: RunConfig) -> SuiteBenchmark:
+    """The run's env-suite benchmark, its options checked; what suite runs cannot do refused here."""
+    if config.record:
+        raise RunError(f"record=true: recording env-suite episodes (benchmark={config.benchmark.name}) is not "
+                       "supported yet; run without record")
+    if config.sample is not None:
+        raise RunError(f"sample: not available for env-suite benchmarks (benchmark={config.benchmark.name}); "
+                       "use limit= or episodes=")
+    try:
+        return load_suite_benchmark(config)
+    except (SuiteBenchmarkError, InfrastructureError, SuiteError) as exc:
+        raise RunError(str(exc)) from None
+
+
+def _suite_plan(index: int, episode: LiberoEpisode, horizon_from_cli: bool) -> EpisodePlan:
+    """Episode ``index`` of an env-suite benchmark as a plan: its spec the episode's fields plus
+    ``env_suite``, its seed and digest the episode's own, its task ``<suite>/task_<id>``."""
+    return EpisodePlan(index, {**asdict(episode), SUITE_KEY: SUITES[0]}, episode.seed, task_label(episode),
+                       episode.instruction, episode.horizon, "cli" if horizon_from_cli else "lerobot", episode.digest)
+
+
+def _run_info(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBenchmark,
+              horizons: dict[str, float]) -> dict[str, Any]:
     """What the run is (``run.json``; a resume must match it)."""
-    bench, prefer, plain = planner.bench, run.plugins.prefer, config.plain()
+    prefer, plain = run.plugins.prefer, config.plain()
     return {
         "benchmark": {"name": bench.name, "sha256": bench.sha256, "n_episodes": len(bench.episodes),
                       "path": str(bench.path)},
@@ -272,7 +315,7 @@ def _run_info(config: RunConfig, run: RunContext, planner: EpisodePlanner) -> di
         "timing": plain["timing"], "mujoco": mujoco.__version__, "code": code_version(),
         "render_profile": run.render_record,
         "recording": {key: plain[key] for key in RECORDING_OPTIONS} if config.record else None,
-        "eval_options": {"horizons": planner.horizons, "custom_object": plain["custom_object"],
+        "eval_options": {"horizons": horizons, "custom_object": plain["custom_object"],
                          "camera": plain["camera"], "robot": plain["robot"],
                          "end_on_success": config.end_on_success,
                          **({"task_rules": config.task_rules} if config.task_rules != TASK_RULES[0]
@@ -290,7 +333,7 @@ def _complete(result: EpisodeResult, plans: dict[int, EpisodePlan]) -> EpisodeRe
     return result
 
 
-def _run_plans(config: RunConfig, run: RunContext, bench: Benchmark, plans: dict[int, EpisodePlan],
+def _run_plans(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBenchmark, plans: dict[int, EpisodePlan],
                results: dict[int, EpisodeResult], run_dir: RunDirectory, executor: Any,
                recorders: list[Any], startups: dict[str, dict[str, float]]) -> dict[int, EpisodeResult]:
     """Record the plans that cannot run and run the others on ``executor``, each result appended to

@@ -14,6 +14,7 @@ if TYPE_CHECKING:
     from molmo_lerobot.recording import Recorder, RecorderGroup
     from molmo_lerobot.results import EpisodeResult
     from molmo_lerobot.runner.episode import EpisodeSession
+    from molmo_lerobot.suites.benchmark import SuiteSession
 
 
 class ActionError(MolmoError, ValueError):
@@ -84,7 +85,7 @@ def split_actions(out: Any, move_groups: dict[str, int], policy: str) -> list[Ch
     return steps
 
 
-def rollout(session: EpisodeSession, policy: Policy, recorders: RecorderGroup | list[Recorder],
+def rollout(session: EpisodeSession | SuiteSession, policy: Policy, recorders: RecorderGroup | list[Recorder],
             policy_name: str) -> EpisodeResult:
     """Play ``session`` (open, its policy reset) with ``policy`` until it ends; its result.
 

@@ -24,6 +24,7 @@ from molmo_lerobot.recording import RecorderFactory, RecorderGroup
 from molmo_lerobot.results import EpisodeResult
 from molmo_lerobot.runner.placement import nvidia_gpus, place, slot_of
 from molmo_lerobot.runner.rollout import rollout
+from molmo_lerobot.suites.benchmark import SUITE_KEY, SuiteSession, SuiteSessions
 
 if TYPE_CHECKING:
     from molmo_lerobot.run_config import RunConfig
@@ -126,6 +127,8 @@ class EpisodeWorker:
         cap_threads(config.worker_threads)  # a policy that imported torch reads the cap now
         with self.startup.phase("recorders_s"):
             self.recorders = RecorderGroup([f.make(worker_id, Path(job.output_dir)) for f in job.recorders])
+        #: the worker's env-suite process, kept across its suite episodes (none until the first)
+        self.suites = SuiteSessions(config)
         self.stopping = False
         self._in_rollout = False
 
@@ -146,9 +149,13 @@ class EpisodeWorker:
         result: EpisodeResult
         try:
             t_scene = time.perf_counter()
-            session = EpisodeSession.open(plan, self.run_context, policy=self.policy,
-                                          environment_state=self.environment_state_asker,
-                                          end_on_success=self.run_context.config.end_on_success)
+            session: EpisodeSession | SuiteSession
+            if SUITE_KEY in plan.spec:  # an env suite's episode: played in the worker's suite process
+                session = self.suites.open(plan, self.policy, self.run_context.config.end_on_success)
+            else:
+                session = EpisodeSession.open(plan, self.run_context, policy=self.policy,
+                                              environment_state=self.environment_state_asker,
+                                              end_on_success=self.run_context.config.end_on_success)
             scene_s = time.perf_counter() - t_scene
             try:
                 self.recorders.start_episode(session.recorder_info(
@@ -179,4 +186,7 @@ class EpisodeWorker:
         try:
             self.recorders.close()
         finally:
-            self.policy.close()
+            try:
+                self.suites.close()
+            finally:
+                self.policy.close()
