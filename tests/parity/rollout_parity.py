@@ -26,7 +26,7 @@ from molmo_lerobot.context import RunContext
 from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.policies.convention import GRIPPER_CLOSED_CMD, get_convention
 from molmo_lerobot.recording import EpisodeInfo, Recorder
-from molmo_lerobot.runner.episode import load_run_benchmark, start_episode
+from molmo_lerobot.runner.episode import EpisodeSession, load_run_benchmark
 from molmo_lerobot.runner.plan import EpisodePlanner
 from molmo_lerobot.runner.rollout import rollout
 
@@ -127,29 +127,27 @@ def run(benchmark: str, index: int, policy: Policy | str, horizon: int | None,
     episode's own), body sleeping on as in their loop; ``policy`` is ``"scripted"`` or a Policy. With
     ``mjb`` the compiled model is saved there."""
     from molmo_lerobot.policies.factory import make_policy
+    from molmo_lerobot.runner.episode_env import build_env
 
-    ctx, bench = _context(benchmark, horizon)
-    plan = EpisodePlanner(ctx, bench).plan(index)
-    spec = plan.episode(ctx.plugins)
-    task_type = ctx.plugins.task_type(plan.task_type)
-    env, task = start_episode(spec, plan.seed, task_type, ctx)
+    run, bench = _context(benchmark, horizon)
+    plan = EpisodePlanner(run, bench).plan(index)
+    spec = plan.episode(run.plugins)
+    task_type = run.plugins.task_type(plan.task_type)
+    env = build_env(spec, run.timing, run, run.config.camera.model_dump())
     try:
+        env.reset(plan.seed)
+        task = task_type.create(spec, env)
         if mjb is not None:
             save_model(env.model, mjb)
         expert = policy == "scripted"
-        pol = make_policy(ctx.plugins, {"name": "scripted"}) if expert else policy
-        ectx = EpisodeContext(spec=spec, episode_index=index, seed=plan.seed, prompt=plan.prompt,
-                              move_groups=dict(env.move_groups), policy_dt_s=ctx.timing.policy_dt_s,
-                              env=env if expert else None, run=ctx if expert else None)
-        info = EpisodeInfo(episode_index=index, house_index=spec.house_index, seed=plan.seed, prompt=plan.prompt,
-                           task_type=task_type.name, fps=1000.0 / ctx.timing.policy_dt_ms, horizon=plan.horizon,
-                           camera_names=[], img_resolution=tuple(spec.img_resolution),
-                           joint_names=dict(env.joint_names), move_groups=dict(env.move_groups), expert=expert)
+        pol = make_policy(run.plugins, {"name": "scripted"}) if expert else policy
+        session = EpisodeSession.start(plan, spec, env, task, run, policy=pol)
         rec = StateRecorder(env)
-        outcome = rollout(env, task, pol, ectx, plan.horizon, [rec], info, "replay")
+        rec.start_episode(session.recorder_info(expert=expert, extra={}))
+        result = rollout(session, pol, [rec], "replay")
         return Episode(spec=raw_episode(bench, index, task_type.name), metadata=their_metadata(env), mjb=mjb,
                        actions=np.array(rec.actions) if actions is None else actions,
-                       states=np.array(rec.states), success=rec.success, final=outcome.success)
+                       states=np.array(rec.states), success=rec.success, final=result.success)
     finally:
         env.close()
 
