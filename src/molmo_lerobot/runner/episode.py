@@ -233,8 +233,8 @@ class EpisodeSession:
         from molmo_lerobot.results import EpisodeResult
 
         plan = self.plan
-        odd = tuple(self.task.start_warnings)
-        notes = self.task.parity_notes()  # judged now, in the final state
+        odd = tuple(getattr(self.task, "start_warnings", ()))  # a duck-typed task may define neither
+        notes: tuple[str, ...] = getattr(self.task, "parity_notes", tuple)()  # judged now, in the final state
         return EpisodeResult(
             episode_index=plan.episode_index, house_index=plan.house_index, task_cls=plan.task_cls,
             success=self.success, success_once=self.success_once, steps=self.steps, seed=plan.seed,
