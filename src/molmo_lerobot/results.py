@@ -50,6 +50,49 @@ class RunFileError(MolmoError, ValueError):
     """A run's ``results.json`` or ``episodes.jsonl`` is missing or malformed: ``<file>[:<line>]: <what>``."""
 
 
+class EpisodeOutcome:
+    """A live episode's outcome, kept the same way by every episode session (ours and an env suite's):
+    ``success`` (the last state), ``success_once`` (at the instants the agent observes, and at the end),
+    ``success_any_step`` and what ended it (``ended_by``). A session sets ``end_on_success`` and gives its
+    ``horizon``."""
+
+    end_on_success: bool
+
+    @property
+    def horizon(self) -> int:
+        raise NotImplementedError
+
+    def __init__(self) -> None:
+        self.steps = 0
+        self.success = self.success_once = self.success_any_step = False
+        #: why the episode ended (``horizon``, ``success``, ``terminated`` by the env, ``done``); ``None`` while it runs
+        self.ended_by: str | None = None
+
+    def count_step(self, success: bool, observed: bool) -> bool:
+        """One more step ending in ``success``; ``observed``: the agent sees that state."""
+        self.success = success
+        self.steps += 1
+        self.success_any_step |= success
+        if observed:
+            self.success_once |= success
+        return success
+
+    def end(self, said_done: bool = False, terminated: bool = False) -> str | None:
+        """Whether the episode ends after this step, and why: the action said ``done``, ``success`` (with
+        ``end_on_success``, or the env ``terminated`` it), ``terminated`` without success, or the ``horizon``;
+        ``None`` while it goes on. Its end is an observation instant (``success_once``)."""
+        if said_done:
+            self.ended_by = "done"
+        elif terminated or (self.end_on_success and self.success):
+            self.ended_by = "success" if self.success else "terminated"
+        elif self.steps >= self.horizon:
+            self.ended_by = "horizon"
+        else:
+            return None
+        self.success_once |= self.success
+        return self.ended_by
+
+
 @dataclass
 class EpisodeResult:
     """One attempted episode. The first seven fields are the ``episodes.jsonl`` contract."""

@@ -30,6 +30,7 @@ import numpy as np
 
 from molmo_lerobot.errors import InfrastructureError, MolmoError, describe
 from molmo_lerobot.features import ENV_STATE_KEY
+from molmo_lerobot.results import EpisodeOutcome
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
@@ -98,7 +99,7 @@ def install_failure(exc: Exception, spec: EpisodeSpec, run: RunContext) -> Excep
     return InfrastructureError(f"{problem} (the scene failed to build: {describe(exc)})")
 
 
-class EpisodeSession:
+class EpisodeSession(EpisodeOutcome):
     """One planned episode, open: its env and task, its outcome so far. See the module docstring."""
 
     def __init__(self, plan: EpisodePlan, spec: EpisodeSpec, env: Env, task: Task, run: RunContext, *,
@@ -107,10 +108,7 @@ class EpisodeSession:
         #: observations carry the task's environment state (``observation.environment_state``)
         self.environment_state = environment_state
         self.end_on_success = end_on_success
-        self.steps = 0
-        self.success = self.success_once = self.success_any_step = False
-        #: why the episode ended (``horizon``, ``success`` with end_on_success, ``done``); ``None`` while it runs
-        self.ended_by: str | None = None
+        super().__init__()
 
     @classmethod
     def open(cls, plan: EpisodePlan, run: RunContext, *, policy: Policy | None = None,
@@ -206,27 +204,7 @@ class EpisodeSession:
         for ``success_once``. Returns success in the new state."""
         self.env.step(self.complete(action))
         check_divergence(self.env.data, f"at step {self.steps}")
-        self.success = bool(self.task.success())
-        self.steps += 1
-        self.success_any_step |= self.success
-        if observed:
-            self.success_once |= self.success
-        return self.success
-
-    def end(self, said_done: bool = False) -> str | None:
-        """Whether the episode ends after this step, and why: the action said ``done``, ``success``
-        (with ``end_on_success``) or the ``horizon``; ``None`` while it goes on. Its end is an
-        observation instant (``success_once``)."""
-        if said_done:
-            self.ended_by = "done"
-        elif self.end_on_success and self.success:
-            self.ended_by = "success"
-        elif self.steps >= self.horizon:
-            self.ended_by = "horizon"
-        else:
-            return None
-        self.success_once |= self.success
-        return self.ended_by
+        return self.count_step(bool(self.task.success()), observed)
 
     def result(self) -> EpisodeResult:
         """The episode's outcome as a result (``duration_s`` and outputs are the worker's)."""

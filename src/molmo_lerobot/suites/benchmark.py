@@ -23,6 +23,7 @@ import numpy as np
 
 from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.hashing import content_sha256
+from molmo_lerobot.results import EpisodeOutcome
 from molmo_lerobot.suites.libero import (
     ACTION_DIM,
     CONTROL_HZ,
@@ -143,7 +144,7 @@ class _SuiteTask:
         return self.last_reward
 
 
-class SuiteSession:
+class SuiteSession(EpisodeOutcome):
     """One suite episode, open: the :class:`~molmo_lerobot.runner.episode.EpisodeSession` interface the
     rollout loop plays, over the worker's suite process. ``lerobot-eval``'s rules: the episode ends at its
     first terminated step (LIBERO's goal reached) or at the horizon; it succeeds when its last step did."""
@@ -153,9 +154,8 @@ class SuiteSession:
         self.episode = plan_episode(plan)
         self.env, self.task = _SuiteEnv(), _SuiteTask()
         self.end_on_success = end_on_success
-        self.steps = 0
-        self.success = self.success_once = self.success_any_step = self.terminated = False
-        self.ended_by: str | None = None
+        super().__init__()
+        self.terminated = False
         self._obs = suite.reset(self.episode)
 
     @property
@@ -189,24 +189,12 @@ class SuiteSession:
     def step(self, action: Action, *, observed: bool = True) -> bool:
         reply = self.suite.step(np.asarray(action[MOVE_GROUP], dtype=np.float64))
         self._obs, self.task.last_reward = reply["observation"], float(reply["reward"])
-        self.success, self.terminated = bool(reply["success"]), bool(reply["terminated"])
-        self.steps += 1
-        self.success_any_step |= self.success
-        if observed:
-            self.success_once |= self.success
-        return self.success
+        self.terminated = bool(reply["terminated"])
+        return self.count_step(bool(reply["success"]), observed)
 
-    def end(self, said_done: bool = False) -> str | None:
-        if said_done:
-            self.ended_by = "done"
-        elif self.terminated or (self.end_on_success and self.success):
-            self.ended_by = "success" if self.success else "terminated"
-        elif self.steps >= self.horizon:
-            self.ended_by = "horizon"
-        else:
-            return None
-        self.success_once |= self.success
-        return self.ended_by
+    def end(self, said_done: bool = False, terminated: bool = False) -> str | None:
+        """As :meth:`EpisodeOutcome.end`, the suite's env ending the episode when it says ``terminated``."""
+        return super().end(said_done, terminated or self.terminated)
 
     def result(self) -> EpisodeResult:
         from molmo_lerobot.results import EpisodeResult
