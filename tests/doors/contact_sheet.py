@@ -35,7 +35,7 @@ def _row(spec, ctx: RunContext) -> np.ndarray:
         policy = ScriptedExpert({})
         policy.reset(EpisodeContext(spec=spec, episode_index=0, seed=spec.seed, prompt=spec.prompt,
                                     move_groups=dict(env.move_groups), policy_dt_s=timing.policy_dt_s, env=env,
-                                    catalog=ctx.catalog, expert=ctx.plugins.expert(spec.task_name)))
+                                    catalog=ctx.catalog, expert=ctx.plugins.expert(task_type.name)))
         for _ in range(resolve_horizon(None, spec.task, task_type.default_horizon_sec, timing.policy_dt_ms)):
             chunk = policy.act(env.observe(False))
             for k in range(len(chunk["arm"])):

@@ -107,7 +107,7 @@ RAW = textwrap.dedent('''
         prompt = spec.language.task_description if spec.language else ""
         policy.reset(EpisodeContext(spec=spec, episode_index=i, seed=seed, prompt=prompt,
                                     move_groups=dict(env.move_groups), policy_dt_s=timing.policy_dt_ms / 1000.0,
-                                    env=env, catalog=run.catalog, expert=run.plugins.expert(spec.task_name)))
+                                    env=env, catalog=run.catalog, expert=run.plugins.expert(task_type.name)))
         task.setup()
         obs = env.observe(images=True)
         obs["prompt"], obs["step"] = prompt, 0

@@ -50,7 +50,7 @@ def _render_episode() -> dict[str, np.ndarray]:
     policy = make_policy(plugins, {"name": "scripted"})
     policy.reset(EpisodeContext(spec=spec, episode_index=0, seed=seed, prompt=spec.language.task_description,
                                 move_groups=env.move_groups, policy_dt_s=timing.policy_dt_s,
-                                env=env, catalog=run.catalog, expert=run.plugins.expert(spec.task_name)))
+                                env=env, catalog=run.catalog, expert=run.plugins.expert(task_type.name)))
     task.setup()
     frames: dict[str, list[np.ndarray]] = {cam: [] for cam in env.camera_names}
     queue: list[dict] = []
