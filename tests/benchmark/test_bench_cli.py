@@ -70,9 +70,9 @@ def fake_generator(monkeypatch, data):
         (out_dir / "benchmark.json").write_text(json.dumps(eps))
         (out_dir / "benchmark_metadata.json").write_text(json.dumps(metadata))
 
-    module = types.ModuleType("molmo_lerobot.benchmark.generate")
+    module = types.ModuleType("molmo_lerobot.content.tabletop.generate")
     module.generate_benchmark, module.write_benchmark = generate_benchmark, write_benchmark
-    monkeypatch.setitem(sys.modules, "molmo_lerobot.benchmark.generate", module)
+    monkeypatch.setitem(sys.modules, "molmo_lerobot.content.tabletop.generate", module)
     return types.SimpleNamespace(calls=calls, episodes=episodes)
 
 

@@ -1,0 +1,1 @@
+"""The ``articulated`` scene plugin (:mod:`.scene`) and the open / close benchmark generator (:mod:`.generate`)."""
