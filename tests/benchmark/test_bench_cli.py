@@ -56,7 +56,7 @@ def test_validate_unknown_task_with_installed_plugins(tmp_path, data, capsys):
 
 @pytest.fixture
 def fake_generator(monkeypatch, data):
-    """A stand-in ``benchmark.generate`` module returning the fixture episodes (the real one is the sim's)."""
+    """A stand-in ``content.tabletop.generate`` module returning the fixture episodes (the real one builds scenes)."""
     episodes = json.loads((data / "pick_list" / "benchmark.json").read_text())
     calls = []
 
