@@ -16,8 +16,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from molmo_lerobot.assets.articulated import ARTICULATED_OBJECTS
 from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
+from molmo_lerobot.content.articulated.objects import ARTICULATED_OBJECTS
 from molmo_lerobot.content.articulated.scene import ArticulatedTabletop
 from molmo_lerobot.content.tabletop.generate import episode_base, tabletop_cameras
 from molmo_lerobot.robots.franka import Franka

@@ -2,7 +2,7 @@
 
 The fixtures are read in place from ``articulated_objects/`` of the installed LIBERO asset
 distributions with :class:`mujoco.MjSpec` and normalised to the conventions of
-:mod:`molmo_lerobot.assets.articulated`:
+:mod:`molmo_lerobot.content.articulated.objects`:
 
 * every joint closes at ``q = 0``: its range becomes ``[0, open]`` (LIBERO's drawers run a centimetre
   past closed, ``[-0.16, 0.01]``; that centimetre is cut);
@@ -73,7 +73,7 @@ class FixtureJoint:
 
 @dataclass(frozen=True)
 class JointInfo:
-    """A normalised joint (see :class:`molmo_lerobot.assets.articulated.JointInfo`): name, kind, child body,
+    """A normalised joint (see :class:`molmo_lerobot.content.articulated.objects.JointInfo`): name, kind, child body,
     open end, handle bar (centre in the body frame, axis ``x``/``z``, half length), label."""
 
     name: str
