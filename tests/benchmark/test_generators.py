@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from molmo_lerobot.cli.bench import GENERATORS, main
+from molmo_lerobot.content.doors.generate import GENERATOR_ID as DOOR_GENERATOR
 from molmo_lerobot.paths import data_path
 
 SHIPPED = data_path("benchmarks")
@@ -24,7 +25,7 @@ GENERATED = sorted(p.name for p in SHIPPED.iterdir() if p.is_dir() and p.name no
 def generate_argv(name: str) -> list[str]:
     """The ``molmo-bench generate`` arguments the metadata of the shipped benchmark ``name`` records."""
     made = json.loads((SHIPPED / name / "benchmark_metadata.json").read_text())["generator"]
-    if made.get("module") == "molmo_lerobot.doors.generate":
+    if made.get("module") == DOOR_GENERATOR:
         generator, task = "door", []
     elif made["task"] == "nav_to_obj":
         generator, task = "nav", []

@@ -14,10 +14,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.config import compose
+from molmo_lerobot.content.doors.generate import generate_benchmark
+from molmo_lerobot.content.doors.scenes import DOOR_NAME, HINGE_JOINT, DoorRooms, door_geometry, layout
+from molmo_lerobot.content.libero.objects import assets_root
 from molmo_lerobot.context import RunContext
-from molmo_lerobot.doors.generate import generate_benchmark
-from molmo_lerobot.doors.scenes import DOOR_NAME, HINGE_JOINT, DoorRooms, door_geometry, layout
-from molmo_lerobot.libero.objects import assets_root
 from molmo_lerobot.policies.scripted import ScriptedExpert
 from molmo_lerobot.runner.episode import EpisodeSession
 from molmo_lerobot.runner.episode_env import build_env

@@ -24,8 +24,8 @@ REPS = 3  # alternating; the best wall time of each is kept (the machine is shar
 
 @pytest.fixture(scope="module")
 def bench16(tmp_path_factory):
-    from molmo_lerobot.benchmark.generate import generate_benchmark
     from molmo_lerobot.benchmark.output import write_benchmark
+    from molmo_lerobot.content.tabletop.generate import generate_benchmark
 
     episodes, metadata = generate_benchmark("pick", 4, N_EPISODES // 4, seed=11, name="pick_perf")
     return write_benchmark(tmp_path_factory.mktemp("bench") / "pick_perf", episodes, metadata)

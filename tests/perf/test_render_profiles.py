@@ -86,7 +86,7 @@ def _gym_steps_per_s(bench: str) -> float:
 
 
 def _libero_env(tmp: Path, venv: Path) -> dict[str, str]:
-    from molmo_lerobot.libero.objects import assets_root
+    from molmo_lerobot.content.libero.objects import assets_root
 
     site = next((venv / "lib").glob("python3*/site-packages"))
     root = site / "libero" / "libero"

@@ -27,9 +27,9 @@ pytest.importorskip("torch")
 from perf_rows import append_rows, run_rates
 from test_lerobot_policy import save_tiny_act
 
-from molmo_lerobot.benchmark.generate import generate_benchmark
 from molmo_lerobot.benchmark.output import write_benchmark
 from molmo_lerobot.config import compose
+from molmo_lerobot.content.tabletop.generate import generate_benchmark
 from molmo_lerobot.runner.evaluate import run_evaluation
 
 pytestmark = pytest.mark.perf

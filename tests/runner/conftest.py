@@ -215,8 +215,8 @@ def faulty_policy(tmp_path, monkeypatch):
 @pytest.fixture(scope="session")
 def small_bench(tmp_path_factory) -> Path:
     """An 8-episode pick benchmark (4 houses x 2) generated into a temp dir."""
-    from molmo_lerobot.benchmark.generate import generate_benchmark
     from molmo_lerobot.benchmark.output import write_benchmark
+    from molmo_lerobot.content.tabletop.generate import generate_benchmark
 
     episodes, metadata = generate_benchmark("pick", 4, 2, seed=7, name="pick_small")
     return write_benchmark(tmp_path_factory.mktemp("bench") / "pick_small", episodes, metadata)

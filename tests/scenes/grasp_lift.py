@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from molmo_lerobot.libero.grasps import GRIPPERS
+from molmo_lerobot.content.libero.grasps import GRIPPERS
 from molmo_lerobot.robots.franka import FINGER_TRAVEL, TCP_OFFSET
 from molmo_lerobot.robots.franka_droid import CTRL_CLOSED, TCP_DEPTH
 from molmo_lerobot.sim.env import PHYSICS_OPTIONS

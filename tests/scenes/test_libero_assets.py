@@ -10,10 +10,10 @@ from pathlib import Path
 import mujoco
 import pytest
 
+from molmo_lerobot.content.libero import objects as libero
+from molmo_lerobot.content.libero.library import LiberoAssetLibrary
+from molmo_lerobot.content.libero.objects import LIBERO_OBJECTS
 from molmo_lerobot.context import RunContext
-from molmo_lerobot.libero import objects as libero
-from molmo_lerobot.libero.library import LiberoAssetLibrary
-from molmo_lerobot.libero.objects import LIBERO_OBJECTS
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -17,10 +17,10 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.task_specs import parse_episode
-from molmo_lerobot.libero import generate_articulated as gen
-from molmo_lerobot.libero.fixture_rooms import LiberoFixtureRooms
-from molmo_lerobot.libero.fixtures import LIBERO_FIXTURES, LOW_HANDLE, handle_grasps
-from molmo_lerobot.libero.objects import assets_root
+from molmo_lerobot.content.libero import generate_articulated as gen
+from molmo_lerobot.content.libero.fixture_rooms import LiberoFixtureRooms
+from molmo_lerobot.content.libero.fixtures import LIBERO_FIXTURES, LOW_HANDLE, handle_grasps
+from molmo_lerobot.content.libero.objects import assets_root
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.policies.scripted import ScriptedExpert
 from molmo_lerobot.runner.episode import EpisodeSession

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from grasp_lift import LIFT, lift_height
 
-from molmo_lerobot.libero.grasps import GRIPPERS, LiberoGraspLibrary, compute_grasps
-from molmo_lerobot.libero.objects import LIBERO_OBJECTS
+from molmo_lerobot.content.libero.grasps import GRIPPERS, LiberoGraspLibrary, compute_grasps
+from molmo_lerobot.content.libero.objects import LIBERO_OBJECTS
 
 GRASPABLE = sorted(u for u, o in LIBERO_OBJECTS.items() if o.graspable)
 QUICK = ["libero_black_book", "libero_milk"]

@@ -16,9 +16,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.benchmark.validate import validate_benchmark
-from molmo_lerobot.libero.generate import TASKS, generate_benchmark
-from molmo_lerobot.libero.objects import LIBERO_OBJECTS
-from molmo_lerobot.libero.rooms import LiberoRooms, resting_radius
+from molmo_lerobot.content.libero.generate import TASKS, generate_benchmark
+from molmo_lerobot.content.libero.objects import LIBERO_OBJECTS
+from molmo_lerobot.content.libero.rooms import LiberoRooms, resting_radius
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim.env import Timing

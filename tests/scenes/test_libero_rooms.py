@@ -12,7 +12,7 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.task_specs import parse_episode
-from molmo_lerobot.libero.rooms import LiberoRooms
+from molmo_lerobot.content.libero.rooms import LiberoRooms
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim.env import Env, Timing
@@ -94,7 +94,7 @@ def test_a_few_steps_of_one_pick_v2_episode(run, tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_pick_v2_regenerates_identically():
-    from molmo_lerobot.libero.generate import generate_benchmark
+    from molmo_lerobot.content.libero.generate import generate_benchmark
 
     meta = json.loads((data_path("benchmarks") / "pick_v2" / "benchmark_metadata.json").read_text())
     gen = meta["generator"]

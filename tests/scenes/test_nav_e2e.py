@@ -78,7 +78,7 @@ def test_remote_random_gives_the_in_process_outcomes(tmp_path):
 
 @pytest.mark.slow
 def test_generator_reproduces_nav_v1():
-    from molmo_lerobot.libero.generate_nav import generate_benchmark
+    from molmo_lerobot.content.libero.generate_nav import generate_benchmark
 
     episodes, meta = generate_benchmark(12, 5, 0, "nav_v1")
     root = data_path("benchmarks") / "nav_v1"

@@ -11,7 +11,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 @pytest.fixture(scope="session")
 def pick_episodes():
-    from molmo_lerobot.benchmark.generate import generate_benchmark
+    from molmo_lerobot.content.tabletop.generate import generate_benchmark
 
     return generate_benchmark("pick", 2, 2, 0, "test")[0]
 

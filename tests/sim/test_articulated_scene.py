@@ -8,11 +8,11 @@ import mujoco
 import numpy as np
 import pytest
 
-from molmo_lerobot.assets.articulated import ARTICULATED_OBJECTS, ArticulatedAssetLibrary, handle_grasps
 from molmo_lerobot.assets.grasps import GraspError
-from molmo_lerobot.benchmark.generate_articulated import generate_benchmark
+from molmo_lerobot.content.articulated.generate import generate_benchmark
+from molmo_lerobot.content.articulated.objects import ARTICULATED_OBJECTS, ArticulatedAssetLibrary, handle_grasps
+from molmo_lerobot.content.articulated.scene import ArticulatedTabletop
 from molmo_lerobot.context import RunContext
-from molmo_lerobot.sim.articulated import ArticulatedTabletop
 
 
 def test_articulated_library_is_in_the_default_catalog_with_per_joint_grasps():

@@ -8,10 +8,10 @@ import math
 import pytest
 
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
-from molmo_lerobot.benchmark.generate import generate_benchmark
 from molmo_lerobot.benchmark.output import write_benchmark
 from molmo_lerobot.benchmark.schema import BenchmarkMetadata
 from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.content.tabletop.generate import generate_benchmark
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
 

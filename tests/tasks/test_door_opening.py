@@ -16,9 +16,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.benchmark.load import BenchmarkError, load_benchmark
 from molmo_lerobot.benchmark.task_specs import DoorOpeningTaskSpec, parse_episode
+from molmo_lerobot.content.doors.generate import generate_benchmark
+from molmo_lerobot.content.doors.scenes import DOOR_RANGE, HINGE_JOINT, door_geometry
 from molmo_lerobot.context import RunContext
-from molmo_lerobot.doors.generate import generate_benchmark
-from molmo_lerobot.doors.scenes import DOOR_RANGE, HINGE_JOINT, door_geometry
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.sim.env import Timing

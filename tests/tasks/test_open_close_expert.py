@@ -9,8 +9,8 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.benchmark.generate_articulated import generate_benchmark
 from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.content.articulated.generate import generate_benchmark
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.policies.scripted import ScriptedExpert
 from molmo_lerobot.runner.episode import EpisodeSession

@@ -16,8 +16,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from task_scenes import make_task_env, put_in_receptacle, settle
 
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES
-from molmo_lerobot.benchmark.generate import generate_benchmark
 from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.content.tabletop.generate import generate_benchmark
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.robots.franka import FINGER_TRAVEL

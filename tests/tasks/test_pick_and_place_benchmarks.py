@@ -9,11 +9,16 @@ import mujoco
 import pytest
 
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES, PAINT_COLORS
-from molmo_lerobot.benchmark.generate import NEXT_TO_START_GAP, _receptacle_footprint, _resting, generate_benchmark
 from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.content.tabletop.generate import (
+    NEXT_TO_START_GAP,
+    _receptacle_footprint,
+    _resting,
+    generate_benchmark,
+)
+from molmo_lerobot.content.tabletop.scene import ProceduralTabletop, ProceduralTabletopReceptacles
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
-from molmo_lerobot.sim.tabletop import ProceduralTabletop, ProceduralTabletopReceptacles
 
 SHIPPED = {"pick_and_place_v1": "pick_and_place", "next_to_v1": "pick_and_place_next_to",
            "color_v1": "pick_and_place_color"}

@@ -8,8 +8,8 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from molmo_lerobot.benchmark.generate import generate_benchmark
 from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.content.tabletop.generate import generate_benchmark
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.policies.scripted_place import ScriptedPlace

@@ -12,8 +12,8 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
-from molmo_lerobot.benchmark.generate import generate_benchmark
 from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.content.tabletop.generate import generate_benchmark
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.robots.franka import FINGER_TRAVEL
 from molmo_lerobot.runner.episode_env import build_env

@@ -14,9 +14,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from task_scenes import hold, make_task_env, put_in_receptacle, settle
 
-from molmo_lerobot.benchmark.generate import generate_benchmark
-from molmo_lerobot.benchmark.generate_articulated import generate_benchmark as generate_articulated
 from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.content.articulated.generate import generate_benchmark as generate_articulated
+from molmo_lerobot.content.tabletop.generate import generate_benchmark
 from molmo_lerobot.context import RunContext
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.runner.episode_env import build_env

@@ -1,4 +1,5 @@
-"""Benchmarks: MolmoSpaces-compatible episode schema, loading with a content hash, validation, generation.
+"""Benchmarks: MolmoSpaces-compatible episode schema, loading with a content hash, validation, and the
+generators' output helpers (the generators themselves are content: :mod:`molmo_lerobot.content`).
 
 ``load_benchmark(path, plugins)`` reads a benchmark directory or file into a :class:`Benchmark`
 (each task validated with its plugin's spec model, see :mod:`.task_specs`);

@@ -67,14 +67,15 @@ class Generator:
 
 #: every generator ``molmo-bench generate`` runs (the shipped benchmarks name theirs in their metadata)
 GENERATORS = {
-    "v1": Generator("molmo_lerobot.benchmark.generate",
+    "v1": Generator("molmo_lerobot.content.tabletop.generate",
                     ("pick", "pick_and_place", "pick_and_place_next_to", "pick_and_place_color", "open", "close"),
                     "the procedural (and articulated) tabletop, Franka Panda, exocentric + wrist camera"),
-    "v2": Generator("molmo_lerobot.libero.generate", ("pick", "pick_and_place", "next_to", "color", "open", "close"),
+    "v2": Generator("molmo_lerobot.content.libero.generate",
+                    ("pick", "pick_and_place", "next_to", "color", "open", "close"),
                     "textured LIBERO rooms (and LIBERO cabinets), franka_droid, DROID cameras"),
-    "nav": Generator("molmo_lerobot.libero.generate_nav", ("nav_to_obj",),
+    "nav": Generator("molmo_lerobot.content.libero.generate_nav", ("nav_to_obj",),
                      "nav_to_obj in multi-room nav_houses, mobile_franka", takes_task=False),
-    "door": Generator("molmo_lerobot.doors.generate", ("door_opening",),
+    "door": Generator("molmo_lerobot.content.doors.generate", ("door_opening",),
                       "open the door between two door_rooms rooms, mobile_franka", takes_task=False),
 }
 

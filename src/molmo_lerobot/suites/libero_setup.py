@@ -34,8 +34,8 @@ def config_paths(package: Path, config_dir: Path, assets: Path) -> dict[str, str
 
 def write_config(config_dir: Path) -> Path:
     """Write ``config_dir/config.yaml`` and link LIBERO's ``assets`` to the registry tree; returns the config."""
+    from molmo_lerobot.content.libero.objects import assets_root
     from molmo_lerobot.fileio import atomic_write, symlink
-    from molmo_lerobot.libero.objects import assets_root
 
     package, assets = libero_package_dir(), assets_root()
     link = package / "assets"

@@ -2,10 +2,10 @@
 
 ``molmo-bench generate v2 --task open --houses 25 --episodes-per-house 4 --seed 0 --name open_v2``
 (and ``--task close``). The v1 open/close tasks
-(:mod:`molmo_lerobot.benchmark.generate_articulated`) in the v2 setting: per episode, a house with
+(:mod:`molmo_lerobot.content.articulated.generate`) in the v2 setting: per episode, a house with
 at least one joint the task may target (close: slide joints only, as v1), one joint of its fixture,
 the joint's start state in ``task.joint_start_position`` (closed for open; 95–100 % open for close),
-the robot's start pose (:data:`~molmo_lerobot.libero.episode_fields.READY_ARM`, small joint jitter),
+the robot's start pose (:data:`~molmo_lerobot.content.libero.episode_fields.READY_ARM`, small joint jitter),
 franka_droid with the DROID cameras (``cameras: []``, the camera system builds them). Episodes use
 MolmoSpaces' ``OpeningTask`` with ``task_type`` open/close and the v1 success threshold. Language
 names the fixture and its part from the metadata: "open the middle drawer of the yellow cabinet",
@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 
-from molmo_lerobot.benchmark.generate_articulated import CLOSE_KINDS, CLOSE_START, TASK_CLS, THRESHOLD
 from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
-from molmo_lerobot.libero.episode_fields import CAMERA_SYSTEM, episode_fields, start_arm
-from molmo_lerobot.libero.fixture_rooms import LiberoFixtureRooms
-from molmo_lerobot.libero.fixtures import LIBERO_FIXTURES
+from molmo_lerobot.content.articulated.generate import CLOSE_KINDS, CLOSE_START, TASK_CLS, THRESHOLD
+from molmo_lerobot.content.libero.episode_fields import CAMERA_SYSTEM, episode_fields, start_arm
+from molmo_lerobot.content.libero.fixture_rooms import LiberoFixtureRooms
+from molmo_lerobot.content.libero.fixtures import LIBERO_FIXTURES
 
 GENERATOR_VERSION = 2
 TASKS = ("open", "close")

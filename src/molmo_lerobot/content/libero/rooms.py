@@ -5,7 +5,7 @@ room, study) with its floor, wall and table-top textures and LIBERO's background
 (visual meshes only: kitchen cabinets and fridge, a wall unit, shelves, plants, lamps, pictures),
 a table (legs, or a counter block in kitchens) of realistic height and size, lights (a key light
 that casts shadows, a fill light), and its objects from the ``libero`` asset library
-(:mod:`molmo_lerobot.libero.objects`): graspable items no two of which share a name and colour (so
+(:mod:`molmo_lerobot.content.libero.objects`): graspable items no two of which share a name and colour (so
 "the red ketchup bottle" names one), two flat distractors and three receptacles (two of one kind in
 different colours, one of another kind). Every file is read in place from the installed LIBERO
 asset distributions.
@@ -33,9 +33,9 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.assets.libraries import AssetLibraryType
-from molmo_lerobot.libero import install_check
-from molmo_lerobot.libero.library import LIBERO_LIBRARY_TYPE
-from molmo_lerobot.libero.objects import LIBERO_OBJECTS, LiberoObject, assets_root, texture_file
+from molmo_lerobot.content.libero import install_check
+from molmo_lerobot.content.libero.library import LIBERO_LIBRARY_TYPE
+from molmo_lerobot.content.libero.objects import LIBERO_OBJECTS, LiberoObject, assets_root, texture_file
 from molmo_lerobot.sim.scenes import SceneDataset, attach_mjcf
 
 _SALT = 0x1B3A0
@@ -167,7 +167,7 @@ class LiberoRooms(SceneDataset):
     aliases = ()
 
     def install_problem(self) -> str | None:
-        """A broken file of the installed LIBERO asset library (:mod:`molmo_lerobot.libero.install_check`)."""
+        """A broken file of the installed LIBERO asset library (:mod:`molmo_lerobot.content.libero.install_check`)."""
         return install_check.install_problem()
 
     def n_houses(self) -> int:

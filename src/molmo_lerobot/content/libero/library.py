@@ -1,11 +1,11 @@
-"""The ``libero`` asset library: the LIBERO objects (:mod:`molmo_lerobot.libero.objects`) with
-the grasps computed from their collision geometry (:mod:`molmo_lerobot.libero.grasps`)."""
+"""The ``libero`` asset library: the LIBERO objects (:mod:`molmo_lerobot.content.libero.objects`) with
+the grasps computed from their collision geometry (:mod:`molmo_lerobot.content.libero.grasps`)."""
 
 from __future__ import annotations
 
 from molmo_lerobot.assets.libraries import AssetLibraryType, ObjectTableLibrary
-from molmo_lerobot.libero.grasps import LiberoGraspLibrary
-from molmo_lerobot.libero.objects import LIBERO_OBJECTS, object_metadata
+from molmo_lerobot.content.libero.grasps import LiberoGraspLibrary
+from molmo_lerobot.content.libero.objects import LIBERO_OBJECTS, object_metadata
 
 
 class LiberoAssetLibrary(ObjectTableLibrary):

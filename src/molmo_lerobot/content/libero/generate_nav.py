@@ -21,8 +21,8 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
-from molmo_lerobot.libero.nav_houses import NavHouses, display_name
-from molmo_lerobot.libero.objects import LIBERO_OBJECTS
+from molmo_lerobot.content.libero.nav_houses import NavHouses, display_name
+from molmo_lerobot.content.libero.objects import LIBERO_OBJECTS
 from molmo_lerobot.poses import yaw_quat
 from molmo_lerobot.robots.mobile_franka import MobileFranka
 from molmo_lerobot.sim.navigation import free_space, occupancy, path_lengths

@@ -6,7 +6,7 @@ high and 0.86–1.0 m wide, holds a door leaf on a latch-free hinge (damping and
 spring and no latch, range ``[0, DOOR_RANGE]`` with 0 closed and positive angles opening). The
 hinge is on either jamb and the door swings into either room; a vertical bar handle stands on each
 face, 0.95–1.05 m high, near the free edge. Floor, walls and door leaf are textured with the
-installed LIBERO textures (read in place, as :mod:`molmo_lerobot.libero.rooms` reads them).
+installed LIBERO textures (read in place, as :mod:`molmo_lerobot.content.libero.rooms` reads them).
 
 Body names, in MolmoSpaces' door layout (their ``Door`` data view reads the same tree): ``door``
 (the frame, static) → ``door/leaf`` (joint ``door/hinge``) → the handles ``door/handle_pos`` (on
@@ -28,8 +28,8 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.libero import install_check
-from molmo_lerobot.libero.objects import assets_root, texture_file
+from molmo_lerobot.content.libero import install_check
+from molmo_lerobot.content.libero.objects import assets_root, texture_file
 from molmo_lerobot.sim.scenes import SceneDataset
 
 _SALT = 0xD0025
@@ -105,7 +105,7 @@ class DoorRooms(SceneDataset):
     aliases = ()
 
     def install_problem(self) -> str | None:
-        """A broken file of the installed LIBERO asset library (:mod:`molmo_lerobot.libero.install_check`)."""
+        """A broken file of the installed LIBERO asset library (:mod:`molmo_lerobot.content.libero.install_check`)."""
         return install_check.install_problem()
 
     def n_houses(self) -> int:

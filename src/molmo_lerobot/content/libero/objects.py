@@ -14,7 +14,7 @@ by volume). Textures larger than :func:`texture_size` are read from a downscaled
 the cache dir (``$MOLMO_LEROBOT_HOME/libero_textures/<size>/``). The metadata document has
 MolmoSpaces' fields and the licence of the distribution that ships the object's files
 (``license``: SPDX expression, distribution, version, licence file), read from its dist-info.
-Grasps come from :mod:`molmo_lerobot.libero.grasps`.
+Grasps come from :mod:`molmo_lerobot.content.libero.grasps`.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """LIBERO's articulated fixtures in the textured rooms (``libero_fixture_rooms``), a scene plugin.
 
-House ``i`` is house ``i`` of ``libero_rooms`` (:mod:`molmo_lerobot.libero.rooms`: the same room, table,
+House ``i`` is house ``i`` of ``libero_rooms`` (:mod:`molmo_lerobot.content.libero.rooms`: the same room, table,
 decor and lights) with its loose objects replaced: one fixture of the ``libero_fixtures`` library
-(:mod:`molmo_lerobot.libero.fixtures`) stands on the table facing the robot, its closed handles
+(:mod:`molmo_lerobot.content.libero.fixtures`) stands on the table facing the robot, its closed handles
 :data:`FRONT` ahead of the base (an open drawer's handle then still lies where franka_droid reaches
 it with a level hand), and two of the house's own graspable objects stand at the table's sides as
 distractors, clear of the drawers' travel. Choices come from a random stream seeded by ``i`` alone.
@@ -22,8 +22,8 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.assets.libraries import AssetLibraryType
-from molmo_lerobot.libero.fixtures import FIXTURE_LIBRARY_TYPE, LIBERO_FIXTURES, LiberoFixture
-from molmo_lerobot.libero.rooms import TABLE_NEAR, LiberoRooms, referring_expression
+from molmo_lerobot.content.libero.fixtures import FIXTURE_LIBRARY_TYPE, LIBERO_FIXTURES, LiberoFixture
+from molmo_lerobot.content.libero.rooms import TABLE_NEAR, LiberoRooms, referring_expression
 from molmo_lerobot.sim.scenes import SceneDataset
 
 _SALT = 0xF1C57

@@ -2,12 +2,12 @@
 
 ``molmo-bench generate v2 --task pick --houses 20 --episodes-per-house 5 --seed 0 --name pick_v2``
 writes pick_v2. :data:`TASKS` maps each ``--task`` to its task type, horizon and episode function
-(``open`` / ``close``: :mod:`molmo_lerobot.libero.generate_articulated`).
+(``open`` / ``close``: :mod:`molmo_lerobot.content.libero.generate_articulated`).
 
 ``pick``: per episode a house, the object to pick (a graspable one), a collision-free layout of it and
 two or three of the house's other objects inside the robot's workspace (the rest stay where the house
 puts them, and the layout keeps clear of them too), the robot's start pose
-(:data:`~molmo_lerobot.libero.episode_fields.READY_ARM`, the gripper 0.27 m above the table pointing
+(:data:`~molmo_lerobot.content.libero.episode_fields.READY_ARM`, the gripper 0.27 m above the table pointing
 down, small joint jitter). The layout is then settled: the
 house (without the robot) is simulated for :data:`SETTLE_S` and the resting poses are what the episode
 records; a layout in which anything moved more than :data:`MAX_SETTLE_SHIFT` is drawn again.
@@ -15,7 +15,7 @@ records; a layout in which anything moved more than :data:`MAX_SETTLE_SHIFT` is 
 ``pick_and_place`` / ``next_to`` / ``color`` (task types ``pick_and_place``, ``pick_and_place_next_to``,
 ``pick_and_place_color``): the receptacle is one of the house's three (two of one category in different
 colours, one of another); the object to pick is a graspable one whose footprint passes the receptacle's
-rim (:attr:`~molmo_lerobot.libero.objects.LiberoObject.opening_radius`; any for ``next_to``). Laid out
+rim (:attr:`~molmo_lerobot.content.libero.objects.LiberoObject.opening_radius`; any for ``next_to``). Laid out
 in the workspace and settled as for ``pick``: the receptacle, for ``pick_and_place`` a second receptacle
 where it fits, for ``color`` the other receptacle of its pair (the two differ only in colour), the
 object (room for the open hand around it; for ``next_to`` at least :data:`NEXT_TO_START_GAP` from the
@@ -40,11 +40,11 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
-from molmo_lerobot.libero.episode_fields import CAMERA_SYSTEM, episode_fields, start_arm
-from molmo_lerobot.libero.generate_articulated import TASKS as ARTICULATED_TASKS
-from molmo_lerobot.libero.generate_articulated import generate_benchmark as generate_articulated
-from molmo_lerobot.libero.objects import LIBERO_OBJECTS
-from molmo_lerobot.libero.rooms import REGION_X, REGION_Y, LiberoRooms, resting_radius
+from molmo_lerobot.content.libero.episode_fields import CAMERA_SYSTEM, episode_fields, start_arm
+from molmo_lerobot.content.libero.generate_articulated import TASKS as ARTICULATED_TASKS
+from molmo_lerobot.content.libero.generate_articulated import generate_benchmark as generate_articulated
+from molmo_lerobot.content.libero.objects import LIBERO_OBJECTS
+from molmo_lerobot.content.libero.rooms import REGION_X, REGION_Y, LiberoRooms, resting_radius
 from molmo_lerobot.poses import yaw_quat
 from molmo_lerobot.sim.env import PHYSICS_OPTIONS
 
@@ -324,7 +324,7 @@ TASKS: dict[str, TaskKind] = {
 def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: int,
                        name: str) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Episodes (JSON-ready EpisodeSpec dicts) and metadata, fully determined by the arguments
-    (``open`` / ``close``: :mod:`molmo_lerobot.libero.generate_articulated`'s)."""
+    (``open`` / ``close``: :mod:`molmo_lerobot.content.libero.generate_articulated`'s)."""
     if task in ARTICULATED_TASKS:
         return generate_articulated(task, n_houses, episodes_per_house, seed, name)
     if task not in TASKS:

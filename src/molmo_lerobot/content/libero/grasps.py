@@ -253,7 +253,7 @@ def _collides(cloud: np.ndarray, T: np.ndarray, width: float, robot: str) -> boo
 
 def compute_grasps(uid: str, robot: str) -> np.ndarray:
     """Grasps ``(N, 4, 4)`` of libero object ``uid`` for ``robot``'s hand (module docstring)."""
-    from molmo_lerobot.libero.objects import LIBERO_OBJECTS
+    from molmo_lerobot.content.libero.objects import LIBERO_OBJECTS
 
     obj = LIBERO_OBJECTS[uid]
     hand_boxes(robot)  # an unknown robot fails here
@@ -290,7 +290,7 @@ class LiberoGraspLibrary(GraspLibrary):
         self.write_root = self.root if root else home_dir()  # no link below it is followed (fileio)
 
     def _ensure(self, uid: str, robot: str, joint: str | None) -> None:
-        from molmo_lerobot.libero.objects import LIBERO_OBJECTS
+        from molmo_lerobot.content.libero.objects import LIBERO_OBJECTS
 
         if joint is None and robot in GRIPPERS and uid in LIBERO_OBJECTS and super().path(uid, robot) is None:
             save_grasp_file(self.root / robot / f"{uid}.npz", compute_grasps(uid, robot), root=self.write_root)

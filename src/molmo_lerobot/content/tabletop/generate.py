@@ -26,9 +26,9 @@ from molmo_lerobot.assets.builtin import (
     BuiltinReceptacle,
 )
 from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
+from molmo_lerobot.content.tabletop.scene import ProceduralTabletop, ProceduralTabletopReceptacles
 from molmo_lerobot.poses import look_rotation, mat_to_quat, quat_mul, yaw_quat
 from molmo_lerobot.robots.franka import Franka
-from molmo_lerobot.sim.tabletop import ProceduralTabletop, ProceduralTabletopReceptacles
 
 GENERATOR_VERSION = 1
 TASK_CLS = {"pick": "molmo_lerobot.tasks.pick.PickTask",
@@ -272,8 +272,8 @@ def _place_episode(scene: ProceduralTabletop, house: int, index: int, seed: int,
 
 
 #: task families whose scenes and episodes another module generates (same signature)
-EXTERNAL_GENERATORS = {"open": "molmo_lerobot.benchmark.generate_articulated",
-                       "close": "molmo_lerobot.benchmark.generate_articulated"}
+EXTERNAL_GENERATORS = {"open": "molmo_lerobot.content.articulated.generate",
+                       "close": "molmo_lerobot.content.articulated.generate"}
 
 
 def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: int,

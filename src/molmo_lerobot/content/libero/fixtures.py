@@ -2,7 +2,7 @@
 
 The fixtures are read in place from ``articulated_objects/`` of the installed LIBERO asset
 distributions with :class:`mujoco.MjSpec` and normalised to the conventions of
-:mod:`molmo_lerobot.assets.articulated`:
+:mod:`molmo_lerobot.content.articulated.objects`:
 
 * every joint closes at ``q = 0``: its range becomes ``[0, open]`` (LIBERO's drawers run a centimetre
   past closed, ``[-0.16, 0.01]``; that centimetre is cut);
@@ -13,7 +13,7 @@ distributions with :class:`mujoco.MjSpec` and normalised to the conventions of
   parameters (LIBERO's ``solref 0.001`` is far below what a 2 ms step resolves); a body
   without an inertial takes its mass from its collision geoms only (visual meshes weigh nothing);
 * mesh and texture files are absolute paths into the package (textures downscaled as
-  :func:`~molmo_lerobot.libero.objects.texture_file` does).
+  :func:`~molmo_lerobot.content.libero.objects.texture_file` does).
 
 Each joint's handle is found from the geometry: the collision geom of the joint's moving body
 reaching farthest to the front (ties within :data:`_FRONT_TIE` broken by length across the
@@ -25,7 +25,7 @@ finger orientations; a horizontal bar within :data:`LOW_HANDLE` of the support i
 above its front instead (:data:`PITCHES`), since the lower finger of a level grasp would hit the
 support. The same poses serve ``franka`` and ``franka_droid`` (MolmoSpaces' unified TCP
 convention). The metadata records each fixture's licence from the distribution that ships its
-MJCF (:func:`~molmo_lerobot.libero.objects.license_of`).
+MJCF (:func:`~molmo_lerobot.content.libero.objects.license_of`).
 
 Not included: the stoves and faucets (knobs and levers are turned, not opened); the microwave
 (it loads and normalises, but the scripted expert opened it in 1 of 17 tries: its grip on the
@@ -47,7 +47,7 @@ import numpy as np
 
 from molmo_lerobot.assets.grasps import GraspLibrary
 from molmo_lerobot.assets.libraries import AssetError, AssetLibraryType, ObjectTableLibrary
-from molmo_lerobot.libero.objects import COLLISION_GROUP, PACKAGE, assets_root, license_of, texture_file
+from molmo_lerobot.content.libero.objects import COLLISION_GROUP, PACKAGE, assets_root, license_of, texture_file
 from molmo_lerobot.paths import home_dir
 
 #: robots whose grasp poses these are (one TCP convention)
@@ -73,7 +73,7 @@ class FixtureJoint:
 
 @dataclass(frozen=True)
 class JointInfo:
-    """A normalised joint (see :class:`molmo_lerobot.assets.articulated.JointInfo`): name, kind, child body,
+    """A normalised joint (see :class:`molmo_lerobot.content.articulated.objects.JointInfo`): name, kind, child body,
     open end, handle bar (centre in the body frame, axis ``x``/``z``, half length), label."""
 
     name: str

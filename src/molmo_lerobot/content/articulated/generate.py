@@ -16,11 +16,11 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from molmo_lerobot.assets.articulated import ARTICULATED_OBJECTS
-from molmo_lerobot.benchmark.generate import episode_base, tabletop_cameras
 from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
+from molmo_lerobot.content.articulated.objects import ARTICULATED_OBJECTS
+from molmo_lerobot.content.articulated.scene import ArticulatedTabletop
+from molmo_lerobot.content.tabletop.generate import episode_base, tabletop_cameras
 from molmo_lerobot.robots.franka import Franka
-from molmo_lerobot.sim.articulated import ArticulatedTabletop
 
 GENERATOR_VERSION = 1
 TASK_CLS = "molmo_spaces.tasks.opening_tasks.OpeningTask"

@@ -3,7 +3,7 @@ provides the library of its articulated objects (``articulated``).
 
 House ``i`` is drawn from a random stream seeded by ``i`` alone: table height and colours,
 one main articulated object (microwave, sliding cabinet, hinged cabinet or drawer chest from
-:mod:`molmo_lerobot.assets.articulated`) in front of the robot with its handles 0.62–0.68 m
+:mod:`molmo_lerobot.content.articulated.objects`) in front of the robot with its handles 0.62–0.68 m
 ahead, in half the houses a drawer chest beside it, and two built-in objects as
 distractors at the table's front corners, out of the doors' swing. The robot stands on a
 pedestal in front of the table, its base :data:`ROBOT_DROP` below the table top (the Franka
@@ -23,13 +23,13 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.assets.articulated import (
+from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
+from molmo_lerobot.assets.libraries import AssetLibraryType
+from molmo_lerobot.content.articulated.objects import (
     ARTICULATED_LIBRARY_TYPE,
     ARTICULATED_OBJECTS,
     ArticulatedObject,
 )
-from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
-from molmo_lerobot.assets.libraries import AssetLibraryType
 from molmo_lerobot.sim.scenes import SceneDataset, attach_mjcf, room_spec
 
 _SALT = 0xA471C

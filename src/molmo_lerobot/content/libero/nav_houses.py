@@ -6,7 +6,7 @@ doorway (:data:`DOOR_WIDTH` wide, a lintel above it) in the wall between them; f
 textures from LIBERO's scene textures; in every room two or three pieces of furniture standing
 against its walls, clear of the doorways (tables on legs, cabinets, sideboards, textured with
 LIBERO's wood and stone); and :data:`N_OBJECTS` of LIBERO's household objects
-(:mod:`molmo_lerobot.libero.objects`) standing upright on the furniture tops, from categories of
+(:mod:`molmo_lerobot.content.libero.objects`) standing upright on the furniture tops, from categories of
 which two have two instances each (in different rooms where the furniture allows), so that "any
 bowl" has candidates. Every file is read in place from the installed LIBERO asset distributions.
 
@@ -26,8 +26,8 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.libero import install_check
-from molmo_lerobot.libero.objects import LIBERO_OBJECTS, LiberoObject, assets_root, texture_file
+from molmo_lerobot.content.libero import install_check
+from molmo_lerobot.content.libero.objects import LIBERO_OBJECTS, LiberoObject, assets_root, texture_file
 from molmo_lerobot.sim.scenes import SceneDataset, attach_mjcf
 
 _SALT = 0x4E4156
@@ -186,7 +186,7 @@ class NavHouses(SceneDataset):
     name = "nav_houses"
 
     def install_problem(self) -> str | None:
-        """A broken file of the installed LIBERO asset library (:mod:`molmo_lerobot.libero.install_check`)."""
+        """A broken file of the installed LIBERO asset library (:mod:`molmo_lerobot.content.libero.install_check`)."""
         return install_check.install_problem()
 
     def n_houses(self) -> int:

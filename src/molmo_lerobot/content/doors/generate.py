@@ -22,12 +22,15 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot.benchmark.output import rounded
-from molmo_lerobot.doors.scenes import DOOR_NAME, DoorRooms, door_geometry
+from molmo_lerobot.content.doors.scenes import DOOR_NAME, DoorRooms, door_geometry
 from molmo_lerobot.poses import yaw_quat
 from molmo_lerobot.tasks.door_opening import DEFAULT_THRESHOLD, PULL_PROMPT, PUSH_PROMPT, is_pushing
 
 GENERATOR_VERSION = 1
 TASK_CLS = "molmo_spaces.tasks.opening_tasks.DoorOpeningTask"
+#: the generator's name in the metadata it writes: its module's path when door_v1 was published
+#: (``molmo_lerobot.doors.generate``), kept so that regenerating door_v1 gives the published bytes
+GENERATOR_ID = "molmo_lerobot.doors.generate"
 HORIZON_SEC = 40.0  # MolmoSpaces' door config: 400 steps at 100 ms
 ROBOT = "mobile_franka"
 IMG_RESOLUTION = (224, 224)
@@ -132,7 +135,7 @@ def generate_benchmark(n_houses: int, episodes_per_house: int, seed: int,
         "prompt_counts": {p: prompts.count(p) for p in sorted(set(prompts))},
         "robot_counts": {ROBOT: len(episodes)},
         "house_counts": {str(h): episodes_per_house for h in houses},
-        "generator": {"module": "molmo_lerobot.doors.generate", "n_houses": len(houses),
+        "generator": {"module": GENERATOR_ID, "n_houses": len(houses),
                       "episodes_per_house": episodes_per_house, "seed": seed, "version": GENERATOR_VERSION},
     }
     return episodes, metadata
