@@ -146,7 +146,7 @@ def load_suite_benchmark(config: RunConfig) -> SuiteBenchmark:
     """The suite's episodes for ``config``: its task catalogue (read from the suite's process), then
     ``episodes_per_task`` episodes per task with the run's seed, ``horizon`` overriding LeRobot's step limit."""
     options = suite_options(config)
-    kind_name, name = str(config.benchmark.suite), str(config.benchmark.name)
+    kind_name, name = str(config.benchmark.model_dump()["suite"]), str(config.benchmark.name)
     kind = SUITES[kind_name]
     suite = kind.open(options)
     try:

@@ -43,7 +43,7 @@ WORKSPACE = (0.0, 512.0)
 MOVE_GROUP = "agent"
 CAMERA = "image"
 #: LeRobot's ``pusht`` env kwargs besides the observation size (``PushtEnv.gym_kwargs``)
-_GYM_KWARGS = {"obs_type": "pixels_agent_pos", "render_mode": "rgb_array", "visualization_width": 384,
+_GYM_KWARGS: dict[str, Any] = {"obs_type": "pixels_agent_pos", "render_mode": "rgb_array", "visualization_width": 384,
                "visualization_height": 384}
 
 
