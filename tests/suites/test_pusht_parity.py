@@ -6,7 +6,8 @@ the benchmark's planned episodes (``load_suite_benchmark``) as plans, each a ``S
 processors that config gives, ``lerobot_eval.rollout`` with episode ``k`` seeded ``seed + k`` (``eval_policy``
 with ``--eval.batch_size=1``). For a seeded random policy and a fixed replay every episode must agree on success
 (any step's ``is_success`` up to the first done, ``eval_policy``'s rule) and step count, and bit for bit on every
-step's reward and on every observation the policy was shown (agent position, image). The default run plays
+step's reward (to 1e-12: gym_pusht's coverage varies in its last bit, see ``_compare``) and bit for bit on every
+observation the policy was shown (agent position, image). The default run plays
 short episodes; ``-m slow`` plays full-length ones (LeRobot's 300 steps).
 """
 
@@ -134,16 +135,23 @@ def our_episodes(policy: str, seed: int, episodes: int, horizon: int) -> list[di
 
 
 def _compare(policy: str, seed: int, episodes: int, horizon: int) -> list[tuple]:
+    """Both sides' episodes, checked equal; per episode (policy, seed, success, steps, best reward, steps whose
+    rewards are not bit-identical)."""
     theirs, ours = lerobot_episodes(policy, seed, episodes, horizon), our_episodes(policy, seed, episodes, horizon)
     assert len(theirs) == len(ours) == episodes
     for k, (t, o) in enumerate(zip(theirs, ours, strict=True)):
         where = f"{policy} episode {k} (seed {seed + k})"
         assert (o["success"], o["steps"]) == (t["success"], t["steps"]), where
-        assert o["rewards"] == t["rewards"], f"{where}: rewards differ"
+        assert o["rewards"] and len(o["rewards"]) == len(t["rewards"]), where
+        # to the last bit but one: gym_pusht builds the goal's shape from a Python set of the block's two shapes,
+        # whose order follows memory addresses, so even one env reset twice alike can differ there
+        assert np.allclose(o["rewards"], t["rewards"], rtol=0, atol=1e-12), f"{where}: rewards differ"
         assert len(o["shown"]) == len(t["shown"]) == o["steps"], where
         for step, (a, b) in enumerate(zip(o["shown"], t["shown"], strict=True)):
             assert a == b, f"{where}, step {step}: observation differs (state {a[0]} vs {b[0]})"
-    return [(policy, t["success"], t["steps"], max(t["rewards"])) for t in theirs]
+    return [(policy, seed + k, t["success"], t["steps"], round(max(t["rewards"]), 4),
+             sum(a != b for a, b in zip(o["rewards"], t["rewards"], strict=True)))
+            for k, (t, o) in enumerate(zip(theirs, ours, strict=True))]
 
 
 def test_pusht_constants_are_lerobots():
