@@ -171,5 +171,6 @@ def test_pusht_matches_lerobot_eval(policy):
 @pytest.mark.slow
 def test_pusht_matches_lerobot_eval_full_episodes():
     rows = [row for policy in POLICIES for row in _compare(policy, seed=0, episodes=10, horizon=pusht.MAX_STEPS)]
+    print("\npolicy seed success steps best_reward rewards_not_bit_identical")
     for row in rows:
         print(*row)
