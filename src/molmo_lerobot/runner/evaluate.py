@@ -299,8 +299,9 @@ def _suite_benchmark(config: RunConfig) -> SuiteBenchmark:
 def _suite_plan(index: int, episode: LiberoEpisode, horizon_from_cli: bool) -> EpisodePlan:
     """Episode ``index`` of an env-suite benchmark as a plan: its spec the episode's fields plus
     ``env_suite``, its seed and digest the episode's own, its task ``<suite>/task_<id>``."""
-    return EpisodePlan(index, {**asdict(episode), SUITE_KEY: SUITES[0]}, episode.seed, task_label(episode),
-                       episode.instruction, episode.horizon, "cli" if horizon_from_cli else "lerobot", episode.digest)
+    return EpisodePlan.of(index, {**asdict(episode), SUITE_KEY: SUITES[0]}, episode.seed, task_label(episode),
+                          episode.instruction, episode.horizon, "cli" if horizon_from_cli else "lerobot",
+                          episode.digest)
 
 
 def _run_info(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBenchmark,

@@ -172,11 +172,9 @@ class SuiteSession(EpisodeOutcome):
     def recorder_info(self, *, expert: bool, extra: dict[str, Any]) -> EpisodeInfo:
         from molmo_lerobot.recording import EpisodeInfo
 
-        plan = self.plan
-        return EpisodeInfo(episode_index=plan.episode_index, house_index=None, seed=plan.seed, prompt=plan.prompt,
-                           task_type=plan.task_type, fps=float(CONTROL_HZ), horizon=self.horizon,
-                           camera_names=list(_CAMERAS), img_resolution=(self.image_size, self.image_size),
-                           joint_names={}, move_groups=dict(self.env.move_groups), expert=expert,
+        return EpisodeInfo(identity=self.plan.identity, fps=float(CONTROL_HZ), camera_names=list(_CAMERAS),
+                           img_resolution=(self.image_size, self.image_size), joint_names={},
+                           move_groups=dict(self.env.move_groups), expert=expert,
                            extra={"suite": self.episode.suite, "task_id": self.episode.task_id,
                                   "init_state_index": self.episode.init_state_index, **extra})
 
