@@ -297,8 +297,9 @@ def _suite_benchmark(config: RunConfig) -> SuiteBenchmark:
 def _suite_plan(index: int, suite: str, episode: Any, horizon_from_cli: bool) -> EpisodePlan:
     """Episode ``index`` of env suite ``suite``'s benchmark as a plan: its spec the episode's fields plus
     ``env_suite``, its seed and digest the episode's own, its task the suite's label (``<suite>/task_<id>``)."""
-    return EpisodePlan(index, {**asdict(episode), SUITE_KEY: suite}, episode.seed, task_label(episode),
-                       episode.instruction, episode.horizon, "cli" if horizon_from_cli else "lerobot", episode.digest)
+    return EpisodePlan.of(index, {**asdict(episode), SUITE_KEY: suite}, episode.seed, task_label(episode),
+                          episode.instruction, episode.horizon, "cli" if horizon_from_cli else "lerobot",
+                          episode.digest)
 
 
 def _run_info(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBenchmark,

@@ -213,12 +213,10 @@ class SuiteSession(EpisodeOutcome):
     def recorder_info(self, *, expert: bool, extra: dict[str, Any]) -> EpisodeInfo:
         from molmo_lerobot.recording import EpisodeInfo
 
-        plan = self.plan
-        return EpisodeInfo(episode_index=plan.episode_index, house_index=None, seed=plan.seed, prompt=plan.prompt,
-                           task_type=plan.task_type, fps=float(self.kind.control_hz), horizon=self.horizon,
+        return EpisodeInfo(identity=self.plan.identity, fps=float(self.kind.control_hz),
                            camera_names=list(self.kind.cameras), img_resolution=(self.image_size, self.image_size),
                            joint_names={}, move_groups=dict(self.env.move_groups), expert=expert,
-                           extra={**self._identity(), **extra})
+                           extra={**self._suite_fields(), **extra})
 
     def observe(self, images: bool = True) -> Observation:
         return self.kind.observation({**self._obs, "task": self.plan.prompt}, self.steps)
@@ -245,9 +243,9 @@ class SuiteSession(EpisodeOutcome):
             success_once=self.success_once, steps=self.steps, seed=plan.seed, task_type=plan.task_type,
             prompt=plan.prompt, horizon=self.horizon,
             extra={"ended_by": self.ended_by or "horizon", "end_on_success": self.end_on_success,
-                   "success_any_step": self.success_any_step, **self._identity(), "digest": self.episode.digest})
+                   "success_any_step": self.success_any_step, **self._suite_fields(), "digest": self.episode.digest})
 
-    def _identity(self) -> dict[str, Any]:
+    def _suite_fields(self) -> dict[str, Any]:
         """Which of the suite's episodes this is, minus what the result holds anyway (seed, horizon, prompt):
         LIBERO's suite, task id and init state; PushT's suite and task."""
         return {k: v for k, v in asdict(self.episode).items() if k not in ("seed", "horizon", "instruction")}
