@@ -284,9 +284,9 @@ def _plan_run(planner: EpisodePlanner, indices: list[int]) -> tuple[dict[int, Ep
 
 def _suite_benchmark(config: RunConfig) -> SuiteBenchmark:
     """The run's env-suite benchmark, its options checked; what suite runs cannot do refused here."""
-    if config.record:
-        raise RunError(f"record=true: recording env-suite episodes (benchmark={config.benchmark.name}) is not "
-                       "supported yet; run without record")
+    if config.record_environment_state:
+        raise RunError(f"record_environment_state: env-suite episodes (benchmark={config.benchmark.name}) have no "
+                       "environment state; their recording has the suite's own dataset layout")
     if config.sample is not None:
         raise RunError(f"sample: not available for env-suite benchmarks (benchmark={config.benchmark.name}); "
                        "use limit= or episodes=")

@@ -34,6 +34,7 @@ from molmo_lerobot.suites.libero import (
     plan_episodes,
     policy_observation,
 )
+from molmo_lerobot.suites.libero_dataset import LiberoDatasetLayout
 
 if TYPE_CHECKING:
     from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
@@ -76,6 +77,12 @@ def suite_options(config: RunConfig) -> dict[str, Any]:
 def is_suite(config: RunConfig) -> bool:
     """Whether ``config.benchmark`` names an env-suite benchmark."""
     return bool(config.benchmark.model_dump().get("suite"))
+
+
+def recording_layout(config: RunConfig) -> LiberoDatasetLayout | None:
+    """The dataset schema ``record=true`` writes a suite run in (LeRobot's LIBERO datasets' layout, at the
+    run's ``image_size``); None for our own benchmarks, whose schema follows their robot and cameras."""
+    return LiberoDatasetLayout(suite_options(config)["image_size"]) if is_suite(config) else None
 
 
 @dataclass(frozen=True)
