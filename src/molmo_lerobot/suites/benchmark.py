@@ -80,9 +80,11 @@ def is_suite(config: RunConfig) -> bool:
 
 
 def recording_layout(config: RunConfig) -> LiberoDatasetLayout | None:
-    """The dataset schema ``record=true`` writes a suite run in (LeRobot's LIBERO datasets' layout, at the
-    run's ``image_size``); None for our own benchmarks, whose schema follows their robot and cameras."""
-    return LiberoDatasetLayout(suite_options(config)["image_size"]) if is_suite(config) else None
+    """The dataset schema ``record=true`` writes a LIBERO run in (LeRobot's LIBERO datasets' layout, at the
+    run's ``image_size``); None for other runs, whose schema follows each recording's first step."""
+    if config.benchmark.model_dump().get("suite") != "libero":
+        return None
+    return LiberoDatasetLayout(suite_options(config)["image_size"])
 
 
 @dataclass(frozen=True)
