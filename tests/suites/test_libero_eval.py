@@ -81,18 +81,19 @@ def _frames(root: Path) -> dict[int, tuple[np.ndarray, np.ndarray]]:
 
 @needs_libero
 @pytest.mark.slow
+@pytest.mark.timeout(3600)  # three runs of 3 LIBERO episodes: ~25 min on the loaded 2-core machine
 def test_libero_run_killed_with_sigkill_resumes_to_the_uninterrupted_run(tmp_path):
     """``molmo-eval … workers=2 record=true``, its whole process group (molmo-eval, its workers, their LIBERO
     processes) SIGKILLed once an episode is done, then ``resume=true``: per episode the same results, and the
     same recorded states and actions bit for bit, as the run never cut."""
-    args = [a for a in ARGS if a != "workers=1"] + ["workers=2", "limit=4", "record=true"]
+    args = [a for a in ARGS if a != "workers=1"] + ["workers=2", "limit=3", "record=true"]
     whole = run_evaluation(compose([*args, f"output_dir={tmp_path / 'whole'}"]))
 
     cut = tmp_path / "cut"
     with open(tmp_path / "cut.log", "w") as log:
         proc = subprocess.Popen([sys.executable, "-m", "molmo_lerobot.cli.eval", *args, f"output_dir={cut}"],
                                 stdout=log, stderr=log, start_new_session=True)  # its own process group
-    episodes, deadline = cut / "episodes.jsonl", time.monotonic() + 900
+    episodes, deadline = cut / "episodes.jsonl", time.monotonic() + 1200
     while proc.poll() is None and time.monotonic() < deadline and not (
             episodes.exists() and episodes.read_text().count("\n") >= 1):
         time.sleep(0.2)
@@ -105,7 +106,7 @@ def test_libero_run_killed_with_sigkill_resumes_to_the_uninterrupted_run(tmp_pat
         time.sleep(0.1)
     assert _group(proc.pid) == {}
     kept = episodes.read_text().splitlines()
-    assert 1 <= len(kept) < 4 and not (cut / "results.json").exists()
+    assert 1 <= len(kept) < 3 and not (cut / "results.json").exists()
 
     resumed = run_evaluation(compose([*args, "resume=true", f"output_dir={cut}"]))
 
@@ -113,9 +114,9 @@ def test_libero_run_killed_with_sigkill_resumes_to_the_uninterrupted_run(tmp_pat
         return [(r.episode_index, r.task_type, r.seed, r.success, r.steps, r.error, r.extra["digest"],
                  r.extra["ended_by"]) for r in res.episodes]
 
-    assert outcomes(resumed) == outcomes(whole) and len(whole.episodes) == 4
+    assert outcomes(resumed) == outcomes(whole) and len(whole.episodes) == 3
     ours, theirs = _frames(cut / "dataset"), _frames(tmp_path / "whole" / "dataset")
-    assert sorted(ours) == sorted(theirs) == [0, 1, 2, 3]
+    assert sorted(ours) == sorted(theirs) == [0, 1, 2]
     for i in ours:
         assert np.array_equal(ours[i][0], theirs[i][0]) and np.array_equal(ours[i][1], theirs[i][1]), i
 
