@@ -77,9 +77,8 @@ def test_recorder_env_and_policy_see_the_same_vector(genv, tmp_path):
     genv.step(genv.action_space.sample() * 0 + genv._obs(genv._episode.observe())["agent_pos"])  # hold: a later state
     obs = genv._episode.observe()
     ep = genv._episode
-    info = EpisodeInfo(episode_index=ep.plan.episode_index, house_index=0, seed=ep.plan.seed, prompt=ep.plan.prompt,
-                       task_type="pick",
-                       fps=15.0, horizon=4, camera_names=list(ep.env.camera_names), img_resolution=(224, 224),
+    info = EpisodeInfo(identity=ep.plan.identity, fps=15.0, camera_names=list(ep.env.camera_names),
+                       img_resolution=(224, 224),
                        joint_names=dict(ep.env.joint_names), move_groups=dict(ep.env.move_groups),
                        environment_state_names=ep.task.environment_state_names)
     layout = FrameLayout.from_step(info, obs, None)
