@@ -113,8 +113,8 @@ class Ramp(Policy):
 
 
 def _plan(index: int, episode: LiberoEpisode) -> EpisodePlan:
-    return EpisodePlan(index, {**asdict(episode), SUITE_KEY: "libero"}, episode.seed, task_label(episode),
-                       episode.instruction, episode.horizon, "cli", episode.digest)
+    return EpisodePlan.of(index, {**asdict(episode), SUITE_KEY: "libero"}, episode.seed, task_label(episode),
+                          episode.instruction, episode.horizon, "cli", episode.digest)
 
 
 def test_a_suite_recording_has_lerobots_libero_layout_and_merges_with_theirs(tmp_path):
@@ -202,3 +202,13 @@ def test_a_recorded_libero_run_merges_with_lerobots_libero_layout(tmp_path):
     assert ds[0]["task"] == res.episodes[0].prompt
     merged = merge_with_standin(root, tmp_path, standin_episodes=2, frames=4)
     assert merged.meta.total_episodes == 4 and merged.meta.total_frames == ds.meta.total_frames + 8
+
+
+def test_a_suite_without_a_recording_layout_refuses_record_up_front(tmp_path):
+    from molmo_lerobot.errors import RunError
+    from molmo_lerobot.runner.evaluate import run_evaluation
+
+    with pytest.raises(RunError, match=r"record=true: recording benchmark=pusht is not supported yet"):
+        run_evaluation(compose(["policy=random", "benchmark=pusht", "record=true", "limit=1", "progress=false",
+                                f"output_dir={tmp_path}"]))
+    assert not tmp_path.joinpath("episodes.jsonl").exists()
