@@ -12,7 +12,8 @@ by the next merge or resume (:func:`recover_dataset`); no work directory outlive
 Layout added to the LeRobot dataset root:
 
 Dataset episodes follow benchmark order (each worker shard holds consecutive episodes, so the
-merge only copies and concatenates, never re-encodes), and every frame carries ``eval.episode_index``.
+merge only copies and concatenates, never re-encodes), and every frame carries ``eval.episode_index``, but in an
+env suite's recording, whose schema is the suite's published datasets' (:mod:`molmo_lerobot.suites.libero_dataset`).
 
 * ``meta/eval/episodes.jsonl``: one record per attempted episode: ``episode_index`` (the
   dataset episode, or null when not stored, with ``not_recorded``), ``benchmark_episode_index``,
@@ -302,25 +303,34 @@ def _eval_records(results: list[EpisodeResult], dataset_index: dict[int, int], f
 
 
 def check_dataset(root: Path, results: list[EpisodeResult]) -> None:
-    """Raise :class:`ExportError` unless the stored episodes agree with the eval records and results."""
+    """Raise :class:`ExportError` unless the stored episodes agree with the eval records and results: their
+    lengths, and where the schema has them (not a suite's fixed layout) ``eval.episode_index`` and the final
+    ``next.done``/``next.success``."""
     import pyarrow.dataset as pads
 
     by_index = {r.episode_index: r for r in results}
     stored = {r["episode_index"]: r for r in read_eval_records(root) if r["episode_index"] is not None}
-    table = pads.dataset(str(root / "data"), format="parquet").to_table(
-        columns=["episode_index", "frame_index", "next.success", "next.done", EVAL_EPISODE_INDEX])
-    frames = table.to_pandas()
+    data = pads.dataset(str(root / "data"), format="parquet")
+    flags = EVAL_EPISODE_INDEX in data.schema.names
+    frames = data.to_table(columns=["episode_index", "frame_index",
+                                    *(["next.success", "next.done", EVAL_EPISODE_INDEX] if flags else [])]
+                           ).to_pandas()
     if set(frames["episode_index"].unique()) != set(stored):
         raise ExportError(f"{root}: data holds episodes {sorted(frames['episode_index'].unique())[:10]}…, "
                           f"meta/eval/episodes.jsonl maps {sorted(stored)[:10]}…")
     for ep, g in frames.groupby("episode_index"):
         rec = stored[int(ep)]
         res = by_index[rec["benchmark_episode_index"]]
+        length = rec.get("frames", res.steps)
+        if not flags:
+            if len(g) != length or length != res.steps:
+                raise ExportError(f"{root}: dataset episode {ep} (benchmark episode {res.episode_index}) has "
+                                  f"{len(g)} frames; the records say {length} frames of {res.steps} steps")
+            continue
         last = g.loc[g["frame_index"].idxmax()]
         if set(g[EVAL_EPISODE_INDEX]) != {res.episode_index}:
             raise ExportError(f"{root}: dataset episode {ep} holds {EVAL_EPISODE_INDEX} "
                               f"{sorted(set(g[EVAL_EPISODE_INDEX]))[:5]}, expected {res.episode_index}")
-        length = rec.get("frames", res.steps)
         held = length < res.steps  # an expert's recording ends at its success hold, its rollout goes on
         if (len(g) != length or length > res.steps or not bool(last["next.done"])
                 or (bool(last["next.success"]) != res.success if not held else not g["next.success"].any())):

@@ -9,6 +9,8 @@ An expert's episode (:attr:`EpisodeInfo.expert`) is recorded up to ``record_hold
 its first success, but at least ``record_min_frames`` frames (100: the action chunk of LeRobot's
 ACT and SmolVLA, so no demonstration is shorter than the chunk a policy trained on it predicts); the
 rollout itself, and so the score, runs on to the horizon either way.
+An env-suite run (``benchmark=libero_object``) records in the suite's fixed schema instead, LeRobot's LIBERO
+datasets' (:mod:`molmo_lerobot.suites.libero_dataset`), so that its dataset merges with theirs.
 ``finalize`` then merges the shards into ``output_dir/dataset`` with
 ``lerobot.datasets.aggregate.aggregate_datasets``, writes the eval records, the dataset card
 and ``results.json`` into it, and pushes to the Hub when ``push=true``.
@@ -21,17 +23,20 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot import fileio
 from molmo_lerobot.export.frames import FrameLayout
-from molmo_lerobot.export.merge import MergedDataset, merge_shards, stored_episodes
+from molmo_lerobot.export.merge import MergedDataset, dataset_fps, merge_shards, stored_episodes
 from molmo_lerobot.export.shards import SHARDS_DIR, shard_name, write_marker
 from molmo_lerobot.export.video import RecordingDataset, VideoSettings
 from molmo_lerobot.hookspecs import ConfigError
 from molmo_lerobot.recording import EpisodeInfo, Recorder, RecorderFactory
 from molmo_lerobot.results import EpisodeResult, Push, RunSummary
 from molmo_lerobot.run_config import RunConfig
+
+if TYPE_CHECKING:
+    from molmo_lerobot.suites.libero_dataset import LiberoDatasetLayout
 
 log = logging.getLogger(__name__)
 
@@ -79,6 +84,8 @@ class LeRobotRecorderFactory(MergedDataset, RecorderFactory):
     remote: str | None = None
     #: ... but an expert's recording keeps at least this many frames (the horizon permitting)
     min_frames: int = RunConfig.model_fields["record_min_frames"].default
+    #: an env suite's fixed schema (LeRobot's LIBERO datasets'); None: each shard's schema follows its first step
+    layout: LiberoDatasetLayout | None = None
 
     @classmethod
     def from_config(cls, cfg: RunConfig | dict[str, Any]) -> LeRobotRecorderFactory:
@@ -94,10 +101,20 @@ class LeRobotRecorderFactory(MergedDataset, RecorderFactory):
             validate_repo_id(repo_id)
         else:
             repo_id = f"local/{_slug(bench)}-{_slug(policy)}"
-        return cls(repo_id=repo_id, policy_dt_ms=float(run.timing.policy_dt_ms), benchmark=bench,
+        from molmo_lerobot.suites.benchmark import recording_layout
+
+        layout = recording_layout(run)
+        policy_dt_ms = 1000.0 / layout.step_hz if layout is not None else float(run.timing.policy_dt_ms)
+        return cls(repo_id=repo_id, policy_dt_ms=policy_dt_ms, benchmark=bench,
                    policy=policy, push=run.push, private=run.hub.private,
                    video=VideoSettings.from_config(run.video.model_dump()), hold_steps=run.record_hold_steps,
-                   dataset_id=dataset_id, store_root=store_root, remote=remote, min_frames=run.record_min_frames)
+                   dataset_id=dataset_id, store_root=store_root, remote=remote, min_frames=run.record_min_frames,
+                   layout=layout)
+
+    @property
+    def fps(self) -> int:
+        """The dataset's declared fps: the policy rate, or the suite layout's own (LIBERO's datasets say 10)."""
+        return self.layout.fps if self.layout is not None else dataset_fps(self.policy_dt_ms)
 
     def make(self, worker_id: str, output_dir: Path) -> LeRobotRecorder:
         return LeRobotRecorder(self, worker_id, Path(output_dir))
@@ -214,7 +231,7 @@ class LeRobotRecorder(Recorder):
         self.shards_dir = output_dir / SHARDS_DIR
         self._ds: Any = None
         self._root: Path | None = None
-        self._layout: FrameLayout | None = None
+        self._layout: FrameLayout | LiberoDatasetLayout | None = None
         self._seq = 0
         self._saved: list[dict[str, Any]] = []
         self._discarded: list[dict[str, Any]] = []
@@ -245,7 +262,7 @@ class LeRobotRecorder(Recorder):
             self._last = max(step + self.factory.hold_steps, self.factory.min_frames - 1)
         done = done or step == self._last
         if self._frames == 0:
-            layout = FrameLayout.from_step(info, obs, reward)
+            layout = self.factory.layout or FrameLayout.from_step(info, obs, reward)
             if self._ds is not None and layout != self._layout:
                 self._close_shard()  # cameras/joints changed: a dataset holds one schema
             if self._ds is None:
@@ -285,7 +302,7 @@ class LeRobotRecorder(Recorder):
         self._close_shard()
 
     # Shards ----------------------------------------------------------------------------
-    def _open_shard(self, layout: FrameLayout, horizon: int) -> None:
+    def _open_shard(self, layout: FrameLayout | LiberoDatasetLayout, horizon: int) -> None:
         fileio.make_dirs(self.shards_dir, root=self.shards_dir.parent)  # LeRobot makes the new shard in it
         root = self.shards_dir / shard_name(self.factory.session, self.worker_id, self._seq)
         while root.exists():  # never reuse a directory, whatever left it there

@@ -55,6 +55,7 @@ from molmo_lerobot.suites.benchmark import (
     SuiteBenchmarkError,
     is_suite,
     load_suite_benchmark,
+    recording_layout,
     task_label,
 )
 from molmo_lerobot.suites.pipe import SuiteError
@@ -282,13 +283,16 @@ def _plan_run(planner: EpisodePlanner, indices: list[int]) -> tuple[dict[int, Ep
 
 def _suite_benchmark(config: RunConfig) -> SuiteBenchmark:
     """The run's env-suite benchmark, its options checked; what suite runs cannot do refused here."""
-    if config.record:
-        raise RunError(f"record=true: recording env-suite episodes (benchmark={config.benchmark.name}) is not "
-                       "supported yet; run without record")
+    if config.record_environment_state:
+        raise RunError(f"record_environment_state: env-suite episodes (benchmark={config.benchmark.name}) have no "
+                       "environment state; their recording has the suite's own dataset layout")
     if config.sample is not None:
         raise RunError(f"sample: not available for env-suite benchmarks (benchmark={config.benchmark.name}); "
                        "use limit= or episodes=")
     try:
+        if config.record and recording_layout(config) is None:
+            raise RunError(f"record=true: recording benchmark={config.benchmark.name} is not supported yet "
+                           "(LIBERO runs record, in LeRobot's LIBERO layout); run without record")
         return load_suite_benchmark(config)
     except (SuiteBenchmarkError, InfrastructureError, SuiteError) as exc:
         raise RunError(str(exc)) from None

@@ -28,6 +28,7 @@ from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.hashing import content_sha256
 from molmo_lerobot.results import EpisodeOutcome
 from molmo_lerobot.suites import libero, pusht
+from molmo_lerobot.suites.libero_dataset import LiberoDatasetLayout
 
 if TYPE_CHECKING:
     from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
@@ -58,6 +59,9 @@ class SuiteKind:
     #: what the policy learns of the action (``EpisodeContext.extra``): ``delta_groups`` (LIBERO's delta-EEF
     #: command) or ``action_bounds`` (PushT's target position, within the workspace)
     action_extra: dict[str, Any]
+    #: the dataset layout ``record=true`` writes (``recording(options)``: LeRobot's LIBERO datasets' schema);
+    #: None: each recording's schema follows its first step
+    recording: Callable[[dict[str, Any]], Any] | None = None
 
 
 def _libero_label(episode: libero.LiberoEpisode) -> str:
@@ -71,7 +75,7 @@ SUITES: dict[str, SuiteKind] = {
         lambda o: libero.LiberoSuite(image_size=o["image_size"], hard_reset=o["hard_reset"]),
         _libero_label, libero.policy_observation, libero.MOVE_GROUP, libero.ACTION_DIM, libero.CONTROL_HZ,
         ("image", "image2"), {"episodes_per_task": 1, "image_size": libero.IMAGE_SIZE, "hard_reset": True},
-        {"delta_groups": [libero.MOVE_GROUP]}),
+        {"delta_groups": [libero.MOVE_GROUP]}, lambda o: LiberoDatasetLayout(o["image_size"])),
     "pusht": SuiteKind(
         pusht.PushTEpisode, pusht.plan_episodes, lambda o: pusht.PushTSuite(image_size=o["image_size"]),
         pusht.task_label, pusht.policy_observation, pusht.MOVE_GROUP, pusht.ACTION_DIM, pusht.CONTROL_HZ,
@@ -112,6 +116,15 @@ def suite_kind(config: RunConfig) -> SuiteKind:
 def is_suite(config: RunConfig) -> bool:
     """Whether ``config.benchmark`` names an env-suite benchmark."""
     return bool(config.benchmark.model_dump().get("suite"))
+
+
+def recording_layout(config: RunConfig) -> LiberoDatasetLayout | None:
+    """The dataset schema ``record=true`` writes a suite run in (LIBERO: LeRobot's LIBERO datasets' layout, at
+    the run's ``image_size``); None for other runs, whose schema follows each recording's first step."""
+    if not is_suite(config):
+        return None
+    kind = suite_kind(config)
+    return kind.recording(suite_options(config)) if kind.recording is not None else None
 
 
 @dataclass(frozen=True)

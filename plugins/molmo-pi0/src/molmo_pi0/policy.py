@@ -24,6 +24,8 @@ class Pi0Config(DroidConfig):
     model_config = ConfigDict(extra="forbid")
 
     name: str = "pi0"
+    #: the request's keys: openpi's DROID client's (droid.py) or its LIBERO client's (libero.py, policy=pi0_libero)
+    protocol: Literal["droid", "libero"] = "droid"
     host: str = "127.0.0.1"
     port: int | None = Field(default=8000, ge=0, le=65535)
     api_key: str | None = None
