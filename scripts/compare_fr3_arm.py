@@ -66,15 +66,15 @@ def main() -> None:
     parser.add_argument("benchmarks", nargs="*", default=BENCHMARKS)
     parser.add_argument("--limit", type=int, default=5)
     parser.add_argument("--workers", type=int, default=2)
-    args = parser.parse_args()
-    rows = ["| benchmark | episodes | franka_droid (Panda arm) | franka_droid_fr3 | per episode (Panda / FR3) "
-            "| flipped |", "|---|---|---|---|---|---|"]
+    args = parser.parse_intermixed_args()
+    table = ["| benchmark | episodes | franka_droid (Panda arm) | franka_droid_fr3 | per episode (Panda / FR3) "
+             "| flipped |", "|---|---|---|---|---|---|"]
     for name in args.benchmarks:
         old, new = (run(name, robot, args.out, args.limit, args.workers) for robot in ARMS)
-        flips = [str(i) for i, (a, b) in enumerate(zip(old, new, strict=True)) if a != b]
-        rows.append(f"| {name} | 0-{args.limit - 1} | {old.count('1')}/{args.limit} | {new.count('1')}/{args.limit} "
-                    f"| {''.join(old)} / {''.join(new)} | {', '.join(f'#{i}' for i in flips) or 'none'} |")
-        print("\n".join(rows), flush=True)
+        flips = [f"#{i}" for i, (a, b) in enumerate(zip(old, new, strict=True)) if a != b]
+        table.append(f"| {name} | 0-{args.limit - 1} | {old.count('1')}/{args.limit} | {new.count('1')}/{args.limit} "
+                     f"| {''.join(old)} / {''.join(new)} | {', '.join(flips) or 'none'} |")
+    print("\n".join(table))
 
 
 if __name__ == "__main__":
