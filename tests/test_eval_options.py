@@ -18,6 +18,7 @@ from molmo_lerobot.overrides import OverrideError
 from molmo_lerobot.overrides import molmo_episode_overrides as _override
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
+from molmo_lerobot.run_config import RunConfigError
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.runner.evaluate import run_evaluation
 from molmo_lerobot.sim.env import Timing
@@ -39,8 +40,8 @@ def custom_mjcf(tmp_path):
 
 
 def molmo_episode_overrides(episode, config):
-    """The built-in overrides of ``config`` (as plain data: the hook checks it itself) under a default run context."""
-    return _override(episode, config, RunContext.build())
+    """The built-in overrides under a run context of ``config`` (partial: the rest are RunConfig's defaults)."""
+    return _override(episode, RunContext.build(config))
 
 
 def _rows(out: Path) -> list[dict]:
@@ -67,9 +68,9 @@ def test_custom_object_replaces_the_target_keeping_its_pose(episode, custom_mjcf
 
 
 def test_custom_object_errors_are_clear(episode, tmp_path):
-    with pytest.raises(OverrideError, match=r"custom_object.path: no MJCF file"):
+    with pytest.raises(RunConfigError, match=r"custom_object.path: no MJCF file"):  # refused before any episode
         molmo_episode_overrides(episode, {"custom_object": {"path": str(tmp_path / "missing.xml")}})
-    with pytest.raises(OverrideError, match=r"camera.randomization must be 0-3, got 5"):
+    with pytest.raises(RunConfigError, match=r"camera.randomization: expected a level 0-3 \(0: off\), got 5"):
         molmo_episode_overrides(episode, {"camera": {"randomization": 5}})
     with pytest.raises(OverrideError, match=r"camera.overrides: no camera 'nope'"):
         molmo_episode_overrides(episode, {"camera": {"overrides": {"nope": {"fov": 10}}}})

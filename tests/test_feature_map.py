@@ -15,6 +15,7 @@ from molmo_lerobot.export.frames import FrameLayout
 from molmo_lerobot.features import ACTION, STATE, FeatureError, FeatureMap, image_feature
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.recording import EpisodeInfo
+from molmo_lerobot.results import EpisodeIdentity
 from molmo_lerobot.robots.franka_droid import FrankaDroid
 
 #: the cameras franka_droid's DROID camera system builds, in its order
@@ -48,8 +49,8 @@ def _action(fmap: FeatureMap, seed: int = 1) -> dict:
 
 
 def _info(fmap: FeatureMap, robot: str, steps: int = STEPS) -> EpisodeInfo:
-    return EpisodeInfo(episode_index=0, house_index=0, seed=7, prompt="pick up the mug", task_type="pick", fps=15.0,
-                       horizon=steps, camera_names=[c for c, _, _ in fmap.cameras],
+    return EpisodeInfo(identity=EpisodeIdentity(0, 7, "pick", "pick up the mug", steps, "cli", "", house_index=0),
+                       fps=15.0, camera_names=[c for c, _, _ in fmap.cameras],
                        img_resolution=(fmap.cameras[0][2], fmap.cameras[0][1]),
                        joint_names={g: list(n) for g, n in MobileRobot.joint_names.items()} if robot == MobileRobot.name
                        else dict(FrankaDroid.joint_names),

@@ -11,12 +11,7 @@ from __future__ import annotations
 import grimp
 
 #: circles not yet broken, each as its set of modules (``molmo_lerobot.`` left out)
-KNOWN: list[frozenset[str]] = [
-    # the library types take the catalog their libraries join (TYPE_CHECKING), the catalog makes them
-    frozenset({"assets.catalog", "assets.grasps", "assets.libraries"}),
-    # merging the shards takes the recorder factory (TYPE_CHECKING); the recorder merges
-    frozenset({"export.merge", "export.recorder"}),
-]
+KNOWN: list[frozenset[str]] = []
 
 
 def import_circles(graph: grimp.ImportGraph, package: str = "molmo_lerobot") -> list[frozenset[str]]:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from molmo_lerobot.cli.eval import main
+from eval_runs import evaluate, molmo_eval, refusal
 from test_plugins import IMPOSTOR, write_dist
 
 FAST = ["policy=random", "limit=2", "horizon=3", "workers=1", "progress=false"]
@@ -51,43 +51,39 @@ def _episodes(run: Path) -> list[dict]:
     return [{k: r[k] for k in ("episode_index", "success", "steps", "seed", "error")} for r in rows]
 
 
-def test_a_clash_fails_the_run_naming_both_and_a_pin_runs_on_the_chosen_provider(install, tmp_path, monkeypatch,
-                                                                                   capsys):
+def test_a_clash_fails_the_run_naming_both_and_a_pin_runs_on_the_chosen_provider(install, tmp_path, monkeypatch):
     install(write_dist(tmp_path / "site", "impostor-bots", {"impostor_bots": IMPOSTOR},
                        {"impostor_franka": "impostor_bots"}), "impostor_bots")
     marker = tmp_path / "impostor-built"
     monkeypatch.setenv("IMPOSTOR_MARKER", str(marker))
 
-    assert main([*FAST, f"output_dir={tmp_path / 'clash'}"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1, err
-    assert err.startswith("molmo-eval: error: robot 'franka' is provided by plugin 'franka' (molmo-lerobot ")
+    [err] = refusal(*FAST, f"output_dir={tmp_path / 'clash'}")
+    assert err.startswith("robot 'franka' is provided by plugin 'franka' (molmo-lerobot ")
     assert "plugin 'impostor_franka' (impostor-bots 0.1)" in err
     assert not (tmp_path / "clash" / "results.json").exists() and not marker.exists()
 
     out = tmp_path / "pinned"
-    assert main([*FAST, "plugins.prefer.robot.franka=impostor_franka", f"output_dir={out}"]) == 0
+    evaluate(*FAST, "plugins.prefer.robot.franka=impostor_franka", f"output_dir={out}")
     summary = json.loads((out / "results.json").read_text())
     assert (summary["n_episodes"], summary["n_errors"]) == (2, 0)
     assert summary["eval_options"]["plugins_prefer"] == {"robot": {"franka": "impostor_franka"}}  # provenance
-    capsys.readouterr()
-    assert main([*FAST, "plugins.prefer.robot.franka=franka", f"output_dir={out}", "resume=true"]) == 2
-    assert "its eval_options differs" in capsys.readouterr().err  # never mixes providers in one run
+    assert "its eval_options differs" in "\n".join(  # never mixes providers in one run
+        refusal(*FAST, "plugins.prefer.robot.franka=franka", f"output_dir={out}", "resume=true"))
     built_in = {int(pid) for pid in marker.read_text().split()}
     assert built_in and os.getpid() not in built_in  # the workers built the pinned impostor
 
-    assert main([*FAST, "plugins.prefer.robot.franka=franka", f"output_dir={tmp_path / 'builtin'}"]) == 0
+    evaluate(*FAST, "plugins.prefer.robot.franka=franka", f"output_dir={tmp_path / 'builtin'}")
     assert {int(pid) for pid in marker.read_text().split()} == built_in  # the built-in never touches it
 
 
 def test_broken_recorder_and_override_plugins_leave_other_runs_untouched(install, tmp_path, capsys):
-    assert main([*FAST, f"output_dir={tmp_path / 'clean'}"]) == 0
+    evaluate(*FAST, f"output_dir={tmp_path / 'clean'}")
     install(write_dist(tmp_path / "site", "broken-hooks",
                        {"broken_recorder": BROKEN_RECORDER, "broken_override": BROKEN_OVERRIDE},
                        {"bad_recorder": "broken_recorder", "bad_override": "broken_override"}),
             "broken_recorder", "broken_override")
     capsys.readouterr()
-    assert main([*FAST, f"output_dir={tmp_path / 'with_broken'}"]) == 0
+    evaluate(*FAST, f"output_dir={tmp_path / 'with_broken'}")
     err = capsys.readouterr().err
     assert "plugin 'bad_recorder' (broken-hooks 0.1) is broken and was skipped: molmo_recorders() failed: " \
            "AttributeError: module 'lerobot' has no attribute 'OldRecorderApi'" in err
@@ -97,45 +93,38 @@ def test_broken_recorder_and_override_plugins_leave_other_runs_untouched(install
     assert all(e["error"] is None for e in _episodes(tmp_path / "with_broken"))
 
 
-def test_a_sweep_writes_one_complete_run_per_job(tmp_path, capsys):
+def test_a_sweep_writes_one_complete_run_per_job_and_a_failing_job_does_not_stop_the_others(tmp_path):
     sweep = tmp_path / "sweep"
-    assert main(["-m", "policy=random,scripted", "limit=2", "horizon=3", "workers=1", "progress=false",
-                 f"hydra.sweep.dir={sweep}"]) == 0
-    out = capsys.readouterr()
-    assert "Launching 2 jobs locally" in out.err
-    jobs = sorted(p.name for p in sweep.iterdir() if p.is_dir())
-    assert jobs == ["0-random-pick_v1", "1-scripted-pick_v1"]
+    proc = molmo_eval("-m", "workers=0,1", "policy=random,scripted", "limit=2", "horizon=3", "progress=false",
+                      f"hydra.sweep.dir={sweep}")
+    assert proc.returncode == 2 and "Launching 4 jobs locally" in proc.stderr
+    assert proc.stderr.count("molmo-eval: error: workers must be at least 1, got 0") == 2
+    jobs = sorted(p.parent.name for p in sweep.glob("*/results.json"))
+    assert jobs == ["2-random-pick_v1", "3-scripted-pick_v1"]  # the refused jobs have no run
     for job, policy in zip(jobs, ("random", "scripted"), strict=True):
         summary = json.loads((sweep / job / "results.json").read_text())
         assert (summary["policy"]["name"], summary["n_episodes"]) == (policy, 2)
-        assert len(_episodes(sweep / job)) == 2 and f"outputs: {sweep / job}" in out.out
+        assert len(_episodes(sweep / job)) == 2 and f"outputs: {sweep / job}" in proc.stdout
     assert (sweep / "multirun.yaml").is_file()
-
-
-def test_a_sweep_job_that_fails_does_not_stop_the_others(tmp_path, capsys):
-    sweep = tmp_path / "sweep"
-    assert main(["-m", "workers=0,1", *FAST[:3], "progress=false", f"hydra.sweep.dir={sweep}"]) == 2
-    out = capsys.readouterr()
-    assert "workers must be at least 1, got 0" in out.err
-    assert json.loads((sweep / "1-random-pick_v1" / "results.json").read_text())["n_episodes"] == 2
     # the sweep ends with one table of its jobs (each job's own summary scrolled by above it)
-    table = out.out.strip().splitlines()[-4:]
-    assert table[0] == "sweep: 2 jobs"
+    table = proc.stdout.strip().splitlines()[-6:]
+    assert table[0] == "sweep: 4 jobs"
     assert table[1].split() == ["job", "policy", "benchmark", "success", "exit", "outputs"]
     assert table[2].split()[:4] == ["0", "random", "pick_v1", "error:"] and table[2].split()[-2:] == ["2", "-"]
-    assert table[3].split()[:3] == ["1", "random", "pick_v1"] and table[3].split()[-2:] == [
-        "0", str(sweep / "1-random-pick_v1")]
+    assert table[4].split()[:3] == ["2", "random", "pick_v1"] and table[4].split()[-2:] == [
+        "0", str(sweep / "2-random-pick_v1")]
 
 
-def test_a_single_run_writes_nothing_but_its_output_dir(tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    assert main([*FAST, "output_dir=out"]) == 0
+def test_a_single_run_writes_nothing_but_its_output_dir(tmp_path):
+    proc = molmo_eval(*FAST, "output_dir=out", cwd=tmp_path)
+    assert proc.returncode == 0 and proc.stdout.endswith("outputs: out\n"), proc.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 
-def test_help_is_hydras_app_help_with_every_config_group(capsys):
-    assert main(["--help"]) == 0
-    out = capsys.readouterr().out
+def test_help_is_hydras_app_help_with_every_config_group():
+    proc = molmo_eval("--help")
+    assert proc.returncode == 0, proc.stderr
+    out = proc.stdout
     assert out.startswith("usage: molmo-eval [-m]")
     listing = out.split("== Config groups ==")[1].split("==")[0].strip()
     groups = dict(line.split(": ", 1) for line in listing.splitlines())

@@ -75,7 +75,7 @@ def test_policy_interface_mapping_example_composes():
 def test_policy_interface_facts_match_the_code():
     """The numbers the README states: rate, dataset fps, Franka move groups and names, benchmark cameras."""
     from molmo_lerobot.benchmark.load import load_benchmark
-    from molmo_lerobot.export.recorder import dataset_fps
+    from molmo_lerobot.export.merge import dataset_fps
     from molmo_lerobot.paths import data_path
     from molmo_lerobot.plugins import Plugins
     from molmo_lerobot.sim.env import Timing

@@ -21,7 +21,7 @@ from hydra.core.config_search_path import ConfigSearchPath
 from hydra.core.config_store import ConfigStore
 from hydra.core.global_hydra import GlobalHydra
 from hydra.core.plugins import Plugins as HydraPlugins
-from hydra.errors import HydraException
+from hydra.errors import HydraException, OverrideParseException
 from hydra.plugins.search_path_plugin import SearchPathPlugin
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
@@ -121,7 +121,10 @@ def compose(overrides: list[str], config_name: str = "eval") -> DictConfig:
 def config_message(exc: BaseException) -> str:
     """Hydra's message for a bad override or config: a did-you-mean for an unknown group
     option, one line for an unknown key of the run config's schema, otherwise Hydra's full
-    text (with its ``+key=value`` hint and the cause)."""
+    text (with its ``+key=value`` hint and the cause); one line that says how to quote for an
+    override its grammar cannot parse."""
+    if isinstance(exc, OverrideParseException):
+        return _override_message(exc.override, exc.message)
     text = str(exc).strip()
     unknown = re.fullmatch(r"Could not override '([^']+)'\.\nTo append to your config use (\S+)", text)
     if unknown and "is not in struct" in str(exc.__cause__):
@@ -160,3 +163,17 @@ def _unknown_key_message(key: str, append: str) -> str | None:
     if closed:
         return f"Could not override {key!r}: {section} has no key {name!r}" + (hint or f" (known: {', '.join(keys)})")
     return f"Could not override {key!r}: no such key{hint} (a plugin's own key is added with {append})"
+
+
+def _override_message(override: str, message: str) -> str:
+    """One line for an override Hydra's grammar cannot parse; says how to quote a value that needs it."""
+    lines = [line for line in message.splitlines() if not line.startswith("See https://")]
+    detail = lines[0].split(": ", 1)[-1] if lines else "syntax error"
+    if len(lines) > 1 and lines[0].startswith("LexerNoViableAltException"):  # Hydra points at the character
+        at = len(lines[1]) - len(lines[1].lstrip()) - lines[0].rfind(override)
+        detail = f"{override[at]!r} is not allowed there" if 0 <= at < len(override) else "a character is not allowed"
+        key, sep, value = override.partition("=")
+        if sep and len(key) < at < len(override) and not {"'", '"'} & set(value):
+            return (f"cannot parse override {override!r}: {override[at]!r} is allowed only in a quoted value; "
+                    f"quote it, e.g. molmo-eval '{key}=\"{value}\"'")
+    return f"cannot parse override {override!r}: {detail} (grammar: https://hydra.cc/docs/advanced/override_grammar/basic)"

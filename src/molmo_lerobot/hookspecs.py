@@ -27,8 +27,7 @@ import pluggy
 from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:
-    from molmo_lerobot.assets.grasps import GraspLibraryType
-    from molmo_lerobot.assets.libraries import AssetLibraryType
+    from molmo_lerobot.assets.catalog import AssetLibraryType, GraspLibraryType
     from molmo_lerobot.benchmark.packs import BenchmarkDir
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.cameras.base import CameraSystem
@@ -81,7 +80,7 @@ def molmo_scene_datasets() -> list[SceneDataset]:
 def molmo_asset_libraries() -> list[AssetLibraryType]:
     """Asset library types: every run's asset catalog holds the libraries of each.
 
-    An :class:`~molmo_lerobot.assets.libraries.AssetLibraryType` has a ``name`` (``aliases``),
+    An :class:`~molmo_lerobot.assets.catalog.AssetLibraryType` has a ``name`` (``aliases``),
     a lookup ``priority`` and ``make(settings, catalog)``: its libraries for a run, made from
     the run's MolmoSpaces settings (e.g. MolmoSpaces' ``thor`` over its assets dir, or one
     library per ``asset_libraries`` entry of the config).
@@ -92,7 +91,7 @@ def molmo_asset_libraries() -> list[AssetLibraryType]:
 def molmo_grasp_libraries() -> list[GraspLibraryType]:
     """Grasp library types beyond the grasps an asset library ships with (MolmoSpaces' ``droid``).
 
-    A :class:`~molmo_lerobot.assets.grasps.GraspLibraryType` is an asset library type's
+    A :class:`~molmo_lerobot.assets.catalog.GraspLibraryType` is an asset library type's
     counterpart; ``make(settings, catalog)`` gives ``(grasp library, asset library name)`` pairs.
     """
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from functools import cache
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
@@ -35,6 +35,7 @@ from molmo_lerobot.hashing import episode_digest
 
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetCatalog
+    from molmo_lerobot.context import RunContext
 
 #: per randomization level: position (m), direction (deg), fov (deg), wrist offset (m) jitter
 CAMERA_JITTER = {"pos": 0.02, "dir_deg": 2.0, "fov_deg": 2.0, "offset": 0.005}
@@ -46,36 +47,33 @@ class OverrideError(MolmoError, ValueError):
 
 
 @hookimpl
-def molmo_episode_overrides(episode: EpisodeSpec, config: Any, context: Any) -> EpisodeSpec | None:
-    cfg = config if isinstance(config, dict) else {}
+def molmo_episode_overrides(episode: EpisodeSpec, context: RunContext) -> EpisodeSpec | None:
+    """The run's options (``context.config``, validated, with :class:`~molmo_lerobot.run_config.RunConfig`'s
+    defaults) applied to ``episode``; ``None`` where none changes it."""
+    run = context.config
     data = episode.model_dump(mode="json")
-    identity = episode_digest(episode)
     changed = False
-    custom = cfg.get("custom_object") or {}
-    if custom.get("path"):
-        _swap_target(data, episode, Path(custom["path"]).expanduser(), custom.get("name") or "custom_object",
-                     custom.get("description"), context.catalog)
+    if run.custom_object.path:
+        _swap_target(data, episode, Path(run.custom_object.path).expanduser(), run.custom_object.name,
+                     run.custom_object.description, context.catalog)
         changed = True
-    base_size = (cfg.get("robot") or {}).get("base_size", "default")
-    if base_size != "default":
-        data["robot"]["base_size"] = base_size
+    if run.robot.base_size != "default":
+        data["robot"]["base_size"] = run.robot.base_size
         changed = True
-    camera = cfg.get("camera") or {}
-    for name, fields in (camera.get("overrides") or {}).items():
+    for name, fields in run.camera.overrides.items():
         cams = [c for c in data["cameras"] if c["name"] == name]
         if not cams:
             raise OverrideError(f"camera.overrides: no camera {name!r} in the episode "
                                 f"(cameras: {', '.join(c['name'] for c in data['cameras'])})")
         cams[0].update(fields)
         changed = True
-    if run_camera_system(camera) in EVAL_NAMES and tuple(data["img_resolution"]) != EVAL_IMG_RESOLUTION:
+    if (run_camera_system(run.camera.model_dump()) in EVAL_NAMES
+            and tuple(data["img_resolution"]) != EVAL_IMG_RESOLUTION):
         data["img_resolution"] = list(EVAL_IMG_RESOLUTION)
         changed = True
-    level = int(camera.get("randomization") or 0)
-    if level:
-        if not 0 <= level <= 3:
-            raise OverrideError(f"camera.randomization must be 0-3, got {level}")
-        _jitter_cameras(data["cameras"], level, np.random.default_rng(list(identity[:16])))
+    if run.camera.randomization:  # 1-3 (RunConfig checks the level)
+        rng = np.random.default_rng(list(episode_digest(episode)[:16]))
+        _jitter_cameras(data["cameras"], run.camera.randomization, rng)
         changed = True
     return episode.edited(data) if changed else None
 
@@ -98,8 +96,6 @@ def _bottom_offset(path: str) -> float:
 
 def _swap_target(data: dict, episode: EpisodeSpec, path: Path, name: str, description: str | None,
                  catalog: AssetCatalog) -> None:
-    if not path.is_file():
-        raise OverrideError(f"custom_object.path: no MJCF file at {path}")
     task = data["task"]
     field = next((f for f in TARGET_FIELDS if task.get(f)), None)
     if field is None:

@@ -31,8 +31,7 @@ from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.hookspecs import ConfigError
 
 if TYPE_CHECKING:
-    from molmo_lerobot.assets.grasps import GraspLibraryType
-    from molmo_lerobot.assets.libraries import AssetLibraryType
+    from molmo_lerobot.assets.catalog import AssetLibraryType, GraspLibraryType
     from molmo_lerobot.benchmark.packs import BenchmarkDir
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.cameras.base import CameraSystem

@@ -23,22 +23,18 @@ from molmo_lerobot.errors import describe
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetCatalog
     from molmo_lerobot.policies.base import Action, Observation
-    from molmo_lerobot.results import EpisodeResult, RunSummary, SummaryPiece
+    from molmo_lerobot.results import EpisodeIdentity, EpisodeResult, RunSummary, SummaryPiece
 
 log = logging.getLogger(__name__)
 
 
 @dataclass
 class EpisodeInfo:
-    """What a recorder learns when an episode starts."""
+    """What a recorder learns when an episode starts: the episode's identity (its plan's) and how it
+    is recorded."""
 
-    episode_index: int
-    house_index: int | None
-    seed: int
-    prompt: str
-    task_type: str
+    identity: EpisodeIdentity
     fps: float
-    horizon: int
     camera_names: list[str]
     img_resolution: tuple[int, int]  # (width, height)
     joint_names: dict[str, list[str]]
@@ -50,6 +46,31 @@ class EpisodeInfo:
     environment_state_names: tuple[str, ...] = ()
     #: the run's asset catalog (annotations of the scene's objects), where the worker has one
     catalog: AssetCatalog | None = None
+
+    @property
+    def episode_index(self) -> int:
+        return self.identity.episode_index
+
+    @property
+    def house_index(self) -> int | None:
+        return self.identity.house_index
+
+    @property
+    def seed(self) -> int:
+        return self.identity.seed
+
+    @property
+    def prompt(self) -> str:
+        return self.identity.prompt
+
+    @property
+    def task_type(self) -> str:
+        return self.identity.task_type
+
+    @property
+    def horizon(self) -> int:
+        """Policy steps (an episode that runs always has them)."""
+        return int(self.identity.horizon or 0)
 
 
 class Recorder(ABC):

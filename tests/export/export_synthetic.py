@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from molmo_lerobot.recording import EpisodeInfo
-from molmo_lerobot.results import EpisodeResult, RunSummary, summarize
+from molmo_lerobot.results import EpisodeIdentity, EpisodeResult, RunSummary, summarize
 
 CAMS = ["exo", "wrist"]
 W, H = 32, 24
@@ -14,8 +14,9 @@ JOINTS = {"arm": ["j1", "j2", "j3"], "gripper": ["finger_left", "finger_right"]}
 
 
 def info(index: int, steps: int, prompt: str = "pick up the mug", expert: bool = False) -> EpisodeInfo:
-    return EpisodeInfo(episode_index=index, house_index=index % 3, seed=1000 + index, prompt=prompt,
-                       task_type="pick", fps=1000 / 66, horizon=steps, camera_names=list(CAMS),
+    return EpisodeInfo(identity=EpisodeIdentity(index, 1000 + index, "pick", prompt, steps, "cli", "",
+                                                house_index=index % 3),
+                       fps=1000 / 66, camera_names=list(CAMS),
                        img_resolution=(W, H), joint_names=dict(JOINTS), move_groups=dict(MOVE_GROUPS),
                        expert=expert, extra={"robot": "synth_arm"})
 

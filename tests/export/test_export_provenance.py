@@ -10,7 +10,6 @@ in-place edit. The README's "After lerobot-edit-dataset" section says the same.
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 
 import export_synthetic as S  # tests/export is on sys.path (pytest's prepend import mode)
@@ -36,11 +35,14 @@ def recorded(tmp_path_factory):
     return out / "dataset", factory.repo_id
 
 
-def _edit(*args: str) -> subprocess.CompletedProcess:
-    proc = subprocess.run([sys.executable, "-m", "lerobot.scripts.lerobot_edit_dataset", *args],
-                          capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return proc
+def _edit(*args: str) -> None:
+    """``lerobot-edit-dataset *args``: LeRobot's command, run in this process (its own argument parsing and
+    handlers; a fresh interpreter would only re-import LeRobot)."""
+    from lerobot.scripts.lerobot_edit_dataset import edit_dataset
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(sys, "argv", ["lerobot-edit-dataset", *args])
+        edit_dataset()
 
 
 def _provenance(root) -> list[tuple[int, int]]:

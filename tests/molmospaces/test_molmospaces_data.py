@@ -180,17 +180,15 @@ def test_bad_library_indexes_name_file_and_field(assets, tmp_path, edit, error, 
         register_user_grasp_library(cat, "custom_grasps", lib, "custom_assets")
 
 
-def test_malformed_grasps_index_in_a_run_is_one_line(assets, tmp_path, capsys):
-    from molmo_lerobot.cli.eval import main
+def test_malformed_grasps_index_in_a_run_is_one_line(assets, tmp_path):
+    from eval_runs import refusal
 
     lib = write_user_library(tmp_path)
     (lib / "grasps_index.json").write_text("{not json")
     bench = _write_bench(tmp_path / "b", [user_pick_episode()])
-    rc = main([f"benchmark.path={bench}", "workers=1", f"output_dir={tmp_path / 'run'}", "progress=false",
-               f"scene_xml_paths=[{tmp_path / 'scene.xml'}]", f"+asset_libraries.custom_assets={lib}",
-               f"+grasp_libraries.custom_grasps={{path: {lib}, asset_library: custom_assets}}"])
-    err = capsys.readouterr().err.strip()
-    assert rc != 0 and len(err.splitlines()) == 1
+    [err] = refusal(f"benchmark.path={bench}", "workers=1", f"output_dir={tmp_path / 'run'}", "progress=false",
+                    f"scene_xml_paths=[{tmp_path / 'scene.xml'}]", f"+asset_libraries.custom_assets={lib}",
+                    f"+grasp_libraries.custom_grasps={{path: {lib}, asset_library: custom_assets}}")
     assert "grasp_libraries.custom_grasps:" in err and "grasps_index.json: invalid JSON" in err
     assert not (tmp_path / "run" / "results.json").exists()
 
@@ -244,14 +242,12 @@ def test_house_index_beyond_scene_xml_paths_fails_up_front(assets, tmp_path):
 
 
 def test_missing_scene_assets_fail_up_front_and_still_validate(assets, tmp_path, monkeypatch, capsys):
-    from molmo_lerobot.cli.eval import main
+    from eval_runs import refusal
 
     _, houses = assets
     bench = _write_bench(tmp_path / "b", [pick_episode(h) for h in houses[:3]])
     monkeypatch.setenv("MLSPACES_ASSETS_DIR", str(tmp_path / "empty"))
-    rc = main([f"benchmark.path={bench}", "workers=1", f"output_dir={tmp_path / 'run'}", "progress=false"])
-    err = capsys.readouterr().err.strip()
-    assert rc != 0 and len(err.splitlines()) == 1, err
+    [err] = refusal(f"benchmark.path={bench}", "workers=1", f"output_dir={tmp_path / 'run'}", "progress=false")
     assert "cannot simulate 3 of 3 episodes" in err and str(tmp_path / "empty" / "scenes" / "ithor") in err
     assert "molmo-resources install scenes/ithor@" in err
     assert not (tmp_path / "run" / "results.json").exists()

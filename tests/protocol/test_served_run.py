@@ -118,7 +118,10 @@ def test_a_killed_shm_server_costs_infrastructure_errors_that_resume_reruns(act_
 
 
 def test_a_server_that_cannot_start_fails_the_run_with_one_line(tmp_path):
-    cfg = compose(["policy=lerobot", f"policy.path={tmp_path}/missing", "policy.serve=true", "benchmark=pick_v1",
-                   "limit=1", f"output_dir={tmp_path / 'run'}", "progress=false"])
-    with pytest.raises(RunError, match=r"policy.serve: the policy server did not start: FileNotFoundError: .*no such"):
+    """The server cannot build its policy (replay's actions file is missing: no LeRobot import to wait for)."""
+    cfg = compose(["policy=replay", f"policy.actions={tmp_path}/missing.npy", "+policy.serve=true",
+                   "benchmark=pick_v1", "limit=1", f"output_dir={tmp_path / 'run'}", "progress=false"])
+    with pytest.raises(RunError) as err:
         run_evaluation(cfg)
+    assert str(err.value).startswith("policy.serve: the policy server did not start: ValueError: policy.actions=")
+    assert "cannot load a .npy array" in str(err.value) and "\n" not in str(err.value)

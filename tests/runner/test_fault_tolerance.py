@@ -303,7 +303,7 @@ def _supervise(transport, n, **options):
     from molmo_lerobot.runner.supervisor import Supervisor
 
     results = []
-    items = [EpisodePlan(i, {"house_index": i, "task": {"task_cls": "x"}}, 100 + i, "pick", "", 5, "cli", "")
+    items = [EpisodePlan.of(i, {"house_index": i, "task": {"task_cls": "x"}}, 100 + i, "pick", "", 5, "cli", "")
              for i in range(n)]
     Supervisor(transport, workers=2, **options).run(None, items, results.append)
     return {r.episode_index: r for r in results}, len(results)

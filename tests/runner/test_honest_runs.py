@@ -13,8 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from molmo_lerobot.cli.eval import main
+from eval_runs import evaluate, refusal
+from molmo_lerobot.cli.eval import exit_status
 from molmo_lerobot.errors import RunError
+from molmo_lerobot.results import summary_lines
 from molmo_lerobot.runner.evaluate import run_evaluation
 from molmo_lerobot.runner.plan import horizon_with_source
 
@@ -84,12 +86,12 @@ def test_horizon_source_is_recorded_per_episode(faulty_policy, small_bench, tmp_
     assert [(r["horizon"], r["horizon_source"]) for r in rows] == [(1, "task_horizon_sec"), (61, "default")]
 
 
-def test_a_run_where_every_episode_errored_has_no_score(faulty_policy, small_bench, tmp_path, capsys):
+def test_a_run_where_every_episode_errored_has_no_score(faulty_policy, small_bench, tmp_path):
     out = tmp_path / "run"
-    args = [f"benchmark.path={small_bench}", f"output_dir={out}", "progress=false",
-            *_common(faulty_policy, "limit=2", "+policy.faults={0: raise, 1: raise}")]
-    assert main(args) == 1
-    text = capsys.readouterr().out
+    res = evaluate(f"benchmark.path={small_bench}", f"output_dir={out}", "progress=false",
+                   *_common(faulty_policy, "limit=2", "+policy.faults={0: raise, 1: raise}"))
+    assert exit_status(res.summary) == 1
+    text = "\n".join(summary_lines(res.run_summary))
     assert text.startswith("no episode ran: 2 of 2 episodes errored") and "success 0.000" not in text
     summary = json.loads((out / "results.json").read_text())
     assert summary["success_rate"] is None and summary["ci95"] is None
@@ -98,12 +100,12 @@ def test_a_run_where_every_episode_errored_has_no_score(faulty_policy, small_ben
     assert (out / "report.html").exists()
 
 
-def test_a_run_with_errors_leads_with_them(faulty_policy, small_bench, tmp_path, capsys):
+def test_a_run_with_errors_leads_with_them(faulty_policy, small_bench, tmp_path):
     out = tmp_path / "run"
-    args = [f"benchmark.path={small_bench}", f"output_dir={out}", "progress=false",
-            *_common(faulty_policy, "limit=3", "+policy.faults={1: raise}")]
-    assert main(args) == 0
-    first = capsys.readouterr().out.splitlines()[0]
+    res = evaluate(f"benchmark.path={small_bench}", f"output_dir={out}", "progress=false",
+                   *_common(faulty_policy, "limit=3", "+policy.faults={1: raise}"))
+    assert exit_status(res.summary) == 0
+    first = summary_lines(res.run_summary)[0]
     assert first.startswith("1 of 3 episodes errored · pick_small · faulty: success 0.000")
     summary = json.loads((out / "results.json").read_text())
     assert summary["n_valid"] == 2 and summary["success_rate"] == 0.0
@@ -142,25 +144,23 @@ def test_resume_names_a_corrupt_record(faulty_policy, small_bench, tmp_path, eva
             run_evaluation(eval_config(small_bench, out, *common, "resume=true"))
 
 
-def test_output_dir_that_cannot_be_written_is_one_line(tmp_path, capsys):
+def test_output_dir_that_cannot_be_written_is_one_line(tmp_path):
     a_file = tmp_path / "file"
     a_file.write_text("x")
     for out, needle in ((a_file, f"output_dir {a_file} is a file, not a directory"),
                         (a_file / "sub", f"cannot write output_dir {a_file / 'sub'}: Not a directory"),
                         (Path("/sys/molmo-out"), "cannot write output_dir /sys/molmo-out: Operation not permitted")):
-        assert main(["limit=1", "horizon=1", f"output_dir={out}"]) == 2
-        err = capsys.readouterr().err
-        assert needle in err and "Traceback" not in err and len(err.splitlines()) == 1, err
+        [line] = refusal("limit=1", "horizon=1", f"output_dir={out}")
+        assert needle in line, line
     assert a_file.read_text() == "x"
 
 
-def test_deeply_nested_benchmark_is_one_line_in_molmo_eval(small_bench, tmp_path, capsys):
+def test_deeply_nested_benchmark_is_one_line_in_molmo_eval(small_bench, tmp_path):
     d = tmp_path / "deep"
     d.mkdir()
     (d / "benchmark.json").write_text("[" * 100_000 + "]" * 100_000)
-    assert main([f"benchmark.path={d}", f"output_dir={tmp_path / 'out'}"]) == 2
-    err = capsys.readouterr().err
-    assert "JSON nested deeper than" in err and "Traceback" not in err and not (tmp_path / "out").exists()
+    [line] = refusal(f"benchmark.path={d}", f"output_dir={tmp_path / 'out'}")
+    assert "JSON nested deeper than" in line and not (tmp_path / "out").exists()
 
 
 def _limit_file_size(nbytes: int):

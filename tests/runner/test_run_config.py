@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from molmo_lerobot.cli.eval import main
+from eval_runs import refusal
+from molmo_lerobot.cli.eval import exit_status
 from molmo_lerobot.run_config import MAX_PHYSICS_STEPS, config_problems, episode_work_problem
 
 
@@ -35,20 +36,17 @@ from molmo_lerobot.run_config import MAX_PHYSICS_STEPS, config_problems, episode
         (["timing.sim_dt_ms=0.0001"], "policy steps x 660,000 physics steps each"),
     ],
 )
-def test_nonsense_options_are_one_line_and_write_nothing(args, needle, capsys, tmp_path):
+def test_nonsense_options_are_one_line_and_write_nothing(args, needle, tmp_path):
     out = tmp_path / "out"
-    assert main([*args, "limit=2" if not args[0].startswith("limit") else "workers=1", f"output_dir={out}"]) == 2
-    err = capsys.readouterr().err
-    assert needle in err and "Traceback" not in err
-    assert len(err.strip().splitlines()) == 1 and err.startswith("molmo-eval: error: ")
+    [line] = refusal(*args, "limit=2" if not args[0].startswith("limit") else "workers=1", f"output_dir={out}")
+    assert needle in line
     assert not out.exists()
 
 
-def test_every_problem_is_listed_one_per_line(capsys, tmp_path):
-    assert main(["limit=0", "seed=x", "horizon=-1", "workers=0", f"output_dir={tmp_path / 'out'}"]) == 2
-    lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 4 and all(ln.startswith("molmo-eval: error: ") for ln in lines)
-    assert {ln.split(": ")[2].split(" ")[0] for ln in lines} == {"limit", "seed", "horizon", "workers"}
+def test_every_problem_is_listed_one_per_line(tmp_path):
+    lines = refusal("limit=0", "seed=x", "horizon=-1", "workers=0", f"output_dir={tmp_path / 'out'}")
+    assert {ln.split(": ")[0].split(" ")[0] for ln in lines} == {"limit", "seed", "horizon", "workers"}
+    assert len(lines) == 4
 
 
 def test_defaults_are_valid():
@@ -92,9 +90,8 @@ def test_hydra_composes_the_schema_defaults_and_validation_keeps_a_composed_conf
         (["record_hold_steps=-1"], "record_hold_steps: expected a non-negative integer or null, got -1"),
     ],
 )
-def test_an_unknown_key_or_a_wrongly_typed_value_is_one_line_naming_the_key(args, line, capsys, tmp_path):
-    assert main([*args, f"output_dir={tmp_path / 'out'}"]) == 2
-    assert capsys.readouterr().err == f"molmo-eval: error: {line}\n"
+def test_an_unknown_key_or_a_wrongly_typed_value_is_one_line_naming_the_key(args, line, tmp_path):
+    assert refusal(*args, f"output_dir={tmp_path / 'out'}") == [line]
     assert not (tmp_path / "out").exists()
 
 
@@ -106,9 +103,19 @@ def test_a_plugins_own_top_level_key_is_kept():
     assert RunConfig.of(run) is run  # validated once
 
 
-def test_the_cli_is_a_public_hydra_app():
+def test_the_cli_is_a_public_hydra_app_that_reads_its_own_command_line():
     import inspect
 
     import molmo_lerobot.cli.eval as cli
 
-    assert "hydra._internal" not in inspect.getsource(cli) and "hydra.main(" in inspect.getsource(cli)
+    source = inspect.getsource(cli)
+    assert "hydra._internal" not in source and "hydra.main(" in source
+    assert inspect.signature(cli.main).parameters == {}  # in-process callers compose instead
+    assert "sys.argv =" not in source  # no swapping the command line around Hydra
+
+
+def test_the_exit_status_of_a_finished_run():
+    scored = {"success_rate": 0.0}
+    assert exit_status(scored) == 0 and exit_status({**scored, "push": {"ok": True}}) == 0
+    assert exit_status({"success_rate": None}) == 1  # no episode ran: no score
+    assert exit_status({**scored, "push": {"ok": False}}) == 1

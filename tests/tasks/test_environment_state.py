@@ -23,6 +23,8 @@ from molmo_lerobot.runner.evaluate import run_evaluation
 
 NAMES = ["object_x", "object_y", "object_z", "object_qw", "object_qx", "object_qy", "object_qz",
          "object_half_x", "object_half_y", "object_half_z", "tcp_to_object_x", "tcp_to_object_y", "tcp_to_object_z"]
+#: one recorded step-3 pick_v1 episode (episode 0)
+STATE_RUN = ["benchmark=pick_v1", "limit=1", "workers=1", "horizon=3", "record=true", "progress=false"]
 
 
 def _tiny_state_act(root, fmap: FeatureMap) -> str:
@@ -77,9 +79,8 @@ def test_recorder_env_and_policy_see_the_same_vector(genv, tmp_path):
     genv.step(genv.action_space.sample() * 0 + genv._obs(genv._episode.observe())["agent_pos"])  # hold: a later state
     obs = genv._episode.observe()
     ep = genv._episode
-    info = EpisodeInfo(episode_index=ep.plan.episode_index, house_index=0, seed=ep.plan.seed, prompt=ep.plan.prompt,
-                       task_type="pick",
-                       fps=15.0, horizon=4, camera_names=list(ep.env.camera_names), img_resolution=(224, 224),
+    info = EpisodeInfo(identity=ep.plan.identity, fps=15.0, camera_names=list(ep.env.camera_names),
+                       img_resolution=(224, 224),
                        joint_names=dict(ep.env.joint_names), move_groups=dict(ep.env.move_groups),
                        environment_state_names=ep.task.environment_state_names)
     layout = FrameLayout.from_step(info, obs, None)
@@ -100,30 +101,46 @@ def test_recorder_env_and_policy_see_the_same_vector(genv, tmp_path):
         layout.frame({**obs, ENV_STATE_KEY: np.zeros(3)}, {}, None, False, False, "", info)
 
 
-def test_recorded_only_when_asked_and_a_state_policy_gets_it(tmp_path, pick_recording):
-    args = ["benchmark=pick_v1", "limit=1", "workers=1", "horizon=3", "record=true", "progress=false"]
-    run_evaluation(compose(["policy=scripted", *args, "record_environment_state=true",
-                            f"output_dir={tmp_path / 'on'}"]))
-    root = tmp_path / "on" / "dataset"
+def _first_recorded_state(out):
+    """The recording's ``observation.environment_state`` names and its first frame's value."""
+    root = out / "dataset"
     feats = json.loads((root / "meta" / "info.json").read_text())["features"]
-    assert feats[ENV_STATE]["names"] == NAMES and feats[ENV_STATE]["shape"] == [13]
     frames = pd.concat(pd.read_parquet(p) for p in sorted((root / "data").rglob("*.parquet")))
-    first = frames.sort_values("frame_index").iloc[0][ENV_STATE]
+    return feats[ENV_STATE], frames.sort_values("frame_index").iloc[0][ENV_STATE]
+
+
+def _episode_0_state() -> tuple[np.ndarray, FeatureMap]:
+    """pick_v1 episode 0's first environment state through the Gymnasium env (the same trial as a run's)."""
     genv = MolmoEnv("pick_v1", episode_index=0, horizon=3, environment_state=True)
-    try:  # the same trial: the env's first environment state is the recorded one
-        np.testing.assert_array_equal(genv.reset()[0][ENV_STATE_KEY], first)
-        fmap = genv.features
+    try:
+        return genv.reset()[0][ENV_STATE_KEY], genv.features
     finally:
         genv.close()
-    # a checkpoint that reads it gets it at evaluation, with no option set
+
+
+def test_recorded_only_when_asked_and_a_state_policy_gets_it(tmp_path, pick_recording):
+    """A checkpoint that reads it gets it at evaluation with no option set, and the recording holds what
+    it saw (the env's own values); a run that nobody asks for it records none. The option asking for it
+    is the slow test below (and the error when a task has none, in the default run)."""
+    first, fmap = _episode_0_state()
     act = _tiny_state_act(tmp_path / "act", fmap)
-    res = run_evaluation(compose([f"policy.path={act}", "policy=lerobot", "policy.device=cpu", *args,
+    res = run_evaluation(compose([f"policy.path={act}", "policy=lerobot", "policy.device=cpu", *STATE_RUN,
                                   f"output_dir={tmp_path / 'policy'}"]))
     assert res.summary["n_errors"] == 0
-    policy_feats = json.loads((tmp_path / "policy" / "dataset" / "meta" / "info.json").read_text())["features"]
-    assert policy_feats[ENV_STATE]["names"] == NAMES  # the recording holds what the policy saw
-    off, _, _ = pick_recording  # the same policy recorded without the option
+    feature, recorded = _first_recorded_state(tmp_path / "policy")
+    assert feature["names"] == NAMES and feature["shape"] == [13]
+    np.testing.assert_array_equal(first, recorded)
+    off, _, _ = pick_recording  # the scripted expert recorded without the option
     assert ENV_STATE not in json.loads((off / "dataset" / "meta" / "info.json").read_text())["features"]
+
+
+@pytest.mark.slow
+def test_the_option_records_it_for_a_policy_that_does_not_read_it(tmp_path):
+    run_evaluation(compose(["policy=scripted", *STATE_RUN, "record_environment_state=true",
+                            f"output_dir={tmp_path / 'on'}"]))
+    feature, recorded = _first_recorded_state(tmp_path / "on")
+    assert feature["names"] == NAMES and feature["shape"] == [13]
+    np.testing.assert_array_equal(_episode_0_state()[0], recorded)
 
 
 @pytest.mark.slow

@@ -1,11 +1,10 @@
 """Asset libraries (UID → MJCF + metadata), grasp libraries, their plugin kinds, and dataset ids."""
 
-from molmo_lerobot.assets.catalog import AssetCatalog
-from molmo_lerobot.assets.grasps import GraspError, GraspLibrary, GraspLibraryType
+from molmo_lerobot.assets.catalog import AssetCatalog, AssetLibraryType, GraspLibraryType
+from molmo_lerobot.assets.grasps import GraspError, GraspLibrary
 from molmo_lerobot.assets.libraries import (
     AssetError,
     AssetLibrary,
-    AssetLibraryType,
     BuiltinAssetLibrary,
     ResourceAssetLibrary,
     UidLocation,

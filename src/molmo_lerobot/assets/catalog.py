@@ -7,26 +7,24 @@ restricted to those mapped to a library holding the UID (or to any library): fir
 made for the requested robot, then (MolmoSpaces' unified TCP convention makes grasps transfer)
 those kept under another robot's name. A run's catalog
 (:attr:`molmo_lerobot.context.RunContext.catalog`) is :meth:`AssetCatalog.compose` d from the
-asset and grasp library types its plugins provide; this module names no library of its own.
+asset and grasp library types its plugins provide (:class:`AssetLibraryType`,
+:class:`GraspLibraryType`, defined here beside the catalog their ``make`` receives); this module
+names no library of its own.
 """
 
 from __future__ import annotations
 
 import difflib
 import os
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from molmo_lerobot.assets.grasps import GraspError, GraspLibrary, GraspLibraryType
-from molmo_lerobot.assets.libraries import (
-    AssetError,
-    AssetLibrary,
-    AssetLibraryType,
-    UidLocation,
-)
+from molmo_lerobot.assets.grasps import GraspError, GraspLibrary
+from molmo_lerobot.assets.libraries import AssetError, AssetLibrary, UidLocation
 
 #: A grasp-library robot name → our robots its grasps were made for (beyond the same name).
 GRASP_ROBOT_NAMES = {"droid": ("franka_droid",)}
@@ -35,6 +33,41 @@ GRASP_ROBOT_NAMES = {"droid": ("franka_droid",)}
 def _serves(library: GraspLibrary, robot: str) -> bool:
     """Whether ``library`` holds grasps made for ``robot`` (libraries keyed by robot always do)."""
     return library.robot is None or library.robot == robot or robot in GRASP_ROBOT_NAMES.get(library.robot, ())
+
+
+@dataclass(frozen=True)
+class AssetLibraryType:
+    """Asset libraries a plugin provides (``molmo_asset_libraries``), made per run.
+
+    ``make(settings, catalog)`` returns this type's libraries for a run, from its
+    :class:`~molmo_lerobot.molmospaces.settings.MolmoSpacesSettings`; ``catalog`` holds the
+    libraries of lower priority, already registered (to check names against). Higher
+    ``priority`` is looked up first: the run's user libraries 1000, built-in objects 300,
+    articulated objects 200, MolmoSpaces' ``thor`` 100 and ``objaverse`` 50.
+    """
+
+    name: str
+    make: Callable[[Any, AssetCatalog], Sequence[AssetLibrary]]
+    priority: int = 0
+    aliases: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class GraspLibraryType:
+    """Grasp libraries a plugin provides (``molmo_grasp_libraries``), made per run.
+
+    ``make(settings, catalog)`` returns ``(grasp library, asset library name or None)`` pairs
+    for a run: each serves the UIDs of that asset library (``None``: of any), which must be in
+    ``catalog`` already (it holds every asset library of this priority or lower).
+    ``priority`` orders lookups as :class:`~molmo_lerobot.assets.libraries.AssetLibraryType`'s
+    does (a grasp library shipped with an asset library has that library's priority):
+    MolmoSpaces' ``droid`` 100 (for ``thor``), ``droid_objaverse`` 50, user libraries 1000.
+    """
+
+    name: str
+    make: Callable[[Any, AssetCatalog], Sequence[tuple[GraspLibrary, str | None]]]
+    priority: int = 0
+    aliases: tuple[str, ...] = ()
 
 
 class AssetCatalog:

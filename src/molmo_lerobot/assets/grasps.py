@@ -15,19 +15,13 @@ from __future__ import annotations
 
 import os
 import zipfile
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.fileio import atomic_open
 from molmo_lerobot.paths import home_dir
-
-if TYPE_CHECKING:
-    from molmo_lerobot.assets.catalog import AssetCatalog
 
 KEY = "transforms"
 
@@ -123,24 +117,6 @@ class GraspLibrary:
 
     def __repr__(self) -> str:
         return f"GraspLibrary({self.name!r}, {str(self.root)!r})"
-
-
-@dataclass(frozen=True)
-class GraspLibraryType:
-    """Grasp libraries a plugin provides (``molmo_grasp_libraries``), made per run.
-
-    ``make(settings, catalog)`` returns ``(grasp library, asset library name or None)`` pairs
-    for a run: each serves the UIDs of that asset library (``None``: of any), which must be in
-    ``catalog`` already (it holds every asset library of this priority or lower).
-    ``priority`` orders lookups as :class:`~molmo_lerobot.assets.libraries.AssetLibraryType`'s
-    does (a grasp library shipped with an asset library has that library's priority):
-    MolmoSpaces' ``droid`` 100 (for ``thor``), ``droid_objaverse`` 50, user libraries 1000.
-    """
-
-    name: str
-    make: Callable[[Any, AssetCatalog], Sequence[tuple[GraspLibrary, str | None]]]
-    priority: int = 0
-    aliases: tuple[str, ...] = ()
 
 
 def builtin_grasp_dir() -> Path:

@@ -18,10 +18,10 @@ import json
 import os
 import uuid
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import lmdb
 import zstandard
@@ -29,9 +29,6 @@ import zstandard
 from molmo_lerobot import fileio
 from molmo_lerobot.assets.grasps import BuiltinGraspLibrary, GraspLibrary
 from molmo_lerobot.errors import MolmoError
-
-if TYPE_CHECKING:
-    from molmo_lerobot.assets.catalog import AssetCatalog
 
 
 class AssetError(MolmoError, LookupError):
@@ -92,23 +89,6 @@ class AssetLibrary(ABC):
         return AssetError(f"library {self.name!r} has no UID {uid!r}")
 
 
-@dataclass(frozen=True)
-class AssetLibraryType:
-    """Asset libraries a plugin provides (``molmo_asset_libraries``), made per run.
-
-    ``make(settings, catalog)`` returns this type's libraries for a run, from its
-    :class:`~molmo_lerobot.molmospaces.settings.MolmoSpacesSettings`; ``catalog`` holds the
-    libraries of lower priority, already registered (to check names against). Higher
-    ``priority`` is looked up first: the run's user libraries 1000, built-in objects 300,
-    articulated objects 200, MolmoSpaces' ``thor`` 100 and ``objaverse`` 50.
-    """
-
-    name: str
-    make: Callable[[Any, AssetCatalog], Sequence[AssetLibrary]]
-    priority: int = 0
-    aliases: tuple[str, ...] = ()
-
-
 class ObjectTableLibrary(AssetLibrary):
     """An asset library over an in-memory table of objects (each with ``metadata()`` and ``mjcf()``)."""
 
@@ -152,9 +132,6 @@ class BuiltinAssetLibrary(ObjectTableLibrary):
 
 
 #: The built-in objects as a library type (the ``tabletop`` plugin provides it).
-BUILTIN_LIBRARY_TYPE = AssetLibraryType("builtin", lambda settings, catalog: [BuiltinAssetLibrary()], priority=300)
-
-
 class MetadataStore:
     """UID → metadata document in LMDB (zstd JSON values, a completion marker); fork-safe."""
 

@@ -29,20 +29,17 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from molmo_lerobot import fileio
 from molmo_lerobot.errors import ExportError
 from molmo_lerobot.export.card import make_card
 from molmo_lerobot.export.frames import EVAL_EPISODE_INDEX
 from molmo_lerobot.export.portable import portable
-from molmo_lerobot.export.shards import SHARDS_DIR, Shard, list_shards
+from molmo_lerobot.export.shards import SHARDS_DIR, Shard, list_shards, new_session
 from molmo_lerobot.results import RESULTS_FILE, EpisodeResult, RunSummary
-
-if TYPE_CHECKING:
-    from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +48,29 @@ EVAL_EPISODES = "meta/eval/episodes.jsonl"
 EVAL_INFO = "meta/eval/info.json"
 MERGE_PREFIX = ".dataset-merge-"  # + session: a merge's work directory
 PREVIOUS = "previous"  # in the work directory: the dataset being replaced, during the swap
+
+
+def dataset_fps(policy_dt_ms: float) -> int:
+    """LeRobot stores integer fps; the exact policy rate goes into ``meta/eval/info.json``."""
+    return max(1, round(1000.0 / float(policy_dt_ms)))
+
+
+@dataclass
+class MergedDataset:
+    """What the merge writes of a run's dataset: its repo id, the run's policy and benchmark, the policy
+    rate, the recording session (it names the merge's work directory) and whether it goes to the Hub
+    (the card says so). :class:`~molmo_lerobot.export.recorder.LeRobotRecorderFactory` is one."""
+
+    repo_id: str
+    policy_dt_ms: float
+    benchmark: str
+    policy: str
+    push: bool = False
+    session: str = field(default_factory=new_session)
+
+    @property
+    def fps(self) -> int:
+        return dataset_fps(self.policy_dt_ms)
 
 
 @dataclass
@@ -143,7 +163,7 @@ def stored_episodes(output_dir: Path, results: list[EpisodeResult]) -> set[int]:
 
 
 def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: RunSummary,
-                 factory: LeRobotRecorderFactory) -> Path | None:
+                 dataset: MergedDataset) -> Path | None:
     """Build ``output_dir/dataset`` from the shards; returns its root, or None when nothing was recorded."""
     output_dir = Path(output_dir)
     sources, shards = _sources(output_dir)
@@ -151,9 +171,9 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: RunSum
     for name in torn:
         log.warning("skipping dataset shard %s: its worker did not finish it (killed or crashed); "
                     "its episodes are not stored in the dataset", name)
-    work = output_dir / f"{MERGE_PREFIX}{factory.session}"
+    work = output_dir / f"{MERGE_PREFIX}{dataset.session}"
     try:
-        tmp = _build(work, sources, shards, torn, results, summary, factory)
+        tmp = _build(work, sources, shards, torn, results, summary, dataset)
     except BaseException:
         fileio.rmtree(work, root=output_dir, ignore_errors=True)
         raise
@@ -168,7 +188,7 @@ def merge_shards(output_dir: Path, results: list[EpisodeResult], summary: RunSum
 
 
 def _build(work: Path, sources: list[_Source], shards: list[Shard], torn: list[str], results: list[EpisodeResult],
-           summary: RunSummary, factory: LeRobotRecorderFactory) -> Path | None:
+           summary: RunSummary, dataset: MergedDataset) -> Path | None:
     """The merged, checked dataset at ``work/dataset``; None when no episode is to be stored."""
     from lerobot.datasets.aggregate import aggregate_datasets
     from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
@@ -185,7 +205,7 @@ def _build(work: Path, sources: list[_Source], shards: list[Shard], torn: list[s
     for k, (si, keep) in enumerate(_segments(order, chosen)):
         src = sources[si]
         roots.append(src.root if len(keep) == len(src.episodes)
-                     else _subset(src, keep, work / f"subset-{k}", factory.repo_id))
+                     else _subset(src, keep, work / f"subset-{k}", dataset.repo_id))
 
     if not roots:
         log.warning("record=true but no episode finished without error: no dataset written")
@@ -193,27 +213,27 @@ def _build(work: Path, sources: list[_Source], shards: list[Shard], torn: list[s
 
     tmp = work / DATASET_DIR
     try:
-        aggregate_datasets([factory.repo_id] * len(roots), factory.repo_id, roots=roots, aggr_root=tmp)
+        aggregate_datasets([dataset.repo_id] * len(roots), dataset.repo_id, roots=roots, aggr_root=tmp)
     except Exception as exc:
         raise ExportError(f"merging {len(roots)} dataset shards under {output_dir / SHARDS_DIR} failed: "
                           f"{type(exc).__name__}: {exc}") from exc
     restat(tmp)
     frames = {b: sources[si].episodes[li].get("frames", by_index[b].steps) for b, (si, li) in chosen.items()}
-    records = portable(_eval_records(results, dataset_index, frames, discarded, summary, factory), output_dir)
+    records = portable(_eval_records(results, dataset_index, frames, discarded, summary, dataset), output_dir)
     fileio.atomic_write(tmp / EVAL_EPISODES, "".join(json.dumps(r) + "\n" for r in records), root=tmp)
     info = {
-        "benchmark": summary.document().get("benchmark"), "policy": factory.policy, "repo_id": factory.repo_id,
-        "policy_dt_ms": factory.policy_dt_ms, "fps_exact": 1000.0 / factory.policy_dt_ms, "fps": factory.fps,
+        "benchmark": summary.document().get("benchmark"), "policy": dataset.policy, "repo_id": dataset.repo_id,
+        "policy_dt_ms": dataset.policy_dt_ms, "fps_exact": 1000.0 / dataset.policy_dt_ms, "fps": dataset.fps,
         "n_attempted": len(results), "n_recorded": len(dataset_index), "torn_shards": torn,
-        "session": factory.session,
+        "session": dataset.session,
     }
     shared = RunSummary.from_document(portable(summary.document(), output_dir))  # no path of this machine
     fileio.atomic_write(tmp / EVAL_INFO, json.dumps(portable(info, output_dir), indent=2) + "\n", root=tmp)
     fileio.atomic_write(tmp / RESULTS_FILE, shared.to_json(), root=tmp)
-    meta = LeRobotDatasetMetadata(factory.repo_id, root=tmp)
+    meta = LeRobotDatasetMetadata(dataset.repo_id, root=tmp)
     check_dataset(tmp, results)
-    fileio.atomic_write(tmp / "README.md", str(make_card(meta.info, shared, factory.repo_id, records,
-                                                                    on_hub=factory.push)), root=tmp)
+    fileio.atomic_write(tmp / "README.md", str(make_card(meta.info, shared, dataset.repo_id, records,
+                                                                    on_hub=dataset.push)), root=tmp)
     return tmp
 
 
@@ -258,7 +278,7 @@ def _subset(src: _Source, keep: list[int], out: Path, repo_id: str) -> Path:
 
 def _eval_records(results: list[EpisodeResult], dataset_index: dict[int, int], frames: dict[int, int],
                   discarded: dict[int, str], summary: RunSummary,
-                  factory: LeRobotRecorderFactory) -> list[dict[str, Any]]:
+                  dataset: MergedDataset) -> list[dict[str, Any]]:
     bench = summary.benchmark.model_dump() if summary.benchmark else {}
     records = []
     for r in sorted(results, key=lambda r: r.episode_index):
@@ -275,7 +295,7 @@ def _eval_records(results: list[EpisodeResult], dataset_index: dict[int, int], f
             "episode_index": idx, "benchmark_episode_index": r.episode_index, "house_index": r.house_index,
             "task_cls": r.task_cls, "task_type": r.task_type, "prompt": r.prompt, "success": r.success,
             "success_once": r.success_once, "steps": r.steps, "seed": r.seed, "error": r.error,
-            "policy": factory.policy, "benchmark": bench.get("name", factory.benchmark),
+            "policy": dataset.policy, "benchmark": bench.get("name", dataset.benchmark),
             "benchmark_sha256": bench.get("sha256"), "not_recorded": why, "frames": frames.get(r.episode_index),
         })
     return records

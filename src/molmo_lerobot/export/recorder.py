@@ -25,7 +25,8 @@ from typing import Any
 
 from molmo_lerobot import fileio
 from molmo_lerobot.export.frames import FrameLayout
-from molmo_lerobot.export.shards import SHARDS_DIR, new_session, shard_name, write_marker
+from molmo_lerobot.export.merge import MergedDataset, merge_shards, stored_episodes
+from molmo_lerobot.export.shards import SHARDS_DIR, shard_name, write_marker
 from molmo_lerobot.export.video import RecordingDataset, VideoSettings
 from molmo_lerobot.hookspecs import ConfigError
 from molmo_lerobot.recording import EpisodeInfo, Recorder, RecorderFactory
@@ -56,22 +57,12 @@ def validate_repo_id(repo_id: str) -> str:
     return repo_id
 
 
-def dataset_fps(policy_dt_ms: float) -> int:
-    """LeRobot stores integer fps; the exact policy rate goes into ``meta/eval/info.json``."""
-    return max(1, round(1000.0 / float(policy_dt_ms)))
-
-
 @dataclass
-class LeRobotRecorderFactory(RecorderFactory):
-    """Picklable recipe: per-worker shard writers plus the merge/publish step."""
+class LeRobotRecorderFactory(MergedDataset, RecorderFactory):
+    """Picklable recipe: per-worker shard writers plus the merge/publish step (the dataset it merges:
+    :class:`~molmo_lerobot.export.merge.MergedDataset`)."""
 
-    repo_id: str
-    policy_dt_ms: float
-    benchmark: str
-    policy: str
-    push: bool = False
     private: bool = False
-    session: str = field(default_factory=new_session)
     #: finalize a worker's shard after this many episodes (a killed worker or a failed save loses
     #: its open shard's episodes from the dataset, never from the results), or before an episode
     #: that does not follow the previous one in benchmark order: the supervisor gives each worker
@@ -108,10 +99,6 @@ class LeRobotRecorderFactory(RecorderFactory):
                    video=VideoSettings.from_config(run.video.model_dump()), hold_steps=run.record_hold_steps,
                    dataset_id=dataset_id, store_root=store_root, remote=remote, min_frames=run.record_min_frames)
 
-    @property
-    def fps(self) -> int:
-        return dataset_fps(self.policy_dt_ms)
-
     def make(self, worker_id: str, output_dir: Path) -> LeRobotRecorder:
         return LeRobotRecorder(self, worker_id, Path(output_dir))
 
@@ -121,7 +108,6 @@ class LeRobotRecorderFactory(RecorderFactory):
         Returns the push outcome (``results.json``'s ``push``): a failed push keeps every local
         file and makes ``molmo-eval`` exit non-zero."""
         from molmo_lerobot.export.hub import push_dataset
-        from molmo_lerobot.export.merge import merge_shards
 
         quiet_libraries()
         root = merge_shards(Path(output_dir), results, summary, self)
@@ -166,8 +152,6 @@ class LeRobotRecorderFactory(RecorderFactory):
         """Resume: the episodes that finished without error but are neither in ``output_dir/dataset``
         nor in a finished shard (their worker was killed before it finished its shard, or saving
         failed); the resume runs them again so that the dataset holds every such episode."""
-        from molmo_lerobot.export.merge import stored_episodes
-
         stored = stored_episodes(Path(output_dir), results)
         return {r.episode_index for r in results if r.error is None and r.episode_index not in stored}
 

@@ -31,9 +31,9 @@ import lmdb
 import zstandard
 
 from molmo_lerobot import fileio
-from molmo_lerobot.assets.catalog import AssetCatalog
-from molmo_lerobot.assets.grasps import GraspLibrary, GraspLibraryType
-from molmo_lerobot.assets.libraries import AssetError, AssetLibrary, AssetLibraryType, MetadataStore, UidLocation
+from molmo_lerobot.assets.catalog import AssetCatalog, AssetLibraryType, GraspLibraryType
+from molmo_lerobot.assets.grasps import GraspLibrary
+from molmo_lerobot.assets.libraries import AssetError, AssetLibrary, MetadataStore, UidLocation
 from molmo_lerobot.molmospaces import layout
 from molmo_lerobot.molmospaces.settings import MolmoSpacesSettings
 from molmo_lerobot.paths import home_dir

@@ -23,8 +23,8 @@ from typing import TYPE_CHECKING, Any
 import mujoco
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.assets.grasps import GraspLibraryType
-from molmo_lerobot.assets.libraries import AssetError, AssetLibraryType
+from molmo_lerobot.assets.catalog import AssetLibraryType, GraspLibraryType
+from molmo_lerobot.assets.libraries import AssetError
 from molmo_lerobot.molmospaces import layout, libraries, user
 from molmo_lerobot.sim.scenes import SceneContext, SceneDataset
 

@@ -3,8 +3,9 @@
 Each chunk moves the arm to a random joint target near the current pose (uniform within
 ``scale`` radians per joint) and sets the gripper to a random command; a move group whose actions
 are deltas (an env suite's, named in ``EpisodeContext.extra["delta_groups"]``: LIBERO's 7-D delta
-end-effector command) gets a random delta within ``scale`` instead. Draws come from a generator
-seeded by the episode seed, so episodes replay exactly.
+end-effector command) gets a random delta within ``scale`` instead, and one whose actions are targets
+within a box (``extra["action_bounds"]``: PushT's 2-D target position in its workspace) a uniform draw
+from that box. Draws come from a generator seeded by the episode seed, so episodes replay exactly.
 """
 
 from __future__ import annotations
@@ -39,17 +40,21 @@ class RandomPolicy(Policy):
         self.rng = np.random.default_rng(0)
         self.move_groups: dict[str, int] = {}
         self.delta_groups: frozenset[str] = frozenset()
+        self.bounds: dict[str, tuple[float, float]] = {}
 
     def reset(self, ctx: EpisodeContext) -> None:
         self.rng = np.random.default_rng(ctx.seed)
         self.move_groups = dict(ctx.move_groups)
         self.delta_groups = frozenset(ctx.extra.get("delta_groups", ()))
+        self.bounds = {g: (float(lo), float(hi)) for g, (lo, hi) in ctx.extra.get("action_bounds", {}).items()}
 
     def act(self, obs: Observation) -> Action:
         out: Action = {}
         for group, dim in self.move_groups.items():
             if group in self.delta_groups:
                 goal = self.rng.uniform(-self.scale, self.scale, dim)
+            elif group in self.bounds:
+                goal = self.rng.uniform(*self.bounds[group], dim)
             elif group == "gripper":
                 goal = self.rng.uniform(0.0, 1.0, dim)
             else:

@@ -13,10 +13,10 @@
 * :meth:`~EpisodeSession.close` and :meth:`~EpisodeSession.result`, the
   :class:`~molmo_lerobot.results.EpisodeResult`.
 
-Its identity (index, seed, digest, task type, prompt, horizon) is its frozen
-:class:`~molmo_lerobot.runner.plan.EpisodePlan`; the policy's
-:class:`~molmo_lerobot.policies.base.EpisodeContext`, the recorders'
-:class:`~molmo_lerobot.recording.EpisodeInfo` and the result are made from it here, once.
+Its identity (index, seed, digest, task type, prompt, horizon) is its plan's frozen
+:class:`~molmo_lerobot.results.EpisodeIdentity`, which the recorders'
+:class:`~molmo_lerobot.recording.EpisodeInfo` embeds; the policy's
+:class:`~molmo_lerobot.policies.base.EpisodeContext` and the result are made from it here, once.
 """
 
 from __future__ import annotations
@@ -174,9 +174,7 @@ class EpisodeSession(EpisodeOutcome):
 
         plan, env = self.plan, self.env
         return EpisodeInfo(
-            episode_index=plan.episode_index, house_index=plan.house_index, seed=plan.seed, prompt=plan.prompt,
-            task_type=self.plan.task_type, fps=1000.0 / self.run.timing.policy_dt_ms, horizon=self.horizon,
-            camera_names=list(env.camera_names),
+            identity=plan.identity, fps=1000.0 / self.run.timing.policy_dt_ms, camera_names=list(env.camera_names),
             img_resolution=(int(self.spec.img_resolution[0]), int(self.spec.img_resolution[1])),
             joint_names=dict(env.joint_names), move_groups=dict(env.move_groups), expert=expert,
             extra={"task_cls": plan.task_cls, "robot": self.spec.robot.robot_name,

@@ -51,14 +51,12 @@ from molmo_lerobot.serving.run_server import ServeError, served_policy
 from molmo_lerobot.sim.env import TASK_RULES
 from molmo_lerobot.suites.benchmark import (
     SUITE_KEY,
-    SUITES,
     SuiteBenchmark,
     SuiteBenchmarkError,
     is_suite,
     load_suite_benchmark,
     task_label,
 )
-from molmo_lerobot.suites.libero import LiberoEpisode
 from molmo_lerobot.suites.pipe import SuiteError
 
 if TYPE_CHECKING:
@@ -189,7 +187,7 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     recorders = run.plugins.recorder_factories(config.plain())  # e.g. a bad hub.repo_id fails here, before any output
     executor = _make_executor(config)
     bench: Benchmark | SuiteBenchmark
-    if is_suite(config):  # an env suite's episodes (LIBERO), played in each worker's suite process
+    if is_suite(config):  # an env suite's episodes (LIBERO, PushT), played in each worker's suite
         bench = _suite_benchmark(config)
     else:
         bench = load_benchmark(resolve_benchmark_path(config.benchmark.model_dump(), run.plugins), run.plugins)
@@ -206,7 +204,7 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     config = config.model_copy(update=update)
     indices, selection = selection_of(config, bench)  # type: ignore[arg-type]  # episodes, origins, path, name
     if isinstance(bench, SuiteBenchmark):
-        plans = {i: _suite_plan(i, bench.episodes[i], config.horizon is not None) for i in indices}
+        plans = {i: _suite_plan(i, bench.suite, bench.episodes[i], config.horizon is not None) for i in indices}
         thresholds: dict[str, Any] = {}
         horizons: dict[str, float] = {}
     else:
@@ -296,11 +294,12 @@ def _suite_benchmark(config: RunConfig) -> SuiteBenchmark:
         raise RunError(str(exc)) from None
 
 
-def _suite_plan(index: int, episode: LiberoEpisode, horizon_from_cli: bool) -> EpisodePlan:
-    """Episode ``index`` of an env-suite benchmark as a plan: its spec the episode's fields plus
-    ``env_suite``, its seed and digest the episode's own, its task ``<suite>/task_<id>``."""
-    return EpisodePlan(index, {**asdict(episode), SUITE_KEY: SUITES[0]}, episode.seed, task_label(episode),
-                       episode.instruction, episode.horizon, "cli" if horizon_from_cli else "lerobot", episode.digest)
+def _suite_plan(index: int, suite: str, episode: Any, horizon_from_cli: bool) -> EpisodePlan:
+    """Episode ``index`` of env suite ``suite``'s benchmark as a plan: its spec the episode's fields plus
+    ``env_suite``, its seed and digest the episode's own, its task the suite's label (``<suite>/task_<id>``)."""
+    return EpisodePlan.of(index, {**asdict(episode), SUITE_KEY: suite}, episode.seed, task_label(episode),
+                          episode.instruction, episode.horizon, "cli" if horizon_from_cli else "lerobot",
+                          episode.digest)
 
 
 def _run_info(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBenchmark,

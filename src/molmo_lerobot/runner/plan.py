@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.errors import EPISODE
 from molmo_lerobot.hashing import content_sha256
-from molmo_lerobot.results import EpisodeResult
+from molmo_lerobot.results import EpisodeIdentity, EpisodeResult
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
@@ -53,25 +53,62 @@ def episode_seed(run_seed: int, spec: dict[str, Any]) -> int:
 
 @dataclass(frozen=True)
 class EpisodePlan:
-    """One episode as a run plays it. Plain data: it travels to workers as it is."""
+    """One episode as a run plays it: its :class:`~molmo_lerobot.results.EpisodeIdentity` and the spec
+    it runs. Plain data: it travels to workers as it is."""
 
-    episode_index: int
+    identity: EpisodeIdentity
     #: the episode as it runs (overrides applied) as JSON; what its seed and digest derive from
     spec: dict[str, Any]
-    seed: int
-    #: the task type's name (the known name when no installed plugin provides it)
-    task_type: str
-    prompt: str
-    #: policy steps and where they came from (``cli``, ``task_horizons``, ``task_horizon_sec``,
-    #: ``default``); ``None`` only for an episode whose task type no plugin provides
-    horizon: int | None
-    horizon_source: str | None
-    #: SHA-256 of :attr:`spec`'s canonical JSON: the episode's identity
-    digest: str
     #: problems of the benchmark's episode (``field: message``), as ``molmo-bench validate`` finds them
     problems: tuple[str, ...] = ()
     #: why it cannot run (an override failed, or it is invalid); it is then recorded, never simulated
     error: str | None = None
+
+    @classmethod
+    def of(cls, index: int, spec: dict[str, Any], seed: int, task_type: str, prompt: str, horizon: int | None,
+           horizon_source: str | None, digest: str, problems: tuple[str, ...] = (),
+           error: str | None = None) -> EpisodePlan:
+        """The plan of ``spec``, its identity's house and task class read from it."""
+        task = spec.get("task")
+        return cls(EpisodeIdentity(index, seed, task_type, prompt, horizon, horizon_source, digest,
+                                   spec.get("house_index"), task.get("task_cls") if isinstance(task, dict) else None),
+                   spec, problems, error)
+
+    @property
+    def episode_index(self) -> int:
+        return self.identity.episode_index
+
+    @property
+    def seed(self) -> int:
+        return self.identity.seed
+
+    @property
+    def task_type(self) -> str:
+        return self.identity.task_type
+
+    @property
+    def prompt(self) -> str:
+        return self.identity.prompt
+
+    @property
+    def horizon(self) -> int | None:
+        return self.identity.horizon
+
+    @property
+    def horizon_source(self) -> str | None:
+        return self.identity.horizon_source
+
+    @property
+    def digest(self) -> str:
+        return self.identity.digest
+
+    @property
+    def house_index(self) -> int | None:
+        return self.identity.house_index
+
+    @property
+    def task_cls(self) -> str | None:
+        return self.identity.task_cls
 
     @property
     def steps(self) -> int:
@@ -79,15 +116,6 @@ class EpisodePlan:
         if self.horizon is None:
             raise ValueError(f"episode {self.episode_index}: no plugin provides task type {self.task_type!r}")
         return self.horizon
-
-    @property
-    def house_index(self) -> int | None:
-        return self.spec.get("house_index")
-
-    @property
-    def task_cls(self) -> str | None:
-        task = self.spec.get("task")
-        return task.get("task_cls") if isinstance(task, dict) else None
 
     def episode(self, plugins: Plugins) -> EpisodeSpec:
         """:attr:`spec` validated, its task by the model of the plugin that owns it (what a worker or
@@ -112,7 +140,7 @@ def plan_spec(spec: EpisodeSpec, plugins: Plugins, *, seed: int, horizon: int, i
     and horizon: what :meth:`EpisodeSession.start <molmo_lerobot.runner.episode.EpisodeSession.start>`
     starts an episode built by hand from."""
     raw = spec.model_dump(mode="json", exclude_unset=False)
-    return EpisodePlan(index, raw, int(seed), plugins.task_type(spec.task_name).name, spec.language.task_description,
+    return EpisodePlan.of(index, raw, int(seed), plugins.task_type(spec.task_name).name, spec.language.task_description,
                        int(horizon), "cli", content_sha256(raw, ensure_ascii=True).hex())
 
 
@@ -149,8 +177,8 @@ class EpisodePlanner:
         if self.horizon is not None or self.horizons.get(task_type) or spec.task.task_horizon_sec or default_sec:
             horizon, source = horizon_with_source(self.horizon, spec.task, default_sec, self.policy_dt_ms,
                                                   self.horizons.get(task_type))
-        return EpisodePlan(index, raw, episode_seed(self.run_seed, raw), task_type, spec.language.task_description,
-                           horizon, source, content_sha256(raw, ensure_ascii=True).hex(), problems, error)
+        return EpisodePlan.of(index, raw, episode_seed(self.run_seed, raw), task_type, spec.language.task_description,
+                              horizon, source, content_sha256(raw, ensure_ascii=True).hex(), problems, error)
 
     def _task_type(self, spec: EpisodeSpec) -> tuple[str, float | None]:
         """The task type's name and default horizon (seconds); without a plugin, the known name and none."""

@@ -1,21 +1,24 @@
-"""Env-suite benchmarks: ``molmo-eval benchmark=libero_object`` and its kin.
+"""Env-suite benchmarks: ``molmo-eval benchmark=libero_object`` and its kin, ``benchmark=pusht``.
 
-A suite benchmark is named by a config with ``suite: libero`` (``conf/benchmark/libero_*.yaml``); its
-episodes are the suite's own episode specs (:class:`~molmo_lerobot.suites.libero.LiberoEpisode`, planned in
-``lerobot-eval``'s order and seeding from the suite's task catalogue), not MolmoSpaces episode files. Each
+A suite benchmark is named by a config with ``suite: libero`` or ``suite: pusht`` (``conf/benchmark/libero_*.yaml``,
+``pusht.yaml``); its episodes are the suite's own episode specs (:class:`~molmo_lerobot.suites.libero.LiberoEpisode`,
+:class:`~molmo_lerobot.suites.pusht.PushTEpisode`, planned in ``lerobot-eval``'s order and seeding from the suite's
+task catalogue), not MolmoSpaces episode files. What differs between suites is one :class:`SuiteKind`. Each
 becomes an :class:`~molmo_lerobot.runner.plan.EpisodePlan` (spec: the episode's fields plus ``env_suite``;
 digest: the episode's), so workers, executors, resume, ``results.json`` (one ``per_task`` row per LIBERO task),
 ``episodes.jsonl``, compare and report are the same code as for our benchmarks. A worker plays a suite plan
-in a :class:`SuiteSession` on its own suite process, started at its first such episode and kept across episodes
-(:class:`SuiteSessions`).
+in a :class:`SuiteSession` on its own suite (LIBERO's process, PushT's env), started at its first such episode and
+kept across episodes (:class:`SuiteSessions`).
 
 Options (``benchmark.<key>=``): ``episodes_per_task`` (default 1; ``lerobot-eval``'s ``--eval.n_episodes``),
-``image_size`` (camera images, default LeRobot's 360), ``hard_reset`` (default true, LeRobot's default).
+``image_size`` (camera images, default LeRobot's: LIBERO 360, PushT 96), LIBERO's ``hard_reset`` (default true,
+LeRobot's default).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -24,16 +27,7 @@ import numpy as np
 from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.hashing import content_sha256
 from molmo_lerobot.results import EpisodeOutcome
-from molmo_lerobot.suites.libero import (
-    ACTION_DIM,
-    CONTROL_HZ,
-    IMAGE_SIZE,
-    MOVE_GROUP,
-    LiberoEpisode,
-    LiberoSuite,
-    plan_episodes,
-    policy_observation,
-)
+from molmo_lerobot.suites import libero, pusht
 
 if TYPE_CHECKING:
     from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
@@ -44,9 +38,46 @@ if TYPE_CHECKING:
 
 #: the key of a plan's spec that names its env suite (absent: one of our own episodes)
 SUITE_KEY = "env_suite"
+
+
+@dataclass(frozen=True)
+class SuiteKind:
+    """What one env suite brings: its episode type and planner, its env (``open(options)``: an object with
+    ``tasks``, ``reset``, ``step``, ``close``), its policy interface and its options with their defaults."""
+
+    episode: type
+    plan: Callable[..., list[Any]]
+    open: Callable[[dict[str, Any]], Any]
+    task_label: Callable[[Any], str]
+    observation: Callable[[Any, int], Observation]
+    move_group: str
+    action_dim: int
+    control_hz: float
+    cameras: tuple[str, ...]
+    options: dict[str, Any]
+    #: what the policy learns of the action (``EpisodeContext.extra``): ``delta_groups`` (LIBERO's delta-EEF
+    #: command) or ``action_bounds`` (PushT's target position, within the workspace)
+    action_extra: dict[str, Any]
+
+
+def _libero_label(episode: libero.LiberoEpisode) -> str:
+    return f"{episode.suite}/task_{episode.task_id:02d}"
+
+
 #: the suites molmo-eval runs (``benchmark.suite``)
-SUITES = ("libero",)
-_CAMERAS = ("image", "image2")
+SUITES: dict[str, SuiteKind] = {
+    "libero": SuiteKind(
+        libero.LiberoEpisode, libero.plan_episodes,
+        lambda o: libero.LiberoSuite(image_size=o["image_size"], hard_reset=o["hard_reset"]),
+        _libero_label, libero.policy_observation, libero.MOVE_GROUP, libero.ACTION_DIM, libero.CONTROL_HZ,
+        ("image", "image2"), {"episodes_per_task": 1, "image_size": libero.IMAGE_SIZE, "hard_reset": True},
+        {"delta_groups": [libero.MOVE_GROUP]}),
+    "pusht": SuiteKind(
+        pusht.PushTEpisode, pusht.plan_episodes, lambda o: pusht.PushTSuite(image_size=o["image_size"]),
+        pusht.task_label, pusht.policy_observation, pusht.MOVE_GROUP, pusht.ACTION_DIM, pusht.CONTROL_HZ,
+        (pusht.CAMERA,), {"episodes_per_task": 1, "image_size": pusht.IMAGE_SIZE},
+        {"action_bounds": {pusht.MOVE_GROUP: pusht.WORKSPACE}}),
+}
 
 
 class SuiteBenchmarkError(MolmoError, ValueError):
@@ -56,21 +87,26 @@ class SuiteBenchmarkError(MolmoError, ValueError):
 def suite_options(config: RunConfig) -> dict[str, Any]:
     """The suite benchmark's options from ``benchmark.*``, checked (one clear error naming the key)."""
     bench = config.benchmark.model_dump()
-    if bench.get("suite") not in SUITES:
-        raise SuiteBenchmarkError(f"benchmark.suite: unknown env suite {bench.get('suite')!r} "
-                                  f"(known: {', '.join(SUITES)})")
-    out = {"episodes_per_task": bench.get("episodes_per_task", 1), "image_size": bench.get("image_size", IMAGE_SIZE),
-           "hard_reset": bench.get("hard_reset", True)}
+    kind = suite_kind(config)
+    out = {key: bench.get(key, default) for key, default in kind.options.items()}
     for key in ("episodes_per_task", "image_size"):
         if not isinstance(out[key], int) or isinstance(out[key], bool) or out[key] < 1:
             raise SuiteBenchmarkError(f"benchmark.{key}: expected an integer >= 1, got {out[key]!r}")
-    if not isinstance(out["hard_reset"], bool):
+    if not isinstance(out.get("hard_reset", True), bool):
         raise SuiteBenchmarkError(f"benchmark.hard_reset: expected true or false, got {out['hard_reset']!r}")
     unknown = sorted(set(bench) - {"name", "path", "suite", *out})
     if unknown:
         raise SuiteBenchmarkError(f"benchmark.{unknown[0]}: not an option of env-suite benchmarks "
                                   f"(options: {', '.join(out)})")
     return out
+
+
+def suite_kind(config: RunConfig) -> SuiteKind:
+    """The env suite ``benchmark.suite`` names (one clear error when it is none)."""
+    name = config.benchmark.model_dump().get("suite")
+    if name not in SUITES:
+        raise SuiteBenchmarkError(f"benchmark.suite: unknown env suite {name!r} (known: {', '.join(SUITES)})")
+    return SUITES[name]
 
 
 def is_suite(config: RunConfig) -> bool:
@@ -88,8 +124,10 @@ class SuiteBenchmark:
     """A suite's episodes for one run: what the run directory, selection and summary read of a benchmark."""
 
     name: str
-    episodes: list[LiberoEpisode]
+    episodes: list[Any]
     path: Path
+    #: the env suite (a key of :data:`SUITES`)
+    suite: str
 
     @property
     def sha256(self) -> str:
@@ -108,31 +146,33 @@ def load_suite_benchmark(config: RunConfig) -> SuiteBenchmark:
     """The suite's episodes for ``config``: its task catalogue (read from the suite's process), then
     ``episodes_per_task`` episodes per task with the run's seed, ``horizon`` overriding LeRobot's step limit."""
     options = suite_options(config)
-    name = str(config.benchmark.name)
-    suite = LiberoSuite()
+    kind_name, name = str(config.benchmark.model_dump()["suite"]), str(config.benchmark.name)
+    kind = SUITES[kind_name]
+    suite = kind.open(options)
     try:
         tasks = suite.tasks(name)
     finally:
         suite.close()
-    episodes = plan_episodes(name, tasks, options["episodes_per_task"], seed=config.seed, horizon=config.horizon)
-    return SuiteBenchmark(name, episodes, Path(f"{SUITES[0]}:{name}"))
+    episodes = kind.plan(name, tasks, options["episodes_per_task"], seed=config.seed, horizon=config.horizon)
+    return SuiteBenchmark(name, episodes, Path(f"{kind_name}:{name}"), kind_name)
 
 
-def task_label(episode: LiberoEpisode) -> str:
-    """The episode's task as ``results.json``'s ``per_task`` key: ``libero_object/task_03``."""
-    return f"{episode.suite}/task_{episode.task_id:02d}"
+def task_label(episode: Any) -> str:
+    """The episode's task as ``results.json``'s ``per_task`` key: ``libero_object/task_03``, ``pusht/PushT-v0``."""
+    return next(k.task_label(episode) for k in SUITES.values() if isinstance(episode, k.episode))
 
 
-def plan_episode(plan: EpisodePlan) -> LiberoEpisode:
+def plan_episode(plan: EpisodePlan) -> Any:
     """The suite episode a plan carries."""
-    return LiberoEpisode(**{f.name: plan.spec[f.name] for f in fields(LiberoEpisode)})
+    cls = SUITES[plan.spec[SUITE_KEY]].episode
+    return cls(**{f.name: plan.spec[f.name] for f in fields(cls)})
 
 
 class _SuiteEnv:
     """What the rollout loop and the worker read of a session's env."""
 
-    def __init__(self) -> None:
-        self.move_groups = {MOVE_GROUP: ACTION_DIM}
+    def __init__(self, kind: SuiteKind) -> None:
+        self.move_groups = {kind.move_group: kind.action_dim}
         self.renderer_setup_s = 0.0
 
 
@@ -149,10 +189,11 @@ class SuiteSession(EpisodeOutcome):
     rollout loop plays, over the worker's suite process. ``lerobot-eval``'s rules: the episode ends at its
     first terminated step (LIBERO's goal reached) or at the horizon; it succeeds when its last step did."""
 
-    def __init__(self, plan: EpisodePlan, suite: LiberoSuite, image_size: int, end_on_success: bool) -> None:
+    def __init__(self, plan: EpisodePlan, suite: Any, image_size: int, end_on_success: bool) -> None:
         self.plan, self.suite, self.image_size = plan, suite, image_size
+        self.kind = SUITES[plan.spec[SUITE_KEY]]
         self.episode = plan_episode(plan)
-        self.env, self.task = _SuiteEnv(), _SuiteTask()
+        self.env, self.task = _SuiteEnv(self.kind), _SuiteTask()
         self.end_on_success = end_on_success
         super().__init__()
         self.terminated = False
@@ -167,27 +208,24 @@ class SuiteSession(EpisodeOutcome):
 
         return EpisodeContext(spec=None, episode_index=self.plan.episode_index, seed=self.plan.seed,
                               prompt=self.plan.prompt, move_groups=dict(self.env.move_groups),
-                              policy_dt_s=1.0 / CONTROL_HZ, extra={"delta_groups": [MOVE_GROUP]})
+                              policy_dt_s=1.0 / self.kind.control_hz, extra=dict(self.kind.action_extra))
 
     def recorder_info(self, *, expert: bool, extra: dict[str, Any]) -> EpisodeInfo:
         from molmo_lerobot.recording import EpisodeInfo
 
-        plan = self.plan
-        return EpisodeInfo(episode_index=plan.episode_index, house_index=None, seed=plan.seed, prompt=plan.prompt,
-                           task_type=plan.task_type, fps=float(CONTROL_HZ), horizon=self.horizon,
-                           camera_names=list(_CAMERAS), img_resolution=(self.image_size, self.image_size),
+        return EpisodeInfo(identity=self.plan.identity, fps=float(self.kind.control_hz),
+                           camera_names=list(self.kind.cameras), img_resolution=(self.image_size, self.image_size),
                            joint_names={}, move_groups=dict(self.env.move_groups), expert=expert,
-                           extra={"suite": self.episode.suite, "task_id": self.episode.task_id,
-                                  "init_state_index": self.episode.init_state_index, **extra})
+                           extra={**self._suite_fields(), **extra})
 
     def observe(self, images: bool = True) -> Observation:
-        return policy_observation({**self._obs, "task": self.plan.prompt}, self.steps)
+        return self.kind.observation({**self._obs, "task": self.plan.prompt}, self.steps)
 
     def complete(self, action: Action) -> Action:
         return action
 
     def step(self, action: Action, *, observed: bool = True) -> bool:
-        reply = self.suite.step(np.asarray(action[MOVE_GROUP], dtype=np.float64))
+        reply = self.suite.step(np.asarray(action[self.kind.move_group], dtype=np.float64))
         self._obs, self.task.last_reward = reply["observation"], float(reply["reward"])
         self.terminated = bool(reply["terminated"])
         return self.count_step(bool(reply["success"]), observed)
@@ -205,25 +243,29 @@ class SuiteSession(EpisodeOutcome):
             success_once=self.success_once, steps=self.steps, seed=plan.seed, task_type=plan.task_type,
             prompt=plan.prompt, horizon=self.horizon,
             extra={"ended_by": self.ended_by or "horizon", "end_on_success": self.end_on_success,
-                   "success_any_step": self.success_any_step, "suite": self.episode.suite,
-                   "task_id": self.episode.task_id, "init_state_index": self.episode.init_state_index,
-                   "digest": self.episode.digest})
+                   "success_any_step": self.success_any_step, **self._suite_fields(), "digest": self.episode.digest})
+
+    def _suite_fields(self) -> dict[str, Any]:
+        """Which of the suite's episodes this is, minus what the result holds anyway (seed, horizon, prompt):
+        LIBERO's suite, task id and init state; PushT's suite and task."""
+        return {k: v for k, v in asdict(self.episode).items() if k not in ("seed", "horizon", "instruction")}
 
     def close(self) -> None:
         """Nothing: the suite process outlives the episode (:class:`SuiteSessions`)."""
 
 
 class SuiteSessions:
-    """A worker's suite process, started at its first suite episode and kept until :meth:`close`."""
+    """A worker's suite (LIBERO's process, PushT's env), started at its first suite episode and kept until
+    :meth:`close`."""
 
     def __init__(self, config: RunConfig) -> None:
         self.config = config
-        self._suite: LiberoSuite | None = None
+        self._suite: Any = None
 
     def open(self, plan: EpisodePlan, policy: Policy | None, end_on_success: bool) -> SuiteSession:
         options = suite_options(self.config)
         if self._suite is None:
-            self._suite = LiberoSuite(image_size=options["image_size"], hard_reset=options["hard_reset"])
+            self._suite = suite_kind(self.config).open(options)
         session = SuiteSession(plan, self._suite, options["image_size"], end_on_success)
         if policy is not None:
             policy.reset(session.policy_context())

@@ -27,8 +27,9 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from molmo_lerobot.assets.catalog import AssetLibraryType
 from molmo_lerobot.assets.grasps import GraspLibrary
-from molmo_lerobot.assets.libraries import AssetLibraryType, ObjectTableLibrary
+from molmo_lerobot.assets.libraries import ObjectTableLibrary
 from molmo_lerobot.paths import package_asset_dir
 
 ROBOT = "franka"  # the analytic handle grasps are sized for the Franka hand

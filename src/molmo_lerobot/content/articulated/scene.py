@@ -24,7 +24,7 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS
-from molmo_lerobot.assets.libraries import AssetLibraryType
+from molmo_lerobot.assets.catalog import AssetLibraryType
 from molmo_lerobot.content.articulated.objects import (
     ARTICULATED_LIBRARY_TYPE,
     ARTICULATED_OBJECTS,

@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.assets.libraries import AssetLibraryType
+from molmo_lerobot.assets.catalog import AssetLibraryType
 from molmo_lerobot.content.libero.fixtures import FIXTURE_LIBRARY_TYPE, LIBERO_FIXTURES, LiberoFixture
 from molmo_lerobot.content.libero.rooms import TABLE_NEAR, LiberoRooms, referring_expression
 from molmo_lerobot.sim.scenes import SceneDataset

@@ -45,8 +45,9 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from molmo_lerobot.assets.catalog import AssetLibraryType
 from molmo_lerobot.assets.grasps import GraspLibrary
-from molmo_lerobot.assets.libraries import AssetError, AssetLibraryType, ObjectTableLibrary
+from molmo_lerobot.assets.libraries import AssetError, ObjectTableLibrary
 from molmo_lerobot.content.libero.objects import COLLISION_GROUP, PACKAGE, assets_root, license_of, texture_file
 from molmo_lerobot.paths import home_dir
 

@@ -3,7 +3,8 @@ the grasps computed from their collision geometry (:mod:`molmo_lerobot.content.l
 
 from __future__ import annotations
 
-from molmo_lerobot.assets.libraries import AssetLibraryType, ObjectTableLibrary
+from molmo_lerobot.assets.catalog import AssetLibraryType
+from molmo_lerobot.assets.libraries import ObjectTableLibrary
 from molmo_lerobot.content.libero.grasps import LiberoGraspLibrary
 from molmo_lerobot.content.libero.objects import LIBERO_OBJECTS, object_metadata
 

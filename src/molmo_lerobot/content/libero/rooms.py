@@ -32,7 +32,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.assets.libraries import AssetLibraryType
+from molmo_lerobot.assets.catalog import AssetLibraryType
 from molmo_lerobot.content.libero import install_check
 from molmo_lerobot.content.libero.library import LIBERO_LIBRARY_TYPE
 from molmo_lerobot.content.libero.objects import LIBERO_OBJECTS, LiberoObject, assets_root, texture_file

@@ -22,7 +22,8 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.assets.builtin import BUILTIN_OBJECTS, BUILTIN_RECEPTACLES, BuiltinObject, BuiltinReceptacle
-from molmo_lerobot.assets.libraries import BUILTIN_LIBRARY_TYPE, AssetLibraryType
+from molmo_lerobot.assets.catalog import AssetLibraryType
+from molmo_lerobot.assets.libraries import BuiltinAssetLibrary
 from molmo_lerobot.sim.scenes import SceneDataset, attach_mjcf, room_spec
 
 #: salt that keeps house streams apart from every other use of the house index
@@ -173,4 +174,4 @@ def molmo_scene_datasets() -> list[SceneDataset]:
 
 @hookimpl
 def molmo_asset_libraries() -> list[AssetLibraryType]:
-    return [BUILTIN_LIBRARY_TYPE]
+    return [AssetLibraryType("builtin", lambda settings, catalog: [BuiltinAssetLibrary()], priority=300)]

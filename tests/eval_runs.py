@@ -1,0 +1,35 @@
+"""``molmo-eval`` in tests: in this process as every in-process caller runs it (compose the overrides,
+validate, evaluate), and the console script itself, a Hydra app that reads ``sys.argv``, as a subprocess
+(for what is about its command line: ``-m``, ``--help``, ``--cfg``, printed errors, exit statuses)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from molmo_lerobot.cli.eval import refused_errors
+from molmo_lerobot.config import compose
+from molmo_lerobot.run_config import RunConfig
+from molmo_lerobot.runner.evaluate import EvalResults, run_evaluation
+
+
+def evaluate(*overrides: str) -> EvalResults:
+    """``molmo-eval *overrides``'s run."""
+    return run_evaluation(RunConfig.of(compose(list(overrides))))
+
+
+def refusal(*overrides: str) -> list[str]:
+    """The problems ``molmo-eval *overrides`` refuses with (exit 2), one ``molmo-eval: error:`` line
+    each; fails the test where it runs instead."""
+    with pytest.raises(refused_errors()) as refused:
+        evaluate(*overrides)
+    return str(refused.value).splitlines()
+
+
+def molmo_eval(*args: str, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    """``molmo-eval *args`` in a subprocess (this process's environment; text output captured)."""
+    return subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.eval", *args], capture_output=True, text=True,
+                          cwd=cwd, timeout=timeout)

@@ -1,0 +1,67 @@
+"""``molmo-eval benchmark=pusht``: LeRobot's PushT episodes through our workers, results and resume.
+
+gym_pusht runs in the worker's own process (no venv of its own); a step costs ~10 ms here, so these runs play
+full sets of short episodes.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from molmo_lerobot.config import compose
+from molmo_lerobot.policies.random_policy import RandomPolicy
+from molmo_lerobot.run_config import RunConfig
+from molmo_lerobot.runner.evaluate import _suite_plan, run_evaluation
+from molmo_lerobot.suites import pusht
+from molmo_lerobot.suites.benchmark import SuiteBenchmarkError, SuiteSessions, load_suite_benchmark, suite_options
+
+pytest.importorskip("gym_pusht")
+
+ARGS = ["policy=random", "benchmark=pusht", "horizon=30", "progress=false"]
+
+
+def test_pusht_run_with_two_workers_scores_per_task(tmp_path):
+    res = run_evaluation(compose([*ARGS, "workers=2", "limit=4", f"output_dir={tmp_path}"]))
+    doc = json.loads((tmp_path / "results.json").read_text())
+    assert doc["n_episodes"] == 4 and doc["n_errors"] == 0 and list(doc["per_task"]) == ["pusht/PushT-v0"]
+    lines = sorted((json.loads(line) for line in (tmp_path / "episodes.jsonl").read_text().splitlines()),
+                   key=lambda e: e["episode_index"])
+    # lerobot-eval's seeding: episode k of a run with seed 0 is reset with seed k
+    assert [(e["seed"], e["steps"], e["horizon"], e["error"]) for e in lines] == [(k, 30, 30, None) for k in range(4)]
+    assert len({e["extra"]["digest"] for e in lines}) == 4
+    assert res.run_summary.n_episodes == 4
+
+
+@pytest.mark.slow
+def test_pusht_run_resumes_the_episodes_left(tmp_path):
+    run_evaluation(compose([*ARGS, "workers=1", "limit=1", f"output_dir={tmp_path}"]))
+    kept = (tmp_path / "episodes.jsonl").read_text().splitlines()
+    run_evaluation(compose([*ARGS, "workers=1", "limit=2", "resume=true", f"output_dir={tmp_path}"]))
+    lines = (tmp_path / "episodes.jsonl").read_text().splitlines()
+    assert lines[:1] == kept and len(lines) == 2 and json.loads(lines[1])["seed"] == 1
+
+
+def test_random_policy_draws_targets_across_the_workspace():
+    config = RunConfig.of(compose(["policy=random", "benchmark=pusht", "horizon=5"]))
+    bench = load_suite_benchmark(config)
+    sessions, policy = SuiteSessions(config), RandomPolicy({})
+    try:
+        session = sessions.open(_suite_plan(0, bench.suite, bench.episodes[0], True), policy, end_on_success=False)
+        obs = session.observe()
+        targets = policy.act(obs)[pusht.MOVE_GROUP]
+    finally:
+        sessions.close()
+    assert obs["images"][pusht.CAMERA].shape == (pusht.IMAGE_SIZE, pusht.IMAGE_SIZE, 3)
+    assert targets.shape == (policy.chunk, pusht.ACTION_DIM)
+    assert np.all((targets >= 0) & (targets <= 512))
+    # a target of the workspace, not a step of `scale` (0.15) from the agent's position
+    assert np.abs(targets[0] - obs["qpos"][pusht.MOVE_GROUP]).max() > 1.0
+
+
+def test_pusht_refuses_libero_options():
+    config = RunConfig.of(compose(["policy=random", "benchmark=pusht", "+benchmark.hard_reset=false"]))
+    with pytest.raises(SuiteBenchmarkError, match=r"benchmark.hard_reset: not an option .*: episodes_per_task, image_"):
+        suite_options(config)
