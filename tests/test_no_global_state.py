@@ -27,7 +27,6 @@ PROCESS_CACHES = {
     ("molmo_lerobot.resources.index", "_ENVS"): "LMDB allows one open handle per environment and process",
     ("molmo_lerobot.resources.index", "_ENVS_PID"): "the process the LMDB handles belong to (reset after fork)",
     ("molmo_lerobot.robots.franka", "_base_xml"): "constant MJCF text read from the installed package",
-    ("molmo_lerobot.robots.franka_droid", "_registry_xml"): "constant MJCF text built from the installed package",
     ("molmo_lerobot.content.libero.objects", "_file_owners"):
         "which installed LIBERO distribution lists each asset file (their dist-info RECORDs, the same for every run)",
 }

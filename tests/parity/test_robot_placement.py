@@ -3,8 +3,9 @@
 Their code places a mount body at the base pose, a ``base_size`` pedestal on it and the arm's
 root on top; ours must put every body, the pedestal and the TCP where theirs does, for several
 base poses and pedestals (their default, a custom one, none). Only their gated robot model is
-replaced: their loader reads our franka_droid arm's kinematic tree from a robot directory in
-their layout (tests/parity/their_placement.py).
+replaced: their loader reads our arm's kinematic tree from a robot directory in their layout
+(tests/parity/their_placement.py), for both arms: ``franka_droid`` (the Panda-built one) and
+``franka_droid_fr3`` (franky-sim's FR3).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from molmo_lerobot.robots.franka_droid import BASE_SIZE, FrankaDroid, load_droid_spec
+from molmo_lerobot.robots.franka_droid import BASE_SIZE, FrankaDroid, FrankaDroidFR3, load_droid_spec
 
 pytestmark = pytest.mark.parity
 
@@ -34,9 +35,12 @@ CASES = [{"pose": [0.0, 0.0, 0.0, *_yaw(0)], "base_size": list(BASE_SIZE)},
          {"pose": [0.3, -1.2, 0.0, *_yaw(-60)], "base_size": None}]
 
 
-def _tree() -> list[dict]:
-    """Our franka_droid arm's kinematic tree (fr3_link0 down), as their side rebuilds it."""
-    model = load_droid_spec().compile()
+ROBOTS = [FrankaDroid, FrankaDroidFR3]
+
+
+def _tree(arm: str) -> list[dict]:
+    """Our arm's kinematic tree (fr3_link0 down), as their side rebuilds it."""
+    model = load_droid_spec(arm=arm).compile()
     out = []
     for b in range(1, model.nbody):
         name = model.body(b).name
@@ -52,9 +56,8 @@ def _tree() -> list[dict]:
     return out
 
 
-def _ours(case: dict) -> dict:
+def _ours(robot: FrankaDroid, case: dict) -> dict:
     world = mujoco.MjSpec()
-    robot = FrankaDroid()
     if case["base_size"] is None:
         robot.add_to(world, case["pose"])
     else:
@@ -74,12 +77,14 @@ def _same_quat(a, b) -> bool:
     return abs(abs(float(np.dot(a, b))) - 1.0) < 1e-9
 
 
-def test_placement_matches_their_add_robot_to_scene(theirs):
-    got = theirs.run("their_placement:placements", {"tree": _tree(), "cases": CASES, "bodies": BODIES,
+@pytest.mark.parametrize("robot_type", ROBOTS, ids=lambda r: r.name)
+def test_placement_matches_their_add_robot_to_scene(theirs, robot_type):
+    robot = robot_type()
+    got = theirs.run("their_placement:placements", {"tree": _tree(robot.arm), "cases": CASES, "bodies": BODIES,
                                                    "tcp": TCP, "qpos": QPOS})["cases"]
     agreed = 0
     for case, their in zip(CASES, got, strict=True):
-        ours = _ours(case)
+        ours = _ours(robot, case)
         for name in BODIES:
             assert np.allclose(ours["bodies"][name][:3], their["bodies"][name][:3], atol=1e-9), (case, name)
             assert _same_quat(ours["bodies"][name][3:], their["bodies"][name][3:]), (case, name)

@@ -28,7 +28,7 @@ def object_grasps(env: Any, name: str, catalog: Any) -> np.ndarray:
     """
     uid = env.scene_metadata.get("objects", {}).get(name, {}).get("asset_id", name)
     try:
-        return robot_grasps(catalog, uid, env.robot_type.name)
+        return robot_grasps(catalog, uid, env.robot_type.hand)
     except LookupError as exc:
         raise ValueError(f"scripted policy: no grasps for object {name!r} (asset {uid!r}): {exc}") from None
 

@@ -82,7 +82,7 @@ class ScriptedArticulated(PhasedExpert):
         """(grasp pose in the moving body's frame, pre-grasp arm q) for the first reachable candidate, or None."""
         uid = self._uid()
         try:
-            local = robot_grasps(self.catalog, uid, self.env.robot_type.name, joint=self.local_joint)
+            local = robot_grasps(self.catalog, uid, self.env.robot_type.hand, joint=self.local_joint)
         except LookupError as exc:
             raise ValueError(f"scripted policy: no handle grasps for {uid!r} joint {self.local_joint!r}: "
                              f"{exc}") from None

@@ -66,7 +66,7 @@ class ScriptedPick(PhasedExpert):
         world = T_obj @ local
         approach = world[:, :3, 2]
         down = -approach[:, 2]
-        hand = HANDS.get(env.robot_type.name, PANDA_HAND)  # other robots: fingers as long as the Panda's
+        hand = HANDS.get(env.robot_type.hand, PANDA_HAND)  # other robots: fingers as long as the Panda's
         tips = world[:, :3, 3] + hand.tcp_to_fingertip * approach
         support = self._support_height(T_obj)
         ok = (down >= np.cos(np.radians(MAX_TILT_DEG))) & (tips[:, 2] >= support + TABLE_CLEARANCE)

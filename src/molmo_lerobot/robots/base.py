@@ -234,6 +234,14 @@ class RobotType(ABC):
     #: MolmoSpaces' ``base_size``: the box pedestal (x, y, z extents, metres) between the base
     #: pose and the arm's root, where an episode gives no ``robot.base_size``; None: no pedestal
     default_base_size: tuple[float, float, float] | None = None
+    #: the robot whose hand this one carries: grasp libraries and hand geometry are looked up by it
+    #: (None: its own name); a new version of a robot with the same gripper and TCP names the old one
+    hand_of: str | None = None
+
+    @property
+    def hand(self) -> str:
+        """The name grasps and hand geometry are kept under for this robot's gripper."""
+        return self.hand_of or self.name
 
     def init_qpos(self, group: str, values: Sequence[float]) -> np.ndarray:
         """An episode's ``robot.init_qpos[group]`` in public units; ``ValueError`` if it does not fit."""

