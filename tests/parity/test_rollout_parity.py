@@ -39,11 +39,17 @@ START_TOL = 1e-5
 TOL = 1e-9
 
 
+#: the full set's expert episodes (the episode's horizon, 227 to 606 steps) are on these task types;
+#: the pick-and-place kinds' 606-step ones are left out (too slow on the shared machine)
+EXPERT_TASKS = ("pick", "open", "close")
+
+
 def cases(task: str) -> list[tuple[int, str]]:
-    """(episode index, policy kind). All: the first 10 episodes, the expert on #0 and #5, fixed and random
-    on the others; by default episode 1 fixed, 2 random, and the expert on #0 of pick and open."""
+    """(episode index, policy kind). All: the first 10 episodes, fixed on the even ones and random on the
+    odd ones, except the expert on #0 and #5 of pick, open and close; by default episode 1 fixed, 2
+    random, and the expert on #0 of pick and open."""
     if FULL:
-        return [(i, "expert" if i % 5 == 0 else KINDS[1 + i % 2]) for i in range(10)]
+        return [(i, "expert" if i % 5 == 0 and task in EXPERT_TASKS else KINDS[1 + i % 2]) for i in range(10)]
     return [(0, "expert")] * (task in ("pick", "open")) + [(1, "fixed"), (2, "random")]
 
 
