@@ -15,17 +15,15 @@ from typing import Any
 
 import numpy as np
 
-from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
+from molmo_lerobot.policies.base import Action, EpisodeContext, Observation
 from molmo_lerobot.policies.image_ops import resize_with_pad_pil
 from molmo_lerobot.policies.lerobot_policy import parse_config
-from molmo_lerobot.protocol.client import PolicyClient
-from molmo_pi0.policy import Pi0Config
+from molmo_pi0.policy import OpenpiClientPolicy, Pi0Config
 
 IMAGE = "observation/image"
 WRIST = "observation/wrist_image"
 STATE = "observation/state"
 PROMPT = "prompt"
-ACTIONS = "actions"
 #: the LIBERO suite's policy observation (molmo_lerobot.suites.libero): cameras, its one move group and sizes
 CAMERAS = {IMAGE: "image", WRIST: "image2"}
 MOVE_GROUP, STATE_DIM, ACTION_DIM = "eef", 8, 7
@@ -58,37 +56,25 @@ def libero_actions(raw: Any, open_loop_horizon: int | None, source: str) -> dict
     return {MOVE_GROUP: actions}
 
 
-class Pi0LiberoPolicy(Policy):
+class Pi0LiberoPolicy(OpenpiClientPolicy):
     """One openpi connection per worker; LIBERO requests, 7-D chunks."""
 
     def __init__(self, cfg: dict[str, Any]) -> None:
-        self.cfg: Pi0Config = parse_config(cfg, Pi0Config)
+        self.cfg = parse_config(cfg, Pi0Config)
         if self.cfg.path:
             raise ValueError("policy=pi0_libero talks to an openpi server (policy.host, policy.port); a LeRobot "
                              f"LIBERO checkpoint ({self.cfg.path}) runs with policy=lerobot policy.path=…")
-        self.client = PolicyClient(self.cfg.host, self.cfg.port, timeout_s=self.cfg.timeout_s,
-                                   connect_timeout_s=self.cfg.connect_timeout_s,
-                                   max_message_bytes=self.cfg.max_message_bytes, api_key=self.cfg.api_key)
-        self._ctx: EpisodeContext | None = None
+        self._open_client()
 
     def reset(self, ctx: EpisodeContext) -> None:
         if dict(ctx.move_groups) != {MOVE_GROUP: ACTION_DIM}:
             raise ValueError(f"policy=pi0_libero plays LIBERO episodes (benchmark=libero_*, move group "
                              f"{MOVE_GROUP!r} of {ACTION_DIM}); this episode's move groups are {dict(ctx.move_groups)}")
-        self._ctx = ctx
-        if self.cfg.reset == "reconnect" or not self.client.connected:
-            self.client.connect()
-        if self.cfg.reset == "message":
-            self.client.reset(prompt=ctx.prompt, episode_index=ctx.episode_index, seed=ctx.seed)
+        super().reset(ctx)
 
     def act(self, obs: Observation) -> Action:
         assert self._ctx is not None, "reset() must be called before act()"
         prompt = obs.get("prompt") or self._ctx.prompt
         request = libero_request(obs, prompt.lower() if self.cfg.lowercase_prompt else prompt, self.cfg.image_size)
-        response = self.client.infer(request)
-        if ACTIONS not in response:
-            raise ValueError(f"policy server {self.client.uri} answered without 'actions' (keys: {sorted(response)})")
-        return libero_actions(response[ACTIONS], self.cfg.open_loop_horizon, f"policy server {self.client.uri}")
-
-    def close(self) -> None:
-        self.client.close()
+        return libero_actions(self._infer_actions(request), self.cfg.open_loop_horizon,
+                              f"policy server {self.client.uri}")

@@ -44,13 +44,13 @@ class Pi0Config(DroidConfig):
     serve_batch_timeout_ms: float = Field(default=50.0, ge=0)
 
 
-class Pi0RemotePolicy(Policy):
-    """One websocket connection per policy instance (= per worker); chunk length from the response."""
+class OpenpiClientPolicy(Policy):
+    """A client of an openpi server (``serve_policy``, or ``molmo-serve``): one websocket connection per policy
+    instance (= per worker), reset as ``policy.reset`` says; subclasses make the request and read the answer."""
 
-    def __init__(self, cfg: dict[str, Any]) -> None:
-        self.cfg: Pi0Config = parse_config(cfg, Pi0Config)
-        check_checkpoint(self.cfg.checkpoint, self.cfg.action_mode)
-        self.convention = get_convention(self.cfg.convention)
+    cfg: Pi0Config
+
+    def _open_client(self) -> None:
         self.client = PolicyClient(
             self.cfg.host,
             self.cfg.port,
@@ -68,19 +68,33 @@ class Pi0RemotePolicy(Policy):
         if self.cfg.reset == "message":
             self.client.reset(prompt=ctx.prompt, episode_index=ctx.episode_index, seed=ctx.seed)
 
+    def _infer_actions(self, request: dict[str, Any]) -> Any:
+        """The server's ``actions`` for ``request`` (an answer without them is an error naming its keys)."""
+        response = self.client.infer(request)
+        if ACTIONS not in response:
+            raise ValueError(f"policy server {self.client.uri} answered without 'actions' (keys: {sorted(response)})")
+        return response[ACTIONS]
+
+    def close(self) -> None:
+        self.client.close()
+
+
+class Pi0RemotePolicy(OpenpiClientPolicy):
+    """openpi's DROID protocol; chunk length from the response."""
+
+    def __init__(self, cfg: dict[str, Any]) -> None:
+        self.cfg = parse_config(cfg, Pi0Config)
+        check_checkpoint(self.cfg.checkpoint, self.cfg.action_mode)
+        self.convention = get_convention(self.cfg.convention)
+        self._open_client()
+
     def act(self, obs: Observation) -> Action:
         assert self._ctx is not None, "reset() must be called before act()"
         view = self.convention.observation(obs)
         request = droid_request(self.convention.images(view), view.get("qpos") or {},
                                 obs.get("prompt") or self._ctx.prompt, self.cfg)
-        response = self.client.infer(request)
-        if ACTIONS not in response:
-            raise ValueError(f"policy server {self.client.uri} answered without 'actions' (keys: {sorted(response)})")
-        return droid_actions(response[ACTIONS], request[JOINTS], self.cfg, self._ctx.policy_dt_s,
+        return droid_actions(self._infer_actions(request), request[JOINTS], self.cfg, self._ctx.policy_dt_s,
                              f"policy server {self.client.uri}")
-
-    def close(self) -> None:
-        self.client.close()
 
 
 class Pi0InProcessPolicy(Policy):
