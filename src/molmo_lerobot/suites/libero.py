@@ -14,14 +14,14 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from molmo_lerobot.hashing import content_sha256
 from molmo_lerobot.policies.base import EpisodeContext, Policy
+from molmo_lerobot.suites.episode import SuiteEpisode
 from molmo_lerobot.suites.pipe import SuiteProcess
 
 #: LeRobot's per-suite step limits (``lerobot.envs.libero.TASK_SUITE_MAX_STEPS``; the test checks they agree)
@@ -43,18 +43,13 @@ def libero_venv() -> Path:
 
 
 @dataclass(frozen=True)
-class LiberoEpisode:
+class LiberoEpisode(SuiteEpisode):
     suite: str
     task_id: int
     init_state_index: int
     seed: int
     horizon: int
     instruction: str
-
-    @property
-    def digest(self) -> str:
-        """SHA-256 of the episode's canonical JSON: its identity."""
-        return content_sha256(asdict(self), ensure_ascii=True).hex()
 
 
 def plan_episodes(suite: str, tasks: Iterable[Mapping[str, Any]], episodes_per_task: int, seed: int = 0,

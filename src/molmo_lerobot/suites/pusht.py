@@ -19,12 +19,12 @@ from __future__ import annotations
 import os
 import warnings
 from collections.abc import Iterable, Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from molmo_lerobot.hashing import content_sha256
+from molmo_lerobot.suites.episode import SuiteEpisode
 
 #: gym_pusht's env id as LeRobot's ``pusht`` config names it (``gym_<type>/<task>``)
 ENV_ID = "gym_pusht/PushT-v0"
@@ -48,18 +48,13 @@ _GYM_KWARGS: dict[str, Any] = {"obs_type": "pixels_agent_pos", "render_mode": "r
 
 
 @dataclass(frozen=True)
-class PushTEpisode:
+class PushTEpisode(SuiteEpisode):
     suite: str
     task: str
     seed: int
     horizon: int
     #: the prompt: ``lerobot-eval`` gives PushT policies an empty ``task``
     instruction: str
-
-    @property
-    def digest(self) -> str:
-        """SHA-256 of the episode's canonical JSON: its identity."""
-        return content_sha256(asdict(self), ensure_ascii=True).hex()
 
 
 def plan_episodes(suite: str, tasks: Iterable[Mapping[str, Any]], episodes_per_task: int, seed: int = 0,
