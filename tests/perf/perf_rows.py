@@ -1,12 +1,17 @@
 """What the throughput tables under tests/perf/ share: a run's wall-clock and start-up-free episode
 rates, the policy server's statistics when the run served its policy, appending rows to
-``runs/perf.jsonl``, and a policy plugin that reads every camera image (``policy=image_scripted``)."""
+``runs/perf.jsonl``, timing a command or a ``molmo-eval`` run in a fresh process, and a policy plugin
+that reads every camera image (``policy=image_scripted``)."""
 
 from __future__ import annotations
 
 import json
 import os
+import resource
+import subprocess
+import sys
 import textwrap
+import time
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +39,27 @@ def append_rows(benchmark: str, rows: list[dict[str, Any]], **common: Any) -> No
         for r in rows:
             f.write(json.dumps({"benchmark": benchmark, **common, **r}) + "\n")
 
+
+
+def timed(cmd: list[str], env: dict[str, str]) -> tuple[float, float, str]:
+    """Wall seconds, CPU seconds (the process and every descendant it reaped) and stdout of ``cmd``."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), out.stdout
+
+
+def eval_run(args: list[str], out: Path, env: dict[str, str]) -> tuple[float, float, list[dict[str, Any]]]:
+    """``molmo-eval ARGS output_dir=OUT progress=false`` in a fresh process: its wall and CPU seconds
+    (:func:`timed`) and its ``episodes.jsonl`` records, none of which may be an error."""
+    wall, cpu, _ = timed([sys.executable, "-m", "molmo_lerobot.cli.eval", *args, f"output_dir={out}",
+                          "progress=false"], env)
+    rows = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    assert all(r["error"] is None for r in rows), [r["error"] for r in rows]
+    return wall, cpu, rows
 
 #: Source of a policy plugin that consumes images: the scripted expert, reading every pixel of both cameras.
 PLUGIN = textwrap.dedent('''

@@ -19,13 +19,10 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import pytest
-from perf_rows import image_policy_env
+from perf_rows import eval_run, image_policy_env
 
 pytestmark = pytest.mark.perf
 ROUNDS = int(os.environ.get("MOLMO_PERF_ROUNDS", "1"))
@@ -35,14 +32,7 @@ RUNS = {"camera-reading policy": ["policy=image_scripted"], "recorded scripted r
 
 
 def _run(version: str, args: list[str], out: Path, env: dict[str, str]) -> tuple[float, list[dict]]:
-    cmd = [sys.executable, "-m", "molmo_lerobot.cli.eval", f"benchmark=pick_{version}", *args, "workers=1",
-           f"limit={EPISODES}", "seed=0", f"output_dir={out}", "progress=false"]
-    t0 = time.perf_counter()
-    done = subprocess.run(cmd, capture_output=True, text=True, env=env)
-    wall = time.perf_counter() - t0
-    assert done.returncode == 0, done.stderr[-2000:]
-    rows = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
-    assert all(r["error"] is None for r in rows), [r["error"] for r in rows]
+    wall, _, rows = eval_run([f"benchmark=pick_{version}", *args, "workers=1", f"limit={EPISODES}", "seed=0"], out, env)
     return wall, rows
 
 

@@ -24,15 +24,12 @@ from __future__ import annotations
 
 import json
 import os
-import resource
-import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import pytest
-from perf_rows import image_policy_env
+from perf_rows import eval_run, image_policy_env, timed
 
 pytestmark = pytest.mark.perf
 N = max(2, int(os.environ.get("MOLMO_PERF_EPISODES", "6")))
@@ -104,30 +101,15 @@ def perf_env(tmp_path_factory) -> dict[str, str]:
     return image_policy_env(tmp_path_factory.mktemp("site"), CHUNK)
 
 
-def _timed(cmd: list[str], env: dict[str, str]) -> tuple[float, float, str]:
-    """Wall seconds and CPU seconds (the process and every descendant it reaped) of ``cmd``."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t0 = time.perf_counter()
-    out = subprocess.run(cmd, capture_output=True, text=True, env=env)
-    wall = time.perf_counter() - t0
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    assert out.returncode == 0, out.stderr[-2000:]
-    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), out.stdout
-
-
 def _raw(n: int, env: dict[str, str]) -> tuple[float, float, list[dict]]:
     args = json.dumps({"n": n, "horizon": HORIZON, "chunk": CHUNK, "benchmark": BENCHMARK})
-    wall, cpu, stdout = _timed([sys.executable, "-c", RAW, args], env)
+    wall, cpu, stdout = timed([sys.executable, "-c", RAW, args], env)
     return wall, cpu, json.loads(stdout.strip().splitlines()[-1])
 
 
 def _harness(n: int, workers: int, out_dir: Path, env: dict[str, str]) -> tuple[float, float, list[dict]]:
-    args = [f"benchmark={BENCHMARK}", "policy=image_scripted", f"limit={n}", f"horizon={HORIZON}",
-            f"workers={workers}", f"output_dir={out_dir}", "progress=false"]
-    wall, cpu, _ = _timed([sys.executable, "-m", "molmo_lerobot.cli.eval", *args], env)
-    rows = [json.loads(line) for line in (out_dir / "episodes.jsonl").read_text().splitlines()]
-    assert all(r["error"] is None for r in rows), [r["error"] for r in rows]
-    return wall, cpu, rows
+    return eval_run([f"benchmark={BENCHMARK}", "policy=image_scripted", f"limit={n}", f"horizon={HORIZON}",
+                     f"workers={workers}"], out_dir, env)
 
 
 def _split(t_m: float, t_n: float) -> tuple[float, float]:
