@@ -8,10 +8,10 @@ import json
 
 import mujoco
 import pytest
-from eval_runs import refusal
 from standin import pick_episode
 from user_library import user_pick_episode, write_user_library
 
+from eval_runs import refusal
 from molmo_lerobot.benchmark.load import load_benchmark
 from molmo_lerobot.benchmark.registry import benchmark_dir, benchmark_names
 from molmo_lerobot.config import compose
