@@ -6,7 +6,8 @@ the MolmoSpaces settings and composes the asset catalog from the asset and grasp
 the plugins provide (the run's user libraries among them). The main process builds one per run;
 a worker, the run's policy server and the Gymnasium env build theirs with the same constructor
 (a worker from :meth:`RunContext.portable_config` and the render profile's record).
-No module keeps run state of its own.
+:meth:`RunContext.for_benchmark` adds what the benchmark decides: its render profile and, unless
+the run sets ``timing.sleep``, whether its episodes sleep. No module keeps run state of its own.
 """
 
 from __future__ import annotations
@@ -18,8 +19,8 @@ from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.assets.catalog import AssetCatalog
 from molmo_lerobot.molmospaces.settings import MolmoSpacesSettings, resolve
-from molmo_lerobot.plugins import Plugins
-from molmo_lerobot.run_config import MolmoSpacesConfig, RunConfig
+from molmo_lerobot.plugins import PluginError, Plugins
+from molmo_lerobot.run_config import MolmoSpacesConfig, RunConfig, RunConfigError
 
 if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
@@ -59,9 +60,12 @@ class RunContext:
 
     @property
     def timing(self) -> Timing:
-        """The run's ``timing``."""
+        """The run's ``timing``, once ``timing.sleep`` is decided (given, or by :meth:`for_benchmark`)."""
         from molmo_lerobot.sim.env import Timing
 
+        if self.config.timing.sleep is None:
+            raise ValueError("timing.sleep is undecided: RunContext.for_benchmark decides it from the benchmark's "
+                             "scene datasets")
         return Timing(**self.config.timing.model_dump())
 
     @property
@@ -74,20 +78,45 @@ class RunContext:
         return RenderProfile.from_record(record) if record else resolve_profile(None)
 
     def for_benchmark(self, bench: Benchmark) -> RunContext:
-        """This context with the render profile ``bench`` names (with this process's overrides), whose
-        record workers build their context with."""
+        """This context as ``bench`` runs: with the render profile it names (with this process's overrides),
+        whose record workers build their context with, and ``timing.sleep``, where the run leaves it
+        unset, as its scene datasets say (:func:`scenes_sleep`), so that ``run.json`` records the value used."""
         from molmo_lerobot.sim.render_profile import RenderProfileError, resolve_profile
 
         try:
             profile = resolve_profile(bench.metadata.render_profile if bench.metadata else None)
         except RenderProfileError as exc:
             raise RenderProfileError(f"{bench.path}: benchmark_metadata.json: {exc}") from None
-        return dataclasses.replace(self, render_record=profile.record())
+        run = dataclasses.replace(self, render_record=profile.record())
+        return run if self.config.timing.sleep is not None else run.with_sleep(scenes_sleep(bench, self.plugins))
+
+    def with_sleep(self, sleep: bool) -> RunContext:
+        """This context with ``timing.sleep`` set to ``sleep``."""
+        timing = self.config.timing.model_copy(update={"sleep": sleep})
+        return dataclasses.replace(self, config=self.config.model_copy(update={"timing": timing}))
 
     def portable_config(self) -> RunConfig:
         """The config with every data path absolute: what a worker builds its context from."""
         portable = self.settings.to_config()
         return self.config.model_copy(update={**portable, "molmospaces": MolmoSpacesConfig(**portable["molmospaces"])})
+
+
+def scenes_sleep(bench: Benchmark, plugins: Plugins) -> bool:
+    """Whether ``bench``'s episodes sleep by their scene datasets (``SceneDataset.sleeps``: MolmoSpaces'
+    yes, ours no). A dataset no plugin provides says nothing (its episodes cannot run and are recorded
+    as errors); datasets that disagree are refused (:class:`RunConfigError`): ``timing.sleep`` decides."""
+    says: dict[bool, list[str]] = {}
+    for name in dict.fromkeys(episode.scene_dataset for episode in bench.episodes):
+        try:
+            scene = plugins.scene_dataset(name)
+        except PluginError:
+            continue
+        says.setdefault(bool(getattr(scene, "sleeps", False)), []).append(name)  # a duck-typed one may lack it
+    if len(says) > 1:
+        raise RunConfigError([f"timing.sleep: benchmark {bench.path} mixes scene datasets whose episodes sleep "
+                              f"({', '.join(says[True])}) with ones whose episodes do not "
+                              f"({', '.join(says[False])}); set timing.sleep=true or timing.sleep=false"])
+    return True in says
 
 
 def build_catalog(plugins: Plugins, settings: MolmoSpacesSettings) -> AssetCatalog:

@@ -139,15 +139,17 @@ class TimingConfig(_Section):
     #: hold: a step's targets applied at once and held (MolmoSpaces); ramp: moved in over the ticks
     control: Annotated[str, _rule(lambda v: v in CONTROL_MODES,
                                   f"timing: control must be one of {', '.join(CONTROL_MODES)}, got {{got}}")] = "hold"
-    #: MuJoCo body sleeping from the reset state on, as MolmoSpaces' rollouts (off: a sleeping body's
-    #: contacts leave data.contact, so settled objects read unsupported; docs/parity.md)
-    sleep: Annotated[bool, _rule(lambda v: isinstance(v, bool),
-                                 "timing: sleep must be true or false, got {got}")] = False
+    #: MuJoCo body sleeping from the reset state on, as MolmoSpaces' rollouts; null: as the benchmark's
+    #: scene datasets say (MolmoSpaces' scenes: on; ours: off, as a sleeping body's contacts leave
+    #: data.contact, docs/parity.md). run.json records the value the run used
+    sleep: Annotated[bool | None, _rule(lambda v: v is None or isinstance(v, bool),
+                                        "timing: sleep must be true, false or null (the benchmark's scenes "
+                                        "decide), got {got}")] = None
 
     @model_validator(mode="after")
     def _steps_divide(self) -> TimingConfig:
         try:
-            Timing(**self.model_dump())
+            Timing(**self.model_dump(exclude={"sleep"}))
         except ValueError as exc:
             raise _problem(str(exc)) from None
         return self

@@ -66,7 +66,7 @@ def test_hold_tracks_a_new_target_faster_than_ramp(pick_spec, run):
 def test_sleep_is_off_by_default_and_drops_settled_contacts_when_on(pick_spec, run):
     """timing.sleep=true enables MuJoCo sleeping after the reset, as MolmoSpaces' rollouts (tolerance
     1e-3); a settled object then falls asleep and its contacts leave data.contact, which is why the
-    contact-based success rules need it off (the default)."""
+    contact-based success rules need it off (our scenes' choice; the sim's Timing default)."""
     flag = int(mujoco.mjtEnableBit.mjENBL_SLEEP)
     assert Timing().sleep is False
     contacts, asleep = {}, {}
@@ -103,6 +103,6 @@ def test_control_options_are_checked_up_front():
     assert config_problems({**base, "timing": {**timing, "control": "slew"}}) == [
         "timing: control must be one of hold, ramp, got 'slew'"]
     assert config_problems({**base, "timing": {**timing, "sleep": "yes"}}) == [
-        "timing: sleep must be true or false, got 'yes'"]
+        "timing: sleep must be true, false or null (the benchmark's scenes decide), got 'yes'"]
     assert config_problems({**base, "timing": {**timing, "mode": "hold"}}) == [
         "timing: unknown keys ['mode'] (known: policy_dt_ms, ctrl_dt_ms, sim_dt_ms, control, sleep)"]

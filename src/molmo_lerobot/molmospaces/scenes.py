@@ -64,8 +64,11 @@ class MolmoSpacesScenes(SceneDataset):
     """One MolmoSpaces scene dataset over the run's assets dir (see the module docstring).
 
     Its houses exist only under a run's settings: they are built per episode
-    (:meth:`build_episode`), never by index alone.
+    (:meth:`build_episode`), never by index alone. Its episodes sleep (:attr:`SceneDataset.sleeps`)
+    as MolmoSpaces' rollouts do.
     """
+
+    sleeps = True
 
     def __init__(self, name: str) -> None:
         self.name = name

@@ -164,7 +164,7 @@ class EpisodeSession(EpisodeOutcome):
                 expert = self.run.plugins.expert(self.plan.task_type)
         return EpisodeContext(spec=self.spec, episode_index=self.plan.episode_index, seed=self.plan.seed,
                               prompt=self.plan.prompt, move_groups=dict(self.env.move_groups),
-                              policy_dt_s=self.run.timing.policy_dt_ms / 1000.0,
+                              policy_dt_s=self.env.timing.policy_dt_s,
                               env=self.env if privileged else None,
                               catalog=self.run.catalog if privileged else None, expert=expert)
 
@@ -174,7 +174,7 @@ class EpisodeSession(EpisodeOutcome):
 
         plan, env = self.plan, self.env
         return EpisodeInfo(
-            identity=plan.identity, fps=1000.0 / self.run.timing.policy_dt_ms, camera_names=list(env.camera_names),
+            identity=plan.identity, fps=1000.0 / env.timing.policy_dt_ms, camera_names=list(env.camera_names),
             img_resolution=(int(self.spec.img_resolution[0]), int(self.spec.img_resolution[1])),
             joint_names=dict(env.joint_names), move_groups=dict(env.move_groups), expert=expert,
             extra={"task_cls": plan.task_cls, "robot": self.spec.robot.robot_name,

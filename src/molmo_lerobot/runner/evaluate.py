@@ -190,12 +190,14 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     bench: Benchmark | SuiteBenchmark
     if is_suite(config):  # an env suite's episodes (LIBERO, PushT), played in each worker's suite
         bench = _suite_benchmark(config)
+        run = run.with_sleep(bool(config.timing.sleep))  # not our physics: recorded as given, unset false
     else:
         bench = load_benchmark(resolve_benchmark_path(config.benchmark.model_dump(), run.plugins), run.plugins)
-        try:  # the render profile it names travels to the workers
+        try:  # the render profile it names and whether its episodes sleep travel to the workers
             run = run.for_benchmark(bench)
-        except ValueError as exc:  # an unknown profile, a bad MOLMO_SCENE_* override
+        except ValueError as exc:  # an unknown profile, a bad MOLMO_SCENE_* override, scenes that disagree on sleep
             raise RunError(str(exc)) from None
+    config = config.model_copy(update={"timing": run.config.timing})  # run.json records timing.sleep as decided
     started = datetime.now(UTC)
     run_dir = RunDirectory(Path(config.output_dir or Path("runs") / f"{safe_name(bench.name)}-"
                                 f"{safe_name(policy_name)}-{started:%Y%m%d-%H%M%S}"))

@@ -153,7 +153,7 @@ class EpisodePlanner:
         self.run_seed = run.config.seed
         self.horizon = run.config.horizon
         self.horizons = {str(task): float(sec) for task, sec in run.config.horizons.items()}
-        self.policy_dt_ms = run.timing.policy_dt_ms
+        self.policy_dt_ms = run.config.timing.policy_dt_ms
 
     def plan(self, index: int) -> EpisodePlan:
         """Episode ``index`` of the benchmark, planned (never raises for the episode's own faults)."""

@@ -16,9 +16,10 @@ position targets reach the actuators: ``hold`` (MolmoSpaces' controllers) writes
 targets at the first tick and holds them for the step (the default); ``ramp`` moves them
 linearly from the previous command to the new one over the ticks. ``Timing.sleep`` enables MuJoCo's
 body sleeping from the reset state on, as MolmoSpaces' rollouts do (where the MuJoCo in use
-has it). It is off by default: MuJoCo leaves a sleeping body's contacts out of
-``data.contact``, which the contact-based success rules read (theirs too), so an object that
-has settled on its receptacle reads as unsupported (``docs/parity.md``).
+has it). A run decides it per benchmark (``timing.sleep``, else the scene datasets'
+``SceneDataset.sleeps``: on for MolmoSpaces' scenes, off for ours, whose contact-based success
+rules read ``data.contact``, which leaves out a sleeping body's contacts: a settled object reads
+as unsupported; ``docs/parity.md``).
 """
 
 from __future__ import annotations

@@ -38,6 +38,9 @@ class SceneDataset(ABC):
 
     name: str
     aliases: tuple[str, ...] = ()
+    #: whether its episodes run with MuJoCo body sleeping where the run leaves ``timing.sleep`` unset
+    #: (MolmoSpaces' scene datasets: yes, as their rollouts; ours: no, docs/parity.md)
+    sleeps: bool = False
 
     @abstractmethod
     def n_houses(self) -> int | None:
