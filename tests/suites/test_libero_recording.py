@@ -165,9 +165,9 @@ def test_a_suite_recording_has_lerobots_libero_layout_and_merges_with_theirs(tmp
 
 def test_a_layout_misfit_names_the_feature(tmp_path):
     from molmo_lerobot.features import FeatureError
-    from molmo_lerobot.suites.libero_dataset import LiberoDatasetLayout
+    from molmo_lerobot.suites.libero_dataset import libero_layout
 
-    layout = LiberoDatasetLayout(64)
+    layout = libero_layout(64)
     obs = {"images": {"image": np.zeros((64, 64, 3), np.uint8), "image2": np.zeros((32, 32, 3), np.uint8)},
            "qpos": {"eef": np.zeros(8)}}
     with pytest.raises(FeatureError, match=r"observation.images.image2: got uint8 \(32, 32, 3\), expected"):
@@ -204,11 +204,15 @@ def test_a_recorded_libero_run_merges_with_lerobots_libero_layout(tmp_path):
     assert merged.meta.total_episodes == 4 and merged.meta.total_frames == ds.meta.total_frames + 8
 
 
-def test_a_suite_without_a_recording_layout_refuses_record_up_front(tmp_path):
+def test_a_suite_without_a_recording_layout_refuses_record_up_front(tmp_path, monkeypatch):
+    import dataclasses
+
     from molmo_lerobot.errors import RunError
     from molmo_lerobot.runner.evaluate import run_evaluation
+    from molmo_lerobot.suites import benchmark
 
-    with pytest.raises(RunError, match=r"record=true: recording benchmark=pusht is not supported yet"):
+    monkeypatch.setitem(benchmark.SUITES, "pusht", dataclasses.replace(benchmark.SUITES["pusht"], recording=None))
+    with pytest.raises(RunError, match=r"record=true: env suite 'pusht' \(benchmark=pusht\) has no recording layout"):
         run_evaluation(compose(["policy=random", "benchmark=pusht", "record=true", "limit=1", "progress=false",
                                 f"output_dir={tmp_path}"]))
     assert not tmp_path.joinpath("episodes.jsonl").exists()

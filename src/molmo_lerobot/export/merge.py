@@ -13,7 +13,7 @@ Layout added to the LeRobot dataset root:
 
 Dataset episodes follow benchmark order (each worker shard holds consecutive episodes, so the
 merge only copies and concatenates, never re-encodes), and every frame carries ``eval.episode_index``, but in an
-env suite's recording, whose schema is the suite's published datasets' (:mod:`molmo_lerobot.suites.libero_dataset`).
+env suite's recording, whose schema is the suite's published datasets' (:mod:`molmo_lerobot.suites.dataset`).
 
 * ``meta/eval/episodes.jsonl``: one record per attempted episode: ``episode_index`` (the
   dataset episode, or null when not stored, with ``not_recorded``), ``benchmark_episode_index``,

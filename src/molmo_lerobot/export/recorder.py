@@ -9,8 +9,8 @@ An expert's episode (:attr:`EpisodeInfo.expert`) is recorded up to ``record_hold
 its first success, but at least ``record_min_frames`` frames (100: the action chunk of LeRobot's
 ACT and SmolVLA, so no demonstration is shorter than the chunk a policy trained on it predicts); the
 rollout itself, and so the score, runs on to the horizon either way.
-An env-suite run (``benchmark=libero_object``) records in the suite's fixed schema instead, LeRobot's LIBERO
-datasets' (:mod:`molmo_lerobot.suites.libero_dataset`), so that its dataset merges with theirs.
+An env-suite run (``benchmark=libero_object``, ``pusht``) records in the suite's fixed schema instead, that of the
+suite's LeRobot datasets (:mod:`molmo_lerobot.suites.dataset`), so that its dataset merges with theirs.
 ``finalize`` then merges the shards into ``output_dir/dataset`` with
 ``lerobot.datasets.aggregate.aggregate_datasets``, writes the eval records, the dataset card
 and ``results.json`` into it, and pushes to the Hub when ``push=true``.
@@ -36,7 +36,7 @@ from molmo_lerobot.results import EpisodeResult, Push, RunSummary
 from molmo_lerobot.run_config import RunConfig
 
 if TYPE_CHECKING:
-    from molmo_lerobot.suites.libero_dataset import LiberoDatasetLayout
+    from molmo_lerobot.suites.dataset import SuiteDatasetLayout
 
 log = logging.getLogger(__name__)
 
@@ -84,8 +84,8 @@ class LeRobotRecorderFactory(MergedDataset, RecorderFactory):
     remote: str | None = None
     #: ... but an expert's recording keeps at least this many frames (the horizon permitting)
     min_frames: int = RunConfig.model_fields["record_min_frames"].default
-    #: an env suite's fixed schema (LeRobot's LIBERO datasets'); None: each shard's schema follows its first step
-    layout: LiberoDatasetLayout | None = None
+    #: an env suite's fixed schema (its LeRobot datasets'); None: each shard's schema follows its first step
+    layout: SuiteDatasetLayout | None = None
 
     @classmethod
     def from_config(cls, cfg: RunConfig | dict[str, Any]) -> LeRobotRecorderFactory:
@@ -231,7 +231,7 @@ class LeRobotRecorder(Recorder):
         self.shards_dir = output_dir / SHARDS_DIR
         self._ds: Any = None
         self._root: Path | None = None
-        self._layout: FrameLayout | LiberoDatasetLayout | None = None
+        self._layout: FrameLayout | SuiteDatasetLayout | None = None
         self._seq = 0
         self._saved: list[dict[str, Any]] = []
         self._discarded: list[dict[str, Any]] = []
@@ -302,7 +302,7 @@ class LeRobotRecorder(Recorder):
         self._close_shard()
 
     # Shards ----------------------------------------------------------------------------
-    def _open_shard(self, layout: FrameLayout | LiberoDatasetLayout, horizon: int) -> None:
+    def _open_shard(self, layout: FrameLayout | SuiteDatasetLayout, horizon: int) -> None:
         fileio.make_dirs(self.shards_dir, root=self.shards_dir.parent)  # LeRobot makes the new shard in it
         root = self.shards_dir / shard_name(self.factory.session, self.worker_id, self._seq)
         while root.exists():  # never reuse a directory, whatever left it there

@@ -28,7 +28,9 @@ from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.hashing import content_sha256
 from molmo_lerobot.results import EpisodeOutcome
 from molmo_lerobot.suites import libero, pusht
-from molmo_lerobot.suites.libero_dataset import LiberoDatasetLayout
+from molmo_lerobot.suites.dataset import SuiteDatasetLayout
+from molmo_lerobot.suites.libero_dataset import libero_layout
+from molmo_lerobot.suites.pusht_dataset import pusht_layout
 
 if TYPE_CHECKING:
     from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
@@ -68,9 +70,9 @@ class SuiteKind:
     distributions: tuple[str, ...]
     #: where those distributions live: ``"main"`` (this venv) or ``"libero"`` (the LIBERO venv)
     venv: str = "main"
-    #: the dataset layout ``record=true`` writes (``recording(options)``: LeRobot's LIBERO datasets' schema);
-    #: None: each recording's schema follows its first step
-    recording: Callable[[dict[str, Any]], Any] | None = None
+    #: the dataset layout ``record=true`` writes (``recording(options)``: the schema of the suite's LeRobot
+    #: datasets, ``lerobot/libero``'s, ``lerobot/pusht``'s); None: ``record=true`` is refused
+    recording: Callable[[dict[str, Any]], SuiteDatasetLayout] | None = None
 
 
 def _libero_label(episode: libero.LiberoEpisode) -> str:
@@ -87,7 +89,7 @@ SUITES: dict[str, SuiteKind] = {
         options={"episodes_per_task": 1, "image_size": libero.IMAGE_SIZE, "hard_reset": True},
         action_extra={"delta_groups": [libero.MOVE_GROUP]}, benchmarks=dict(libero.MAX_STEPS),
         check_episode=libero.episode_problems, distributions=libero.DISTRIBUTIONS, venv="libero",
-        recording=lambda o: LiberoDatasetLayout(o["image_size"])),
+        recording=lambda o: libero_layout(o["image_size"])),
     "pusht": SuiteKind(
         episode=pusht.PushTEpisode, plan=pusht.plan_episodes,
         open=lambda o: pusht.PushTSuite(image_size=o["image_size"]),
@@ -95,7 +97,8 @@ SUITES: dict[str, SuiteKind] = {
         action_dim=pusht.ACTION_DIM, control_hz=pusht.CONTROL_HZ, cameras=(pusht.CAMERA,),
         options={"episodes_per_task": 1, "image_size": pusht.IMAGE_SIZE},
         action_extra={"action_bounds": {pusht.MOVE_GROUP: pusht.WORKSPACE}}, benchmarks={"pusht": pusht.MAX_STEPS},
-        check_episode=pusht.episode_problems, distributions=pusht.DISTRIBUTIONS),
+        check_episode=pusht.episode_problems, distributions=pusht.DISTRIBUTIONS,
+        recording=lambda o: pusht_layout(o["image_size"])),
 }
 
 
@@ -138,9 +141,9 @@ def is_suite(config: RunConfig) -> bool:
     return bool(config.benchmark.model_dump().get("suite"))
 
 
-def recording_layout(config: RunConfig) -> LiberoDatasetLayout | None:
-    """The dataset schema ``record=true`` writes a suite run in (LIBERO: LeRobot's LIBERO datasets' layout, at
-    the run's ``image_size``); None for other runs, whose schema follows each recording's first step."""
+def recording_layout(config: RunConfig) -> SuiteDatasetLayout | None:
+    """The dataset schema ``record=true`` writes a suite run in (the suite's LeRobot datasets' layout, at the
+    run's ``image_size``); None for other runs, whose schema follows each recording's first step."""
     if not is_suite(config):
         return None
     kind = suite_kind(config)
