@@ -156,6 +156,14 @@ def test_a_suite_recording_has_lerobots_libero_layout_and_merges_with_theirs(tmp
     assert [(r["episode_index"], r["success"], r["steps"], r["frames"], r["prompt"]) for r in records] == [
         (0, False, 6, 6, episodes[0].instruction), (1, True, 4, 4, episodes[1].instruction)]
 
+    card = (root / "README.md").read_text()
+    assert "joint" not in card and "MuJoCo through robosuite" in card
+    for said in ("`observation.state` (float32 8): the Panda's 8-D end-effector state: position (3), orientation "
+                 "as an axis-angle (3), the two finger positions (2)",
+                 "`action` (float32 7): the 7-D delta end-effector command",
+                 "`observation.images.image2` (video 256x256x3): the wrist camera"):
+        assert said in card, said
+
     merged = merge_with_standin(root, tmp_path, standin_episodes=1, frames=3)
     assert (merged.meta.total_episodes, merged.meta.total_frames) == (3, 13)
     assert sorted(merged.meta.tasks.index) == sorted(

@@ -133,6 +133,14 @@ def test_a_pusht_recording_has_lerobots_pusht_layout_and_merges_with_theirs(tmp_
     records = read_eval_records(root)
     assert [(r["episode_index"], r["steps"], r["frames"], r["seed"]) for r in records] == [(0, 5, 5, 0), (1, 5, 5, 1)]
 
+    card = (root / "README.md").read_text()
+    assert "joint" not in card and "MuJoCo" not in card and "pymunk" in card
+    for said in ("Robot: `unknown`", "`observation.state` (float32 2): the agent's 2-D position",
+                 "`action` (float32 2): the agent's 2-D target position", "`next.reward` (float32 1)",
+                 "1 simulated RGB camera(s), `observation.image` (96x96), at 10 fps",
+                 "the episodes have no language instruction; their LeRobot task is the task's name"):
+        assert said in card, said
+
     merged = merge_with_standin(root, tmp_path)
     assert (merged.meta.total_episodes, merged.meta.total_frames) == (3, 13)
     assert merged[12]["task"] == THEIR_TASK and bool(merged[12]["next.done"])

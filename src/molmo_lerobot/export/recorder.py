@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot import fileio
 from molmo_lerobot.export.frames import FrameLayout
-from molmo_lerobot.export.merge import MergedDataset, dataset_fps, merge_shards, stored_episodes
+from molmo_lerobot.export.merge import MergedDataset, merge_shards, stored_episodes
 from molmo_lerobot.export.shards import SHARDS_DIR, shard_name, write_marker
 from molmo_lerobot.export.video import RecordingDataset, VideoSettings
 from molmo_lerobot.hookspecs import ConfigError
@@ -84,8 +84,6 @@ class LeRobotRecorderFactory(MergedDataset, RecorderFactory):
     remote: str | None = None
     #: ... but an expert's recording keeps at least this many frames (the horizon permitting)
     min_frames: int = RunConfig.model_fields["record_min_frames"].default
-    #: an env suite's fixed schema (its LeRobot datasets'); None: each shard's schema follows its first step
-    layout: SuiteDatasetLayout | None = None
 
     @classmethod
     def from_config(cls, cfg: RunConfig | dict[str, Any]) -> LeRobotRecorderFactory:
@@ -110,11 +108,6 @@ class LeRobotRecorderFactory(MergedDataset, RecorderFactory):
                    video=VideoSettings.from_config(run.video.model_dump()), hold_steps=run.record_hold_steps,
                    dataset_id=dataset_id, store_root=store_root, remote=remote, min_frames=run.record_min_frames,
                    layout=layout)
-
-    @property
-    def fps(self) -> int:
-        """The dataset's declared fps: the policy rate, or the suite layout's own (LIBERO's datasets say 10)."""
-        return self.layout.fps if self.layout is not None else dataset_fps(self.policy_dt_ms)
 
     def make(self, worker_id: str, output_dir: Path) -> LeRobotRecorder:
         return LeRobotRecorder(self, worker_id, Path(output_dir))
