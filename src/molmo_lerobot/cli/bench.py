@@ -42,7 +42,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pydantic import ValidationError
 
 from molmo_lerobot.benchmark.load import Benchmark, BenchmarkError, Problem, load_benchmark, validation_messages
@@ -125,6 +124,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _list() -> int:
     """One line per benchmark (name, kind, episodes, horizon, directory), then each env suite's sources."""
+    from omegaconf import OmegaConf
+
     from molmo_lerobot.benchmark.registry import benchmark_dir, benchmark_names
     from molmo_lerobot.paths import data_path
     from molmo_lerobot.suites.benchmark import SUITES
@@ -144,7 +145,7 @@ def _list() -> int:
     for kind_name, kind in SUITES.items():
         for name, steps in kind.benchmarks.items():
             conf = data_path("conf") / "benchmark" / f"{name}.yaml"
-            per_task = (yaml.safe_load(conf.read_text()) or {}).get("episodes_per_task") if conf.is_file() else None
+            per_task = OmegaConf.select(OmegaConf.load(conf), "episodes_per_task") if conf.is_file() else None
             per_task = per_task or kind.options["episodes_per_task"]
             rows.append((name, f"env suite {kind_name}", f"{per_task} per task", f"{steps} (LeRobot's)", str(conf)))
         sources.append(f"env suite {kind_name}: " + ", ".join(_distribution(d, kind.venv) for d in kind.distributions))

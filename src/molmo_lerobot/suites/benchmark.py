@@ -48,7 +48,7 @@ class SuiteKind:
     """What one env suite brings: its episode type and planner, its env (``open(options)``: an object with
     ``tasks``, ``reset``, ``step``, ``close``), its policy interface and its options with their defaults."""
 
-    episode: type
+    episode: type[Any]
     plan: Callable[..., list[Any]]
     open: Callable[[dict[str, Any]], Any]
     task_label: Callable[[Any], str]
