@@ -3,7 +3,8 @@
 ``gymnasium.make("molmo_lerobot/<benchmark>")`` works for every shipped benchmark once this
 module is imported (``molmo_lerobot/Benchmark`` takes ``benchmark=<name or directory>``).
 The env steps the very ``Env`` and ``Task`` objects that ``molmo-eval``'s rollout steps; it
-adds no physics or success logic of its own.
+adds no physics or success logic of its own. The env-suite benchmarks (``libero_*``, ``pusht``) have no id here:
+they are LeRobot's own envs (``--env.type=libero|pusht``), which ``molmo-eval`` plays and is proven equal to.
 
 Episodes and seeds
     ``reset(seed=s)`` runs benchmark episode ``s mod N``; ``reset()`` without a seed runs the
@@ -80,7 +81,7 @@ class MolmoEnv(gym.Env):
         #: molmo-eval validates its config (:class:`~molmo_lerobot.run_config.RunConfigError` names each problem)
         self.run = RunContext.build({**(eval_options or {}), "seed": run_seed, "horizon": horizon,
                                      "timing": timing or {}})
-        self.bench = load_run_benchmark(benchmark, self.run.plugins)
+        self.bench = load_run_benchmark(_not_a_suite(benchmark), self.run.plugins)
         self.run = self.run.for_benchmark(self.bench)  # the look its metadata names
         self.end_on_success = bool(end_on_success)
         self.environment_state = bool(environment_state)
@@ -221,6 +222,23 @@ class MolmoEnv(gym.Env):
         if self._episode is not None:
             self._episode.close()
             self._episode = None
+
+
+def _not_a_suite(benchmark: str) -> str:
+    """``benchmark``, unless it names an env-suite benchmark: those are LeRobot's own Gymnasium envs already
+    (``lerobot-eval --env.type=libero|pusht``, the envs molmo-eval is proven equal to), so this package
+    registers no id for them and says so in one line."""
+    from pathlib import Path
+
+    from molmo_lerobot.suites.benchmark import suite_benchmarks
+
+    suite = suite_benchmarks().get(str(benchmark))
+    if suite is not None and not Path(str(benchmark)).exists():
+        raise EpisodeSetupError(
+            f"benchmark {benchmark!r} is an env suite ({suite}): it runs in molmo-eval (benchmark={benchmark}) but "
+            f"is not a Gymnasium env of this package; as a Gymnasium env use LeRobot's own "
+            f"(lerobot-eval --env.type={suite})")
+    return benchmark
 
 
 #: what ``gym.make`` imports (a string: gymnasium's entry point type takes no class)

@@ -156,6 +156,14 @@ def test_a_suite_recording_has_lerobots_libero_layout_and_merges_with_theirs(tmp
     assert [(r["episode_index"], r["success"], r["steps"], r["frames"], r["prompt"]) for r in records] == [
         (0, False, 6, 6, episodes[0].instruction), (1, True, 4, 4, episodes[1].instruction)]
 
+    card = (root / "README.md").read_text()
+    assert "joint" not in card and "MuJoCo through robosuite" in card
+    for said in ("`observation.state` (float32 8): the Panda's 8-D end-effector state: position (3), orientation "
+                 "as an axis-angle (3), the two finger positions (2)",
+                 "`action` (float32 7): the 7-D delta end-effector command",
+                 "`observation.images.image2` (video 256x256x3): the wrist camera"):
+        assert said in card, said
+
     merged = merge_with_standin(root, tmp_path, standin_episodes=1, frames=3)
     assert (merged.meta.total_episodes, merged.meta.total_frames) == (3, 13)
     assert sorted(merged.meta.tasks.index) == sorted(
@@ -165,9 +173,9 @@ def test_a_suite_recording_has_lerobots_libero_layout_and_merges_with_theirs(tmp
 
 def test_a_layout_misfit_names_the_feature(tmp_path):
     from molmo_lerobot.features import FeatureError
-    from molmo_lerobot.suites.libero_dataset import LiberoDatasetLayout
+    from molmo_lerobot.suites.libero_dataset import libero_layout
 
-    layout = LiberoDatasetLayout(64)
+    layout = libero_layout(64)
     obs = {"images": {"image": np.zeros((64, 64, 3), np.uint8), "image2": np.zeros((32, 32, 3), np.uint8)},
            "qpos": {"eef": np.zeros(8)}}
     with pytest.raises(FeatureError, match=r"observation.images.image2: got uint8 \(32, 32, 3\), expected"):
@@ -204,11 +212,15 @@ def test_a_recorded_libero_run_merges_with_lerobots_libero_layout(tmp_path):
     assert merged.meta.total_episodes == 4 and merged.meta.total_frames == ds.meta.total_frames + 8
 
 
-def test_a_suite_without_a_recording_layout_refuses_record_up_front(tmp_path):
+def test_a_suite_without_a_recording_layout_refuses_record_up_front(tmp_path, monkeypatch):
+    import dataclasses
+
     from molmo_lerobot.errors import RunError
     from molmo_lerobot.runner.evaluate import run_evaluation
+    from molmo_lerobot.suites import benchmark
 
-    with pytest.raises(RunError, match=r"record=true: recording benchmark=pusht is not supported yet"):
+    monkeypatch.setitem(benchmark.SUITES, "pusht", dataclasses.replace(benchmark.SUITES["pusht"], recording=None))
+    with pytest.raises(RunError, match=r"record=true: env suite 'pusht' \(benchmark=pusht\) has no recording layout"):
         run_evaluation(compose(["policy=random", "benchmark=pusht", "record=true", "limit=1", "progress=false",
                                 f"output_dir={tmp_path}"]))
     assert not tmp_path.joinpath("episodes.jsonl").exists()

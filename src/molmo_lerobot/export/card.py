@@ -3,10 +3,13 @@ MuJoCo, robot, cameras, tasks), how it is scored (the score table) and its limit
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.features import IMAGE_PREFIX, STATE
 from molmo_lerobot.results import Rates, RunSummary
+
+if TYPE_CHECKING:
+    from molmo_lerobot.suites.dataset import SuiteDatasetLayout
 
 TAGS = ["molmo-lerobot", "evaluation", "rollouts", "mujoco", "simulation", "synthetic"]
 
@@ -47,8 +50,30 @@ def _cameras(meta_info: dict[str, Any]) -> list[str]:
     return out
 
 
-def description(meta_info: dict[str, Any], summary: RunSummary, records: list[dict[str, Any]]) -> str:
-    """The card's prose: what the data is (simulated), robot, sensors, tasks, scores, limitations."""
+def _what_it_holds(meta_info: dict[str, Any], layout: SuiteDatasetLayout | None) -> str:
+    """What the frames are and what ``observation.state`` and ``action`` hold: our robots' joint positions and
+    targets, or an env suite's layout's own account of each of its features (their dtypes and shapes as stored)."""
+    features = meta_info.get("features") or {}
+    robot = f"Robot: `{meta_info.get('robot_type') or 'unknown'}`"
+    if layout is None:
+        state = (features.get(STATE) or {}).get("shape") or ["?"]
+        return ("the scenes, the robot and its cameras are simulated in the MuJoCo physics engine, and the images "
+                f"are MuJoCo renders; nothing was recorded on a real robot. {robot}, with its {state[0]} joint "
+                "positions as `observation.state` and the commanded joint targets as `action` (names in "
+                "`meta/info.json`). ")
+    held = []
+    for key, about in layout.describe().items():
+        feature = features.get(key) or {}
+        shape = "x".join(str(n) for n in feature.get("shape") or [])
+        held.append(f"`{key}` ({feature.get('dtype', '?')} {shape}): {about}")
+    return (f"{layout.simulator}; nothing was recorded on a real robot. {robot}. Each frame holds "
+            + "; ".join(held) + ". ")
+
+
+def description(meta_info: dict[str, Any], summary: RunSummary, records: list[dict[str, Any]],
+                layout: SuiteDatasetLayout | None = None) -> str:
+    """The card's prose: what the data is (simulated), robot, sensors, tasks, scores, limitations; ``layout``: an
+    env suite's recording, whose features it describes."""
     bench_name = summary.benchmark.name if summary.benchmark else "?"
     policy_name = (summary.policy or {}).get("name", "?")
     sha = (summary.benchmark and summary.benchmark.sha256) or ""
@@ -58,20 +83,17 @@ def description(meta_info: dict[str, Any], summary: RunSummary, records: list[di
     tasks = sorted(summary.per_task.items())
     cameras = _cameras(meta_info)
     fps = meta_info.get("fps")
-    state = ((meta_info.get("features") or {}).get(STATE) or {}).get("shape") or ["?"]
     lines = [
         f"Evaluation rollouts of policy `{policy_name}` on benchmark `{bench_name}` "
         f"(sha256 `{sha[:16]}`), recorded with molmo_lerobot.",
         "",
-        "**Simulated data.** Every frame is synthetic: the scenes, the robot and its cameras are simulated "
-        "in the MuJoCo physics engine, and the images are MuJoCo renders; nothing was recorded on a real "
-        f"robot. Robot: `{meta_info.get('robot_type') or 'unknown'}`, with its {state[0]} joint positions "
-        "as `observation.state` and the commanded joint targets as `action` (names in `meta/info.json`). "
+        "**Simulated data.** Every frame is synthetic: " + _what_it_holds(meta_info, layout) +
         f"Sensors: {len(cameras)} simulated RGB camera(s), {', '.join(cameras) or 'none'}, at {fps} fps; "
         "no depth, force or tactile sensing. "
         f"Task(s): {', '.join(f'`{t}` ({b.n_episodes} episodes)' for t, b in tasks) or 'none'}; "
-        f"each episode's language instruction is its LeRobot task ({len(prompts)} distinct, "
-        f"e.g. \"{prompts[0] if prompts else ''}\").",
+        + (f"each episode's language instruction is its LeRobot task ({len(prompts)} distinct, "
+           f"e.g. \"{prompts[0]}\")." if prompts else
+           "the episodes have no language instruction; their LeRobot task is the task's name."),
         "",
         f"**Scores.** The benchmark's success rule judges each episode on the simulator state; the primary "
         f"metric is {summary.primary_metric}. Every attempted episode counts; errored "
@@ -101,7 +123,7 @@ def description(meta_info: dict[str, Any], summary: RunSummary, records: list[di
 
 
 def make_card(meta_info: Any, summary: RunSummary, repo_id: str, records: list[dict[str, Any]],
-              on_hub: bool = False) -> Any:
+              on_hub: bool = False, layout: SuiteDatasetLayout | None = None) -> Any:
     """A :class:`huggingface_hub.DatasetCard` from LeRobot's template (``meta_info``: LeRobot's
     ``DatasetInfo``), with this description. ``on_hub`` (``push=true``): the template's "visualize this
     dataset" link to the Hub's viewer; a local dataset instead gets the ``lerobot-dataset-viz`` command
@@ -110,7 +132,7 @@ def make_card(meta_info: Any, summary: RunSummary, repo_id: str, records: list[d
 
     bench = summary.benchmark.name if summary.benchmark else None
     tags = TAGS + ([str(bench)] if bench else [])
-    text = description(meta_info.to_dict(), summary, records)
+    text = description(meta_info.to_dict(), summary, records, layout)
     if not on_hub:
         text += ("\n\n**Visualize** (a local dataset, not on the Hub), from this directory: "
                  f"`lerobot-dataset-viz --repo-id {repo_id} --root . --episode-index 0`")

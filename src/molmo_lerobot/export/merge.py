@@ -13,7 +13,7 @@ Layout added to the LeRobot dataset root:
 
 Dataset episodes follow benchmark order (each worker shard holds consecutive episodes, so the
 merge only copies and concatenates, never re-encodes), and every frame carries ``eval.episode_index``, but in an
-env suite's recording, whose schema is the suite's published datasets' (:mod:`molmo_lerobot.suites.libero_dataset`).
+env suite's recording, whose schema is the suite's published datasets' (:mod:`molmo_lerobot.suites.dataset`).
 
 * ``meta/eval/episodes.jsonl``: one record per attempted episode: ``episode_index`` (the
   dataset episode, or null when not stored, with ``not_recorded``), ``benchmark_episode_index``,
@@ -32,7 +32,7 @@ import json
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot import fileio
 from molmo_lerobot.errors import ExportError
@@ -41,6 +41,9 @@ from molmo_lerobot.export.frames import EVAL_EPISODE_INDEX
 from molmo_lerobot.export.portable import portable
 from molmo_lerobot.export.shards import SHARDS_DIR, Shard, list_shards, new_session
 from molmo_lerobot.results import RESULTS_FILE, EpisodeResult, RunSummary
+
+if TYPE_CHECKING:
+    from molmo_lerobot.suites.dataset import SuiteDatasetLayout
 
 log = logging.getLogger(__name__)
 
@@ -68,10 +71,14 @@ class MergedDataset:
     policy: str
     push: bool = False
     session: str = field(default_factory=new_session)
+    #: an env suite's fixed schema (its LeRobot datasets', which the card describes); None: each shard's schema
+    #: follows its first step
+    layout: SuiteDatasetLayout | None = None
 
     @property
     def fps(self) -> int:
-        return dataset_fps(self.policy_dt_ms)
+        """The dataset's declared fps: the policy rate, or the suite layout's own (LIBERO's datasets say 10)."""
+        return self.layout.fps if self.layout is not None else dataset_fps(self.policy_dt_ms)
 
 
 @dataclass
@@ -233,8 +240,8 @@ def _build(work: Path, sources: list[_Source], shards: list[Shard], torn: list[s
     fileio.atomic_write(tmp / RESULTS_FILE, shared.to_json(), root=tmp)
     meta = LeRobotDatasetMetadata(dataset.repo_id, root=tmp)
     check_dataset(tmp, results)
-    fileio.atomic_write(tmp / "README.md", str(make_card(meta.info, shared, dataset.repo_id, records,
-                                                                    on_hub=dataset.push)), root=tmp)
+    card = make_card(meta.info, shared, dataset.repo_id, records, on_hub=dataset.push, layout=dataset.layout)
+    fileio.atomic_write(tmp / "README.md", str(card), root=tmp)
     return tmp
 
 

@@ -9,8 +9,8 @@ An expert's episode (:attr:`EpisodeInfo.expert`) is recorded up to ``record_hold
 its first success, but at least ``record_min_frames`` frames (100: the action chunk of LeRobot's
 ACT and SmolVLA, so no demonstration is shorter than the chunk a policy trained on it predicts); the
 rollout itself, and so the score, runs on to the horizon either way.
-An env-suite run (``benchmark=libero_object``) records in the suite's fixed schema instead, LeRobot's LIBERO
-datasets' (:mod:`molmo_lerobot.suites.libero_dataset`), so that its dataset merges with theirs.
+An env-suite run (``benchmark=libero_object``, ``pusht``) records in the suite's fixed schema instead, that of the
+suite's LeRobot datasets (:mod:`molmo_lerobot.suites.dataset`), so that its dataset merges with theirs.
 ``finalize`` then merges the shards into ``output_dir/dataset`` with
 ``lerobot.datasets.aggregate.aggregate_datasets``, writes the eval records, the dataset card
 and ``results.json`` into it, and pushes to the Hub when ``push=true``.
@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot import fileio
 from molmo_lerobot.export.frames import FrameLayout
-from molmo_lerobot.export.merge import MergedDataset, dataset_fps, merge_shards, stored_episodes
+from molmo_lerobot.export.merge import MergedDataset, merge_shards, stored_episodes
 from molmo_lerobot.export.shards import SHARDS_DIR, shard_name, write_marker
 from molmo_lerobot.export.video import RecordingDataset, VideoSettings
 from molmo_lerobot.hookspecs import ConfigError
@@ -36,7 +36,7 @@ from molmo_lerobot.results import EpisodeResult, Push, RunSummary
 from molmo_lerobot.run_config import RunConfig
 
 if TYPE_CHECKING:
-    from molmo_lerobot.suites.libero_dataset import LiberoDatasetLayout
+    from molmo_lerobot.suites.dataset import SuiteDatasetLayout
 
 log = logging.getLogger(__name__)
 
@@ -84,8 +84,6 @@ class LeRobotRecorderFactory(MergedDataset, RecorderFactory):
     remote: str | None = None
     #: ... but an expert's recording keeps at least this many frames (the horizon permitting)
     min_frames: int = RunConfig.model_fields["record_min_frames"].default
-    #: an env suite's fixed schema (LeRobot's LIBERO datasets'); None: each shard's schema follows its first step
-    layout: LiberoDatasetLayout | None = None
 
     @classmethod
     def from_config(cls, cfg: RunConfig | dict[str, Any]) -> LeRobotRecorderFactory:
@@ -110,11 +108,6 @@ class LeRobotRecorderFactory(MergedDataset, RecorderFactory):
                    video=VideoSettings.from_config(run.video.model_dump()), hold_steps=run.record_hold_steps,
                    dataset_id=dataset_id, store_root=store_root, remote=remote, min_frames=run.record_min_frames,
                    layout=layout)
-
-    @property
-    def fps(self) -> int:
-        """The dataset's declared fps: the policy rate, or the suite layout's own (LIBERO's datasets say 10)."""
-        return self.layout.fps if self.layout is not None else dataset_fps(self.policy_dt_ms)
 
     def make(self, worker_id: str, output_dir: Path) -> LeRobotRecorder:
         return LeRobotRecorder(self, worker_id, Path(output_dir))
@@ -231,7 +224,7 @@ class LeRobotRecorder(Recorder):
         self.shards_dir = output_dir / SHARDS_DIR
         self._ds: Any = None
         self._root: Path | None = None
-        self._layout: FrameLayout | LiberoDatasetLayout | None = None
+        self._layout: FrameLayout | SuiteDatasetLayout | None = None
         self._seq = 0
         self._saved: list[dict[str, Any]] = []
         self._discarded: list[dict[str, Any]] = []
@@ -302,7 +295,7 @@ class LeRobotRecorder(Recorder):
         self._close_shard()
 
     # Shards ----------------------------------------------------------------------------
-    def _open_shard(self, layout: FrameLayout | LiberoDatasetLayout, horizon: int) -> None:
+    def _open_shard(self, layout: FrameLayout | SuiteDatasetLayout, horizon: int) -> None:
         fileio.make_dirs(self.shards_dir, root=self.shards_dir.parent)  # LeRobot makes the new shard in it
         root = self.shards_dir / shard_name(self.factory.session, self.worker_id, self._seq)
         while root.exists():  # never reuse a directory, whatever left it there

@@ -293,8 +293,8 @@ def _suite_benchmark(config: RunConfig) -> SuiteBenchmark:
                        "use limit= or episodes=")
     try:
         if config.record and recording_layout(config) is None:
-            raise RunError(f"record=true: recording benchmark={config.benchmark.name} is not supported yet "
-                           "(LIBERO runs record, in LeRobot's LIBERO layout); run without record")
+            raise RunError(f"record=true: env suite {config.benchmark.model_dump().get('suite')!r} "
+                           f"(benchmark={config.benchmark.name}) has no recording layout; run without record")
         return load_suite_benchmark(config)
     except (SuiteBenchmarkError, InfrastructureError, SuiteError) as exc:
         raise RunError(str(exc)) from None

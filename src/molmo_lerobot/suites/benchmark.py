@@ -28,7 +28,9 @@ from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.hashing import content_sha256
 from molmo_lerobot.results import EpisodeOutcome
 from molmo_lerobot.suites import libero, pusht
-from molmo_lerobot.suites.libero_dataset import LiberoDatasetLayout
+from molmo_lerobot.suites.dataset import SuiteDatasetLayout
+from molmo_lerobot.suites.libero_dataset import libero_layout
+from molmo_lerobot.suites.pusht_dataset import pusht_layout
 
 if TYPE_CHECKING:
     from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
@@ -46,7 +48,7 @@ class SuiteKind:
     """What one env suite brings: its episode type and planner, its env (``open(options)``: an object with
     ``tasks``, ``reset``, ``step``, ``close``), its policy interface and its options with their defaults."""
 
-    episode: type
+    episode: type[Any]
     plan: Callable[..., list[Any]]
     open: Callable[[dict[str, Any]], Any]
     task_label: Callable[[Any], str]
@@ -59,9 +61,18 @@ class SuiteKind:
     #: what the policy learns of the action (``EpisodeContext.extra``): ``delta_groups`` (LIBERO's delta-EEF
     #: command) or ``action_bounds`` (PushT's target position, within the workspace)
     action_extra: dict[str, Any]
-    #: the dataset layout ``record=true`` writes (``recording(options)``: LeRobot's LIBERO datasets' schema);
-    #: None: each recording's schema follows its first step
-    recording: Callable[[dict[str, Any]], Any] | None = None
+    #: its benchmarks (``benchmark=<name>``, each a ``conf/benchmark/<name>.yaml``) and LeRobot's step limit
+    #: of each (the default horizon)
+    benchmarks: dict[str, int]
+    #: the problems of one planned episode against the suite's task catalogue (``[]``: none)
+    check_episode: Callable[[Any, list[dict[str, Any]]], list[str]]
+    #: the distributions its env and assets come from (``molmo-bench list`` shows their version and licence)
+    distributions: tuple[str, ...]
+    #: where those distributions live: ``"main"`` (this venv) or ``"libero"`` (the LIBERO venv)
+    venv: str = "main"
+    #: the dataset layout ``record=true`` writes (``recording(options)``: the schema of the suite's LeRobot
+    #: datasets, ``lerobot/libero``'s, ``lerobot/pusht``'s); None: ``record=true`` is refused
+    recording: Callable[[dict[str, Any]], SuiteDatasetLayout] | None = None
 
 
 def _libero_label(episode: libero.LiberoEpisode) -> str:
@@ -71,17 +82,29 @@ def _libero_label(episode: libero.LiberoEpisode) -> str:
 #: the suites molmo-eval runs (``benchmark.suite``)
 SUITES: dict[str, SuiteKind] = {
     "libero": SuiteKind(
-        libero.LiberoEpisode, libero.plan_episodes,
-        lambda o: libero.LiberoSuite(image_size=o["image_size"], hard_reset=o["hard_reset"]),
-        _libero_label, libero.policy_observation, libero.MOVE_GROUP, libero.ACTION_DIM, libero.CONTROL_HZ,
-        ("image", "image2"), {"episodes_per_task": 1, "image_size": libero.IMAGE_SIZE, "hard_reset": True},
-        {"delta_groups": [libero.MOVE_GROUP]}, lambda o: LiberoDatasetLayout(o["image_size"])),
+        episode=libero.LiberoEpisode, plan=libero.plan_episodes,
+        open=lambda o: libero.LiberoSuite(image_size=o["image_size"], hard_reset=o["hard_reset"]),
+        task_label=_libero_label, observation=libero.policy_observation, move_group=libero.MOVE_GROUP,
+        action_dim=libero.ACTION_DIM, control_hz=libero.CONTROL_HZ, cameras=("image", "image2"),
+        options={"episodes_per_task": 1, "image_size": libero.IMAGE_SIZE, "hard_reset": True},
+        action_extra={"delta_groups": [libero.MOVE_GROUP]}, benchmarks=dict(libero.MAX_STEPS),
+        check_episode=libero.episode_problems, distributions=libero.DISTRIBUTIONS, venv="libero",
+        recording=lambda o: libero_layout(o["image_size"])),
     "pusht": SuiteKind(
-        pusht.PushTEpisode, pusht.plan_episodes, lambda o: pusht.PushTSuite(image_size=o["image_size"]),
-        pusht.task_label, pusht.policy_observation, pusht.MOVE_GROUP, pusht.ACTION_DIM, pusht.CONTROL_HZ,
-        (pusht.CAMERA,), {"episodes_per_task": 1, "image_size": pusht.IMAGE_SIZE},
-        {"action_bounds": {pusht.MOVE_GROUP: pusht.WORKSPACE}}),
+        episode=pusht.PushTEpisode, plan=pusht.plan_episodes,
+        open=lambda o: pusht.PushTSuite(image_size=o["image_size"]),
+        task_label=pusht.task_label, observation=pusht.policy_observation, move_group=pusht.MOVE_GROUP,
+        action_dim=pusht.ACTION_DIM, control_hz=pusht.CONTROL_HZ, cameras=(pusht.CAMERA,),
+        options={"episodes_per_task": 1, "image_size": pusht.IMAGE_SIZE},
+        action_extra={"action_bounds": {pusht.MOVE_GROUP: pusht.WORKSPACE}}, benchmarks={"pusht": pusht.MAX_STEPS},
+        check_episode=pusht.episode_problems, distributions=pusht.DISTRIBUTIONS,
+        recording=lambda o: pusht_layout(o["image_size"])),
 }
+
+
+def suite_benchmarks() -> dict[str, str]:
+    """Every env-suite benchmark (``benchmark=<name>``) and its suite (a key of :data:`SUITES`)."""
+    return {name: kind for kind, suite in SUITES.items() for name in suite.benchmarks}
 
 
 class SuiteBenchmarkError(MolmoError, ValueError):
@@ -118,9 +141,9 @@ def is_suite(config: RunConfig) -> bool:
     return bool(config.benchmark.model_dump().get("suite"))
 
 
-def recording_layout(config: RunConfig) -> LiberoDatasetLayout | None:
-    """The dataset schema ``record=true`` writes a suite run in (LIBERO: LeRobot's LIBERO datasets' layout, at
-    the run's ``image_size``); None for other runs, whose schema follows each recording's first step."""
+def recording_layout(config: RunConfig) -> SuiteDatasetLayout | None:
+    """The dataset schema ``record=true`` writes a suite run in (the suite's LeRobot datasets' layout, at the
+    run's ``image_size``); None for other runs, whose schema follows each recording's first step."""
     if not is_suite(config):
         return None
     kind = suite_kind(config)
@@ -158,16 +181,55 @@ class SuiteBenchmark:
 def load_suite_benchmark(config: RunConfig) -> SuiteBenchmark:
     """The suite's episodes for ``config``: its task catalogue (read from the suite's process), then
     ``episodes_per_task`` episodes per task with the run's seed, ``horizon`` overriding LeRobot's step limit."""
+    return plan_suite_benchmark(config, suite_tasks(config))
+
+
+def suite_tasks(config: RunConfig) -> list[dict[str, Any]]:
+    """The task catalogue of the run's suite benchmark, as the suite's own env lists it (LIBERO: its
+    process in the LIBERO venv; PushT: gym_pusht's one task)."""
     options = suite_options(config)
-    kind_name, name = str(config.benchmark.model_dump()["suite"]), str(config.benchmark.name)
-    kind = SUITES[kind_name]
-    suite = kind.open(options)
+    suite = suite_kind(config).open(options)
     try:
-        tasks = suite.tasks(name)
+        return suite.tasks(str(config.benchmark.name))
     finally:
         suite.close()
-    episodes = kind.plan(name, tasks, options["episodes_per_task"], seed=config.seed, horizon=config.horizon)
+
+
+def plan_suite_benchmark(config: RunConfig, tasks: list[dict[str, Any]]) -> SuiteBenchmark:
+    """The run's episodes of the suite benchmark whose task catalogue is ``tasks``."""
+    options = suite_options(config)
+    kind_name, name = str(config.benchmark.model_dump()["suite"]), str(config.benchmark.name)
+    episodes = SUITES[kind_name].plan(name, tasks, options["episodes_per_task"], seed=config.seed,
+                                      horizon=config.horizon)
     return SuiteBenchmark(name, episodes, Path(f"{kind_name}:{name}"), kind_name)
+
+
+def plan_problems(bench: SuiteBenchmark, tasks: list[dict[str, Any]]) -> list[str]:
+    """What is wrong with ``bench``'s episodes against the suite's task catalogue ``tasks``, one line each
+    naming the episode and field: the episode type and suite, a seed and a horizon >= 1, the suite's own checks
+    (LIBERO: a task id of the catalogue, an init-state index within that task's init states, its instruction;
+    PushT: its task), and no episode twice."""
+    kind = SUITES[bench.suite]
+    if bench.name not in kind.benchmarks:
+        return [f"{bench.name}: not a benchmark of env suite {bench.suite!r} ({', '.join(kind.benchmarks)})"]
+    out: list[str] = []
+    seen: dict[str, int] = {}
+    for i, episode in enumerate(bench.episodes):
+        where = bench.where(i)
+        if not isinstance(episode, kind.episode):
+            out.append(f"{where}: a {type(episode).__name__}, expected a {kind.episode.__name__}")
+            continue
+        found = [] if episode.suite == bench.name else [f"suite {episode.suite!r}: expected {bench.name!r}"]
+        for field in ("seed", "horizon"):
+            value = getattr(episode, field)
+            if not isinstance(value, int) or isinstance(value, bool) or (field == "horizon" and value < 1):
+                found.append(f"{field} {value!r}: expected an integer" + " >= 1" * (field == "horizon"))
+        found += kind.check_episode(episode, tasks)
+        if episode.digest in seen:
+            found.append(f"the same episode as episode {seen[episode.digest]}")
+        seen.setdefault(episode.digest, i)
+        out += [f"{where}: {problem}" for problem in found]
+    return out
 
 
 def task_label(episode: Any) -> str:

