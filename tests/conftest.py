@@ -27,6 +27,17 @@ def run():
 
 
 @pytest.fixture(scope="session")
+def fork_servers():
+    """The session's :class:`~molmo_lerobot.runner.forkserver.ForkServerPool`: a run given it
+    (``run_evaluation(cfg, fork_servers)``) forks its workers from the server of an earlier run of the
+    same preload and environment instead of starting one (seconds of imports; LeRobot's for a recording)."""
+    from molmo_lerobot.runner.forkserver import ForkServerPool
+
+    with ForkServerPool(keep=3) as pool:
+        yield pool
+
+
+@pytest.fixture(scope="session")
 def pick_recording(tmp_path_factory):
     """One recorded multi-worker run, shared by the tests that read a recording of the defaults:
     ``molmo-eval policy=scripted benchmark=pick_v1 workers=2 limit=4 horizon=30 record=true``.
