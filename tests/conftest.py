@@ -30,10 +30,11 @@ def run():
 def fork_servers():
     """The session's :class:`~molmo_lerobot.runner.forkserver.ForkServerPool`: a run given it
     (``run_evaluation(cfg, fork_servers)``) forks its workers from the server of an earlier run of the
-    same preload and environment instead of starting one (seconds of imports; LeRobot's for a recording)."""
+    same preload and environment instead of starting one (seconds of imports; LeRobot's for a recording).
+    The environment pytest sets per test phase (``PYTEST_CURRENT_TEST``) does not count: no worker reads it."""
     from molmo_lerobot.runner.forkserver import ForkServerPool
 
-    with ForkServerPool(keep=3) as pool:
+    with ForkServerPool(keep=3, ignored_env=["PYTEST_CURRENT_TEST"]) as pool:
         yield pool
 
 

@@ -107,12 +107,13 @@ def test_a_stopped_fork_server_hides_no_death_and_a_killed_one_fakes_none(server
 def test_a_pool_lends_a_running_server_of_the_same_origin_only(monkeypatch):
     """A server given back is lent again to a run of the same preload and environment, never to another;
     one killed while idle or stopped while lent is killed and replaced, never lent; at most ``keep``
-    idle servers are kept, and closing the pool ends them."""
-    with ForkServerPool(keep=1) as pool:
+    idle servers are kept, and closing the pool ends them. Variables it was told to ignore do not count."""
+    with ForkServerPool(keep=1, ignored_env=["MOLMO_POOL_IGNORED"]) as pool:
         first = pool.borrow([])
         first.started = []
         _sleeper(first).kill()
         pool.give_back(first)
+        monkeypatch.setenv("MOLMO_POOL_IGNORED", "any")
         assert pool.borrow([]) is first  # the same origin: the same running server
         monkeypatch.setenv("MOLMO_POOL_TEST", "other")
         other = pool.borrow([])  # another environment: another server, the first still lent

@@ -144,7 +144,7 @@ def plugin_option_problems(run: RunContext) -> list[str]:
     return out
 
 
-def _make_executor(config: RunConfig, fork_servers: ForkServerPool | None) -> Any:
+def _make_executor(config: RunConfig, fork_servers: ForkServerPool | None = None) -> Any:
     ex = config.executor.model_dump()  # the executor's options are its own (conf/executor/<name>.yaml)
     common: dict[str, Any] = dict(timeout_s=float(config.episode_timeout_s), retries=config.episode_retries)
     if ex["name"] == "local":

@@ -175,18 +175,27 @@ class ForkServerPool:
     same), else a new one, and gives it back once its workers have ended. A server is lent to one run
     at a time: one lost during a run (killed, stopped) is that run's to replace, as without a pool, and
     one found not running when given back or borrowed is killed, never lent. At most ``keep`` idle
-    servers are kept (the one idle longest is stopped); :meth:`close`, or leaving ``with``, stops them."""
+    servers are kept (the one idle longest is stopped); :meth:`close`, or leaving ``with``, stops them.
+    ``ignored_env`` names environment variables no worker reads that change between runs (pytest's
+    ``PYTEST_CURRENT_TEST``): a worker of a lent server sees their value from the server's start."""
 
-    def __init__(self, keep: int = 2) -> None:
+    def __init__(self, keep: int = 2, ignored_env: Iterable[str] = ()) -> None:
         self.keep = keep
+        self.ignored_env = frozenset(ignored_env)
         self._idle: list[PreloadedForkServer] = []
+
+    def _key(self, origin: tuple[Any, ...] | None) -> tuple[Any, ...] | None:
+        if origin is None:
+            return None
+        modules, path, cwd, env = origin
+        return modules, path, cwd, tuple(item for item in env if item[0] not in self.ignored_env)
 
     def borrow(self, modules: Iterable[str]) -> PreloadedForkServer:
         """A started server preloading ``modules``, as a fresh one started now would be."""
         modules = list(modules)
-        origin = server_origin(modules)
+        key = self._key(server_origin(modules))
         for server in self._idle:
-            if server.origin == origin:
+            if self._key(server.origin) == key:
                 self._idle.remove(server)
                 if server.state() is None:
                     return server
