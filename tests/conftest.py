@@ -34,7 +34,7 @@ def fork_servers():
     The environment pytest sets per test phase (``PYTEST_CURRENT_TEST``) does not count: no worker reads it."""
     from molmo_lerobot.runner.forkserver import ForkServerPool
 
-    with ForkServerPool(keep=3, ignored_env=["PYTEST_CURRENT_TEST"]) as pool:
+    with ForkServerPool(keep=4, ignored_env=["PYTEST_CURRENT_TEST"]) as pool:
         yield pool
 
 
