@@ -27,7 +27,19 @@ def run():
 
 
 @pytest.fixture(scope="session")
-def pick_recording(tmp_path_factory):
+def fork_servers():
+    """The session's :class:`~molmo_lerobot.runner.forkserver.ForkServerPool`: a run given it
+    (``run_evaluation(cfg, fork_servers)``) forks its workers from the server of an earlier run of the
+    same preload and environment instead of starting one (seconds of imports; LeRobot's for a recording).
+    The environment pytest sets per test phase (``PYTEST_CURRENT_TEST``) does not count: no worker reads it."""
+    from molmo_lerobot.runner.forkserver import ForkServerPool
+
+    with ForkServerPool(keep=4, ignored_env=["PYTEST_CURRENT_TEST"]) as pool:
+        yield pool
+
+
+@pytest.fixture(scope="session")
+def pick_recording(tmp_path_factory, fork_servers):
     """One recorded multi-worker run, shared by the tests that read a recording of the defaults:
     ``molmo-eval policy=scripted benchmark=pick_v1 workers=2 limit=4 horizon=30 record=true``.
 
@@ -44,13 +56,13 @@ def pick_recording(tmp_path_factory):
         mp.setattr(aggregate, "aggregate_datasets",
                    lambda repo_ids, *a, **k: merged.append(len(repo_ids)) or inner(repo_ids, *a, **k))
         res = run_evaluation(compose(["policy=scripted", "benchmark=pick_v1", "workers=2", "limit=4", "horizon=30",
-                                      "record=true", "progress=false", f"output_dir={out}"]))
+                                      "record=true", "progress=false", f"output_dir={out}"]), fork_servers)
     assert len(merged) == 1, merged
     return out, res, merged[0]
 
 
 @pytest.fixture(scope="session")
-def droid_recording(tmp_path_factory):
+def droid_recording(tmp_path_factory, fork_servers):
     """One recorded franka_droid run with the DROID cameras (``cameras: []``), shared by the tests that read
     one: ``policy=pi0_droid`` over openpi's protocol against a fake DROID server (gripper commands 0 … 1 over
     15 steps), the first two pick_v1 episodes, 30 steps each.
@@ -73,7 +85,7 @@ def droid_recording(tmp_path_factory):
     with FakeDroidServer(horizon=15, velocity=0.0).running() as srv:
         res = run_evaluation(compose(["policy=pi0_droid", "policy.open_loop_horizon=null", f"policy.port={srv.port}",
                                       "workers=1", f"benchmark.path={bench}", "horizon=30", "record=true",
-                                      f"output_dir={out}", "progress=false"]))
+                                      f"output_dir={out}", "progress=false"]), fork_servers)
     return bench, out, res, srv
 
 

@@ -14,11 +14,12 @@ from molmo_lerobot.cli.eval import refused_errors
 from molmo_lerobot.config import compose
 from molmo_lerobot.run_config import RunConfig
 from molmo_lerobot.runner.evaluate import EvalResults, run_evaluation
+from molmo_lerobot.runner.forkserver import ForkServerPool
 
 
-def evaluate(*overrides: str) -> EvalResults:
-    """``molmo-eval *overrides``'s run."""
-    return run_evaluation(RunConfig.of(compose(list(overrides))))
+def evaluate(*overrides: str, fork_servers: ForkServerPool | None = None) -> EvalResults:
+    """``molmo-eval *overrides``'s run (its workers' fork server from ``fork_servers``, if given)."""
+    return run_evaluation(RunConfig.of(compose(list(overrides))), fork_servers)
 
 
 def refusal(*overrides: str) -> list[str]:

@@ -87,10 +87,10 @@ def test_workers_do_not_change_outcomes(two_worker_run, tmp_path):
     assert spawned["imports_s"] > 10 * forked["workers"]["w1g0"]["imports_s"]  # the fork server had them
 
 
-def test_seed_changes_episode_seeds_only_where_asked(two_worker_run, tmp_path):
+def test_seed_changes_episode_seeds_only_where_asked(two_worker_run, tmp_path, fork_servers):
     out2, _ = two_worker_run
     res = run_evaluation(compose(["policy=random", "workers=1", "limit=2", "seed=1", "horizon=5",
-                                  f"output_dir={tmp_path / 's1'}", "progress=false"]))
+                                  f"output_dir={tmp_path / 's1'}", "progress=false"]), fork_servers)
     seeds0 = [r["seed"] for r in _episodes(out2)[:2]]
     assert [r.seed for r in res.episodes] != seeds0
     assert res.summary["seed"] == 1

@@ -92,12 +92,12 @@ def test_camera_randomization_is_seeded_by_the_episode(episode):
     env2.close()
 
 
-def test_options_change_the_run_and_are_recorded(tmp_path, custom_mjcf):
+def test_options_change_the_run_and_are_recorded(tmp_path, custom_mjcf, fork_servers):
     out = tmp_path / "run"
     res = run_evaluation(compose([
         "policy=random", "workers=1", "limit=2", f"output_dir={out}", "progress=false",
         f"custom_object.path={custom_mjcf}", "custom_object.name=thing", "camera.randomization=1",
-        "+camera.overrides.exterior.fov=50", "+horizons.pick=1.0"]))
+        "+camera.overrides.exterior.fov=50", "+horizons.pick=1.0"]), fork_servers)
     assert res.summary["n_errors"] == 0
     results = json.loads((out / "results.json").read_text())
     opts = results["eval_options"]
@@ -107,10 +107,10 @@ def test_options_change_the_run_and_are_recorded(tmp_path, custom_mjcf):
     assert all(r["steps"] == 15 for r in _rows(out))
 
 
-def test_an_override_that_cannot_apply_fails_only_its_episodes(tmp_path, custom_mjcf):
+def test_an_override_that_cannot_apply_fails_only_its_episodes(tmp_path, custom_mjcf, fork_servers):
     res = run_evaluation(compose(["policy=random", "benchmark=open_v1", "workers=1", "limit=2", "horizon=2",
                                   f"custom_object.path={custom_mjcf}", f"output_dir={tmp_path / 'run'}",
-                                  "progress=false"]))
+                                  "progress=false"]), fork_servers)
     assert res.summary["n_episodes"] == 2 and res.summary["n_errors"] == 2
     assert all("episode override failed: OverrideError: custom_object:" in r["error"]
                for r in _rows(tmp_path / "run"))
@@ -127,14 +127,14 @@ class _RobotOverride:
             "language": episode.language.model_copy(update={"task_description": "overridden"})})
 
 
-def test_plugin_episode_overrides_apply(tmp_path, in_process_plugins):
+def test_plugin_episode_overrides_apply(tmp_path, in_process_plugins, fork_servers):
     in_process_plugins(_RobotOverride(), "robot_override")
     run_evaluation(compose(["policy=random", "workers=1", "limit=1", "horizon=2", f"output_dir={tmp_path}",
-                            "progress=false"]))
+                            "progress=false"]), fork_servers)
     assert [r["prompt"] for r in _rows(tmp_path)] == ["overridden"]
 
 
-def test_runs_that_cannot_simulate_fail_up_front(tmp_path, monkeypatch):
+def test_runs_that_cannot_simulate_fail_up_front(tmp_path, monkeypatch, fork_servers):
     """MolmoSpaces episodes whose scenes (and mobile robots) are missing here: one line, before any worker."""
     monkeypatch.setenv("MLSPACES_ASSETS_DIR", str(tmp_path / "no_assets"))
     bench = Path(__file__).parent / "data" / "molmospaces" / "mixed_tasks"
@@ -143,6 +143,6 @@ def test_runs_that_cannot_simulate_fail_up_front(tmp_path, monkeypatch):
                                        r"field scene_dataset: scene 'procthor-objaverse' val house 2115: "
                                        r".*no_assets/scenes/procthor-objaverse-val/val_2115_ceiling.xml not found"):
         run_evaluation(compose(["policy=random", "workers=1", f"benchmark.path={bench}", "horizon=2",
-                                f"output_dir={tmp_path / 'run'}", "progress=false"]))
+                                f"output_dir={tmp_path / 'run'}", "progress=false"]), fork_servers)
     assert not (tmp_path / "run").exists()
 

@@ -33,9 +33,9 @@ def _load(dataset_id, root):
     return LeRobotDataset(dataset_id, root=root, video_backend="pyav")
 
 
-def test_a_recording_goes_into_its_namespace_and_loads(store, tmp_path):
+def test_a_recording_goes_into_its_namespace_and_loads(store, tmp_path, fork_servers):
     out = tmp_path / "run"
-    res = run_evaluation(compose([*TINY, f"output_dir={out}", "dataset_id=molmo/evals/pick/tiny"]))
+    res = run_evaluation(compose([*TINY, f"output_dir={out}", "dataset_id=molmo/evals/pick/tiny"]), fork_servers)
     assert res.summary["n_episodes"] == 1
     assert store.list_local_namespaces() == ["molmo", "molmo/evals", "molmo/evals/pick"]
     meta = store.list_local_datasets()["molmo/evals/pick/tiny"]
@@ -48,7 +48,8 @@ def test_a_recording_goes_into_its_namespace_and_loads(store, tmp_path):
     # another run may not take the id: one line, before any run directory, nothing in the store changed
     before = sorted(p.relative_to(store.root) for p in store.root.rglob("*"))
     with pytest.raises(RecordConfigError) as err:
-        run_evaluation(compose([*TINY, f"output_dir={tmp_path / 'other'}", "dataset_id=molmo/evals/pick/tiny"]))
+        run_evaluation(compose([*TINY, f"output_dir={tmp_path / 'other'}", "dataset_id=molmo/evals/pick/tiny"]),
+                       fork_servers)
     assert str(err.value) == (f"dataset id 'molmo/evals/pick/tiny' collides with an existing dataset in {store.root} "
                               "(pick another id, or delete that dataset first)")
     assert not (tmp_path / "other").exists()

@@ -141,7 +141,7 @@ def test_a_linked_dataset_dir_is_refused_at_merge(tmp_path, outside):
     assert (run / "dataset").is_symlink() and _tree(outside) == ["meta", "meta/info.json"]
 
 
-def test_a_resumed_run_with_planted_links_writes_nothing_outside_and_keeps_its_results(tmp_path, outside):
+def test_a_resumed_run_with_planted_links_writes_nothing_outside_and_keeps_its_results(tmp_path, outside, fork_servers):
     """The run dir is itself a link (allowed); ``thumbnails`` and ``logs/w0g0.log`` planted inside it
     are refused, and the run still writes its results, every episode accounted for."""
     from molmo_lerobot.config import compose
@@ -152,14 +152,14 @@ def test_a_resumed_run_with_planted_links_writes_nothing_outside_and_keeps_its_r
     run = tmp_path / "run"
     run.symlink_to(real)
     args = ["policy=random", "horizon=2", "workers=1", f"output_dir={run}", "progress=false"]
-    run_evaluation(compose([*args, "limit=1"]))
+    run_evaluation(compose([*args, "limit=1"]), fork_servers)
     assert (real / "results.json").is_file() and (real / "thumbnails" / "000000.jpg").is_file()
     shutil.rmtree(real / "thumbnails")
     (real / "thumbnails").symlink_to(outside / "thumbs", target_is_directory=True)
     (outside / "thumbs").mkdir()
     (real / "logs" / "w0g0.log").unlink()
     (real / "logs" / "w0g0.log").symlink_to(outside / "w0g0.log")
-    run_evaluation(compose([*args, "limit=2", "resume=true"]))
+    run_evaluation(compose([*args, "limit=2", "resume=true"]), fork_servers)
     assert _tree(outside) == ["thumbs"]
     results = json.loads((real / "results.json").read_text())
     episodes = [json.loads(line) for line in (real / "episodes.jsonl").read_text().splitlines()]

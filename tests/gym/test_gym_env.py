@@ -66,7 +66,7 @@ def test_eval_options_are_validated_as_molmo_eval_validates_its_config():
     assert len(err.value.problems) == 3
 
 
-def test_replayed_actions_give_molmo_evals_trial(tmp_path):
+def test_replayed_actions_give_molmo_evals_trial(tmp_path, fork_servers):
     """The same actions through the Gymnasium env and through molmo-eval (policy=replay): the same
     robot state at every step (from the recorded dataset) and the same outcome."""
     import pandas as pd
@@ -89,7 +89,7 @@ def test_replayed_actions_give_molmo_evals_trial(tmp_path):
     out = tmp_path / "run"
     res = run_evaluation(compose(["policy=replay", f"policy.actions={tmp_path / 'actions.npy'}", "benchmark=pick_v1",
                                   "workers=1", f"episodes=[{index}]", f"horizon={steps}", "record=true",
-                                  "progress=false", f"output_dir={out}"]))
+                                  "progress=false", f"output_dir={out}"]), fork_servers)
     ep = next(e for e in res.episodes if e.episode_index == index)
     assert ep.error is None and ep.seed == info["seed"]
     assert (ep.success, ep.success_once) == (info["is_success"], info["success_once"])

@@ -218,7 +218,7 @@ def test_expert_scores_on_every_standin_scene(assets, tmp_path):
     assert res.summary["n_errors"] == 0 and res.summary["n_success"] == len(houses)
 
 
-def test_user_scene_and_libraries_from_the_run_config(assets, tmp_path):
+def test_user_scene_and_libraries_from_the_run_config(assets, tmp_path, fork_servers):
     lib = write_user_library(tmp_path)
     bench = _write_bench(tmp_path / "b", [user_pick_episode()])
     scene = f"scene_xml_paths=[{tmp_path / 'scene.xml'}]"
@@ -228,7 +228,7 @@ def test_user_scene_and_libraries_from_the_run_config(assets, tmp_path):
     assert res.summary["n_errors"] == 0 and res.summary["n_success"] == 1, [e.error for e in res.episodes]
     # without the grasp library the expert has no grasps for the block: the library's grasps were used
     res = run_evaluation(compose(["policy=scripted", "workers=1", f"benchmark.path={bench}", scene, libs[0],
-                                  f"output_dir={tmp_path / 'run2'}", "progress=false"]))
+                                  f"output_dir={tmp_path / 'run2'}", "progress=false"]), fork_servers)
     assert "no grasps for 'blue_block'" in res.episodes[0].error
     assert [g.name for g, _ in RunContext.build().catalog.grasp_libraries if "/" in g.name] == []  # nor in this process
 

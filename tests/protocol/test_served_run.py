@@ -117,11 +117,11 @@ def test_a_killed_shm_server_costs_infrastructure_errors_that_resume_reruns(act_
     assert [outcome(e) for e in resumed.episodes] == [outcome(e) for e in local.episodes]
 
 
-def test_a_server_that_cannot_start_fails_the_run_with_one_line(tmp_path):
+def test_a_server_that_cannot_start_fails_the_run_with_one_line(tmp_path, fork_servers):
     """The server cannot build its policy (replay's actions file is missing: no LeRobot import to wait for)."""
     cfg = compose(["policy=replay", f"policy.actions={tmp_path}/missing.npy", "+policy.serve=true",
                    "benchmark=pick_v1", "limit=1", f"output_dir={tmp_path / 'run'}", "progress=false"])
     with pytest.raises(RunError) as err:
-        run_evaluation(cfg)
+        run_evaluation(cfg, fork_servers)
     assert str(err.value).startswith("policy.serve: the policy server did not start: ValueError: policy.actions=")
     assert "cannot load a .npy array" in str(err.value) and "\n" not in str(err.value)

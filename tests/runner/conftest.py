@@ -16,7 +16,8 @@ arm still and misbehaves in the episodes named by ``policy.faults={episode_index
   SIGKILLs itself, until ``<marker_dir>/fixed`` exists (the machine was repaired; a resume runs it again).
 
 ``policy.act_sleep_s`` slows every ``act``; every attempt appends the worker's pid to
-``<marker_dir>/pids-<episode_index>`` at reset (so a test can ``kill -9`` it from outside);
+``<marker_dir>/pids-<episode_index>`` at reset (so a test can ``kill -9`` it from outside), and its
+parent's (with ``forkserver``, the fork server it came from) to ``parents-<episode_index>``;
 ``policy.fail_init=true`` makes the policy constructor raise; ``+policy.kill_starts=N`` makes the
 first N workers that start after a ``sigkill*`` fault fired SIGKILL themselves while starting.
 
@@ -79,6 +80,8 @@ MODULE = textwrap.dedent('''
             self.episode = ctx.episode_index
             with open(self.marker_dir / f"pids-{self.episode}", "a") as f:
                 f.write(f"{os.getpid()}\\n")
+            with open(self.marker_dir / f"parents-{self.episode}", "a") as f:
+                f.write(f"{os.getppid()}\\n")
 
         def act(self, obs):
             kind = self.faults.get(self.episode)
@@ -199,10 +202,17 @@ def write_test_distribution(root: Path) -> Path:
     return root
 
 
+@pytest.fixture(scope="session")
+def test_distribution(tmp_path_factory) -> Path:
+    """The ``molmo_test_policies`` distribution, written once: every test installing it has the same
+    ``sys.path`` and ``PYTHONPATH``, so its runs can share fork servers (the ``fork_servers`` fixture)."""
+    return write_test_distribution(tmp_path_factory.mktemp("site"))
+
+
 @pytest.fixture
-def faulty_policy(tmp_path, monkeypatch):
+def faulty_policy(test_distribution, tmp_path, monkeypatch):
     """Install ``policy=faulty`` for this test; yields its ``marker_dir`` and ``sys.path`` entry."""
-    root = write_test_distribution(tmp_path / "site")
+    root = test_distribution
     markers = tmp_path / "markers"
     markers.mkdir()
     monkeypatch.syspath_prepend(str(root))

@@ -37,10 +37,10 @@ def _check_faults(res, markers):
     assert {e["episode_index"] for e in res.summary["errors"]} == {1, 4, 5, 6}
 
 
-def test_local_pool_isolates_crashes_hangs_and_errors(faulty_policy, small_bench, tmp_path, eval_config):
+def test_local_pool_isolates_crashes_hangs_and_errors(faulty_policy, small_bench, tmp_path, eval_config, fork_servers):
     cfg = eval_config(small_bench, tmp_path / "run", "policy=faulty", "workers=2", "horizon=3",
                       "episode_timeout_s=12", FAULTS, f"policy.marker_dir={faulty_policy.marker_dir}")
-    res = run_evaluation(cfg)
+    res = run_evaluation(cfg, fork_servers)
     _check_faults(res, faulty_policy.marker_dir)
     assert "signal SIGKILL" in {r.episode_index: r for r in res.episodes}[1].error
     assert (tmp_path / "run" / "results.json").exists()
@@ -87,12 +87,13 @@ def test_kill_9_of_one_worker_from_outside_mid_run(executor, faulty_policy, smal
     assert all(by[i].attempts == 1 for i in by if i != 3)
 
 
-def test_policy_that_cannot_start_fails_the_run_clearly(faulty_policy, small_bench, tmp_path, eval_config):
+def test_policy_that_cannot_start_fails_the_run_clearly(faulty_policy, small_bench, tmp_path, eval_config,
+                                                         fork_servers):
     from molmo_lerobot.runner.supervisor import WorkerStartError
 
     cfg = eval_config(small_bench, tmp_path / "run", "policy=faulty", "workers=1", "horizon=2", "policy.fail_init=true")
     with pytest.raises(WorkerStartError, match="refusing to start"):
-        run_evaluation(cfg)
+        run_evaluation(cfg, fork_servers)
     assert not (tmp_path / "run" / "results.json").exists()
 
 
@@ -122,11 +123,11 @@ def test_replacement_worker_killed_while_starting_is_a_worker_death(retries, fau
 
 
 def test_keyboard_interrupt_or_sys_exit_in_a_policy_is_an_episode_error(faulty_policy, small_bench, tmp_path,
-                                                                        eval_config):
+                                                                        eval_config, fork_servers):
     markers = faulty_policy.marker_dir
     cfg = eval_config(small_bench, tmp_path / "run", "policy=faulty", "workers=1", "horizon=2", "limit=4",
                       "+policy.faults={1: keyboard_interrupt, 2: system_exit}", f"policy.marker_dir={markers}")
-    res = run_evaluation(cfg)
+    res = run_evaluation(cfg, fork_servers)
     by = {r.episode_index: r for r in res.episodes}
     assert by[1].error.startswith("KeyboardInterrupt:") and "faulty" not in by[1].error.split("(")[0]
     assert "died" not in by[1].error and by[1].attempts == 1
@@ -149,7 +150,7 @@ def test_molmo_eval_leaves_no_child_process_behind(faulty_policy, small_bench, t
 
 
 def test_sigterm_stops_workers_keeps_finished_episodes_and_says_how_to_resume(faulty_policy, small_bench, tmp_path,
-                                                                              run_cli, eval_config):
+                                                                              run_cli, eval_config, fork_servers):
     """SIGTERM while episode 0 hangs and others finish: every worker ends, nothing is orphaned, the
     finished episodes stay in episodes.jsonl, the run does not look complete, and resuming finishes it
     without rerunning them."""
@@ -166,7 +167,7 @@ def test_sigterm_stops_workers_keeps_finished_episodes_and_says_how_to_resume(fa
     kept = [json.loads(line)["episode_index"] for line in (out / "episodes.jsonl").read_text().splitlines()]
     assert 2 <= len(kept) < 8 and 0 not in kept
     res = run_evaluation(eval_config(small_bench, out, "policy=faulty", f"policy.marker_dir={markers}",
-                                     *extra, "resume=true"))
+                                     *extra, "resume=true"), fork_servers)
     assert res.summary["n_episodes"] == 8 and res.summary["n_errors"] == 0
     for i in kept:
         assert len((markers / f"pids-{i}").read_text().split()) == 1, f"finished episode {i} was rerun"
@@ -209,7 +210,7 @@ def test_the_policy_server_of_a_killed_molmo_eval_ends_on_its_own(faulty_policy,
     assert running == {}, f"processes still running after molmo-eval was killed: {running}"
 
 
-def test_a_failing_export_leaves_the_score_standing(faulty_policy, small_bench, tmp_path, eval_config):
+def test_a_failing_export_leaves_the_score_standing(faulty_policy, small_bench, tmp_path, eval_config, fork_servers):
     """Scores first: results.json and episodes.jsonl are final before any export step runs; an export
     that fails is an error that says the score stands and where it is; the report still runs."""
     from molmo_lerobot.errors import ExportError
@@ -221,7 +222,7 @@ def test_a_failing_export_leaves_the_score_standing(faulty_policy, small_bench, 
     with pytest.raises(ExportError, match=r"export failed after the run was scored \(export TraceFactory: "
                                           r"OSError: trace export: disk full.*the score stands: 0/3 successes in "
                                           + str(out / "results.json")):
-        run_evaluation(cfg)
+        run_evaluation(cfg, fork_servers)
     summary = json.loads((out / "results.json").read_text())
     assert summary["n_episodes"] == 3 and summary["n_errors"] == 0
     assert summary["export_errors"] == ["export TraceFactory: OSError: trace export: disk full "

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from molmo_lerobot.runner.evaluate import run_evaluation
-from molmo_lerobot.runner.forkserver import ForkServerLost, PreloadedForkServer, exit_status_lost
+from molmo_lerobot.runner.forkserver import ForkServerLost, ForkServerPool, PreloadedForkServer, exit_status_lost
 from molmo_lerobot.runner.local import ProcessTransport, _Worker
 from molmo_lerobot.runner.supervisor import DEAD
 
@@ -102,6 +102,44 @@ def test_a_stopped_fork_server_hides_no_death_and_a_killed_one_fakes_none(server
         proc.join(WAIT_S)
     assert replacement.exitcode == 255 and exit_status_lost(replacement)  # its server was killed
     assert again.exitcode == -signal.SIGKILL and not exit_status_lost(again)  # its server reaped it
+
+
+def test_a_pool_lends_a_running_server_of_the_same_origin_only(monkeypatch):
+    """A server given back is lent again to a run of the same preload and environment, never to another;
+    one killed while idle or stopped while lent is killed and replaced, never lent; at most ``keep``
+    idle servers are kept, and closing the pool ends them. Variables it was told to ignore do not count."""
+    with ForkServerPool(keep=1, ignored_env=["MOLMO_POOL_IGNORED"]) as pool:
+        first = pool.borrow([])
+        first.started = []
+        _sleeper(first).kill()
+        pool.give_back(first)
+        monkeypatch.setenv("MOLMO_POOL_IGNORED", "any")
+        assert pool.borrow([]) is first  # the same origin: the same running server
+        monkeypatch.setenv("MOLMO_POOL_TEST", "other")
+        other = pool.borrow([])  # another environment: another server, the first still lent
+        evicted = other.pid
+        assert evicted not in (None, first.pid)
+        pool.give_back(other)
+        pool.give_back(first)  # keep=1: the one idle longer (other) is stopped
+        assert _state(evicted) == "gone"
+        monkeypatch.delenv("MOLMO_POOL_TEST")
+        lost = first.pid
+        os.kill(lost, signal.SIGKILL)  # lost while idle
+        assert _until(lambda: _state(lost) in ("Z", "gone"))
+        fresh = pool.borrow([])
+        assert fresh.pid not in (None, lost) and fresh.state() is None
+        fresh.started = []
+        _sleeper(fresh).kill()  # it forks
+        stopped = fresh.pid
+        os.kill(stopped, signal.SIGSTOP)  # stopped while lent: given back, it is killed, not kept
+        assert _until(lambda: _state(stopped) == "T")
+        pool.give_back(fresh)
+        assert _state(stopped) in ("Z", "gone")
+        kept = pool.borrow([])
+        assert kept.pid != stopped
+        pool.give_back(kept)
+        last = kept.pid
+    assert _until(lambda: _state(last) == "gone"), "closing the pool left its server running"
 
 
 # -- a real run ---------------------------------------------------------------------------------------------------
@@ -200,3 +238,29 @@ def test_kill_9_of_the_fork_server_mid_run_costs_no_episode(faulty_policy, small
         {i: r.error for i, r in by.items()}
     retried = [i for i, r in by.items() if r.attempts > 1]  # the killed worker's episode (none if it was idle)
     assert len(retried) <= 1 and all(by[i].attempts == 2 for i in retried), "a live worker was reported dead"
+
+
+def test_runs_sharing_a_pool_fork_from_one_server_and_a_lost_one_is_replaced(
+        faulty_policy, small_bench, tmp_path, eval_config, outcomes):
+    """Two runs given one pool fork their workers from the same server, with the outcomes of a run that
+    started its own; a server killed between runs is replaced, never lent, and costs the next run nothing."""
+    markers = faulty_policy.marker_dir
+    common = ["policy=faulty", "workers=1", "horizon=3", "limit=2", f"policy.marker_dir={markers}"]
+
+    def parents() -> list[int]:
+        return [int(line) for line in (markers / "parents-0").read_text().split()]
+
+    own = run_evaluation(eval_config(small_bench, tmp_path / "own", *common))
+    with ForkServerPool() as pool:
+        runs = [run_evaluation(eval_config(small_bench, tmp_path / "first", *common), pool),
+                run_evaluation(eval_config(small_bench, tmp_path / "second", *common), pool)]
+        assert parents()[1] == parents()[2], "the second run started a fork server of its own"
+        os.kill(parents()[2], signal.SIGKILL)  # the idle server is lost
+        assert _until(lambda: _state(parents()[2]) in ("Z", "gone"))
+        runs.append(run_evaluation(eval_config(small_bench, tmp_path / "third", *common), pool))
+        assert parents()[3] not in parents()[:3]
+    assert _until(lambda: _state(parents()[3]) == "gone"), "closing the pool left its server running"
+    for res, name in zip(runs, ("first", "second", "third"), strict=True):
+        assert [(r.episode_index, r.success, r.error) for r in res.episodes] == \
+            [(r.episode_index, r.success, r.error) for r in own.episodes]
+        assert outcomes(tmp_path / name) == outcomes(tmp_path / "own")

@@ -41,7 +41,8 @@ def _common(faulty_policy, *more):
     return ["policy=faulty", "workers=1", "horizon=2", f"policy.marker_dir={faulty_policy.marker_dir}", *more]
 
 
-def test_errored_and_invalid_episodes_count_in_their_task(faulty_policy, small_bench, tmp_path, eval_config):
+def test_errored_and_invalid_episodes_count_in_their_task(faulty_policy, small_bench, tmp_path, eval_config,
+                                                          fork_servers):
     """Issue 11.2: pick showed 4/6 (errors filed under their task_cls) where the truth was 4/8."""
     def edit(eps):
         eps[3]["cameras"][0]["fov"] = 200  # invalid: fails before any worker sees it
@@ -49,7 +50,8 @@ def test_errored_and_invalid_episodes_count_in_their_task(faulty_policy, small_b
     bench = _bench(small_bench, tmp_path, edit)
     out = tmp_path / "run"
     res = run_evaluation(eval_config(bench, out, *_common(faulty_policy, "limit=5",
-                                                          "+policy.faults={1: raise, 4: hang}", "episode_timeout_s=8")))
+                                                          "+policy.faults={1: raise, 4: hang}", "episode_timeout_s=8")),
+                         fork_servers)
     assert list(res.summary["per_task"]) == ["pick"]
     pick = res.summary["per_task"]["pick"]
     assert (pick["n_episodes"], pick["n_errors"], pick["n_valid"]) == (5, 3, 2)
@@ -72,7 +74,7 @@ def test_horizon_sources():
     assert horizon_with_source(None, Task(), 1.32, 66.0) == (20, "default")
 
 
-def test_horizon_source_is_recorded_per_episode(faulty_policy, small_bench, tmp_path, eval_config):
+def test_horizon_source_is_recorded_per_episode(faulty_policy, small_bench, tmp_path, eval_config, fork_servers):
     def edit(eps):
         eps[0]["task"]["task_horizon_sec"] = 0.132
         del eps[1]["task"]["task_horizon_sec"]  # pick's default, 20 s
@@ -81,15 +83,15 @@ def test_horizon_source_is_recorded_per_episode(faulty_policy, small_bench, tmp_
     out = tmp_path / "run"
     run_evaluation(eval_config(bench, out, "policy=faulty", "workers=1", "limit=2", "timing.policy_dt_ms=330",
                                "timing.ctrl_dt_ms=10", "timing.sim_dt_ms=10",
-                               f"policy.marker_dir={faulty_policy.marker_dir}"))
+                               f"policy.marker_dir={faulty_policy.marker_dir}"), fork_servers)
     rows = _rows(out)
     assert [(r["horizon"], r["horizon_source"]) for r in rows] == [(1, "task_horizon_sec"), (61, "default")]
 
 
-def test_a_run_where_every_episode_errored_has_no_score(faulty_policy, small_bench, tmp_path):
+def test_a_run_where_every_episode_errored_has_no_score(faulty_policy, small_bench, tmp_path, fork_servers):
     out = tmp_path / "run"
     res = evaluate(f"benchmark.path={small_bench}", f"output_dir={out}", "progress=false",
-                   *_common(faulty_policy, "limit=2", "+policy.faults={0: raise, 1: raise}"))
+                   *_common(faulty_policy, "limit=2", "+policy.faults={0: raise, 1: raise}"), fork_servers=fork_servers)
     assert exit_status(res.summary) == 1
     text = "\n".join(summary_lines(res.run_summary))
     assert text.startswith("no episode ran: 2 of 2 episodes errored") and "success 0.000" not in text
@@ -100,10 +102,10 @@ def test_a_run_where_every_episode_errored_has_no_score(faulty_policy, small_ben
     assert (out / "report.html").exists()
 
 
-def test_a_run_with_errors_leads_with_them(faulty_policy, small_bench, tmp_path):
+def test_a_run_with_errors_leads_with_them(faulty_policy, small_bench, tmp_path, fork_servers):
     out = tmp_path / "run"
     res = evaluate(f"benchmark.path={small_bench}", f"output_dir={out}", "progress=false",
-                   *_common(faulty_policy, "limit=3", "+policy.faults={1: raise}"))
+                   *_common(faulty_policy, "limit=3", "+policy.faults={1: raise}"), fork_servers=fork_servers)
     assert exit_status(res.summary) == 0
     first = summary_lines(res.run_summary)[0]
     assert first.startswith("1 of 3 episodes errored · pick_small · faulty: success 0.000")
@@ -111,37 +113,39 @@ def test_a_run_with_errors_leads_with_them(faulty_policy, small_bench, tmp_path)
     assert summary["n_valid"] == 2 and summary["success_rate"] == 0.0
 
 
-def test_resume_with_a_smaller_limit_keeps_every_episode(faulty_policy, small_bench, tmp_path, eval_config):
+def test_resume_with_a_smaller_limit_keeps_every_episode(faulty_policy, small_bench, tmp_path, eval_config,
+                                                         fork_servers):
     """Issue 11.3: episodes.jsonl went from 12 lines to 4, silently."""
     out = tmp_path / "run"
-    run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=4")))
+    run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=4")), fork_servers)
     before = (out / "episodes.jsonl").read_text()
     with pytest.raises(RunError, match=r"with limit=2: it was started with limit=4 \(4 episodes recorded\).*never "
                                        r"drops recorded episodes; use limit=4 or larger"):
-        run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=2", "resume=true")))
+        run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=2", "resume=true")), fork_servers)
     assert (out / "episodes.jsonl").read_text() == before and (out / "results.json").exists()
-    res = run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=6", "resume=true")))
+    res = run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=6", "resume=true")), fork_servers)
     assert [r["episode_index"] for r in _rows(out)] == list(range(6)) and res.summary["n_episodes"] == 6
     assert json.loads((out / "run.json").read_text())["limit"] == 6
     with pytest.raises(RunError, match="limit=5"):
-        run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=5", "resume=true")))
-    res = run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "resume=true")))  # keeps limit=6
+        run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=5", "resume=true")), fork_servers)
+    # keeps limit=6
+    res = run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "resume=true")), fork_servers)
     assert res.summary["n_episodes"] == 6 and len(_rows(out)) == 6
     with pytest.raises(RunError, match=r"with limit=3: it was started with limit=6 \(6 episodes recorded\).*use "
                                        r"limit=6 or larger \(or leave limit out to keep 6\)"):
-        run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=3", "resume=true")))
+        run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "limit=3", "resume=true")), fork_servers)
     assert len(_rows(out)) == 6
 
 
-def test_resume_names_a_corrupt_record(faulty_policy, small_bench, tmp_path, eval_config):
+def test_resume_names_a_corrupt_record(faulty_policy, small_bench, tmp_path, eval_config, fork_servers):
     out = tmp_path / "run"
     common = _common(faulty_policy, "limit=3")
-    run_evaluation(eval_config(small_bench, out, *common))
+    run_evaluation(eval_config(small_bench, out, *common), fork_servers)
     lines = (out / "episodes.jsonl").read_text().splitlines()
     for bad in ('{"episode_index": 1, "success": "yes"}', "not json at all", "[" * 100_000 + "]" * 100_000):
         (out / "episodes.jsonl").write_text("\n".join([lines[0], bad, lines[2]]) + "\n")
         with pytest.raises(RunError, match=r"episodes.jsonl:2: corrupt episode record .*delete that line"):
-            run_evaluation(eval_config(small_bench, out, *common, "resume=true"))
+            run_evaluation(eval_config(small_bench, out, *common, "resume=true"), fork_servers)
 
 
 def test_output_dir_that_cannot_be_written_is_one_line(tmp_path):
@@ -168,7 +172,7 @@ def _limit_file_size(nbytes: int):
 
 
 def test_a_full_disk_mid_run_leaves_episodes_jsonl_valid_for_resume(faulty_policy, small_bench, tmp_path,
-                                                                    eval_config):
+                                                                    eval_config, fork_servers):
     """Writes past RLIMIT_FSIZE fail with EFBIG (Python ignores SIGXFSZ) as a full disk fails with ENOSPC."""
     out = tmp_path / "run"
     args = [f"benchmark.path={small_bench}", f"output_dir={out}", "progress=false", *_common(faulty_policy, "limit=4")]
@@ -183,11 +187,11 @@ def test_a_full_disk_mid_run_leaves_episodes_jsonl_valid_for_resume(faulty_polic
     assert text.endswith("\n") and 1 <= len(text.splitlines()) < 4
     assert all(json.loads(line)["task_type"] == "pick" for line in text.splitlines())
     assert not (out / "results.json").exists()
-    res = run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "resume=true")))
+    res = run_evaluation(eval_config(small_bench, out, *_common(faulty_policy, "resume=true")), fork_servers)
     assert res.summary["n_episodes"] == 4 and len(_rows(out)) == 4
 
 
-def test_diverging_physics_is_an_episode_error(faulty_policy, small_bench, tmp_path, eval_config):
+def test_diverging_physics_is_an_episode_error(faulty_policy, small_bench, tmp_path, eval_config, fork_servers):
     """Issue 11.13: init_qpos of 1e9 gave "simulation unstable" warnings and a plain failure with error null."""
     def edit(eps):
         eps[0]["robot"]["init_qpos"]["arm"] = [1e9] * 7
@@ -196,7 +200,7 @@ def test_diverging_physics_is_an_episode_error(faulty_policy, small_bench, tmp_p
 
     bench = _bench(small_bench, tmp_path, edit)
     out = tmp_path / "run"
-    res = run_evaluation(eval_config(bench, out, *_common(faulty_policy, "limit=3")))
+    res = run_evaluation(eval_config(bench, out, *_common(faulty_policy, "limit=3")), fork_servers)
     errors = [r.error for r in res.episodes]
     assert errors[0].startswith("SimulationDiverged: simulation diverged at step 0") and "mjWARN_BADQACC" in errors[0]
     assert errors[1].startswith("SimulationDiverged: simulation diverged at") and "mjWARN_BADQPOS" in errors[1]
@@ -204,7 +208,7 @@ def test_diverging_physics_is_an_episode_error(faulty_policy, small_bench, tmp_p
     assert res.summary["n_errors"] == 2 and res.summary["n_valid"] == 1
 
 
-def test_benchmark_names_stay_inside_runs(faulty_policy, small_bench, tmp_path, eval_config, monkeypatch):
+def test_benchmark_names_stay_inside_runs(faulty_policy, small_bench, tmp_path, eval_config, monkeypatch, fork_servers):
     """Issue 11.9: name "../../../../tmp/x" moved the default output dir outside runs/."""
     bench = _bench(small_bench, tmp_path, lambda eps: None)
     (bench / "benchmark_metadata.json").write_text(json.dumps({"name": "../../../../tmp/x"}))
@@ -213,7 +217,7 @@ def test_benchmark_names_stay_inside_runs(faulty_policy, small_bench, tmp_path, 
     monkeypatch.chdir(work)
     cfg = eval_config(bench, None, *_common(faulty_policy, "limit=1"))
     cfg.output_dir = None
-    res = run_evaluation(cfg)
+    res = run_evaluation(cfg, fork_servers)
     assert res.output_dir.resolve().parent == (work / "runs").resolve()
     assert res.output_dir.name.startswith("tmp_x-faulty-")
     assert res.summary["benchmark"]["name"] == "../../../../tmp/x"  # recorded as given

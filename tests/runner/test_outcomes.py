@@ -17,7 +17,7 @@ def _records(run_dir):
 
 
 def test_output_and_infrastructure_failures_never_rewrite_outcomes_and_resume_repairs_them(
-        faulty_policy, small_bench, tmp_path, eval_config, outcomes, traces):
+        faulty_policy, small_bench, tmp_path, eval_config, outcomes, traces, fork_servers):
     """On a broken machine: ``thumbnails`` is a file (every thumbnail write fails after its rollout
     finished), a recorder's disk is full, the policy hits a full disk in episode 0 and the worker
     of episode 2 dies on every attempt; episode 3 is a real episode error.
@@ -31,18 +31,19 @@ def test_output_and_infrastructure_failures_never_rewrite_outcomes_and_resume_re
     common = ["policy=faulty", "workers=1", "horizon=2", faults, f"policy.marker_dir={markers}"]
     (markers / "fixed").touch()
     run_evaluation(eval_config(small_bench, tmp_path / "ref", *common, "limit=4",
-                               f"+trace_dir={tmp_path / 'ref-traces'}"))
+                               f"+trace_dir={tmp_path / 'ref-traces'}"), fork_servers)
     for p in [markers / "fixed", *markers.glob("pids-*")]:
         p.unlink()
 
     out = tmp_path / "run"
-    run_evaluation(eval_config(small_bench, out, *common, "limit=1", f"+trace_dir={trace_dir}"))
+    run_evaluation(eval_config(small_bench, out, *common, "limit=1", f"+trace_dir={trace_dir}"), fork_servers)
     (out / "thumbnails").mkdir(exist_ok=True)
     (out / "thumbnails").rename(tmp_path / "thumbnails")
     (out / "thumbnails").write_text("in the way")
     trace_dir.mkdir(exist_ok=True)
     (trace_dir / "disk-full").touch()
-    res = run_evaluation(eval_config(small_bench, out, *common, "limit=4", f"+trace_dir={trace_dir}", "resume=true"))
+    res = run_evaluation(eval_config(small_bench, out, *common, "limit=4", f"+trace_dir={trace_dir}", "resume=true"),
+                         fork_servers)
     by = {r.episode_index: r for r in res.episodes}
     assert by[0].error_kind == "infrastructure" and "No space left on device" in by[0].error
     assert by[2].error_kind == "infrastructure" and "worker process died" in by[2].error
@@ -61,7 +62,7 @@ def test_output_and_infrastructure_failures_never_rewrite_outcomes_and_resume_re
     (out / "thumbnails").unlink()
     (tmp_path / "thumbnails").rename(out / "thumbnails")
     resumed = run_evaluation(eval_config(small_bench, out, *common, "limit=4", f"+trace_dir={trace_dir}",
-                                         "resume=true"))
+                                         "resume=true"), fork_servers)
     assert outcomes(out) == outcomes(tmp_path / "ref")
     assert resumed.summary["n_errors"] == 1 and resumed.summary["output_errors"] == []
     assert traces(trace_dir) == traces(tmp_path / "ref-traces")
@@ -71,7 +72,8 @@ def test_output_and_infrastructure_failures_never_rewrite_outcomes_and_resume_re
     assert runs == {0: 3, 1: 2, 2: 3, 3: 1}, "resume reran exactly the infrastructure and output failures"
 
     (trace_dir / "trace-1").unlink()  # a recorder's output lost after the run (RecorderFactory.missing)
-    run_evaluation(eval_config(small_bench, out, *common, "limit=4", f"+trace_dir={trace_dir}", "resume=true"))
+    run_evaluation(eval_config(small_bench, out, *common, "limit=4", f"+trace_dir={trace_dir}", "resume=true"),
+                   fork_servers)
     assert traces(trace_dir) == traces(tmp_path / "ref-traces") and outcomes(out) == outcomes(tmp_path / "ref")
     assert len((markers / "pids-1").read_text().split()) == 3 and len((markers / "pids-0").read_text().split()) == 3
 

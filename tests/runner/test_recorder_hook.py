@@ -45,11 +45,11 @@ class CounterPlugin:
         return [StepCounterFactory()] if config.get("count_steps") else []
 
 
-def test_plugin_recorder_sees_every_step(tmp_path, in_process_plugins):
+def test_plugin_recorder_sees_every_step(tmp_path, in_process_plugins, fork_servers):
     in_process_plugins(CounterPlugin(), "step_counter")
     out = tmp_path / "run"
     run_evaluation(compose(["policy=random", "workers=2", "limit=3", "horizon=7", "+count_steps=true",
-                            f"output_dir={out}", "progress=false"]))
+                            f"output_dir={out}", "progress=false"]), fork_servers)
     seen = sorted(e for f in out.glob("steps-*.json") for e in json.loads(f.read_text()))
     assert seen == [[0, 7, None], [1, 7, None], [2, 7, None]]
     assert json.loads((out / "finalized.json").read_text()) == 3

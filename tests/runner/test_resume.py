@@ -88,38 +88,38 @@ def test_sigkilled_run_resumes_to_the_uninterrupted_result(faulty_policy, small_
 
 
 def test_torn_last_line_is_rerun_and_finished_episodes_are_kept(faulty_policy, small_bench, tmp_path, eval_config,
-                                                                outcomes):
+                                                                outcomes, fork_servers):
     markers = faulty_policy.marker_dir
     common = ["policy=faulty", "workers=1", "horizon=2", "limit=3", f"policy.marker_dir={markers}"]
     out = tmp_path / "run"
-    run_evaluation(eval_config(small_bench, out, *common))
+    run_evaluation(eval_config(small_bench, out, *common), fork_servers)
     complete = outcomes(out)
     lines = _lines(out / "episodes.jsonl")
     (out / "episodes.jsonl").write_text(lines[0] + "\n" + lines[1][: len(lines[1]) // 2])
     (out / "results.json").unlink()
 
-    run_evaluation(eval_config(small_bench, out, *common, "resume=true"))
+    run_evaluation(eval_config(small_bench, out, *common, "resume=true"), fork_servers)
     assert outcomes(out) == complete
     first = json.loads(lines[0])["episode_index"]
     runs = {i: len((markers / f"pids-{i}").read_text().split()) for i in range(3)}
     assert runs == {i: 1 if i == first else 2 for i in range(3)}
 
 
-def test_resume_refuses_a_different_run(faulty_policy, small_bench, tmp_path, eval_config, monkeypatch):
+def test_resume_refuses_a_different_run(faulty_policy, small_bench, tmp_path, eval_config, monkeypatch, fork_servers):
     out = tmp_path / "run"
     common = ["policy=faulty", "workers=1", "horizon=2", "limit=1", f"policy.marker_dir={faulty_policy.marker_dir}"]
-    first = run_evaluation(eval_config(small_bench, out, *common))
+    first = run_evaluation(eval_config(small_bench, out, *common), fork_servers)
     with pytest.raises(RunError, match="already holds a run"):
-        run_evaluation(eval_config(small_bench, out, *common))
+        run_evaluation(eval_config(small_bench, out, *common), fork_servers)
     with pytest.raises(RunError, match="seed differs"):
-        run_evaluation(eval_config(small_bench, out, *common, "resume=true", "seed=1"))
+        run_evaluation(eval_config(small_bench, out, *common, "resume=true", "seed=1"), fork_servers)
     with pytest.raises(RunError, match="timing differs"):
-        run_evaluation(eval_config(small_bench, out, *common, "resume=true", "timing.policy_dt_ms=100"))
+        run_evaluation(eval_config(small_bench, out, *common, "resume=true", "timing.policy_dt_ms=100"), fork_servers)
     # issue 36: an environment override of the look (here shadows off) is part of the run, never silent
     assert first.summary["render_profile"]["name"] == "v2" and first.summary["render_profile"]["overrides"] == {}
     monkeypatch.setenv("MOLMO_SCENE_SHADOWS", "0")
     with pytest.raises(RunError, match="render_profile differs") as info:
-        run_evaluation(eval_config(small_bench, out, *common, "resume=true"))
+        run_evaluation(eval_config(small_bench, out, *common, "resume=true"), fork_servers)
     assert "\n" not in str(info.value) and "MOLMO_SCENE_SHADOWS" in str(info.value)
     assert (out / "results.json").exists(), "a refused resume leaves the finished run alone"
 

@@ -16,29 +16,30 @@ def _common(faulty_policy) -> list[str]:
 
 
 def test_resume_without_a_limit_keeps_the_recorded_one_and_says_so(faulty_policy, small_bench, tmp_path, eval_config,
-                                                                   capsys):
+                                                                   capsys, fork_servers):
     out = tmp_path / "run"
-    run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "limit=1"))
+    run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "limit=1"), fork_servers)
     (out / "results.json").unlink()  # killed before scoring
     capsys.readouterr()
-    resumed = run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "resume=true"))
+    resumed = run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "resume=true"), fork_servers)
     assert resumed.summary["n_episodes"] == 1 and json.loads((out / "run.json").read_text())["limit"] == 1
     assert (f"molmo-eval: resume {out}: 1 of 1 episodes recorded stand, running the other 0 (limit=1 as recorded, "
             "of 8 in the benchmark)") in capsys.readouterr().err
 
 
-def test_resume_refuses_other_code_naming_the_key(faulty_policy, small_bench, tmp_path, eval_config):
+def test_resume_refuses_other_code_naming_the_key(faulty_policy, small_bench, tmp_path, eval_config, fork_servers):
     out = tmp_path / "run"
-    run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "limit=1"))
+    run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "limit=1"), fork_servers)
     run = json.loads((out / "run.json").read_text())
     assert run["code"]["version"] and run["code"]["commit"]  # this checkout is a git repository
     run["code"]["commit"] = "0" * 40
     (out / "run.json").write_text(json.dumps(run))
     with pytest.raises(RunError, match=r"its code differs from this run's \(code.commit: \"0000") as exc:
-        run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "resume=true"))
+        run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "resume=true"), fork_servers)
     assert len(str(exc.value).splitlines()) == 1
     with pytest.raises(RunError, match=r"its policy differs from this run's \(policy.act_sleep_s: 0.0 vs 0.5\)"):
-        run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "resume=true", "policy.act_sleep_s=0.5"))
+        run_evaluation(eval_config(small_bench, out, *_common(faulty_policy), "resume=true", "policy.act_sleep_s=0.5"),
+                       fork_servers)
 
 
 @pytest.mark.slow

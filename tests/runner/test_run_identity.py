@@ -32,7 +32,7 @@ def test_hash_covers_weights_and_config_and_follows_symlinks(tmp_path):
         "path": {"path": "lerobot/act_aloha", "sha256": None}}
 
 
-def test_resume_refuses_a_retrained_checkpoint(faulty_policy, small_bench, tmp_path, eval_config):
+def test_resume_refuses_a_retrained_checkpoint(faulty_policy, small_bench, tmp_path, eval_config, fork_servers):
     steps = tmp_path / "checkpoints"
     _checkpoint(steps / "001000", b"\x01" * 64)
     _checkpoint(steps / "002000", b"\x02" * 64)
@@ -41,7 +41,7 @@ def test_resume_refuses_a_retrained_checkpoint(faulty_policy, small_bench, tmp_p
     out = tmp_path / "run"
     common = ["policy=faulty", "workers=1", "horizon=2", f"policy.marker_dir={faulty_policy.marker_dir}",
               f"+policy.path={last}"]
-    first = run_evaluation(eval_config(small_bench, out, *common, "limit=1"))
+    first = run_evaluation(eval_config(small_bench, out, *common, "limit=1"), fork_servers)
     recorded = first.summary["policy_checkpoint"]["path"]
     assert recorded["sha256"] == checkpoint_sha256(steps / "001000")["sha256"]
     assert json.loads((out / "run.json").read_text())["policy_checkpoint"]["path"] == recorded
@@ -49,8 +49,8 @@ def test_resume_refuses_a_retrained_checkpoint(faulty_policy, small_bench, tmp_p
     last.unlink()
     os.symlink(steps / "002000", last)  # retrained: same path, new weights
     with pytest.raises(RunError, match="policy_checkpoint differs"):
-        run_evaluation(eval_config(small_bench, out, *common, "limit=2", "resume=true"))
+        run_evaluation(eval_config(small_bench, out, *common, "limit=2", "resume=true"), fork_servers)
     last.unlink()
     os.symlink(steps / "001000", last)
-    resumed = run_evaluation(eval_config(small_bench, out, *common, "limit=2", "resume=true"))
+    resumed = run_evaluation(eval_config(small_bench, out, *common, "limit=2", "resume=true"), fork_servers)
     assert resumed.summary["n_episodes"] == 2

@@ -55,10 +55,10 @@ def test_bad_selections_are_one_line_each(overrides, line):
     assert len(err.value.problems) == 1 and err.value.problems[0].startswith(line)
 
 
-def test_an_index_outside_the_benchmark_is_refused_before_any_run_directory(small_bench, tmp_path):
+def test_an_index_outside_the_benchmark_is_refused_before_any_run_directory(small_bench, tmp_path, fork_servers):
     out = tmp_path / "run"
     with pytest.raises(RunError, match=r"episodes: index 8 is outside benchmark 'pick_small' \(.*8 episodes, 0..7\)"):
-        run_evaluation(compose([f"benchmark.path={small_bench}", f"output_dir={out}", "episodes=[2,8]"]))
+        run_evaluation(compose([f"benchmark.path={small_bench}", f"output_dir={out}", "episodes=[2,8]"]), fork_servers)
     assert not out.exists()
 
 

@@ -18,12 +18,12 @@ from molmo_lerobot.runner.evaluate import run_evaluation
 BASE = ["base_x", "base_y", "base_theta"]
 
 
-def test_a_recorded_nav_episode_loads_in_lerobot_with_the_base_group(tmp_path):
+def test_a_recorded_nav_episode_loads_in_lerobot_with_the_base_group(tmp_path, fork_servers):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     out = tmp_path / "run"
     res = run_evaluation(compose(["policy=scripted", "benchmark=nav_v1", "workers=1", "limit=1", "horizon=100",
-                                  "record=true", "progress=false", f"output_dir={out}"]))
+                                  "record=true", "progress=false", f"output_dir={out}"]), fork_servers)
     (episode,) = res.episodes
     assert episode.error is None and episode.success and episode.steps == 100
     ds = LeRobotDataset("local/nav_v1-scripted", root=out / "dataset", video_backend="pyav")

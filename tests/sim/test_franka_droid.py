@@ -265,7 +265,7 @@ def test_their_model_is_loaded_when_installed(tmp_path, monkeypatch):
     franka_droid.FrankaDroid().bind(m)
 
 
-def test_molmospaces_pick_episode_runs_and_records_an_open_gripper(tmp_path):
+def test_molmospaces_pick_episode_runs_and_records_an_open_gripper(tmp_path, fork_servers):
     """Must-show: their wrist camera spec and init_qpos on franka_droid through molmo-eval; the first
     recorded frame has the gripper open; the scripted expert picks."""
     bench = tmp_path / "ms_pick"
@@ -273,7 +273,7 @@ def test_molmospaces_pick_episode_runs_and_records_an_open_gripper(tmp_path):
     (bench / "benchmark.json").write_text(json.dumps([ms_pick_episode(0)]))
     cfg = compose(["policy=scripted", f"benchmark.path={bench}", "workers=1", "record=true", "end_on_success=true",
                    f"output_dir={tmp_path / 'run'}", "progress=false"])
-    res = run_evaluation(cfg)
+    res = run_evaluation(cfg, fork_servers)
     assert res.summary["n_errors"] == 0 and res.summary["n_success"] == 1
     import pandas as pd
     frames = pd.concat(pd.read_parquet(p) for p in sorted((tmp_path / "run" / "dataset" / "data").rglob("*.parquet")))

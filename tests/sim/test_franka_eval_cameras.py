@@ -171,7 +171,7 @@ def test_good_camera_options_compose():
     assert camera_option_problems({"system": "eval", "rand_level": 12.5}) == []
 
 
-def test_a_run_with_eval_cameras(tmp_path):
+def test_a_run_with_eval_cameras(tmp_path, fork_servers):
     """molmo-eval camera.eval=true camera.rand_level=50 (MolmoSpaces' --use_eval_cameras
     --camera_rand_level 50): the workers build the eval cameras; the run records the options."""
     from molmo_lerobot.config import compose
@@ -182,7 +182,7 @@ def test_a_run_with_eval_cameras(tmp_path):
     (bench / "benchmark.json").write_text(json.dumps([_pick(0)]))
     cfg = compose(["policy=scripted", f"benchmark.path={bench}", "workers=1", "horizon=3", "progress=false",
                    f"output_dir={tmp_path / 'run'}", "camera.eval=true", "camera.rand_level=50"])
-    res = run_evaluation(cfg)
+    res = run_evaluation(cfg, fork_servers)
     assert res.summary["n_errors"] == 0
     assert [e.extra["camera_system"] for e in res.episodes] == ["FrankaEvalCameraSystem"]
     run = json.loads((tmp_path / "run" / "results.json").read_text())

@@ -143,14 +143,14 @@ def test_gripper_init_qpos_takes_their_metres():
     assert list(GROUPS) == [*GROUP_ORDER, "head"]
 
 
-def test_an_rby1_run_records_a_dataset_with_its_base_group(tmp_path, assets):
+def test_an_rby1_run_records_a_dataset_with_its_base_group(tmp_path, assets, fork_servers):
     """End to end: molmo-eval on the stand-in (molmospaces.assets_dir), random policy, recorded."""
     bench = tmp_path / "bench"
     bench.mkdir()
     (bench / "benchmark.json").write_text(json.dumps([_episode()]))
     cfg = compose(["policy=random", f"benchmark.path={bench}", "workers=1", "record=true", "horizon=3",
                    f"output_dir={tmp_path / 'run'}", "progress=false", f"molmospaces.assets_dir={assets}"])
-    res = run_evaluation(cfg)
+    res = run_evaluation(cfg, fork_servers)
     assert res.summary["n_errors"] == 0 and res.summary["n_episodes"] == 1
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 

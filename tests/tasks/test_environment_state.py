@@ -118,14 +118,14 @@ def _episode_0_state() -> tuple[np.ndarray, FeatureMap]:
         genv.close()
 
 
-def test_recorded_only_when_asked_and_a_state_policy_gets_it(tmp_path, pick_recording):
+def test_recorded_only_when_asked_and_a_state_policy_gets_it(tmp_path, pick_recording, fork_servers):
     """A checkpoint that reads it gets it at evaluation with no option set, and the recording holds what
     it saw (the env's own values); a run that nobody asks for it records none. The option asking for it
     is the slow test below (and the error when a task has none, in the default run)."""
     first, fmap = _episode_0_state()
     act = _tiny_state_act(tmp_path / "act", fmap)
     res = run_evaluation(compose([f"policy.path={act}", "policy=lerobot", "policy.device=cpu", *STATE_RUN,
-                                  f"output_dir={tmp_path / 'policy'}"]))
+                                  f"output_dir={tmp_path / 'policy'}"]), fork_servers)
     assert res.summary["n_errors"] == 0
     feature, recorded = _first_recorded_state(tmp_path / "policy")
     assert feature["names"] == NAMES and feature["shape"] == [13]
@@ -159,9 +159,10 @@ def test_a_served_state_policy_is_sent_the_state_too(tmp_path):
     assert [e.success for e in served.episodes] == [e.success for e in res.episodes]
 
 
-def test_a_task_without_environment_state_is_an_episode_error(tmp_path):
+def test_a_task_without_environment_state_is_an_episode_error(tmp_path, fork_servers):
     res = run_evaluation(compose(["policy=scripted", "benchmark=open_v1", "limit=1", "workers=1", "horizon=2",
-                                  "progress=false", "record_environment_state=true", f"output_dir={tmp_path}"]))
+                                  "progress=false", "record_environment_state=true", f"output_dir={tmp_path}"]),
+                         fork_servers)
     lines = [json.loads(x) for x in (tmp_path / "episodes.jsonl").read_text().splitlines()]
     assert res.summary["n_errors"] == 1
     assert "defines no environment state (asked for by record_environment_state=true)" in lines[0]["error"]

@@ -2,7 +2,8 @@
 
 A Hydra app (``@hydra.main``) over ``conf/eval.yaml`` (plus the config dirs plugins add): ``-m`` sweeps
 (``molmo-eval -m policy=random,scripted limit=2`` writes one complete run per job under
-``hydra.sweep.dir/hydra.sweep.subdir``), ``--cfg job|hydra|all``, ``--help``, ``--info``.
+``hydra.sweep.dir/hydra.sweep.subdir``; their workers fork from one fork server where the jobs
+preload the same modules), ``--cfg job|hydra|all``, ``--help``, ``--info``.
 Each job validates its config (:class:`~molmo_lerobot.run_config.RunConfig`) before any
 work. Bad overrides, config and run errors print one ``molmo-eval: error:`` message and exit 2.
 """
@@ -12,11 +13,14 @@ from __future__ import annotations
 import os
 import sys
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.gl import use_headless_gl
 from molmo_lerobot.runner.progress import quiet_library_bars
+
+if TYPE_CHECKING:
+    from molmo_lerobot.runner.forkserver import ForkServerPool
 
 _CFG_TYPES = ("job", "hydra", "all")
 
@@ -50,15 +54,18 @@ def _main(multirun: bool) -> int:
 
     from molmo_lerobot.config import config_message, primary_config_dir
     from molmo_lerobot.plugins import PluginError
+    from molmo_lerobot.runner.forkserver import ForkServerPool
     from molmo_lerobot.runner.supervisor import RunInterrupted
 
     codes: list[int] = []
     jobs: list[dict[str, Any]] = []  # one row per job, for a sweep's closing table
+    fork_servers = ForkServerPool()  # a sweep's jobs fork their workers from one server where they can
     app = hydra.main(version_base="1.3", config_path=str(primary_config_dir()), config_name="eval")(
-        lambda cfg: codes.append(_job(cfg, jobs)))
+        lambda cfg: codes.append(_job(cfg, jobs, fork_servers)))
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors to us instead of printing them and exiting 1
     try:
-        app()
+        with fork_servers:
+            app()
     except SystemExit as exc:  # --help, --hydra-help; a bad flag (argparse's usage message)
         return 0 if exc.code is None else exc.code if isinstance(exc.code, int) else 1
     except (HydraException, OmegaConfBaseException, PluginError) as exc:
@@ -108,9 +115,9 @@ def exit_status(summary: Mapping[str, Any]) -> int:
     return 1 if summary["success_rate"] is None or (push and not push["ok"]) else 0
 
 
-def _job(cfg: Any, jobs: list[dict[str, Any]]) -> int:
-    """One run, validated here (a sweep job writes to its sweep subdir unless ``output_dir`` is set);
-    appends its row to ``jobs``."""
+def _job(cfg: Any, jobs: list[dict[str, Any]], fork_servers: ForkServerPool) -> int:
+    """One run, validated here (a sweep job writes to its sweep subdir unless ``output_dir`` is set),
+    its workers' fork server borrowed from ``fork_servers``; appends its row to ``jobs``."""
     row: dict[str, Any] = {"job": len(jobs), "policy": str(cfg.get("policy", {}).get("name", "?")),
                            "benchmark": str(cfg.get("benchmark", {}).get("path")
                                             or cfg.get("benchmark", {}).get("name", "?")),
@@ -126,7 +133,7 @@ def _job(cfg: Any, jobs: list[dict[str, Any]]) -> int:
     try:
         if HydraConfig.get().mode == RunMode.MULTIRUN and cfg.get("output_dir") is None:
             cfg.output_dir = HydraConfig.get().runtime.output_dir
-        res = run_evaluation(RunConfig.of(cfg))
+        res = run_evaluation(RunConfig.of(cfg), fork_servers)
     except refused_errors() as exc:
         for line in str(exc).splitlines() or [type(exc).__name__]:  # one line per problem
             print(f"molmo-eval: error: {line}", file=sys.stderr)

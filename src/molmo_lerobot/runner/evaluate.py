@@ -39,7 +39,7 @@ from molmo_lerobot.results import EpisodeResult, RunSummary, summarize
 from molmo_lerobot.run_config import RunConfig, episode_work_problem
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
-from molmo_lerobot.runner.forkserver import worker_preload
+from molmo_lerobot.runner.forkserver import ForkServerPool, worker_preload
 from molmo_lerobot.runner.placement import check_devices
 from molmo_lerobot.runner.plan import EpisodePlan, EpisodePlanner
 from molmo_lerobot.runner.progress import Progress
@@ -144,7 +144,7 @@ def plugin_option_problems(run: RunContext) -> list[str]:
     return out
 
 
-def _make_executor(config: RunConfig) -> Any:
+def _make_executor(config: RunConfig, fork_servers: ForkServerPool | None = None) -> Any:
     ex = config.executor.model_dump()  # the executor's options are its own (conf/executor/<name>.yaml)
     common: dict[str, Any] = dict(timeout_s=float(config.episode_timeout_s), retries=config.episode_retries)
     if ex["name"] == "local":
@@ -152,7 +152,8 @@ def _make_executor(config: RunConfig) -> Any:
 
         try:
             check_devices(ex)  # read by each worker, checked here
-            return LocalExecutor(config.workers, start_method=ex.get("start_method", "forkserver"), **common)
+            return LocalExecutor(config.workers, start_method=ex.get("start_method", "forkserver"),
+                                 fork_servers=fork_servers, **common)
         except ValueError as exc:
             raise RunError(str(exc)) from None
     if ex["name"] == "ray":
@@ -166,8 +167,11 @@ def _make_executor(config: RunConfig) -> Any:
     raise RunError(f"unknown executor {ex['name']!r} (available: local, ray)")
 
 
-def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResults:
-    """Evaluate ``config.policy`` on ``config.benchmark``; see ``conf/eval.yaml`` for every option."""
+def run_evaluation(config: RunConfig | DictConfig | dict[str, Any],
+                   fork_servers: ForkServerPool | None = None) -> EvalResults:
+    """Evaluate ``config.policy`` on ``config.benchmark``; see ``conf/eval.yaml`` for every option.
+    ``fork_servers``: where local workers' fork server is borrowed from and given back to (runs in
+    one process reusing it), instead of one started and stopped for this run."""
     from molmo_lerobot.benchmark.load import load_benchmark
 
     config = RunConfig.of(config)  # validated once (unless given a RunConfig): nonsense stops here
@@ -186,7 +190,7 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any]) -> EvalResul
     if problems:
         raise RunError("\n".join(problems))
     recorders = run.plugins.recorder_factories(config.plain())  # e.g. a bad hub.repo_id fails here, before any output
-    executor = _make_executor(config)
+    executor = _make_executor(config, fork_servers)
     bench: Benchmark | SuiteBenchmark
     if is_suite(config):  # an env suite's episodes (LIBERO, PushT), played in each worker's suite
         bench = _suite_benchmark(config)

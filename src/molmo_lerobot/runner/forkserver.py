@@ -3,7 +3,8 @@
 A spawned worker re-imports MuJoCo, the harness and its policy's libraries (torch, LeRobot: 7 s
 for ``lerobot.policies.factory`` on a 2-core box, ~0.9 GB each) before it can run anything.
 :class:`PreloadedForkServer` starts one server process per run that imports them once; every
-worker is then forked from it, starts in milliseconds and shares those pages copy-on-write.
+worker is then forked from it, starts in milliseconds and shares those pages copy-on-write. A
+:class:`ForkServerPool` keeps servers from one run to the next in one process (a sweep's jobs).
 
 It is a multiprocessing fork server of its own, not the module-wide one ``set_forkserver_preload``
 configures, so other code in the process (Gymnasium's vector envs, a user's pool) keeps its own.
@@ -80,6 +81,7 @@ class PreloadedForkServer:
         self._server = self._new()
         self.forked = False  # whether this server (or one it replaced) has forked a process: then one
         # that cannot fork was lost (killed, stopped), not broken by its preload
+        self.origin: tuple[Any, ...] | None = None  # what it was started with (server_origin), once started
 
     def _new(self) -> forkserver.ForkServer:
         server = forkserver.ForkServer()
@@ -88,6 +90,8 @@ class PreloadedForkServer:
 
     def start(self) -> None:
         """Start the server (it imports in the background; the first fork waits for it)."""
+        if self.pid is None:
+            self.origin = server_origin(self.modules)
         self._server.ensure_running()
 
     @property
@@ -114,6 +118,11 @@ class PreloadedForkServer:
     def restart(self) -> None:
         """End this server however it is (dead, stopped, not answering) and start a fresh one. The
         processes it forked live on: nothing but their exit status depended on it."""
+        self.kill()
+        self.start()
+
+    def kill(self) -> None:
+        """End this server at once, however it is; the processes it forked live on."""
         pid = self.pid
         if pid is not None:
             with contextlib.suppress(ProcessLookupError):
@@ -122,7 +131,6 @@ class PreloadedForkServer:
                 os.waitpid(pid, 0)
             os.close(self._server._forkserver_alive_fd)  # type: ignore[attr-defined]
         self._server = self._new()
-        self.start()
 
     def wait_pid(self, status_r: int) -> int:
         """The pid the server reports on ``status_r`` for the process just asked for; raises
@@ -151,6 +159,71 @@ class PreloadedForkServer:
         except ChildProcessError:
             pass  # reaped elsewhere
         self._server = self._new()
+
+
+def server_origin(modules: Iterable[str]) -> tuple[Any, ...]:
+    """What a fork server started now would give its workers besides their job: its preload, and
+    this process's ``sys.path``, working directory and environment (which it imports them under)."""
+    return tuple(modules), tuple(sys.path), os.getcwd(), tuple(sorted(os.environ.items()))
+
+
+class ForkServerPool:
+    """Fork servers kept from one run to the next in this process (the jobs of a ``molmo-eval -m``
+    sweep, the runs of a test session), so that a run after the first skips the server's imports.
+
+    A run borrows an idle server of the same :func:`server_origin` (one started now would be the
+    same), else a new one, and gives it back once its workers have ended. A server is lent to one run
+    at a time: one lost during a run (killed, stopped) is that run's to replace, as without a pool, and
+    one found not running when given back or borrowed is killed, never lent. At most ``keep`` idle
+    servers are kept (the one idle longest is stopped); :meth:`close`, or leaving ``with``, stops them.
+    ``ignored_env`` names environment variables no worker reads that change between runs (pytest's
+    ``PYTEST_CURRENT_TEST``): a worker of a lent server sees their value from the server's start."""
+
+    def __init__(self, keep: int = 2, ignored_env: Iterable[str] = ()) -> None:
+        self.keep = keep
+        self.ignored_env = frozenset(ignored_env)
+        self._idle: list[PreloadedForkServer] = []
+
+    def _key(self, origin: tuple[Any, ...] | None) -> tuple[Any, ...] | None:
+        if origin is None:
+            return None
+        modules, path, cwd, env = origin
+        return modules, path, cwd, tuple(item for item in env if item[0] not in self.ignored_env)
+
+    def borrow(self, modules: Iterable[str]) -> PreloadedForkServer:
+        """A started server preloading ``modules``, as a fresh one started now would be."""
+        modules = list(modules)
+        key = self._key(server_origin(modules))
+        for server in self._idle:
+            if self._key(server.origin) == key:
+                self._idle.remove(server)
+                if server.state() is None:
+                    return server
+                server.kill()  # lost while idle
+                break
+        server = PreloadedForkServer(modules)
+        server.start()
+        return server
+
+    def give_back(self, server: PreloadedForkServer) -> None:
+        """Keep ``server`` for a later run if it is running, else end it."""
+        if server.state() is not None:
+            server.kill()
+            return
+        self._idle.append(server)
+        while len(self._idle) > self.keep:
+            self._idle.pop(0).stop()
+
+    def close(self) -> None:
+        """Stop every idle server."""
+        while self._idle:
+            self._idle.pop().stop()
+
+    def __enter__(self) -> ForkServerPool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def exit_status_lost(proc: process.BaseProcess) -> bool:

@@ -32,7 +32,12 @@ from multiprocessing.context import ForkServerContext, SpawnContext
 from typing import Any
 
 from molmo_lerobot.gl import use_headless_gl
-from molmo_lerobot.runner.forkserver import PreloadedForkServer, exit_status_lost, inherited_gpu_state
+from molmo_lerobot.runner.forkserver import (
+    ForkServerPool,
+    PreloadedForkServer,
+    exit_status_lost,
+    inherited_gpu_state,
+)
 from molmo_lerobot.runner.plan import EpisodePlan
 from molmo_lerobot.runner.progress import redirect_worker_output
 from molmo_lerobot.runner.supervisor import (
@@ -119,9 +124,10 @@ class _Worker:
 
 class ProcessTransport(Transport):
     """Workers as local processes of ``start_method``: ``forkserver`` (forked from the run's
-    preloaded fork server, started with the first worker) or ``spawn``."""
+    preloaded fork server, started with the first worker, or borrowed from ``fork_servers`` and
+    given back there at the end) or ``spawn``."""
 
-    def __init__(self, start_method: str = "forkserver") -> None:
+    def __init__(self, start_method: str = "forkserver", fork_servers: ForkServerPool | None = None) -> None:
         if start_method not in START_METHODS:
             raise ValueError(f"executor.start_method: expected one of {list(START_METHODS)}, got {start_method!r}")
         if start_method == "forkserver" and start_method not in mp.get_all_start_methods():
@@ -130,6 +136,7 @@ class ProcessTransport(Transport):
         self.ctx: SpawnContext | ForkServerContext = (mp.get_context("spawn") if start_method == "spawn"
                                                        else mp.get_context("forkserver"))
         self.server: PreloadedForkServer | None = None
+        self.fork_servers = fork_servers
 
     def start(self, worker_id: str, job: WorkerJob) -> _Worker:
         parent, child = self.ctx.Pipe()
@@ -149,8 +156,11 @@ class ProcessTransport(Transport):
         is replaced by a fresh one, once. One that cannot fork at all (a preloaded module crashed it)
         cannot start any worker."""
         if self.server is None:
-            self.server = PreloadedForkServer(job.preload)
-            self.server.start()
+            if self.fork_servers is not None:
+                self.server = self.fork_servers.borrow(job.preload)
+            else:
+                self.server = PreloadedForkServer(job.preload)
+                self.server.start()
         for attempt in (0, 1):
             proc = self.server.process(_worker_main, args, name=f"molmo-{worker_id}")
             try:
@@ -167,7 +177,10 @@ class ProcessTransport(Transport):
 
     def close(self) -> None:
         if self.server is not None:
-            self.server.stop()
+            if self.fork_servers is not None:
+                self.fork_servers.give_back(self.server)
+            else:
+                self.server.stop()
             self.server = None
 
     def submit(self, handle: _Worker, item: EpisodePlan) -> None:
@@ -225,7 +238,8 @@ class ProcessTransport(Transport):
 
 
 class LocalExecutor(Supervisor):
-    """The supervisor over worker processes: ``LocalExecutor(workers, start_method, timeout_s=…)``."""
+    """The supervisor over worker processes: ``LocalExecutor(workers, start_method, fork_servers, timeout_s=…)``."""
 
-    def __init__(self, workers: int, start_method: str = "forkserver", **options: Any) -> None:
-        super().__init__(ProcessTransport(start_method), workers, **options)
+    def __init__(self, workers: int, start_method: str = "forkserver", fork_servers: ForkServerPool | None = None,
+                 **options: Any) -> None:
+        super().__init__(ProcessTransport(start_method, fork_servers), workers, **options)
