@@ -68,6 +68,14 @@ class RunContext:
                              "scene datasets")
         return Timing(**self.config.timing.model_dump())
 
+    def timing_for(self, scene_dataset: str) -> Timing:
+        """The timing an episode of ``scene_dataset`` runs with: the run's, with ``timing.sleep`` as decided,
+        or where nothing decided it (a context used without :meth:`for_benchmark`: a script, a test, a
+        worker job built by hand) as that scene dataset says (:attr:`SceneDataset.sleeps`)."""
+        if self.config.timing.sleep is not None:
+            return self.timing
+        return self.with_sleep(bool(getattr(self.plugins.scene_dataset(scene_dataset), "sleeps", False))).timing
+
     @property
     def render_profile(self) -> RenderProfile:
         """The run's render profile (:attr:`render_record`, else the default profile with this

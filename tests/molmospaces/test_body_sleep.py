@@ -119,3 +119,13 @@ def test_the_gymnasium_env_steps_their_files_with_sleep_on(assets, tmp_path):
             assert bool(env._current.env.model.opt.enableflags & SLEEP) is on
         finally:
             env.close()
+
+
+def test_a_context_nothing_decided_uses_each_episodes_scene_dataset():
+    """A session opened from a context no benchmark decided (a script, a hand-built worker job) sleeps as its
+    episode's scene dataset says; a given value wins."""
+    undecided = RunContext.build()
+    assert undecided.timing_for("ithor").sleep is True
+    assert undecided.timing_for("procedural_tabletop").sleep is False
+    assert RunContext.build({"timing": {"sleep": False}}).timing_for("ithor").sleep is False
+    assert RunContext.build({"timing": {"sleep": True}}).timing_for("procedural_tabletop").sleep is True

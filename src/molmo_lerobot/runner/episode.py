@@ -120,7 +120,7 @@ class EpisodeSession(EpisodeOutcome):
         spec = plan.episode(run.plugins)
         task_type = run.plugins.task_type(plan.task_type)
         try:
-            env = build_env(spec, run.timing, run, run.config.camera.model_dump())
+            env = build_env(spec, run.timing_for(spec.scene_dataset), run, run.config.camera.model_dump())
         except Exception as exc:
             raise install_failure(exc, spec, run) from exc
         try:
