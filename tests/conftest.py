@@ -11,7 +11,7 @@ import pytest
 #: ``droid_variants`` (tasks/), ``save_tiny_act`` of ``test_lerobot_policy`` (policies/), ``rby1_standin``
 #: (sim/), ``droid_server`` (protocol/), ``export_synthetic`` (export/). Module names are unique across tests/.
 TESTS = Path(__file__).resolve().parent
-sys.path[:0] = [str(TESTS / sub) for sub in ("", "tasks", "policies", "sim", "protocol", "export")
+sys.path[:0] = [str(TESTS / sub) for sub in ("", "tasks", "policies", "sim", "protocol", "export", "suites")
                 if str(TESTS / sub) not in sys.path]
 
 from hub_standin import HubStandin, pinned_client_factory  # noqa: E402

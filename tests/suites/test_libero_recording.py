@@ -15,6 +15,7 @@ from dataclasses import asdict
 
 import numpy as np
 import pytest
+import standin_dataset
 
 from molmo_lerobot.config import compose
 from molmo_lerobot.export.merge import read_eval_records
@@ -41,21 +42,16 @@ SIZE = 256
 
 def write_standin(root, episodes: int, frames: int):
     """A small dataset in LeRobot's LIBERO layout, written by LeRobot's own writer."""
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    ds = LeRobotDataset.create(repo_id="standin/libero", fps=THEIR_FPS, features=THEIR_FEATURES, root=root,
-                               robot_type=THEIR_ROBOT, use_videos=True)
-    rng = np.random.default_rng(7)
-    for _ in range(episodes):
-        for _ in range(frames):
-            ds.add_frame({"observation.images.image": rng.integers(0, 255, (256, 256, 3), dtype=np.uint8),
-                          "observation.images.image2": rng.integers(0, 255, (256, 256, 3), dtype=np.uint8),
-                          "observation.state": rng.normal(size=8).astype(np.float32),
-                          "action": rng.uniform(-1, 1, 7).astype(np.float32),
-                          "task": "put the cream cheese in the bowl"})
-        ds.save_episode()
-    ds.finalize()
-    return root
+    def frame(rng, i):
+        return {"observation.images.image": rng.integers(0, 255, (256, 256, 3), dtype=np.uint8),
+                "observation.images.image2": rng.integers(0, 255, (256, 256, 3), dtype=np.uint8),
+                "observation.state": rng.normal(size=8).astype(np.float32),
+                "action": rng.uniform(-1, 1, 7).astype(np.float32),
+                "task": "put the cream cheese in the bowl"}
+
+    return standin_dataset.write_standin(root, "standin/libero", THEIR_FEATURES, THEIR_FPS, THEIR_ROBOT, episodes,
+                                         frames, frame, seed=7)
 
 
 def merge_with_standin(ours, tmp_path, standin_episodes: int = 1, frames: int = 3):

@@ -10,6 +10,7 @@ import json
 
 import numpy as np
 import pytest
+import standin_dataset
 
 from molmo_lerobot.config import compose
 from molmo_lerobot.export.merge import read_eval_records
@@ -40,21 +41,16 @@ THEIR_TASK = "Push the T-shaped block onto the T-shaped target."
 
 def write_standin(root, episodes: int, frames: int):
     """A small dataset in ``lerobot/pusht``'s layout, written by LeRobot's own writer."""
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    ds = LeRobotDataset.create(repo_id="standin/pusht", fps=THEIR_FPS, features=THEIR_FEATURES, root=root,
-                               robot_type=THEIR_ROBOT, use_videos=True)
-    rng = np.random.default_rng(3)
-    for _ in range(episodes):
-        for i in range(frames):
-            ds.add_frame({"observation.image": rng.integers(0, 255, (96, 96, 3), dtype=np.uint8),
-                          "observation.state": rng.uniform(0, 512, 2).astype(np.float32),
-                          "action": rng.uniform(0, 512, 2).astype(np.float32),
-                          "next.reward": np.array([0.1], np.float32), "next.success": np.array([False]),
-                          "next.done": np.array([i == frames - 1]), "task": THEIR_TASK})
-        ds.save_episode()
-    ds.finalize()
-    return root
+    def frame(rng, i):
+        return {"observation.image": rng.integers(0, 255, (96, 96, 3), dtype=np.uint8),
+                "observation.state": rng.uniform(0, 512, 2).astype(np.float32),
+                "action": rng.uniform(0, 512, 2).astype(np.float32),
+                "next.reward": np.array([0.1], np.float32), "next.success": np.array([False]),
+                "next.done": np.array([i == frames - 1]), "task": THEIR_TASK}
+
+    return standin_dataset.write_standin(root, "standin/pusht", THEIR_FEATURES, THEIR_FPS, THEIR_ROBOT, episodes,
+                                         frames, frame, seed=3)
 
 
 def assert_pusht_layout(root) -> None:
