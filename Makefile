@@ -42,8 +42,11 @@ $(VENV): pyproject.toml $(PLUGINS)
 eval: $(VENV)
 	$(VENV)/bin/molmo-eval policy=scripted benchmark=pick_v1 workers=2
 
+# The default run in TEST_WORKERS pytest-xdist processes, a test file per process at a time (module
+# fixtures are built once); TEST_WORKERS=0 runs it in this process.
+TEST_WORKERS ?= 2
 test: $(VENV) $(LIBERO_VENV)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 test-all: $(VENV) $(LIBERO_VENV)
 	$(PY) -m pytest -q -m "slow or not slow"

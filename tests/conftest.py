@@ -16,6 +16,26 @@ sys.path[:0] = [str(TESTS / sub) for sub in ("", "tasks", "policies", "sim", "pr
 
 from hub_standin import HubStandin, pinned_client_factory  # noqa: E402
 
+#: Test files that start Ray clusters on this machine: a parallel run (``make test``: pytest-xdist) plays them in
+#: one process, one after the other, since ``executor.address=auto`` joins any cluster it finds running here.
+RAY_FILES = frozenset({"tests/runner/test_ray_executor.py", "tests/runner/test_ray_node_servers.py"})
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadfile`` (the Makefile's), the files of :data:`RAY_FILES` counted as one file."""
+    from xdist.scheduler import LoadFileScheduling
+
+    if config.getoption("dist") != "loadfile":
+        return None
+
+    class RayFilesTogether(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            scope = super()._split_scope(nodeid)
+            return "ray clusters" if scope in RAY_FILES else scope
+
+    return RayFilesTogether(config, log)
+
 
 @pytest.fixture(scope="session")
 def run():

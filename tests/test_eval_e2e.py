@@ -111,8 +111,11 @@ def test_random_floor(tmp_path):
     assert res.summary["success_rate"] <= 0.10
 
 
+@pytest.mark.slow
 def test_a_failed_hub_push_exits_non_zero_and_keeps_every_local_file(hub_standin, tmp_path):
-    """The Hub refuses the commit: molmo-eval says so, exits 1, and every output is still written."""
+    """The Hub refuses the commit: molmo-eval says so, exits 1, and every output is still written. ``slow``
+    (a whole molmo-eval process): the default run has its parts, the refused commit recorded with every local
+    file kept (tests/export/test_export_hub.py) and its exit status 1 (``test_the_exit_status_of_a_finished_run``)."""
     hub_standin.fail_commits = 503
     out = tmp_path / "run"
     proc = subprocess.run(

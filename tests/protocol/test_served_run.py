@@ -1,7 +1,7 @@
 """``molmo-eval … policy=lerobot policy.serve=true`` (issue 17 item 2): one local server for the run,
 every worker its client; the run's results equal in-process evaluation for a deterministic policy
-(a tiny random-init ACT reading the exterior camera), over websockets and over shared memory
-(issue 28 item 2)."""
+(the seeded random policy in the default run; a tiny random-init ACT reading the exterior camera, batched,
+``slow``), over websockets and over shared memory (issue 28 item 2)."""
 
 from __future__ import annotations
 
@@ -55,8 +55,26 @@ def outcome(e) -> tuple:
     return (e.episode_index, e.success, e.success_once, e.steps, e.seed, e.error)
 
 
+def test_a_served_run_over_shared_memory_gives_the_in_process_outcomes(tmp_path, fork_servers):
+    """``policy.serve=true`` with the local executor: one server over shared memory (``auto``), two workers its
+    clients; per episode the outcomes of the policy in process (the seeded random policy: no LeRobot import,
+    the batched ACT runs below are ``slow``; batching itself is tests/protocol/test_batching.py)."""
+    def run(out, *overrides):
+        return run_evaluation(compose(["policy=random", "benchmark=pick_v1", "limit=2", f"horizon={HORIZON}",
+                                       "seed=3", f"output_dir={out}", "progress=false", *overrides]), fork_servers)
+
+    local = run(tmp_path / "local", "workers=1")
+    served = run(tmp_path / "served", "workers=2", "+policy.serve=true")
+    assert served.summary["n_errors"] == 0 and served.summary["policy"]["serve"] is True
+    assert [outcome(e) for e in served.episodes] == [outcome(e) for e in local.episodes]
+    stats = json.loads((tmp_path / "served" / STATS_FILE).read_text())
+    assert stats["transport"] == "shm" and stats["served"] > 0 and not stats["batching"]
+    assert not mp.active_children()  # the server process was stopped and reaped
+
+
 # websockets: served runs over them stay in the default run through tests/protocol/test_remote_policy.py
-@pytest.mark.parametrize("transport", [pytest.param("websocket", marks=pytest.mark.slow), "auto"])
+@pytest.mark.slow
+@pytest.mark.parametrize("transport", ["websocket", "auto"])
 def test_served_batched_runs_equal_in_process_over_both_transports(act_dir, tmp_path, transport):
     """In process, served over websockets and served over shared memory (``auto`` on Linux): the
     same outcomes per episode, the same actions up to batched rounding."""

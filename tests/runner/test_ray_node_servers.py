@@ -59,7 +59,9 @@ def test_each_node_serves_its_own_workers_and_outcomes_equal_in_process(two_node
     # one worker per node (one CPU each), one episode each: each server answered its own node's worker only
     assert [n["served"] for n in nodes.values()] == [2, 2] and stats["served"] == 2 * 2
     assert sorted((n["num_gpus"], n["gpu_ids"]) for n in nodes.values()) == [(0, []), (1, ["0"])]
-    assert all(n["alive"] and n["active"] == 0 for n in nodes.values())
+    # (not their open connections: an ended actor's connection closes asynchronously, and the statistics may
+    # be read before its server has seen that, as under the load of a parallel test run)
+    assert all(n["alive"] for n in nodes.values())
 
 
 @pytest.mark.slow
