@@ -101,11 +101,12 @@ LONG = [(s, t) for s in ("libero_spatial", "libero_object", "libero_goal", "libe
 
 @pytest.mark.slow
 @pytest.mark.timeout(8 * 3600)  # ~20 min per task pair at full horizon on a loaded 2-core machine
-@pytest.mark.parametrize("hard_reset", [True, False], ids=["hard_reset", "reused_model"])
+@pytest.mark.parametrize("hard_reset", [True, False], ids=["hard_reset", "soft_reset"])
 def test_fifty_episodes_match_lerobot_eval(venv, hard_reset):
     """Five episodes of two tasks of every suite, random and replay policies alternating, in each of LeRobot's
-    reset modes (``--env.hard_reset``): a rebuilt model per episode (its default) or the task's model reused.
-    The two modes do not agree with each other (docs/suites.md); each must agree with LeRobot's."""
+    reset modes (``--env.hard_reset``): a rebuilt model per episode (its default; ours the cheaper rebuild, one
+    server across all tasks) or the task's sim reused (soft reset). The two modes do not agree with each other
+    (docs/suites.md); each must agree with LeRobot's."""
     horizon = os.environ.get("MOLMO_LIBERO_PARITY_HORIZON")
     rows = []
     with LiberoSuite(venv, image_size=SIZE, hard_reset=hard_reset) as suite_env:
