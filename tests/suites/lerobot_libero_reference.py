@@ -7,7 +7,7 @@ does (``make_env`` over LeRobot's ``LiberoEnv`` config, its env processors) and 
 with ``lerobot_eval.rollout``, seeding rollout ``k`` with ``seed + k`` as ``eval_policy`` does. The policy
 (``parity_policies.py``) records what it is shown. Prints one JSON line: per episode, success (any step's
 ``is_success`` up to the first done, ``eval_policy``'s rule), steps (``select_action`` calls), the 8-D
-states seen and a digest of the first images.
+states seen and a digest of both camera images at every step.
 """
 
 from __future__ import annotations
@@ -35,17 +35,18 @@ class Recorded(torch.nn.Module):
         super().__init__()
         self.act, self.seed, self.step = act, 0, 0
         self.states: list[list[float]] = []
-        self.first_images: dict[str, str] = {}
+        self.images: list[dict[str, str]] = []
 
     def reset(self) -> None:
-        self.step, self.states, self.first_images = 0, [], {}
+        self.step, self.states, self.images = 0, [], []
 
     def select_action(self, obs: dict) -> torch.Tensor:
         self.states.append(obs["observation.state"][0].tolist())
-        if self.step == 0:
-            for key in ("observation.images.image", "observation.images.image2"):
-                img = (obs[key][0] * 255).round().to(torch.uint8).permute(1, 2, 0).contiguous().numpy()
-                self.first_images[key] = hashlib.sha256(img.tobytes()).hexdigest()
+        digests = {}
+        for key in ("observation.images.image", "observation.images.image2"):
+            img = (obs[key][0] * 255).round().to(torch.uint8).permute(1, 2, 0).contiguous().numpy()
+            digests[key] = hashlib.sha256(img.tobytes()).hexdigest()
+        self.images.append(digests)
         action = self.act(self.seed, self.step)
         self.step += 1
         return torch.from_numpy(action)[None]
@@ -69,7 +70,7 @@ def main(args: dict) -> None:
         done = data["done"][0].to(int)
         first = int(torch.argmax(done))
         out.append({"success": bool(data["success"][0][: first + 1].any()), "steps": policy.step,
-                    "done_at": first + 1, "states": policy.states, "first_images": policy.first_images})
+                    "done_at": first + 1, "states": policy.states, "images": policy.images})
     env.close()
     print(json.dumps({"episodes": out, "max_steps": dict(sorted(__import__(
         "lerobot.envs.libero", fromlist=["TASK_SUITE_MAX_STEPS"]).TASK_SUITE_MAX_STEPS.items()))}))
