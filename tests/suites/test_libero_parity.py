@@ -138,23 +138,12 @@ def test_registry_assets_hold_every_file_libero_loads(venv):
 def test_a_lerobot_checkpoint_runs_unchanged(suite_env, tmp_path):
     """A LeRobot ACT (random init) with the features of LeRobot's LIBERO datasets, loaded as ``policy=lerobot
     policy.path=…`` loads it, plays a short LIBERO episode through the suite."""
-    from lerobot.configs.types import FeatureType, PolicyFeature
-    from lerobot.policies.act.configuration_act import ACTConfig
-    from lerobot.policies.act.modeling_act import ACTPolicy
-    from lerobot.policies.factory import make_pre_post_processors
+    from libero_act import save_libero_act
 
     from molmo_lerobot.policies.lerobot_policy import LeRobotPolicy
     from molmo_lerobot.suites.libero import PolicyActor
 
-    image = PolicyFeature(FeatureType.VISUAL, (3, SIZE, SIZE))
-    cfg = ACTConfig(input_features={"observation.images.image": image, "observation.images.image2": image,
-                                    "observation.state": PolicyFeature(FeatureType.STATE, (8,))},
-                    output_features={"action": PolicyFeature(FeatureType.ACTION, (7,))},
-                    pretrained_backbone_weights=None, dim_model=16, n_heads=2, dim_feedforward=32, n_encoder_layers=1,
-                    n_decoder_layers=1, chunk_size=4, n_action_steps=4, use_vae=False, device="cpu")
-    pre, post = make_pre_post_processors(cfg, dataset_stats=None)
-    for obj in (ACTPolicy(cfg), pre, post):
-        obj.save_pretrained(tmp_path)
+    save_libero_act(tmp_path, SIZE)
     policy = LeRobotPolicy({"name": "lerobot", "path": str(tmp_path), "device": "cpu"})
     [episode] = plan_episodes("libero_object", suite_env.tasks("libero_object")[:1], 1, horizon=6)
     outcome = play(suite_env, episode, PolicyActor(policy, episode))
