@@ -1,7 +1,8 @@
 """``molmo-eval benchmark=libero_object``: LIBERO episodes through our workers, results, recording and resume.
 
-Needs the LIBERO venv (``make .libero-venv``); each LIBERO reset costs ~10 s here, so the default run is two
-8-step episodes at 64² images, recorded; the resume after ``kill -9`` of the whole run is ``slow``.
+Needs the LIBERO venv (``make .libero-venv``); a LIBERO process and each task's first scene cost ~10 s here, so
+the default run is two 8-step episodes at 64² images, recorded; the resume after ``kill -9`` of the whole run is
+``slow``.
 """
 
 from __future__ import annotations
