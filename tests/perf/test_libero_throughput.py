@@ -3,7 +3,11 @@
 Both sides play the same episodes with the same policy: a tiny ACT at random init with LeRobot's LIBERO
 features (``tests/suites/libero_act.py``), loaded by ``--policy.path=`` and ``policy.path=``. Theirs is
 ``lerobot-eval`` in the LIBERO venv with its defaults (hard reset, a video per episode, 360² cameras, the suite's
-step limit); ours ``molmo-eval policy=lerobot benchmark=libero_object benchmark.episodes_per_task=E workers=2``.
+step limit, ``select_action`` at every step); ours ``molmo-eval policy=lerobot policy.mode=chunk benchmark=libero_object
+benchmark.episodes_per_task=E workers=2``: the same actions (ACT's ``select_action`` plays out the chunk it
+predicts; the chunk runs open loop here), and LIBERO draws only the frames the policy reads, one step in
+``n_action_steps``. A third row is ``molmo-eval policy=random`` on the same episodes, which draws no frame after
+a reset (``lerobot-eval`` has no random policy; its nearest is the random-init ACT row).
 One run each, one after the other, in fresh processes; wall time includes start-up, and "excluding start-up"
 is their ``eval_s`` (their rollout loop, env construction included) and our episodes' summed durations over the
 workers (resets and steps; not the worker's LIBERO process start). Report, not assert; rows go to
@@ -43,26 +47,33 @@ def test_libero_episodes_per_min_against_lerobot_eval(tmp_path):
          f"--env.task_ids=[{','.join(map(str, range(tasks)))}]", f"--eval.n_episodes={per_task}",
          "--eval.batch_size=1", "--seed=0", f"--output_dir={tmp_path / 'theirs'}"], env)
     info = json.loads((tmp_path / "theirs" / "eval_info.json").read_text())["overall"]
-    ours_wall, ours_cpu, rows = eval_run(
-        ["policy=lerobot", f"policy.path={act}", "policy.device=cpu", f"benchmark={SUITE}",
-         f"benchmark.episodes_per_task={per_task}", f"limit={tasks * per_task}", f"workers={workers}"],
-        tmp_path / "ours", env)
+    ours = {}
+    for name, policy in (("act", ["policy=lerobot", f"policy.path={act}", "policy.device=cpu", "policy.mode=chunk"]),
+                         ("random", ["policy=random"])):
+        ours[name] = eval_run([*policy, f"benchmark={SUITE}", f"benchmark.episodes_per_task={per_task}",
+                               f"limit={tasks * per_task}", f"workers={workers}"], tmp_path / f"ours_{name}", env)
 
     n = tasks * per_task
-    assert info["n_episodes"] == len(rows) == n  # the same episodes on both sides
-    busy = sum(r["duration_s"] for r in rows) / min(workers, n)  # the episodes' time, workers in parallel
     table = [
-        {"side": "lerobot-eval", "episodes": n, "wall_s": round(theirs_wall, 1), "cpu_s": round(theirs_cpu, 1),
-         "eps_per_min": round(60 * n / theirs_wall, 3), "eps_per_min_excl_startup": round(60 * n / info["eval_s"], 3),
+        {"side": "lerobot-eval", "policy": "tiny ACT", "episodes": n, "wall_s": round(theirs_wall, 1),
+         "cpu_s": round(theirs_cpu, 1), "eps_per_min": round(60 * n / theirs_wall, 3),
+         "eps_per_min_excl_startup": round(60 * n / info["eval_s"], 3),
          "successes": round(info["pc_success"] * n / 100)},
-        {"side": f"molmo-eval workers={workers}", "episodes": n, "wall_s": round(ours_wall, 1),
-         "cpu_s": round(ours_cpu, 1), "eps_per_min": round(60 * n / ours_wall, 3),
-         "eps_per_min_excl_startup": round(60 * n / busy, 3), "successes": sum(bool(r["success"]) for r in rows)},
     ]
-    ratio = theirs_wall / ours_wall
+    for name, (wall, cpu, rows) in ours.items():
+        assert info["n_episodes"] == len(rows) == n  # the same episodes on both sides
+        busy = sum(r["duration_s"] for r in rows) / min(workers, n)  # the episodes' time, workers in parallel
+        table.append({"side": f"molmo-eval workers={workers}", "policy": {"act": "tiny ACT", "random": "random"}[name],
+                      "episodes": n, "wall_s": round(wall, 1), "cpu_s": round(cpu, 1),
+                      "eps_per_min": round(60 * n / wall, 3), "eps_per_min_excl_startup": round(60 * n / busy, 3),
+                      "successes": sum(bool(r["success"]) for r in rows),
+                      "steps": sum(int(r["steps"]) for r in rows)})
+    ratio = theirs_wall / table[1]["wall_s"]
     append_rows(SUITE, table, test="libero_throughput", ratio_wall=round(ratio, 3))
-    print(f"\nLIBERO {SUITE}: {tasks} tasks x {per_task} init states, {SIZE}² cameras, tiny ACT")
+    print(f"\nLIBERO {SUITE}: {tasks} tasks x {per_task} init states, {SIZE}² cameras")
     for row in table:
         print("  " + "  ".join(f"{k}={v}" for k, v in row.items()))
-    print(f"  episodes/min ours / lerobot-eval: x{ratio:.2f} (wall), "
-          f"x{table[1]['eps_per_min_excl_startup'] / table[0]['eps_per_min_excl_startup']:.2f} (excluding start-up)")
+    for row in table[1:]:
+        print(f"  episodes/min ours ({row['policy']}) / lerobot-eval (tiny ACT): x{theirs_wall / row['wall_s']:.2f} "
+              f"(wall), x{row['eps_per_min_excl_startup'] / table[0]['eps_per_min_excl_startup']:.2f} "
+              "(excluding start-up)")

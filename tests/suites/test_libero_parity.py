@@ -17,13 +17,20 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import asdict
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 from parity_policies import POLICIES
 
+from molmo_lerobot.policies.base import Policy
+from molmo_lerobot.recording import Recorder
+from molmo_lerobot.runner.plan import EpisodePlan
+from molmo_lerobot.runner.rollout import rollout
+from molmo_lerobot.suites.benchmark import SUITE_KEY, SuiteSession
 from molmo_lerobot.suites.libero import MAX_STEPS, LiberoSuite, libero_venv, plan_episodes, play
 
 HERE = Path(__file__).parent
@@ -86,13 +93,71 @@ def assert_same(mine: list[dict], reference: list[dict], where: str) -> None:
         assert a["images"] == b["images"], f"{label}: camera images differ"
 
 
-def test_three_short_episodes_match_lerobot_eval(venv, suite_env):
-    """libero_object task 0, init states 0–2, 10 steps of a seeded random policy, against LeRobot's default hard
-    reset: the second and third episodes start from our reused model and render context."""
-    reference = theirs(venv, "libero_object", 0, 3, 7, 10, "random")
-    assert reference["max_steps"] == MAX_STEPS
+@pytest.fixture(scope="module")
+def three_short(venv) -> dict:
+    """LeRobot's three episodes of libero_object task 0 (init states 0–2), 10 steps of the seeded random policy."""
+    return theirs(venv, "libero_object", 0, 3, 7, 10, "random")
+
+
+def test_three_short_episodes_match_lerobot_eval(three_short, suite_env):
+    """Those three episodes, against LeRobot's default hard reset: the second and third episodes start from our
+    reused model and render context."""
+    assert three_short["max_steps"] == MAX_STEPS
     mine = ours(suite_env, "libero_object", 0, 3, 7, 10, "random")
-    assert_same(mine, reference["episodes"], "libero_object task 0")
+    assert_same(mine, three_short["episodes"], "libero_object task 0")
+
+
+class ChunkedRandom(Policy):
+    """The parity test's random policy in chunks of ``CHUNK`` actions, run open loop by the rollout; remembers
+    the digests of the images it was shown (at each chunk's first step)."""
+
+    CHUNK = 4
+
+    def reset(self, ctx) -> None:
+        self.seed, self.shown = ctx.seed, {}
+
+    def act(self, obs) -> dict:
+        step = obs["step"]
+        self.shown[step] = {f"observation.images.{k}": hashlib.sha256(v.tobytes()).hexdigest()
+                            for k, v in obs["images"].items()}
+        return {"eef": np.stack([POLICIES["random"](self.seed, t) for t in range(step, step + self.CHUNK)])}
+
+
+class States(Recorder):
+    """Every step's 8-D state, from the observations the rollout hands recorders (it asks for no images)."""
+
+    wants_images = False
+
+    def start_episode(self, info) -> None:
+        self.states: list[list[float]] = []
+
+    def record_step(self, obs, action, reward, success, done) -> None:
+        self.states.append([float(v) for v in obs["qpos"]["eef"]])
+
+    def end_episode(self, result) -> None:
+        pass
+
+
+def test_a_chunked_run_draws_a_quarter_of_the_frames_with_lerobot_evals_bits(three_short, suite_env):
+    """The same three episodes through molmo-eval's own path (``SuiteSession`` + the rollout loop) with the random
+    actions in chunks of 4: LIBERO draws frames only at each chunk's first step, and those images, every step's
+    state and the outcomes are LeRobot's, which drew every frame (a frame not drawn leaves the sim untouched)."""
+    [task] = suite_env.tasks("libero_object")[:1]
+    for k, episode in enumerate(plan_episodes("libero_object", [task], 3, seed=7, horizon=10)):
+        plan = EpisodePlan.of(k, {**asdict(episode), SUITE_KEY: "libero"}, episode.seed, "libero_object/task_00",
+                              episode.instruction, episode.horizon, "cli", episode.digest)
+        session = SuiteSession(plan, suite_env, SIZE, end_on_success=True)
+        policy, states = ChunkedRandom(), States()
+        policy.reset(session.policy_context())
+        states.start_episode(None)
+        result = rollout(session, policy, [states], "chunked")
+        reference = three_short["episodes"][k]
+        assert (result.success, result.steps) == (reference["success"], reference["steps"]), k
+        assert states.states == reference["states"], f"episode {k}: 8-D state trajectories differ"
+        assert sorted(policy.shown) == [0, 4, 8]
+        assert {t: reference["images"][t] for t in policy.shown} == policy.shown, f"episode {k}: images differ"
+        with pytest.raises(RuntimeError, match="played without them"):  # its last step drew no frames
+            session.observe(images=True)
 
 
 #: (suite, task id) pairs of the long run: two tasks of each suite, five episodes each = 50 episodes

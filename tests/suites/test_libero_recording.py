@@ -83,20 +83,24 @@ class FakeLibero:
     success_at = 3
 
     def reset(self, episode: LiberoEpisode) -> dict:
-        self.seed, self.t = episode.seed, 0
-        return self._obs()
+        self.seed, self.t, self.drawn = episode.seed, 0, [0]
+        return self._obs(True)
 
-    def step(self, action: np.ndarray) -> dict:
+    def step(self, action: np.ndarray, images: bool = True) -> dict:
         assert action.shape == (7,)
         self.t += 1
+        self.drawn += [self.t] * images
         success = self.seed == 1 and self.t > self.success_at
-        return {"observation": self._obs(), "reward": float(success), "success": success, "terminated": success}
+        return {"observation": self._obs(images), "reward": float(success), "success": success,
+                "terminated": success}
 
-    def _obs(self) -> dict:
+    def _obs(self, images: bool) -> dict:
         level = (self.seed * 40 + self.t * 9) % 250
+        state = {"observation.state": np.arange(8, dtype=np.float32) + 10 * self.seed + self.t}
+        if not images:  # as LIBERO's server answers a step asked to draw nothing
+            return state
         return {"observation.images.image": np.full((SIZE, SIZE, 3), level, np.uint8),
-                "observation.images.image2": np.full((SIZE, SIZE, 3), 255 - level, np.uint8),
-                "observation.state": np.arange(8, dtype=np.float32) + 10 * self.seed + self.t}
+                "observation.images.image2": np.full((SIZE, SIZE, 3), 255 - level, np.uint8), **state}
 
 
 class Ramp(Policy):
@@ -165,6 +169,37 @@ def test_a_suite_recording_has_lerobots_libero_layout_and_merges_with_theirs(tmp
     assert sorted(merged.meta.tasks.index) == sorted(
         [episodes[0].instruction, episodes[1].instruction, "put the cream cheese in the bowl"])
     assert merged[12]["task"] == "put the cream cheese in the bowl" and merged[0]["task"] == episodes[0].instruction
+
+
+class Chunks(Policy):
+    """Chunks of 4 actions (run open loop); asserts it sees the images whenever it is asked to act."""
+
+    def __init__(self, needs_images: bool) -> None:
+        self.needs_images, self.asked = needs_images, []
+
+    def reset(self, ctx) -> None:
+        self.asked = []
+
+    def act(self, obs) -> dict:
+        self.asked.append(obs["step"])
+        assert ("images" in obs) == self.needs_images, obs["step"]
+        return {"eef": np.zeros((4, 7), np.float32)}
+
+
+@pytest.mark.parametrize("needs_images", [True, False])
+def test_a_suite_step_draws_only_the_frames_someone_reads(needs_images):
+    """Not recording, LIBERO draws the frames of the steps where a policy reading images gets an observation
+    (a chunk's end) and none for a policy that reads none; the observation of a step without them has none."""
+    episode = LiberoEpisode("libero_object", 0, 0, 0, 10, "pick up the soup and place it in the basket")
+    env = FakeLibero()
+    session = SuiteSession(_plan(0, episode), env, SIZE, end_on_success=True)
+    policy = Chunks(needs_images)
+    policy.reset(session.policy_context())
+    result = rollout(session, policy, [], "chunks")
+    assert result.steps == 10 and policy.asked == [0, 4, 8]
+    assert env.drawn == ([0, 4, 8] if needs_images else [0])  # the reset's frames are always drawn
+    with pytest.raises(RuntimeError, match="played without them"):
+        session.observe(images=True)
 
 
 def test_a_layout_misfit_names_the_feature(tmp_path):

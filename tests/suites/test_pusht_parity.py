@@ -107,8 +107,8 @@ def _logging_step(suite: pusht.PushTSuite, rewards: list[float]):
     """``suite.step`` that also appends each step's reward to ``rewards``."""
     step = type(suite).step
 
-    def logged(action):
-        reply = step(suite, action)
+    def logged(action, images=True):
+        reply = step(suite, action, images)
         rewards.append(reply["reward"])
         return reply
 

@@ -24,7 +24,7 @@ class LiberoStandIn:
     def reset(self, episode):
         return self._obs()
 
-    def step(self, action):
+    def step(self, action, images=True):
         self.actions.append(action)
         done = len(self.actions) == 3
         return {"observation": self._obs(), "reward": float(done), "terminated": done, "success": done}

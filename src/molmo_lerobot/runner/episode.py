@@ -196,10 +196,11 @@ class EpisodeSession(EpisodeOutcome):
         held = {g: self.env.robot.targets(self.env.data, g) for g in self.env.move_groups if g not in action}
         return {**action, **held} if held else action
 
-    def step(self, action: Action, *, observed: bool = True) -> bool:
+    def step(self, action: Action, *, observed: bool = True, images: bool = True) -> bool:
         """One policy step towards ``action`` (:meth:`complete`); divergence is an error. ``observed``:
         the agent observes the new state (a chunk's last step; every Gymnasium step), so it counts
-        for ``success_once``. Returns success in the new state."""
+        for ``success_once``. ``images`` (whether the next :meth:`observe` asks for them) changes nothing
+        here: this env draws in :meth:`observe`. Returns success in the new state."""
         self.env.step(self.complete(action))
         check_divergence(self.env.data, f"at step {self.steps}")
         return self.count_step(bool(self.task.success()), observed)

@@ -94,8 +94,8 @@ def rollout(session: EpisodeSession | SuiteSession, policy: Policy, recorders: R
     ``end_on_success`` after the first successful step, else at the horizon
     (:meth:`EpisodeSession.end <molmo_lerobot.runner.episode.EpisodeSession.end>`). Images are
     rendered only when someone needs them: the policy at the steps where it gets an observation,
-    recorders at the steps they ask for. A recorder that raises fails its output, not the episode
-    (:class:`RecorderGroup`).
+    recorders at the steps they ask for (an env suite that draws inside its step is told before
+    the step). A recorder that raises fails its output, not the episode (:class:`RecorderGroup`).
     """
     from molmo_lerobot.recording import RecorderGroup
 
@@ -109,10 +109,11 @@ def rollout(session: EpisodeSession | SuiteSession, policy: Policy, recorders: R
         planned = queue.popleft()
         said_done = bool(planned.get(DONE_KEY, False))
         action = session.complete({g: a for g, a in planned.items() if isinstance(a, np.ndarray)})
-        success = session.step(action, observed=not queue)
+        images = recs.wants_images_at(session.steps + 1, horizon) or (policy.needs_images and not queue)
+        success = session.step(action, observed=not queue, images=images)
         ended = session.end(said_done)
         if recs.recorders:
             recs.record_step(obs, action, session.task.reward(), success, ended is not None)
         if ended:
             return session.result()
-        obs = session.observe(recs.wants_images_at(session.steps, horizon) or (policy.needs_images and not queue))
+        obs = session.observe(images)

@@ -294,13 +294,22 @@ class SuiteSession(EpisodeOutcome):
                            extra={**self._suite_fields(), **extra})
 
     def observe(self, images: bool = True) -> Observation:
-        return self.kind.observation({**self._obs, "task": self.plan.prompt}, self.steps)
+        """The observation now; ``images``: with the camera frames (the last step must have drawn them)."""
+        obs = self.kind.observation({**self._obs, "task": self.plan.prompt}, self.steps)
+        if not images:
+            obs.pop("images", None)
+        elif "images" not in obs:
+            raise RuntimeError(f"{self.plan.identity}: images asked for at step {self.steps}, "
+                               "but the step was played without them")
+        return obs
 
     def complete(self, action: Action) -> Action:
         return action
 
-    def step(self, action: Action, *, observed: bool = True) -> bool:
-        reply = self.suite.step(np.asarray(action[self.kind.move_group], dtype=np.float64))
+    def step(self, action: Action, *, observed: bool = True, images: bool = True) -> bool:
+        """One step of the suite's env; ``images``: the next :meth:`observe` asks for frames, so the step
+        draws them (LIBERO draws inside its step; a frame nobody reads is not drawn)."""
+        reply = self.suite.step(np.asarray(action[self.kind.move_group], dtype=np.float64), images=images)
         self._obs, self.task.last_reward = reply["observation"], float(reply["reward"])
         self.terminated = bool(reply["terminated"])
         return self.count_step(bool(reply["success"]), observed)

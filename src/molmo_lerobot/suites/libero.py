@@ -113,8 +113,9 @@ class LiberoSuite(SuiteProcess):
                             init_state_index=episode.init_state_index, seed=episode.seed, width=self.image_size,
                             height=self.image_size, hard_reset=self.hard_reset)["observation"]
 
-    def step(self, action: np.ndarray) -> dict[str, Any]:
-        return self.request("step", action=np.asarray(action, dtype=np.float64))
+    def step(self, action: np.ndarray, images: bool = True) -> dict[str, Any]:
+        """One step; without ``images`` its frames are not drawn and the observation has the state only."""
+        return self.request("step", action=np.asarray(action, dtype=np.float64), images=images)
 
 
 def play(suite: LiberoSuite, episode: LiberoEpisode,
@@ -137,10 +138,12 @@ def play(suite: LiberoSuite, episode: LiberoEpisode,
 
 def policy_observation(obs: Mapping[str, Any], step: int) -> dict[str, Any]:
     """A LIBERO observation in our policy interface (:mod:`molmo_lerobot.policies.base`): cameras ``image``
-    and ``image2`` (so ``policy=lerobot`` feeds them to ``observation.images.image``/``image2``), the 8-D state
-    as ``qpos["eef"]`` (its ``observation.state``)."""
-    return {"images": {"image": obs["observation.images.image"], "image2": obs["observation.images.image2"]},
-            "qpos": {MOVE_GROUP: obs["observation.state"]}, "prompt": obs["task"], "step": step}
+    and ``image2`` (so ``policy=lerobot`` feeds them to ``observation.images.image``/``image2``; none when the
+    step drew no frames), the 8-D state as ``qpos["eef"]`` (its ``observation.state``)."""
+    out = {"qpos": {MOVE_GROUP: obs["observation.state"]}, "prompt": obs["task"], "step": step}
+    if "observation.images.image" in obs:
+        out["images"] = {"image": obs["observation.images.image"], "image2": obs["observation.images.image2"]}
+    return out
 
 
 class PolicyActor:

@@ -12,7 +12,9 @@ its orientation as an axis-angle, the two gripper finger positions.
 One env per task is kept and reset per episode; with ``hard_reset`` (LeRobot's default) LIBERO rebuilds
 the model at every reset, without it it reuses the compiled model. A reset is cheaper here than in LeRobot and
 gives the same bits: the rebuild reuses what comes out the same every time (:class:`RebuildCache`), and the
-frames of a reset that no policy sees are not drawn (:func:`unseen_frames`).
+frames of a reset that no policy sees are not drawn (:func:`unseen_frames`). A step draws its frames only when
+asked (``images``): the harness asks when the policy or a recorder will read them, so a policy whose chunks run
+open loop, or one that reads no images, costs no drawing at the steps in between.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from __future__ import annotations
 import copy
 import os
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from types import SimpleNamespace
 from typing import Any
 
@@ -207,21 +209,23 @@ class LiberoServer:
         self._env = env
         return {"observation": self._observation(raw)}
 
-    def step(self, action: Any) -> dict[str, Any]:
-        """One control step: the new observation, reward, success and termination."""
+    def step(self, action: Any, images: bool = True) -> dict[str, Any]:
+        """One control step: the new observation, reward, success and termination. Without ``images`` the
+        step's frames are not drawn (:func:`unseen_frames`) and the observation has the state only."""
         if self._env is None:
             raise RuntimeError("step before reset")
         action = np.asarray(action, dtype=np.float64)
         if action.shape != (7,):
             raise ValueError(f"action: expected shape (7,), got {action.shape}")
-        raw, reward, done, _ = self._env.step(action)
+        with nullcontext() if images else unseen_frames():
+            raw, reward, done, _ = self._env.step(action)
         success = bool(self._env.check_success())
-        return {"observation": self._observation(raw), "reward": float(reward), "success": success,
+        return {"observation": self._observation(raw, images), "reward": float(reward), "success": success,
                 "terminated": bool(done) or success}
 
     @staticmethod
-    def _observation(raw: dict[str, Any]) -> dict[str, Any]:
-        obs = {key: np.ascontiguousarray(raw[cam][::-1, ::-1]) for cam, key in CAMERAS.items()}
+    def _observation(raw: dict[str, Any], images: bool = True) -> dict[str, Any]:
+        obs = {key: np.ascontiguousarray(raw[cam][::-1, ::-1]) for cam, key in CAMERAS.items()} if images else {}
         obs["observation.state"] = np.concatenate([raw["robot0_eef_pos"], axis_angle(raw["robot0_eef_quat"]),
                                                    raw["robot0_gripper_qpos"]]).astype(np.float32)
         return obs

@@ -112,8 +112,9 @@ class PushTSuite:
         obs, _info = self.env.reset(seed=episode.seed)
         return self._observation(obs)
 
-    def step(self, action: np.ndarray) -> dict[str, Any]:
-        """One step with a 2-D target position, as float32 (what a LeRobot policy's tensor gives the env)."""
+    def step(self, action: np.ndarray, images: bool = True) -> dict[str, Any]:
+        """One step with a 2-D target position, as float32 (what a LeRobot policy's tensor gives the env).
+        gym_pusht draws its frame inside every step (a cheap 96² pygame canvas), ``images`` or not."""
         action = np.asarray(action, dtype=np.float32)
         if action.shape != (ACTION_DIM,):
             raise ValueError(f"PushT: an action is a 2-D target position, got shape {action.shape}")
