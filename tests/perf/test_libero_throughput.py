@@ -31,6 +31,7 @@ SIZE = 360  # lerobot-eval's LIBERO default
 
 
 @pytest.mark.perf
+@pytest.mark.timeout(6 * 3600)  # 50 episodes a side: ~1.5 hours of this 2-core machine
 def test_libero_episodes_per_min_against_lerobot_eval(tmp_path):
     venv = libero_venv()
     if not (venv / "bin" / "python").exists():
