@@ -17,7 +17,6 @@ import json
 import os
 import subprocess
 import sys
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -28,9 +27,9 @@ from parity_policies import POLICIES
 
 from molmo_lerobot.policies.base import Policy
 from molmo_lerobot.recording import Recorder
-from molmo_lerobot.runner.plan import EpisodePlan
+from molmo_lerobot.runner.evaluate import _suite_plan
 from molmo_lerobot.runner.rollout import rollout
-from molmo_lerobot.suites.benchmark import SUITE_KEY, SuiteSession
+from molmo_lerobot.suites.benchmark import SuiteSession
 from molmo_lerobot.suites.libero import MAX_STEPS, LiberoSuite, libero_venv, plan_episodes, play
 
 HERE = Path(__file__).parent
@@ -144,9 +143,7 @@ def test_a_chunked_run_draws_a_quarter_of_the_frames_with_lerobot_evals_bits(thr
     state and the outcomes are LeRobot's, which drew every frame (a frame not drawn leaves the sim untouched)."""
     [task] = suite_env.tasks("libero_object")[:1]
     for k, episode in enumerate(plan_episodes("libero_object", [task], 3, seed=7, horizon=10)):
-        plan = EpisodePlan.of(k, {**asdict(episode), SUITE_KEY: "libero"}, episode.seed, "libero_object/task_00",
-                              episode.instruction, episode.horizon, "cli", episode.digest)
-        session = SuiteSession(plan, suite_env, SIZE, end_on_success=True)
+        session = SuiteSession(_suite_plan(k, "libero", episode, True), suite_env, SIZE, end_on_success=True)
         policy, states = ChunkedRandom(), States()
         policy.reset(session.policy_context())
         states.start_episode(None)

@@ -11,7 +11,6 @@ test records a real LIBERO run with ``molmo-eval`` and merges that.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
 
 import numpy as np
 import pytest
@@ -22,9 +21,9 @@ from molmo_lerobot.export.merge import read_eval_records
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 from molmo_lerobot.policies.base import Policy
 from molmo_lerobot.results import summarize
-from molmo_lerobot.runner.plan import EpisodePlan
+from molmo_lerobot.runner.evaluate import _suite_plan
 from molmo_lerobot.runner.rollout import rollout
-from molmo_lerobot.suites.benchmark import SUITE_KEY, SuiteSession, task_label
+from molmo_lerobot.suites.benchmark import SuiteSession
 from molmo_lerobot.suites.libero import LiberoEpisode, libero_venv
 
 #: LeRobot's LIBERO layout as published (``HuggingFaceVLA/libero`` ``meta/info.json``, codebase v3.0: names,
@@ -112,11 +111,6 @@ class Ramp(Policy):
         return {"eef": np.full(7, self.t / 10, np.float32)}
 
 
-def _plan(index: int, episode: LiberoEpisode) -> EpisodePlan:
-    return EpisodePlan.of(index, {**asdict(episode), SUITE_KEY: "libero"}, episode.seed, task_label(episode),
-                          episode.instruction, episode.horizon, "cli", episode.digest)
-
-
 def test_a_suite_recording_has_lerobots_libero_layout_and_merges_with_theirs(tmp_path):
     config = compose(["policy=random", "benchmark=libero_object", "record=true", f"benchmark.image_size={SIZE}",
                       f"output_dir={tmp_path / 'run'}"])
@@ -127,7 +121,7 @@ def test_a_suite_recording_has_lerobots_libero_layout_and_merges_with_theirs(tmp
                 LiberoEpisode("libero_object", 1, 0, 1, 6, "pick up the milk and place it in the basket")]
     results = []
     for i, episode in enumerate(episodes):
-        session = SuiteSession(_plan(i, episode), FakeLibero(), SIZE, end_on_success=True)
+        session = SuiteSession(_suite_plan(i, "libero", episode, True), FakeLibero(), SIZE, end_on_success=True)
         policy = Ramp()
         policy.reset(session.policy_context())
         recorder.start_episode(session.recorder_info(expert=False, extra={}))
@@ -192,7 +186,7 @@ def test_a_suite_step_draws_only_the_frames_someone_reads(needs_images):
     (a chunk's end) and none for a policy that reads none; the observation of a step without them has none."""
     episode = LiberoEpisode("libero_object", 0, 0, 0, 10, "pick up the soup and place it in the basket")
     env = FakeLibero()
-    session = SuiteSession(_plan(0, episode), env, SIZE, end_on_success=True)
+    session = SuiteSession(_suite_plan(0, "libero", episode, True), env, SIZE, end_on_success=True)
     policy = Chunks(needs_images)
     policy.reset(session.policy_context())
     result = rollout(session, policy, [], "chunks")
