@@ -92,7 +92,7 @@ def test_datasets_are_copied_in_listed_and_never_overwritten(home, tmp_path):
         assert "\n" not in str(err.value) and repr(ident) in str(err.value)
     with pytest.raises(NamespaceError, match="collides with the dataset"):
         store.create_namespace("molmo/evals/pick/a")
-    assert _files(home) == before and not [p for p in home.iterdir() if p.name.startswith(".")]
+    assert _files(home) == before and not [p for p in home.iterdir() if p.name.startswith(ns.STAGING_PREFIX)]
     # the same run (a resume) replaces its own recording
     store.add_dataset("molmo/evals/pick/a", other, {"policy": "scripted"}, run_dir=tmp_path / "run2" / ".." / "run1")
     assert (home / "molmo/evals/pick/a/data/file-000.parquet").read_bytes() == b"other"

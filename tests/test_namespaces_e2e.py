@@ -11,6 +11,7 @@ import sys
 import pytest
 
 from molmo_lerobot import namespaces as ns
+from molmo_lerobot.cli.eval import _stored_lines
 from molmo_lerobot.config import compose
 from molmo_lerobot.export.recorder import RecordConfigError
 from molmo_lerobot.run_config import RunConfig, RunConfigError
@@ -45,6 +46,8 @@ def test_a_recording_goes_into_its_namespace_and_loads(store, tmp_path, fork_ser
     local = _load("local/pick_v1-scripted", out / "dataset")  # the run directory keeps its own (a copy)
     assert stored.num_episodes == local.num_episodes == 1 and len(stored) == len(local) == 4
     assert store.run_dir("molmo/evals/pick/tiny") == out.resolve()
+    assert _stored_lines(res.summary) == [f"stored: {store.path('molmo/evals/pick/tiny')} (dataset_id=molmo/evals/"
+                                          "pick/tiny; molmo-datasets show molmo/evals/pick/tiny)"]  # molmo-eval says
     # another run may not take the id: one line, before any run directory, nothing in the store changed
     before = sorted(p.relative_to(store.root) for p in store.root.rglob("*"))
     with pytest.raises(RecordConfigError) as err:
@@ -64,14 +67,20 @@ def test_bad_dataset_ids_are_one_line_before_any_run(store, bad):
     assert line.startswith(f"dataset_id: malformed dataset id {bad!r}")
 
 
-def test_molmo_eval_refuses_a_bad_dataset_id_with_one_line_and_exit_2(store, tmp_path):
+@pytest.mark.parametrize(("dataset_id", "error"), [
+    ("molmo//x", "dataset_id: malformed dataset id 'molmo//x': malformed namespace 'molmo/': use letters, digits, "
+                 "'-', '_' and '/' between parts (at least 2 characters, no leading, trailing or double '/')"),
+    # the id check once raised ENAMETOOLONG inside the recorder hook, which was skipped: the run scored, exit 0,
+    # and its recording was dropped
+    ("x" * 300 + "/name", f"dataset_id: dataset id {'x' * 60!r}… (305 characters) is too long: its part "
+                          f"{'x' * 60!r}… (300 characters) has 300 bytes, and a file name at most 255"),
+], ids=["malformed", "too long"])
+def test_molmo_eval_refuses_a_bad_dataset_id_with_one_line_and_exit_2(store, tmp_path, dataset_id, error):
     proc = subprocess.run([sys.executable, "-m", "molmo_lerobot.cli.eval", *TINY, f"output_dir={tmp_path / 'run'}",
-                           "dataset_id=molmo//x"], capture_output=True, text=True,
+                           f"dataset_id={dataset_id}"], capture_output=True, text=True,
                           env={**os.environ, "MUJOCO_GL": "egl"}, timeout=300)
     assert proc.returncode == 2
-    assert proc.stderr.strip().splitlines() == [
-        "molmo-eval: error: dataset_id: malformed dataset id 'molmo//x': malformed namespace 'molmo/': use letters, "
-        "digits, '-', '_' and '/' between parts (at least 2 characters, no leading, trailing or double '/')"]
+    assert proc.stderr.strip().splitlines() == [f"molmo-eval: error: {error}"]
     assert not (tmp_path / "run").exists() and not store.root.exists()
 
 

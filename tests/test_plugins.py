@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import subprocess
@@ -221,6 +222,24 @@ def test_a_broken_recorder_plugin_is_skipped_and_marked_broken(capsys):
     err = capsys.readouterr().err
     assert "plugin 'broken' ((in-process) -) is broken and was skipped" in err
     assert plugins.recorder_factories({}) == ["good-factory"]  # skipped from then on
+
+
+def test_a_failing_builtin_recorder_fails_the_run_in_one_line(monkeypatch):
+    """The project's own recorder is never skipped as a broken plugin: that dropped a run's recording
+    silently (exit 0, no dataset/, run.json saying record: true)."""
+    from molmo_lerobot.errors import RunError
+    from molmo_lerobot.export.recorder import LeRobotRecorderFactory
+
+    def fail(cfg):
+        raise OSError(errno.ENAMETOOLONG, "File name too long", "/store/" + "x" * 300)
+
+    monkeypatch.setattr(LeRobotRecorderFactory, "from_config", staticmethod(fail))
+    plugins = Plugins()
+    with pytest.raises(RunError) as err:  # BuiltinHookError: molmo-eval's one line, exit 2
+        plugins.recorder_factories({"record": True})
+    assert str(err.value).startswith("molmo_recorders() of the built-in plugin 'lerobot_export' (molmo-lerobot ")
+    assert "failed: OSError: [Errno 36] File name too long" in str(err.value) and "\n" not in str(err.value)
+    assert plugins.broken() == [] and len(plugins.recorder_factories({})) == 1  # still there: only the glance
 
 
 def test_a_recorder_rejecting_the_config_fails_the_run_with_its_message():

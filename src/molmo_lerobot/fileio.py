@@ -17,6 +17,9 @@ permissions (``0o666`` less the umask).
 
 Libraries that write a tree themselves (LeRobot's dataset writer, LMDB) get a directory
 made by :func:`make_dirs`: link-free from the root down when it is handed over.
+
+Reads that must not go through a link either (the dataset store's) use :func:`read_bytes`, which
+also never opens a FIFO or device, and :func:`walk`, which lists a tree without following one.
 """
 
 from __future__ import annotations
@@ -301,9 +304,48 @@ def refuse_link(path: str | os.PathLike) -> None:
         raise UnsafePathError(errno.ELOOP, f"{path} is a symlink; refusing to use it as part of the run")
 
 
-# -- reading trees without following links (resources' verification) ----------------------------
+# -- reading without following links ------------------------------------------------------------
+def read_bytes(path: str | os.PathLike, *, root: str | os.PathLike) -> bytes:
+    """The content of the regular file ``path`` below ``root``, reached without following a link: a link
+    on the way or as ``path``, a FIFO or another non-regular file is refused (:class:`UnsafePathError`)
+    without being opened, so that a planted FIFO never hangs the reader."""
+    base, rel = _split(path, root)
+    parts = _parts(rel, str(base))
+    with open_root(base, create=False) as rfd:
+        fd = os.dup(rfd)
+        try:
+            for i, part in enumerate(parts):
+                last = i == len(parts) - 1
+                st = lstat_at(fd, part)
+                if st is None:
+                    raise FileNotFoundError(errno.ENOENT, "No such file or directory", str(base / rel))
+                if not (stat.S_ISREG if last else stat.S_ISDIR)(st.st_mode):
+                    _refuse_read(base / "/".join(parts[: i + 1]), st, leaf=last)
+                flags = (os.O_RDONLY | os.O_NONBLOCK) if last else _DIR
+                nfd = os.open(part, flags | os.O_NOFOLLOW | os.O_CLOEXEC, dir_fd=fd)
+                os.close(fd)
+                fd = nfd
+            st = os.fstat(fd)  # what was opened, should it have been swapped since the lstat
+            if not stat.S_ISREG(st.st_mode):
+                _refuse_read(base / rel, st, leaf=True)
+            with open(fd, "rb") as f:
+                fd = -1  # the file object owns it
+                return f.read()
+        finally:
+            if fd >= 0:
+                os.close(fd)
+
+
+def _refuse_read(path: Path, st: os.stat_result, *, leaf: bool) -> NoReturn:
+    link = stat.S_ISLNK(st.st_mode)
+    what = "a symlink" if link else "not a directory" if not leaf else "a directory" if stat.S_ISDIR(st.st_mode) \
+        else "not a regular file"
+    raise UnsafePathError(errno.ELOOP if link else errno.EINVAL, f"{path} is {what}; refusing to read through it")
+
+
 def walk(root: str | os.PathLike) -> dict[str, tuple]:
-    """Every entry below ``root`` without following links: ``{rel: ("f", size) | ("l", target) | ("d",)}``."""
+    """Every entry below ``root`` without following links:
+    ``{rel: ("f", size) | ("l", target) | ("d",) | ("o",)}`` (``o``: a FIFO, socket or device)."""
     out: dict[str, tuple] = {}
     root = Path(root)
     for dirpath, dirnames, filenames in os.walk(root):
@@ -316,8 +358,10 @@ def walk(root: str | os.PathLike) -> dict[str, tuple]:
                 out[rel] = ("l", os.readlink(full))
             elif stat.S_ISDIR(st.st_mode):
                 out[rel] = ("d",)
-            else:
+            elif stat.S_ISREG(st.st_mode):
                 out[rel] = ("f", st.st_size)
+            else:
+                out[rel] = ("o",)
         dirnames[:] = [d for d in dirnames if not os.path.islink(base / d)]
     return out
 

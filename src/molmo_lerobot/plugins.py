@@ -4,7 +4,9 @@ Built-ins and third-party plugins load the same way. Every hook is dispatched th
 pluggy (``pm.hook.<name>.get_hookimpls()``, so ``specname``, ``tryfirst`` and ``trylast``
 apply) one implementation at a time, so that a plugin whose import or hook fails is
 marked broken with its error while everything else keeps working; only a run that needs
-what the broken plugin would have provided fails, naming it.
+what the broken plugin would have provided fails, naming it. The project's own plugins
+(:attr:`PluginRecord.builtin`) are never skipped as broken: their hooks' failures are raised
+(:class:`BuiltinHookError`).
 
 Two plugins that provide the same name (a robot ``franka``, a policy ``random``) are a
 clash: ``molmo-plugins`` lists it, and resolving that name fails naming both providers
@@ -27,7 +29,7 @@ from typing import TYPE_CHECKING, Any, Literal, overload
 import pluggy
 
 from molmo_lerobot import hookspecs
-from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.errors import MolmoError, RunError
 from molmo_lerobot.hookspecs import ConfigError
 
 if TYPE_CHECKING:
@@ -46,6 +48,8 @@ if TYPE_CHECKING:
                      | PolicyType | BenchmarkDir)
 
 ENTRY_POINT_GROUP = hookspecs.PROJECT
+#: the distribution whose entry points are the built-in plugins
+PROJECT_DISTRIBUTION = "molmo-lerobot"
 
 #: provider hook → plugin kind shown by ``molmo-plugins``
 KIND_HOOKS = {
@@ -80,6 +84,11 @@ class PluginConflict(PluginError):
     """Several plugins provide the requested name and the run pins none of them."""
 
 
+class BuiltinHookError(RunError):
+    """A hook of one of the project's own plugins failed: the caller's failure, never a plugin skipped
+    as broken (a built-in recorder that fails would otherwise drop the run's recording silently)."""
+
+
 @dataclass
 class PluginRecord:
     """One entry point (or in-process plugin) and what became of it."""
@@ -99,6 +108,11 @@ class PluginRecord:
     @property
     def label(self) -> str:
         return f"{self.name!r} ({self.distribution} {self.version})"
+
+    @property
+    def builtin(self) -> bool:
+        """Whether it is one of this project's own plugins (registered by ``molmo-lerobot``'s entry points)."""
+        return self.distribution.replace("_", "-").lower() == PROJECT_DISTRIBUTION
 
     def matches(self, ref: str) -> bool:
         """Whether ``ref`` names this plugin: entry-point name, ``<distribution>:<name>`` or distribution."""
@@ -189,15 +203,25 @@ class Plugins:
 
         At run time (``run_time``) a ``ValueError`` is the plugin rejecting its arguments and
         propagates, and Ctrl-C stops the run; elsewhere anything, even ``sys.exit()``, is caught.
+        A built-in plugin's failure is never caught: it raises :class:`BuiltinHookError`.
         """
         passthrough = (ValueError, KeyboardInterrupt) if run_time else ()
         try:
             return True, impl.function(*(kwargs[arg] for arg in impl.argnames))
         except passthrough:
             raise
-        except BaseException as exc:  # a plugin must never take the process down
-            self._break(rec, f"{hook_name}() failed: {_one_line(exc)}", warn=run_time)
+        except BaseException as exc:  # a third-party plugin must never take the process down
+            self._fail(rec, hook_name, exc, warn=run_time)
             return False, None
+
+    def _fail(self, rec: PluginRecord, hook_name: str, exc: BaseException, *, warn: bool = False) -> None:
+        """Mark a third-party plugin broken by its hook's failure; a built-in's failure is raised."""
+        if rec.builtin:
+            if not isinstance(exc, Exception):  # Ctrl-C, sys.exit()
+                raise exc
+            raise BuiltinHookError(f"{hook_name}() of the built-in plugin {rec.label} failed: "
+                                   f"{_one_line(exc)}") from exc
+        self._break(rec, f"{hook_name}() failed: {_one_line(exc)}", warn=warn)
 
     def _call(self, hook_name: str, *, run_time: bool = False, **kwargs: Any) -> Iterable[tuple[PluginRecord, Any]]:
         """``(plugin, result)`` of each implementation of ``hook_name`` that did not fail."""
@@ -219,7 +243,7 @@ class Plugins:
                         if not isinstance(getattr(item, "name", None), str):
                             raise TypeError(f"returned {type(item).__name__} without a string 'name'")
                 except Exception as exc:
-                    self._break(rec, f"{hook}() failed: {_one_line(exc)}")
+                    self._fail(rec, hook, exc)
                     continue
                 provided.setdefault(rec.pm_name, {})[kind] = items
         ok = {r.pm_name: r for r in self.records if r.status == "ok"}
@@ -364,15 +388,16 @@ class Plugins:
             try:
                 dirs.extend(str(d) for d in result or [])
             except Exception as exc:
-                self._break(rec, f"molmo_config_dirs() failed: {_one_line(exc)}")
+                self._fail(rec, "molmo_config_dirs", exc)
         return dirs
 
     def recorder_factories(self, config: dict[str, Any]) -> list[RecorderFactory]:
         """Every ``molmo_recorders`` implementation's factories for this run config.
 
         A plugin that rejects the config (``ValueError``) fails the run with a
-        :class:`ConfigError`; one that fails otherwise is marked broken and skipped with a
-        warning, so a broken third-party recorder never breaks runs that do not use it.
+        :class:`ConfigError`; a third-party one that fails otherwise is marked broken and skipped
+        with a warning, so a broken third-party recorder never breaks runs that do not use it; a
+        built-in one's failure fails the run (:class:`BuiltinHookError`).
         """
         factories: list[RecorderFactory] = []
         try:

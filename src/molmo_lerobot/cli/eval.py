@@ -144,13 +144,23 @@ def _job(cfg: Any, jobs: list[dict[str, Any]], fork_servers: ForkServerPool) -> 
     row["success"] = ("no episode ran" if s["success_rate"] is None else
                       f"{s['success_rate']:.3f} ({s['n_success']}/{s['n_episodes']})"
                       + (f", {s['n_errors']} errored" if s["n_errors"] else ""))
-    print("\n".join([*summary_lines(res.run_summary), f"outputs: {res.output_dir}"]))
+    print("\n".join([*summary_lines(res.run_summary), f"outputs: {res.output_dir}", *_stored_lines(s)]))
     push = s.get("push")
     if push and not push["ok"]:
         print(f"molmo-eval: error: push to the Hub as {push['repo_id']} failed ({push['error']}); every local "
               f"file is kept in {res.output_dir} (results.json records the failure)", file=sys.stderr)
     row["exit"] = exit_status(s)
     return row["exit"]
+
+
+def _stored_lines(summary: Mapping[str, Any]) -> list[str]:
+    """Where a ``dataset_id=`` run's recording went in the dataset store (a run reaching its summary stored it)."""
+    dataset_id = (summary.get("config") or {}).get("dataset_id")
+    if not dataset_id:
+        return []
+    from molmo_lerobot.namespaces import DatasetStore
+
+    return [f"stored: {DatasetStore().path(dataset_id)} (dataset_id={dataset_id}; molmo-datasets show {dataset_id})"]
 
 
 if __name__ == "__main__":
