@@ -116,6 +116,25 @@ def test_failures_are_grouped_with_counts_and_breakdowns_per_house_and_category(
     assert "Pick and place next to" in page and 'name=show value=failures' in page
 
 
+def test_a_suite_report_shows_instructions_and_rewards_and_no_houses():
+    results = [EpisodeResult(i, None, None, False, False, 300, 1000 + i, task_type=f"libero_object/task_0{i}",
+                             prompt=f"pick up the {obj} and place it in the basket",
+                             extra={"sum_reward": 0.0, "max_reward": float(i)})
+               for i, obj in enumerate(["alphabet soup", "cream cheese"])]
+    page = render_report(S.summary_for(results), results)
+    assert "Per house" not in page and "Breakdowns" not in page and "<th>house</th>" not in page
+    tasks = page.split("<h2>Per task</h2>")[1].split("<svg")[0]
+    assert "<td title='pick up the cream cheese and place it in the basket'>pick up the cream cheese" in tasks
+    assert "<th>avg max reward</th>" in tasks and "<td class=num>0.500</td>" in tasks  # overall: mean of 0 and 1
+    assert "avg max reward 0.500" in page.split("<h2>")[0]
+
+
+def test_a_task_with_many_instructions_shows_the_first_and_how_many_more():
+    page = render_report(S.summary_for(_results()), _results())
+    assert "pick up the &lt;b&gt;mug&lt;/b&gt; <span class=sub>(+1 more)</span>" in page
+    assert "avg max reward" not in page  # these episodes carry no rewards
+
+
 def test_task_labels_are_readable():
     assert task_label("pick_and_place_next_to") == "Pick and place next to"
     assert task_label("molmo_lerobot.tasks.pick_and_place.PickAndPlaceColorTask") == "Pick and place color"
