@@ -9,9 +9,11 @@ with ``eval_s`` and ``eval_ep_s``). Here, with its meanings:
 * a task's group is the benchmark (``libero_object``, ``pusht``: the suite ``lerobot-eval`` names; ours:
   ``pick_v1`` …) and its id LIBERO's task id, else the task's place in ``results.json``'s ``per_task`` order
   (PushT's one task: 0); each row also names its ``per_task`` key (``task``);
-* an episode's ``sum_rewards`` / ``max_rewards`` entry is the sum and maximum of its steps' rewards (the env's;
-  for our benchmarks the Gymnasium env's: the task's own reward, else 1.0 on success), its ``successes`` entry
-  whether any step succeeded (``lerobot-eval``'s rule; ``extra.success_any_step`` of ``episodes.jsonl``);
+* an episode's ``sum_rewards`` / ``max_rewards`` entry is the sum and maximum of its steps' rewards up to the
+  step that ended it (the env's; for our benchmarks the Gymnasium env's: the task's own reward, else 1.0 on
+  success), as ``lerobot-eval`` masks the steps after an episode's first ``done`` (with ``--eval.batch_size``
+  > 1 its mask keeps one step more, a finished env's zeroed reward); its ``successes`` entry whether any step
+  succeeded (``lerobot-eval``'s rule; ``extra.success_any_step`` of ``episodes.jsonl``);
 * an episode that errored is a failure (as in ``results.json``) whose rewards are ``null``; the averages
   skip ``null`` (``lerobot-eval``'s ``nanmean``), and an average over no episode is ``null`` (theirs: NaN);
 * ``eval_s`` is the run's ``wall_time_s`` (a resumed run's: its last session's); no video is written, so
