@@ -85,6 +85,11 @@ def test_wandb_offline_run_records_the_scores(tmp_path, monkeypatch):
 def test_metrics_are_flat_and_per_task():
     m = metrics(S.summary_for(_results()))
     assert m["n_errors"] == 1 and m["open/n_errors"] == 1 and m["pick/success_rate"] == 0.5
+    assert "avg_max_reward" not in m  # these episodes carry no rewards
+    rewarded = [EpisodeResult(0, None, None, False, False, 9, 0, task_type="pusht/PushT-v0",
+                              extra={"sum_reward": 2.0, "max_reward": 0.5})]
+    m = metrics(S.summary_for(rewarded))
+    assert (m["avg_max_reward"], m["pusht/PushT-v0/avg_sum_reward"]) == (0.5, 2.0)
 
 
 def test_failures_are_grouped_with_counts_and_breakdowns_per_house_and_category():
