@@ -19,6 +19,10 @@ Two success flags per episode, each with one name wherever it is printed:
 * ``extra.success_any_step`` (``episodes.jsonl`` only): success at any policy step, finer than
   ``success_once`` when a policy plays chunks longer than one step.
 
+Rewards, ``lerobot-eval``'s figures: an episode's ``extra.sum_reward`` and ``extra.max_reward`` over its
+steps (the env's reward; ours: the task's own, else 1.0 on success), averaged per block over the
+episodes that simulated (``avg_sum_reward``, ``avg_max_reward``).
+
 :class:`RunSummary` is ``results.json``'s schema. ``summarize`` scores the episodes; what runs
 after the score (the dataset's Hub push) returns a :data:`SummaryPiece` that the summary takes
 in (:meth:`RunSummary.with_piece`), never edits it. A file without ``schema_version`` is
