@@ -122,9 +122,7 @@ class MolmoEnv(gym.Env):
                              f"{self.features.action_layout()}")
         success = ep.step(self.features.split_action(a) if isinstance(a, np.ndarray) else a)
         ended = ep.end()
-        reward = ep.task.reward()
-        return (self._obs(ep.observe()), float(success if reward is None else reward), ended == "success",
-                ended == "horizon", self._info(success))
+        return self._obs(ep.observe()), ep.reward, ended == "success", ended == "horizon", self._info(success)
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None or self._episode is None:

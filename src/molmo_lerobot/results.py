@@ -19,6 +19,10 @@ Two success flags per episode, each with one name wherever it is printed:
 * ``extra.success_any_step`` (``episodes.jsonl`` only): success at any policy step, finer than
   ``success_once`` when a policy plays chunks longer than one step.
 
+Rewards, ``lerobot-eval``'s figures: an episode's ``extra.sum_reward`` and ``extra.max_reward`` over its
+steps (the env's reward; ours: the task's own, else 1.0 on success), averaged per block over the
+episodes that simulated (``avg_sum_reward``, ``avg_max_reward``).
+
 :class:`RunSummary` is ``results.json``'s schema. ``summarize`` scores the episodes; what runs
 after the score (the dataset's Hub push) returns a :data:`SummaryPiece` that the summary takes
 in (:meth:`RunSummary.with_piece`), never edits it. A file without ``schema_version`` is
@@ -89,15 +93,27 @@ class EpisodeOutcome:
         self.success = self.success_once = self.success_any_step = False
         #: why the episode ended (``horizon``, ``success``, ``terminated`` by the env, ``done``); ``None`` while it runs
         self.ended_by: str | None = None
+        #: the last step's reward, and the sum and maximum over the episode's steps (``lerobot-eval``'s
+        #: ``sum_reward`` and ``max_reward``; ``None`` before the first step)
+        self.reward = 0.0
+        self.sum_reward = 0.0
+        self.max_reward: float | None = None
 
-    def count_step(self, success: bool, observed: bool) -> bool:
-        """One more step ending in ``success``; ``observed``: the agent sees that state."""
+    def count_step(self, success: bool, observed: bool, reward: float) -> bool:
+        """One more step ending in ``success`` with ``reward``; ``observed``: the agent sees that state."""
         self.success = success
         self.steps += 1
         self.success_any_step |= success
         if observed:
             self.success_once |= success
+        self.reward = reward
+        self.sum_reward += reward
+        self.max_reward = reward if self.max_reward is None else max(self.max_reward, reward)
         return success
+
+    def rewards(self) -> dict[str, float]:
+        """``sum_reward`` and ``max_reward`` of the steps so far, for the result's ``extra`` (none: no step)."""
+        return {} if self.max_reward is None else {"sum_reward": self.sum_reward, "max_reward": self.max_reward}
 
     def end(self, said_done: bool = False, terminated: bool = False) -> str | None:
         """Whether the episode ends after this step, and why: the action said ``done``, ``success`` (with
@@ -243,21 +259,37 @@ class Rates(_Part):
     n_errors: int
     ci95: tuple[float, float] | None  # Wilson 95 % interval of success_rate
     success_once_ci95: tuple[float, float] | None
+    #: the mean over the block's episodes that simulated of each one's summed and best per-step reward
+    #: (``lerobot-eval``'s ``avg_sum_reward``, ``avg_max_reward``); absent from runs written before them
+    avg_sum_reward: float | None = None
+    avg_max_reward: float | None = None
 
     @staticmethod
     def score(results: list[EpisodeResult]) -> dict[str, Any]:
-        """The block's fields for ``results``: errors count as failures."""
+        """The block's fields for ``results``: errors count as failures; rewards average the episodes that
+        have them (every episode that simulated)."""
         n = len(results)
         k = sum(r.success for r in results)
         k_once = sum(r.success_once for r in results)
         n_errors = sum(r.error is not None for r in results)
         scored = n > n_errors  # at least one episode simulated
+        rewarded = [r.extra for r in results if "max_reward" in r.extra]
         return {
             "success_rate": k / n if scored else None, "success_once_rate": k_once / n if scored else None,
             "n_episodes": n, "n_valid": n - n_errors, "n_success": k, "n_success_once": k_once,
             "n_errors": n_errors, "ci95": wilson_ci(k, n) if scored else None,
             "success_once_ci95": wilson_ci(k_once, n) if scored else None,
+            **({f"avg_{key}": sum(float(e[key]) for e in rewarded) / len(rewarded)
+                for key in ("sum_reward", "max_reward")} if rewarded else {}),
         }
+
+
+class TaskRates(Rates):
+    """One task's score block (``per_task``), with the task's instructions."""
+
+    #: the prompts of the task's episodes, each once, in episode order (an env suite's task has one);
+    #: absent from runs written before them
+    instructions: list[str] | None = None
 
 
 class EpisodeError(_Part):
@@ -317,7 +349,7 @@ class RunSummary(Rates):
 
     schema_version: int = SCHEMA_VERSION
     primary_metric: str = PRIMARY_METRIC
-    per_task: dict[str, Rates]
+    per_task: dict[str, TaskRates]
     errors: list[EpisodeError]
     start_warnings: list[StartWarnings] | None = None  # episodes that started oddly (Task.start_warnings)
     parity_notes: list[ParityNotes] | None = None  # episodes the other task_rules would judge otherwise
@@ -390,6 +422,10 @@ class RunSummary(Rates):
         return cls.from_document(data, str(path))
 
 
+def _instructions(results: list[EpisodeResult]) -> list[str]:
+    return list(dict.fromkeys(r.prompt for r in results if r.prompt is not None))
+
+
 def summarize(results: list[EpisodeResult], **context: Any) -> RunSummary:
     """The run's summary: overall and per-task scores of ``results`` plus ``context`` (the fields
     of :class:`RunSummary` below the score: ``benchmark``, ``policy``, …)."""
@@ -401,7 +437,7 @@ def summarize(results: list[EpisodeResult], **context: Any) -> RunSummary:
         by_task[r.task_type or r.task_cls or "unknown"].append(r)
     return RunSummary.model_validate({
         "schema_version": SCHEMA_VERSION, "primary_metric": PRIMARY_METRIC, **Rates.score(results),
-        "per_task": {t: Rates.score(rs) for t, rs in sorted(by_task.items())},
+        "per_task": {t: {**Rates.score(rs), "instructions": _instructions(rs)} for t, rs in sorted(by_task.items())},
         "errors": [{"episode_index": r.episode_index, "error": r.error, "error_kind": r.error_kind}
                    for r in results if r.error is not None],
         "start_warnings": [{"episode_index": r.episode_index, "warnings": r.extra["start_warnings"]}
@@ -428,11 +464,11 @@ def summary_lines(s: RunSummary, max_errors: int = 10) -> list[str]:
         lo, hi = s.ci95
         lines = [f"{errors + ' · ' if s.n_errors else ''}{head}: success {s.success_rate:.3f} "
                  f"[{lo:.3f}, {hi:.3f}] ({s.n_success}/{s.n_episodes}), "
-                 f"{SUCCESS_LABELS['success_once']} {s.success_once_rate:.3f}"]
+                 f"{SUCCESS_LABELS['success_once']} {s.success_once_rate:.3f}{_reward_text(s)}"]
         for task, b in s.per_task.items():
             rate = "no episode ran" if b.success_rate is None else f"{b.success_rate:.3f}"
             tail = f", {b.n_errors} errored" if b.n_errors else ""
-            lines.append(f"  {task}: {rate} ({b.n_success}/{b.n_episodes}{tail})")
+            lines.append(f"  {task}: {rate} ({b.n_success}/{b.n_episodes}{tail}){_reward_text(b)}")
     lines.extend(f"  episode {e.episode_index}: {e.error}" for e in s.errors[:max_errors])
     if len(s.errors) > max_errors:
         lines.append(f"  ... and {len(s.errors) - max_errors} more errors (results.json)")
@@ -450,6 +486,10 @@ def summary_lines(s: RunSummary, max_errors: int = 10) -> list[str]:
         lines.append(f"  outputs not written for {len(outputs)} episode{'s' * (len(outputs) != 1)}, outcomes kept "
                      f"(episode {first.episode_index}: {first.errors[0]}; all in results.json output_errors)")
     return lines
+
+
+def _reward_text(block: Rates) -> str:
+    return "" if block.avg_max_reward is None else f", avg max reward {block.avg_max_reward:.3f}"
 
 
 @dataclass(frozen=True)

@@ -85,6 +85,11 @@ def test_wandb_offline_run_records_the_scores(tmp_path, monkeypatch):
 def test_metrics_are_flat_and_per_task():
     m = metrics(S.summary_for(_results()))
     assert m["n_errors"] == 1 and m["open/n_errors"] == 1 and m["pick/success_rate"] == 0.5
+    assert "avg_max_reward" not in m  # these episodes carry no rewards
+    rewarded = [EpisodeResult(0, None, None, False, False, 9, 0, task_type="pusht/PushT-v0",
+                              extra={"sum_reward": 2.0, "max_reward": 0.5})]
+    m = metrics(S.summary_for(rewarded))
+    assert (m["avg_max_reward"], m["pusht/PushT-v0/avg_sum_reward"]) == (0.5, 2.0)
 
 
 def test_failures_are_grouped_with_counts_and_breakdowns_per_house_and_category():
@@ -114,6 +119,25 @@ def test_failures_are_grouped_with_counts_and_breakdowns_per_house_and_category(
     hist = page.split("<h2>Time to first success</h2>")[1].split("<h2>")[0]
     assert "5 of 10 episodes succeeded at some step; median 1.0 s" in hist and "<svg" in hist
     assert "Pick and place next to" in page and 'name=show value=failures' in page
+
+
+def test_a_suite_report_shows_instructions_and_rewards_and_no_houses():
+    results = [EpisodeResult(i, None, None, False, False, 300, 1000 + i, task_type=f"libero_object/task_0{i}",
+                             prompt=f"pick up the {obj} and place it in the basket",
+                             extra={"sum_reward": 0.0, "max_reward": float(i)})
+               for i, obj in enumerate(["alphabet soup", "cream cheese"])]
+    page = render_report(S.summary_for(results), results)
+    assert "Per house" not in page and "Breakdowns" not in page and "<th>house</th>" not in page
+    tasks = page.split("<h2>Per task</h2>")[1].split("<svg")[0]
+    assert "<td title='pick up the cream cheese and place it in the basket'>pick up the cream cheese" in tasks
+    assert "<th>avg max reward</th>" in tasks and "<td class=num>0.500</td>" in tasks  # overall: mean of 0 and 1
+    assert "avg max reward 0.500" in page.split("<h2>")[0]
+
+
+def test_a_task_with_many_instructions_shows_the_first_and_how_many_more():
+    page = render_report(S.summary_for(_results()), _results())
+    assert "pick up the &lt;b&gt;mug&lt;/b&gt; <span class=sub>(+1 more)</span>" in page
+    assert "avg max reward" not in page  # these episodes carry no rewards
 
 
 def test_task_labels_are_readable():

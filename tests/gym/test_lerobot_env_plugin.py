@@ -57,7 +57,8 @@ def test_environment_state_reaches_a_lerobot_policy_as_observation_environment_s
 @pytest.mark.slow
 def test_lerobot_eval_matches_molmo_eval_per_episode(tmp_path):
     """ACT trained for 2 steps on a record=true run: lerobot-eval (any-step success, LeRobot's
-    pc_success) and molmo-eval's success_once agree episode by episode."""
+    pc_success) and molmo-eval's success_once agree episode by episode, and so do both eval_info.json
+    files' per-episode rewards and averages."""
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": "egl"}
     rec = tmp_path / "rec"
     run_evaluation(compose(["policy=scripted", "benchmark=pick_v1", "workers=2", "limit=4", "horizon=30",
@@ -83,3 +84,11 @@ def test_lerobot_eval_matches_molmo_eval_per_episode(tmp_path):
     assert ours.summary["n_errors"] == 0
     assert theirs == [e.success_once for e in ours.episodes]
     assert info["overall"]["n_episodes"] == 4
+    # molmo-eval's eval_info.json: the same per-episode rewards and successes, the same averages
+    mine = json.loads((tmp_path / "molmo" / "eval_info.json").read_text())
+    (row,) = mine["per_task"]
+    assert row["metrics"]["successes"] == theirs
+    for key in ("sum_rewards", "max_rewards"):
+        assert row["metrics"][key] == pytest.approx(task["metrics"][key], rel=0, abs=1e-9), key
+    for key in ("pc_success", "avg_sum_reward", "avg_max_reward", "n_episodes"):
+        assert mine["overall"][key] == pytest.approx(info["overall"][key], rel=0, abs=1e-9), key

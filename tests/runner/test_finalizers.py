@@ -9,8 +9,9 @@ from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 
 
 def test_the_config_chooses_the_finalizers():
-    assert [f.label for f in run_finalizers(RunConfig())] == ["report"]
-    assert [f.label for f in run_finalizers(RunConfig.of({"wandb": {"enable": True}}))] == ["report", "W&B log"]
+    assert [f.label for f in run_finalizers(RunConfig())] == ["eval_info.json", "report"]
+    assert [f.label for f in run_finalizers(RunConfig.of({"wandb": {"enable": True}}))] == [
+        "eval_info.json", "report", "W&B log"]
 
 
 def test_every_step_runs_and_each_failure_is_one_line(tmp_path):

@@ -57,6 +57,27 @@ def test_a_summary_round_trips_through_its_file(tmp_path):
     assert doc["output_errors"] == [{"episode_index": 1, "errors": ["GlanceRecorder: OSError: disk full"]}]
 
 
+def test_per_task_rows_carry_their_instructions_and_rewards_averaged_over_the_episodes_that_ran(tmp_path):
+    def pusht(i: int, sum_reward: float, max_reward: float) -> EpisodeResult:
+        return EpisodeResult(i, None, None, False, False, 300, i, task_type="pusht/PushT-v0", prompt="",
+                             extra={"sum_reward": sum_reward, "max_reward": max_reward})
+
+    results = [pusht(0, 12.0, 0.5), pusht(1, 3.0, 0.25),
+               EpisodeResult.failed(2, None, None, 2, "RuntimeError: boom", task_type="pusht/PushT-v0"),
+               *_results()]
+    summary = summarize(results)
+    (tmp_path / "results.json").write_text(summary.to_json())
+    doc = RunSummary.read(tmp_path / "results.json").document()
+    row = doc["per_task"]["pusht/PushT-v0"]
+    assert (row["avg_sum_reward"], row["avg_max_reward"], row["n_episodes"]) == (7.5, 0.375, 3)  # the error: no reward
+    assert row["instructions"] == [""]  # lerobot-eval gives PushT an empty task
+    assert doc["per_task"]["pick"]["instructions"] == ["pick up the mug"]  # each once; none for the one without
+    assert "avg_max_reward" not in doc["per_task"]["pick"]  # its episodes carry no rewards (written before them)
+    assert doc["avg_max_reward"] == 0.375 and "instructions" not in doc
+    assert summary_lines(summary)[0].endswith("avg max reward 0.375")
+    assert "  pusht/PushT-v0: 0.000 (0/3, 1 errored), avg max reward 0.375" in summary_lines(summary)
+
+
 @pytest.mark.parametrize("name", OLD)
 def test_results_written_by_older_code_read_and_write_back_unchanged(name):
     doc = json.loads((DATA / name).read_text())
@@ -73,7 +94,8 @@ def test_a_fresh_summary_has_every_field_of_mains_results_json():
     doc = json.loads((DATA / OLD[0]).read_text())
     summary = RunSummary.from_document(doc)
     assert summary.model_extra == {}
-    assert set(RunSummary.model_fields) - set(doc) == {"schema_version", "push", "export_errors", "parity_notes"}
+    assert set(RunSummary.model_fields) - set(doc) == {"schema_version", "push", "export_errors", "parity_notes",
+                                                       "avg_sum_reward", "avg_max_reward"}
 
 
 @pytest.mark.parametrize(("edit", "message"), [

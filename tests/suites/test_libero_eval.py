@@ -7,6 +7,7 @@ the default run is two 8-step episodes at 64² images, recorded; the resume afte
 
 from __future__ import annotations
 
+import html
 import json
 import os
 import signal
@@ -44,6 +45,16 @@ def test_libero_run_scores_per_task_and_records(tmp_path):
                                       ("libero_object/task_01", 8, 8, 0, None, 0)]
     assert len({e["extra"]["digest"] for e in lines}) == 2
     assert res.run_summary.n_episodes == 2
+    # each task's row carries LIBERO's instruction, and the scores are in lerobot-eval's eval_info.json too
+    prompts = {r.task_type: r.prompt for r in res.episodes}
+    assert all(prompts.values()) and {t: b["instructions"] for t, b in doc["per_task"].items()} == {
+        t: [p] for t, p in prompts.items()}
+    info = json.loads((tmp_path / "eval_info.json").read_text())
+    assert [(t["task_group"], t["task_id"], t["metrics"]["successes"]) for t in info["per_task"]] == [
+        ("libero_object", 0, [False]), ("libero_object", 1, [False])]
+    assert info["overall"]["n_episodes"] == 2 and info["overall"]["avg_max_reward"] == doc["avg_max_reward"] == 0.0
+    report = (tmp_path / "report.html").read_text()
+    assert "Per house" not in report and all(html.escape(p) in report for p in prompts.values())
     # the recording: LeRobot's LIBERO layout at the run's image size, one frame per step, the eval records
     ds = LeRobotDataset("local/x", root=tmp_path / "dataset", video_backend="pyav")
     assert {k: tuple(v["shape"]) for k, v in ds.meta.features.items() if k.startswith(("observation", "action"))} == {

@@ -33,6 +33,14 @@ def test_pusht_run_with_two_workers_scores_per_task(tmp_path):
     assert [(e["seed"], e["steps"], e["horizon"], e["error"]) for e in lines] == [(k, 30, 30, None) for k in range(4)]
     assert len({e["extra"]["digest"] for e in lines}) == 4
     assert res.run_summary.n_episodes == 4
+    # gym_pusht's rewards, per episode and averaged (lerobot-eval's figures), beside results.json too
+    task = doc["per_task"]["pusht/PushT-v0"]
+    assert task["avg_max_reward"] == sum(e["extra"]["max_reward"] for e in lines) / 4 and task["instructions"] == [""]
+    info = json.loads((tmp_path / "eval_info.json").read_text())
+    assert [(t["task_group"], t["task_id"], len(t["metrics"]["max_rewards"])) for t in info["per_task"]] == [
+        ("pusht", 0, 4)]
+    assert info["overall"]["avg_max_reward"] == doc["avg_max_reward"] and info["overall"]["n_episodes"] == 4
+    assert "Per house" not in (tmp_path / "report.html").read_text()  # an env suite's episodes have no house
 
 
 @pytest.mark.slow

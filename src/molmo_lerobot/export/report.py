@@ -1,8 +1,9 @@
 """``report.html``: one self-contained page per run.
 
-Scores with CIs and a plot; failure reasons grouped with counts; success per object category
-and per house; the distribution of the time to first success; one row per episode with a
-readable task label, a thumbnail (first | last exterior frame, saved by
+Scores with CIs and a plot, per task with its instruction and rewards (``avg_max_reward``,
+``avg_sum_reward``); failure reasons grouped with counts; success per object category and per house
+(where the episodes have them); the distribution of the time to first success; one row per episode
+with a readable task label, a thumbnail (first | last exterior frame, saved by
 :mod:`molmo_lerobot.export.glance` during the rollout) and a filter to failures or errors.
 
 Written at the end of every run. When the run was recorded, each episode row plays its
@@ -21,7 +22,7 @@ from typing import Any
 
 from molmo_lerobot.export.merge import DATASET_DIR, EVAL_EPISODES, EVAL_INFO, read_eval_records
 from molmo_lerobot.fileio import atomic_write
-from molmo_lerobot.results import SUCCESS_LABELS, EpisodeResult, Rates, RunSummary, wilson_ci
+from molmo_lerobot.results import SUCCESS_LABELS, EpisodeResult, Rates, RunSummary, TaskRates, wilson_ci
 
 REPORT_FILE = "report.html"
 
@@ -93,16 +94,35 @@ def _bars_svg(summary: RunSummary) -> str:
     return "".join(parts)
 
 
+def _reward(x: float | None) -> str:
+    return "n/a" if x is None else f"{x:.3f}"
+
+
+def _instructions(b: Rates) -> str:
+    """A task's instruction (its first and how many more, all of them on hover); ``–`` for none (the run's
+    row) or an empty one (PushT's)."""
+    said = (b.instructions if isinstance(b, TaskRates) else None) or []
+    if not said or said == [""]:
+        return "<td>–</td>"
+    more = f" <span class=sub>(+{len(said) - 1} more)</span>" if len(said) > 1 else ""
+    return f"<td title='{_e('; '.join(said[:20]))}'>{_e(said[0])}{more}</td>"
+
+
 def _task_table(summary: RunSummary) -> str:
-    out = ["<table><tr><th>task</th><th>episodes</th><th>success (end)</th><th>95% CI</th>"
-           "<th>success (any chunk end)</th><th>95% CI</th><th>errors</th></tr>"]
+    rewards = summary.avg_max_reward is not None
+    out = ["<table><tr><th>task</th><th>instruction</th><th>episodes</th><th>success (end)</th><th>95% CI</th>"
+           "<th>success (any chunk end)</th><th>95% CI</th>"
+           + ("<th>avg max reward</th><th>avg sum reward</th>" if rewards else "") + "<th>errors</th></tr>"]
     for name, b in _rows(summary):
         lo, hi = b.ci95 or (None, None)
         lo2, hi2 = b.success_once_ci95 or (None, None)
-        out.append(f"<tr><td>{_e(name)}</td><td class=num>{b.n_episodes}</td>"
+        reward_cells = (f"<td class=num>{_reward(b.avg_max_reward)}</td><td class=num>{_reward(b.avg_sum_reward)}</td>"
+                        if rewards else "")
+        out.append(f"<tr><td>{_e(name)}</td>{_instructions(b)}"
+                   f"<td class=num>{b.n_episodes}</td>"
                    f"<td class=num>{_pct(b.success_rate)}</td><td>{_pct(lo)} – {_pct(hi)}</td>"
                    f"<td class=num>{_pct(b.success_once_rate)}</td><td>{_pct(lo2)} – {_pct(hi2)}</td>"
-                   f"<td class=num>{b.n_errors}</td></tr>")
+                   f"{reward_cells}<td class=num>{b.n_errors}</td></tr>")
     out.append("</table>")
     return "".join(out)
 
@@ -171,19 +191,20 @@ def _group_table(title: str, groups: dict[Any, list[EpisodeResult]], label: Any)
 
 
 def _breakdowns(results: list[EpisodeResult]) -> str:
+    """Success per object category and per house, each where the episodes have one (an env suite's have neither)."""
     houses: dict[Any, list[EpisodeResult]] = {}
     cats: dict[Any, list[EpisodeResult]] = {}
     for r in results:
         houses.setdefault(r.house_index, []).append(r)
         cats.setdefault((r.extra or {}).get("object_category"), []).append(r)
-    parts = ["<h2>Breakdowns</h2><div class=cols>"]
+    parts = []
     if any(k is not None for k in cats):
         parts.append("<div><h3>Per object category</h3>"
                      + _group_table("object category", cats, lambda k: "unknown" if k is None else k) + "</div>")
-    parts.append("<div><h3>Per house</h3>"
-                 + _group_table("house", houses, lambda k: "unknown" if k is None else f"house {k}") + "</div>")
-    parts.append("</div>")
-    return "".join(parts)
+    if any(k is not None for k in houses):
+        parts.append("<div><h3>Per house</h3>"
+                     + _group_table("house", houses, lambda k: "unknown" if k is None else f"house {k}") + "</div>")
+    return "".join(["<h2>Breakdowns</h2><div class=cols>", *parts, "</div>"]) if parts else ""
 
 
 def _failure_groups(results: list[EpisodeResult]) -> tuple[str, dict[int, int]]:
@@ -248,9 +269,12 @@ def _first_success_svg(results: list[EpisodeResult], policy_dt_s: float) -> str:
 
 def _episode_rows(results: list[EpisodeResult], videos: dict[int, list[tuple[str, str]]],
                   groups: dict[int, int], policy_dt_s: float, output_dir: Path | None) -> str:
-    head = ("<table id=episodes><tr><th>glance (first | last)</th><th>#</th><th>house</th><th>task</th>"
-            "<th>instruction</th><th>outcome</th><th>any chunk end</th><th>first success</th><th>steps</th>"
-            "<th>seed</th><th>time</th><th>video</th></tr>")
+    houses = any(r.house_index is not None for r in results)
+    rewards = any("max_reward" in (r.extra or {}) for r in results)
+    head = ("<table id=episodes><tr><th>glance (first | last)</th><th>#</th>" + "<th>house</th>" * houses
+            + "<th>task</th><th>instruction</th><th>outcome</th><th>any chunk end</th><th>first success</th>"
+            + "<th>max reward</th><th>sum reward</th>" * rewards + "<th>steps</th><th>seed</th><th>time</th>"
+            "<th>video</th></tr>")
     out = [head]
     for r in sorted(results, key=lambda r: r.episode_index):
         extra = r.extra or {}
@@ -271,12 +295,15 @@ def _episode_rows(results: list[EpisodeResult], videos: dict[int, list[tuple[str
         first = extra.get("first_success_step")
         first_s = f"{first * policy_dt_s:.1f}s" if first is not None else "–"
         outcome = "error" if r.error is not None else ("success" if r.success else "failure")
+        house = f"<td class=num>{_e(r.house_index)}</td>" if houses else ""
+        reward = (f"<td class=num>{_reward(extra.get('max_reward'))}</td>"
+                  f"<td class=num>{_reward(extra.get('sum_reward'))}</td>" if rewards else "")
         out.append(
             f"<tr id=ep{r.episode_index} data-outcome={outcome}><td>{thumb_html}</td>"
-            f"<td class=num>{r.episode_index}</td><td class=num>{_e(r.house_index)}</td>"
+            f"<td class=num>{r.episode_index}</td>{house}"
             f"<td title='{_e(r.task_cls)}'>{_e(task_label(r.task_type or r.task_cls))}</td><td>{_e(r.prompt)}</td>"
             f"<td>{status}</td><td>{'yes' if r.success_once else 'no'}</td><td class=num>{first_s}</td>"
-            f"<td class=num>{r.steps}</td><td class=num>{r.seed}</td>"
+            f"{reward}<td class=num>{r.steps}</td><td class=num>{r.seed}</td>"
             f"<td class=num>{r.duration_s:.1f}s</td><td>{clips}</td></tr>")
     out.append("</table>")
     return "".join(out)
@@ -316,7 +343,9 @@ def render_report(summary: RunSummary, results: list[EpisodeResult],
         f"({summary.n_errors} errors) · {_e(summary.started_at or '')}</p>",
         f"<p><span class=big>{_pct(summary.success_rate)}</span> success at the end "
         f"(95% CI {_pct(lo)} – {_pct(hi)}) · {_pct(summary.success_once_rate)} at any chunk end · "
-        f"{summary.n_success}/{summary.n_episodes}</p>",
+        f"{summary.n_success}/{summary.n_episodes}"
+        + ("" if summary.avg_max_reward is None else f" · avg max reward {_reward(summary.avg_max_reward)}, "
+           f"avg sum reward {_reward(summary.avg_sum_reward)}") + "</p>",
         f"<p class=sub>{_e(summary.primary_metric)}. Errored episodes count as failures.</p>",
         _parity_notes(summary),
         "<h2>Per task</h2>", _task_table(summary), "<div style='margin-top:1rem'>", _bars_svg(summary), "</div>",

@@ -22,7 +22,8 @@ EPISODE_COLUMNS = ["episode_index", "house_index", "task", "prompt", "success", 
 
 def metrics(summary: RunSummary) -> dict[str, float]:
     """Flat scalar metrics: overall and ``<task>/<metric>`` for every task."""
-    keys = ("success_rate", "success_once_rate", "n_episodes", "n_success", "n_errors")
+    keys = ("success_rate", "success_once_rate", "n_episodes", "n_success", "n_errors", "avg_sum_reward",
+            "avg_max_reward")
 
     def scalars(block: Rates) -> dict[str, float]:  # null rates: no episode simulated
         return {k: v for k in keys if (v := getattr(block, k)) is not None}

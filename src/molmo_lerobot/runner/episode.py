@@ -200,10 +200,13 @@ class EpisodeSession(EpisodeOutcome):
         """One policy step towards ``action`` (:meth:`complete`); divergence is an error. ``observed``:
         the agent observes the new state (a chunk's last step; every Gymnasium step), so it counts
         for ``success_once``. ``images`` (whether the next :meth:`observe` asks for them) changes nothing
-        here: this env draws in :meth:`observe`. Returns success in the new state."""
+        here: this env draws in :meth:`observe`. Returns success in the new state; the step's reward is the
+        task's own (``Task.reward``), else 1.0 on success and 0.0 otherwise (the Gymnasium env's)."""
         self.env.step(self.complete(action))
         check_divergence(self.env.data, f"at step {self.steps}")
-        return self.count_step(bool(self.task.success()), observed)
+        success = bool(self.task.success())
+        reward = self.task.reward()
+        return self.count_step(success, observed, float(success if reward is None else reward))
 
     def result(self) -> EpisodeResult:
         """The episode's outcome as a result (``duration_s`` and outputs are the worker's)."""
@@ -218,6 +221,7 @@ class EpisodeSession(EpisodeOutcome):
             task_type=self.plan.task_type, prompt=plan.prompt, horizon=self.horizon,
             extra={"ended_by": self.ended_by or "horizon", "end_on_success": self.end_on_success,
                    "success_any_step": self.success_any_step, "camera_system": self.env.camera_system,
+                   **self.rewards(),
                    **({"start_warnings": list(odd)} if odd else {}),
                    **({"parity_notes": list(notes)} if notes else {})},
         )

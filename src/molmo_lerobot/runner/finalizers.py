@@ -1,6 +1,6 @@
 """What runs once a run is scored (``results.json`` written), in order: every recorder factory's
-``finalize`` (the dataset, the Hub push), then the run's finalizers chosen from its config: the
-report (every run) and the W&B log (``wandb.enable=true``).
+``finalize`` (the dataset, the Hub push), then the run's finalizers chosen from its config:
+``eval_info.json`` and the report (every run), and the W&B log (``wandb.enable=true``).
 
 A finalizer is an object with a ``label`` and ``finalize(output_dir, results, summary)``, the
 recorder factories' own run-level step. It returns what it adds to ``results.json`` (a
@@ -27,6 +27,17 @@ class Finalizer(Protocol):
                  summary: RunSummary) -> SummaryPiece | None: ...
 
 
+class EvalInfoFinalizer:
+    """``eval_info.json``: the score in ``lerobot-eval``'s schema."""
+
+    label = "eval_info.json"
+
+    def finalize(self, output_dir: Path, results: list[EpisodeResult], summary: RunSummary) -> None:
+        from molmo_lerobot.export.eval_info import write_eval_info
+
+        write_eval_info(output_dir, summary, results)
+
+
 class ReportFinalizer:
     """``report.html``."""
 
@@ -51,7 +62,7 @@ class WandbFinalizer:
 
 def run_finalizers(config: RunConfig) -> list[Finalizer]:
     """The finalizers ``config`` asks for, in the order they run."""
-    return [ReportFinalizer(), *([WandbFinalizer()] if config.wandb.enable else [])]
+    return [EvalInfoFinalizer(), ReportFinalizer(), *([WandbFinalizer()] if config.wandb.enable else [])]
 
 
 def finalize_run(output_dir: Path, results: list[EpisodeResult], summary: RunSummary, recorders: list[Any],

@@ -312,7 +312,7 @@ class SuiteSession(EpisodeOutcome):
         reply = self.suite.step(np.asarray(action[self.kind.move_group], dtype=np.float64), images=images)
         self._obs, self.task.last_reward = reply["observation"], float(reply["reward"])
         self.terminated = bool(reply["terminated"])
-        return self.count_step(bool(reply["success"]), observed)
+        return self.count_step(bool(reply["success"]), observed, self.task.last_reward)
 
     def end(self, said_done: bool = False, terminated: bool = False) -> str | None:
         """As :meth:`EpisodeOutcome.end`, the suite's env ending the episode when it says ``terminated``."""
@@ -327,7 +327,8 @@ class SuiteSession(EpisodeOutcome):
             success_once=self.success_once, steps=self.steps, seed=plan.seed, task_type=plan.task_type,
             prompt=plan.prompt, horizon=self.horizon,
             extra={"ended_by": self.ended_by or "horizon", "end_on_success": self.end_on_success,
-                   "success_any_step": self.success_any_step, **self._suite_fields(), "digest": self.episode.digest})
+                   "success_any_step": self.success_any_step, **self.rewards(), **self._suite_fields(),
+                   "digest": self.episode.digest})
 
     def _suite_fields(self) -> dict[str, Any]:
         """Which of the suite's episodes this is, minus what the result holds anyway (seed, horizon, prompt):
