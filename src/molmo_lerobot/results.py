@@ -93,19 +93,24 @@ class EpisodeOutcome:
         self.success = self.success_once = self.success_any_step = False
         #: why the episode ended (``horizon``, ``success``, ``terminated`` by the env, ``done``); ``None`` while it runs
         self.ended_by: str | None = None
-        #: the last step's reward, and the sum and maximum over the episode's steps (``lerobot-eval``'s
-        #: ``sum_reward`` and ``max_reward``; ``None`` before the first step)
+        #: the last step's reward as the task defines it (``None``: it defines none; what recorders get),
+        #: as scored (the task's, else 1.0 on success), and the sum and maximum of the scored one over the
+        #: episode's steps (``lerobot-eval``'s ``sum_reward`` and ``max_reward``; ``None`` before the first step)
+        self.task_reward: float | None = None
         self.reward = 0.0
         self.sum_reward = 0.0
         self.max_reward: float | None = None
 
-    def count_step(self, success: bool, observed: bool, reward: float) -> bool:
-        """One more step ending in ``success`` with ``reward``; ``observed``: the agent sees that state."""
+    def count_step(self, success: bool, observed: bool, reward: float | None) -> bool:
+        """One more step ending in ``success`` with the task's ``reward`` (``None``: it defines none, and the
+        step scores 1.0 on success); ``observed``: the agent sees that state."""
         self.success = success
         self.steps += 1
         self.success_any_step |= success
         if observed:
             self.success_once |= success
+        self.task_reward = reward
+        reward = float(success) if reward is None else reward
         self.reward = reward
         self.sum_reward += reward
         self.max_reward = reward if self.max_reward is None else max(self.max_reward, reward)

@@ -204,9 +204,7 @@ class EpisodeSession(EpisodeOutcome):
         task's own (``Task.reward``), else 1.0 on success and 0.0 otherwise (the Gymnasium env's)."""
         self.env.step(self.complete(action))
         check_divergence(self.env.data, f"at step {self.steps}")
-        success = bool(self.task.success())
-        reward = self.task.reward()
-        return self.count_step(success, observed, float(success if reward is None else reward))
+        return self.count_step(bool(self.task.success()), observed, self.task.reward())
 
     def result(self) -> EpisodeResult:
         """The episode's outcome as a result (``duration_s`` and outputs are the worker's)."""

@@ -113,7 +113,7 @@ def rollout(session: EpisodeSession | SuiteSession, policy: Policy, recorders: R
         success = session.step(action, observed=not queue, images=images)
         ended = session.end(said_done)
         if recs.recorders:
-            recs.record_step(obs, action, session.task.reward(), success, ended is not None)
+            recs.record_step(obs, action, session.task_reward, success, ended is not None)
         if ended:
             return session.result()
         obs = session.observe(images)
