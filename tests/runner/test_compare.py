@@ -262,3 +262,20 @@ def test_compare_names_the_options_that_made_the_episodes_differ(tmp_path):
     assert str(refused.value) == (f"refusing to compare: {a} and {b} evaluated different episodes of 'b': horizon 300 "
                                   f"vs 200 (benchmark sha256 {'ab' * 6}… vs {'cd' * 6}…); a paired comparison needs "
                                   "the same episodes")
+
+
+@pytest.mark.slow
+def test_a_benchmark_run_with_another_robot_names_it_and_is_not_compared(tmp_path):
+    """``robot.name=franka_droid_fr3`` plays pick_v2's franka_droid episodes with the FR3 arm (MolmoSpaces'
+    robot_config switch); results.json names each robot, and molmo-compare refuses the pair naming both."""
+    from eval_runs import evaluate
+
+    common = ["benchmark=pick_v2", "policy=random", "workers=1", "horizon=2", "limit=1", "progress=false"]
+    droid = evaluate(*common, f"output_dir={tmp_path / 'droid'}")
+    fr3 = evaluate(*common, "robot.name=franka_droid_fr3", f"output_dir={tmp_path / 'fr3'}")
+    assert [r["name"] for r in droid.summary["robots"]] == ["franka_droid"] and fr3.episodes[0].error is None
+    assert [r["name"] for r in fr3.summary["per_task"]["pick"]["robots"]] == ["franka_droid_fr3"]
+    assert droid.summary["benchmark"]["sha256"] == fr3.summary["benchmark"]["sha256"]  # the same episodes
+    with pytest.raises(CompareError, match=r"ran robot franka_droid \(sha256 \w{12}…\) but .* ran robot "
+                                           r"franka_droid_fr3 \(sha256 \w{12}…\); a paired comparison needs the same"):
+        compare_runs(load_run(tmp_path / "droid"), load_run(tmp_path / "fr3"))

@@ -111,6 +111,7 @@ class RunDirectory:
         if not isinstance(options, dict):
             raise RunError(f"cannot resume {self.path}: {self.run_file} records no options (a run started by an "
                            "older molmo-lerobot); finish it with the code that started it, or start a new output_dir")
+        given = json.loads(json.dumps(given))  # compare as stored (JSON turns int keys into strings)
         merged = copy.deepcopy(options)
         for key in sorted(keys if keys is not None else {*given, *options}):
             path = key.split(".")
