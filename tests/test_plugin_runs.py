@@ -67,8 +67,10 @@ def test_a_clash_fails_the_run_naming_both_and_a_pin_runs_on_the_chosen_provider
     summary = json.loads((out / "results.json").read_text())
     assert (summary["n_episodes"], summary["n_errors"]) == (2, 0)
     assert summary["eval_options"]["plugins_prefer"] == {"robot": {"franka": "impostor_franka"}}  # provenance
-    assert "its eval_options differs" in "\n".join(  # never mixes providers in one run
-        refusal(*FAST, "plugins.prefer.robot.franka=franka", f"output_dir={out}", "resume=true"))
+    assert summary["robots"][0]["name"] == "franka" and summary["robots"][0]["version"] == "impostor-bots 0.1"
+    refused = refusal(*FAST, "plugins.prefer.robot.franka=franka", f"output_dir={out}", "resume=true")
+    assert ("plugins.prefer.robot.franka differs from the run's (\"impostor_franka\" in run.json, \"franka\" "
+            "given)") in "\n".join(refused)  # never mixes providers in one run
     built_in = {int(pid) for pid in marker.read_text().split()}
     assert built_in and os.getpid() not in built_in  # the workers built the pinned impostor
 

@@ -32,7 +32,7 @@ from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.run_config import RunConfig
 
-__all__ = ["ConfigError", "PluginConfigDirs", "compose", "config_message", "primary_config_dir"]
+__all__ = ["ConfigError", "PluginConfigDirs", "compose", "config_message", "given_keys", "primary_config_dir"]
 
 
 #: the run config's keys that pick a file of ``conf/<group>/`` (or a plugin's config dir)
@@ -101,6 +101,16 @@ def _register() -> None:
 
 
 _register()
+
+
+def given_keys(overrides: list[str]) -> set[str]:
+    """The options a command line's ``overrides`` give, as dotted keys (what a resume does not take from
+    the run): ``a.b=1``, ``+a.b=1``, ``~a.b`` give ``a.b``; a config group's choice (``policy=lerobot``)
+    gives ``policy.name``, the rest of the group being options the command line did not give."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    keys = (o.key_or_group for o in OverridesParser.create().parse_overrides(overrides))
+    return {f"{key}.name" if key in CONFIG_GROUPS else key for key in keys}
 
 
 def compose(overrides: list[str], config_name: str = "eval") -> DictConfig:

@@ -7,6 +7,8 @@ edited episode is what the seeds, the rollout and the recorded dataset all see:
   position and yaw (resting on the same support), removing the original and renaming the
   task's target to ``custom_object.name``;
 * ``camera.overrides``: set fields of named cameras (``{exterior: {fov: 60}}``);
+* ``robot.name``: the robot every episode runs with, instead of its ``robot.robot_name`` (MolmoSpaces'
+  eval config's ``robot_config``); the episode's ``init_qpos`` must fit its move groups;
 * ``robot.base_size``: the robot's pedestal for every episode (``[x, y, z]`` metres, ``null``
   for none; ``default`` leaves each episode's ``robot.base_size`` or the robot's own);
 * ``camera.randomization``: level 0-3 of seeded camera jitter (position, direction, field of
@@ -56,6 +58,9 @@ def molmo_episode_overrides(episode: EpisodeSpec, context: RunContext) -> Episod
     if run.custom_object.path:
         _swap_target(data, episode, Path(run.custom_object.path).expanduser(), run.custom_object.name,
                      run.custom_object.description, context.catalog)
+        changed = True
+    if run.robot.name is not None and run.robot.name != episode.robot.robot_name:
+        data["robot"]["robot_name"] = run.robot.name
         changed = True
     if run.robot.base_size != "default":
         data["robot"]["base_size"] = run.robot.base_size

@@ -318,6 +318,11 @@ class Plugins:
                                  f"providers of {kind} {name!r} ({who}); give one plugin name")
         return chosen[0]
 
+    def provider(self, kind: str, name: str) -> PluginRecord:
+        """The plugin whose ``kind`` item :meth:`resolve` gives for ``name``."""
+        item = self.resolve(kind, name)
+        return next(rec for found, rec in self._index(kind)[name] if found is item)
+
     def set_preferences(self, prefer: Pins | None) -> None:
         """Pin providers for clashing names (``{kind: {name: plugin}}``, the run's ``plugins.prefer``).
 

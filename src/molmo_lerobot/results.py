@@ -26,7 +26,8 @@ episodes that simulated (``avg_sum_reward``, ``avg_max_reward``).
 :class:`RunSummary` is ``results.json``'s schema. ``summarize`` scores the episodes; what runs
 after the score (the dataset's Hub push) returns a :data:`SummaryPiece` that the summary takes
 in (:meth:`RunSummary.with_piece`), never edits it. A file without ``schema_version`` is
-version 1, the same schema (runs written before the field existed).
+version 1 (runs written before the field existed); version 2 added ``robots`` (the run's and each
+task's), which version 1's readers refuse as an unknown field.
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 from molmo_lerobot.errors import EPISODE, INFRASTRUCTURE, MolmoError
 
 #: ``results.json``'s ``schema_version`` this code writes and the newest it reads
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 PRIMARY_METRIC = "success_rate (success at the final step)"
 EPISODES_FILE = "episodes.jsonl"
 RESULTS_FILE = "results.json"
@@ -252,6 +253,15 @@ class _Part(BaseModel):
     model_config = ConfigDict(strict=True, extra="forbid", frozen=True)
 
 
+class RobotRef(_Part):
+    """A robot that ran: its name, version (the distribution that provides it) and the sha256 of its model
+    as built (``null`` for an env suite's robot, which its env builds)."""
+
+    name: str
+    version: str | None = None
+    sha256: str | None = None
+
+
 class Rates(_Part):
     """One score block: the run's (the top of ``results.json``) or one task's (``per_task``)."""
 
@@ -268,6 +278,7 @@ class Rates(_Part):
     #: (``lerobot-eval``'s ``avg_sum_reward``, ``avg_max_reward``); absent from runs written before them
     avg_sum_reward: float | None = None
     avg_max_reward: float | None = None
+    robots: list[RobotRef] | None = None  # the robots its episodes ran (absent: written before version 2)
 
     @staticmethod
     def score(results: list[EpisodeResult]) -> dict[str, Any]:
@@ -352,7 +363,7 @@ class RunSummary(Rates):
 
     model_config = ConfigDict(strict=True, extra="allow", frozen=True)
 
-    schema_version: int = SCHEMA_VERSION
+    schema_version: int = 1  # a file without it: written before it existed (summarize writes SCHEMA_VERSION)
     primary_metric: str = PRIMARY_METRIC
     per_task: dict[str, TaskRates]
     errors: list[EpisodeError]
@@ -442,7 +453,8 @@ def summarize(results: list[EpisodeResult], **context: Any) -> RunSummary:
         by_task[r.task_type or r.task_cls or "unknown"].append(r)
     return RunSummary.model_validate({
         "schema_version": SCHEMA_VERSION, "primary_metric": PRIMARY_METRIC, **Rates.score(results),
-        "per_task": {t: {**Rates.score(rs), "instructions": _instructions(rs)} for t, rs in sorted(by_task.items())},
+        "per_task": {t: {**Rates.score(rs), "instructions": _instructions(rs), **_robots(rs, context.get("robots"))}
+                     for t, rs in sorted(by_task.items())},
         "errors": [{"episode_index": r.episode_index, "error": r.error, "error_kind": r.error_kind}
                    for r in results if r.error is not None],
         "start_warnings": [{"episode_index": r.episode_index, "warnings": r.extra["start_warnings"]}
@@ -453,6 +465,14 @@ def summarize(results: list[EpisodeResult], **context: Any) -> RunSummary:
                           for r in results if r.output_errors],
         **context,
     }, strict=False)
+
+
+def _robots(results: list[EpisodeResult], robots: list[dict[str, Any]] | None) -> dict[str, Any]:
+    """``{"robots": [...]}``: those of ``robots`` (the run's) that ``results`` ran (their ``extra.robot``)."""
+    if robots is None:
+        return {}
+    ran = {r.extra.get("robot") for r in results}
+    return {"robots": [robot for robot in robots if robot["name"] in ran]}
 
 
 def summary_lines(s: RunSummary, max_errors: int = 10) -> list[str]:

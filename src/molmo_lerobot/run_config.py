@@ -191,6 +191,11 @@ def _base_size(value: Any) -> Any:
 
 
 class RobotConfig(_Section):
+    #: run every episode with this robot instead of the one its spec names (``robot.robot_name``), as
+    #: MolmoSpaces' eval config's ``robot_config`` does; null: each episode's own
+    name: Annotated[str | None, _rule(_optional(lambda v: isinstance(v, str) and v != ""),
+                                      "{key}: expected a robot's name (molmo-plugins lists them) or null, "
+                                      "got {got}")] = None
     #: the robot's pedestal, as MolmoSpaces' robot configs: [x, y, z] metres, null for none; default:
     #: the episode's robot.base_size, else the robot's (franka_droid [0.5, 0.5, 0.58], franka none)
     base_size: Annotated[str | list[int | float] | None, BeforeValidator(_base_size)] = "default"

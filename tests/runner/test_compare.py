@@ -233,3 +233,49 @@ def test_control_mode_and_mujoco_version_are_part_of_the_trial(tmp_path, path, v
     with pytest.raises(CompareError, match="ran different trials") as info:
         compare_runs(load_run(a), load_run(b))
     assert path in str(info.value)
+
+
+def test_compare_refuses_runs_of_different_robots_naming_both(tmp_path):
+    droid = {"name": "franka_droid", "version": "molmo-lerobot 0.1.0", "sha256": "1" * 64}
+    fr3 = {"name": "franka_droid_fr3", "version": "molmo-lerobot 0.1.0", "sha256": "2" * 64}
+    a = _write_run(tmp_path / "a", {0: (True, True)}, header={"robots": [droid]})
+    b = _write_run(tmp_path / "b", {0: (False, False)}, sha="cd" * 32, header={"robots": [fr3]})
+    with pytest.raises(CompareError) as refused:
+        compare_runs(load_run(a), load_run(b))
+    assert str(refused.value) == (f"refusing to compare: {a} ran robot franka_droid (sha256 111111111111…) but {b} ran "
+                                  "robot franka_droid_fr3 (sha256 222222222222…); a paired comparison needs the same "
+                                  "robot")
+    # the same robot's model built otherwise (MolmoSpaces' own model installed) is another robot too
+    c = _write_run(tmp_path / "c", {0: (False, False)}, header={"robots": [{**droid, "sha256": "3" * 64}]})
+    with pytest.raises(CompareError, match=r"ran robot franka_droid \(sha256 333333333333…\)"):
+        compare_runs(load_run(a), load_run(c))
+    d = _write_run(tmp_path / "d", {0: (False, False)}, header={"robots": [{**droid, "version": "x 2"}]})
+    assert compare_runs(load_run(a), load_run(d))["n_shared"] == 1  # same model, other release: comparable
+
+
+def test_compare_names_the_options_that_made_the_episodes_differ(tmp_path):
+    config = {"benchmark": {"name": "libero_object", "suite": "libero", "image_size": 64}, "seed": 0, "horizon": 300}
+    a = _write_run(tmp_path / "a", {0: (True, True)}, header={"config": config})
+    b = _write_run(tmp_path / "b", {0: (True, True)}, sha="cd" * 32, header={"config": {**config, "horizon": 200}})
+    with pytest.raises(CompareError) as refused:
+        compare_runs(load_run(a), load_run(b))
+    assert str(refused.value) == (f"refusing to compare: {a} and {b} evaluated different episodes of 'b': horizon 300 "
+                                  f"vs 200 (benchmark sha256 {'ab' * 6}… vs {'cd' * 6}…); a paired comparison needs "
+                                  "the same episodes")
+
+
+@pytest.mark.slow
+def test_a_benchmark_run_with_another_robot_names_it_and_is_not_compared(tmp_path):
+    """``robot.name=franka_droid_fr3`` plays pick_v2's franka_droid episodes with the FR3 arm (MolmoSpaces'
+    robot_config switch); results.json names each robot, and molmo-compare refuses the pair naming both."""
+    from eval_runs import evaluate
+
+    common = ["benchmark=pick_v2", "policy=random", "workers=1", "horizon=2", "limit=1", "progress=false"]
+    droid = evaluate(*common, f"output_dir={tmp_path / 'droid'}")
+    fr3 = evaluate(*common, "robot.name=franka_droid_fr3", f"output_dir={tmp_path / 'fr3'}")
+    assert [r["name"] for r in droid.summary["robots"]] == ["franka_droid"] and fr3.episodes[0].error is None
+    assert [r["name"] for r in fr3.summary["per_task"]["pick"]["robots"]] == ["franka_droid_fr3"]
+    assert droid.summary["benchmark"]["sha256"] == fr3.summary["benchmark"]["sha256"]  # the same episodes
+    with pytest.raises(CompareError, match=r"ran robot franka_droid \(sha256 \w{12}…\) but .* ran robot "
+                                           r"franka_droid_fr3 \(sha256 \w{12}…\); a paired comparison needs the same"):
+        compare_runs(load_run(tmp_path / "droid"), load_run(tmp_path / "fr3"))

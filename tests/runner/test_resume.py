@@ -113,7 +113,7 @@ def test_resume_refuses_a_different_run(faulty_policy, small_bench, tmp_path, ev
         run_evaluation(eval_config(small_bench, out, *common), fork_servers)
     with pytest.raises(RunError, match="seed differs"):
         run_evaluation(eval_config(small_bench, out, *common, "resume=true", "seed=1"), fork_servers)
-    with pytest.raises(RunError, match="timing differs"):
+    with pytest.raises(RunError, match=r"timing.policy_dt_ms differs from the run's \(66.0 in run.json, 100 given\)"):
         run_evaluation(eval_config(small_bench, out, *common, "resume=true", "timing.policy_dt_ms=100"), fork_servers)
     # issue 36: an environment override of the look (here shadows off) is part of the run, never silent
     assert first.summary["render_profile"]["name"] == "v2" and first.summary["render_profile"]["overrides"] == {}

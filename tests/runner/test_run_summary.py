@@ -90,12 +90,13 @@ def test_results_written_by_older_code_read_and_write_back_unchanged(name):
 
 
 def test_a_fresh_summary_has_every_field_of_mains_results_json():
-    """The fields main wrote are the model's fields (plus schema_version): none left to the extras."""
+    """The fields main wrote are the model's fields (plus schema_version and the later robots): none left to
+    the extras."""
     doc = json.loads((DATA / OLD[0]).read_text())
     summary = RunSummary.from_document(doc)
     assert summary.model_extra == {}
     assert set(RunSummary.model_fields) - set(doc) == {"schema_version", "push", "export_errors", "parity_notes",
-                                                       "avg_sum_reward", "avg_max_reward"}
+                                                       "avg_sum_reward", "avg_max_reward", "robots"}
 
 
 @pytest.mark.parametrize(("edit", "message"), [
@@ -106,7 +107,8 @@ def test_a_fresh_summary_has_every_field_of_mains_results_json():
     (lambda d: d["per_task"]["pick"].update(n_sucess=1), r"field per_task\.pick\.n_sucess: Extra inputs "),
     (lambda d: d.update(errors=[{"episode_index": 1}]), r"field errors\.0\.error: Field required$"),
     (lambda d: d["benchmark"].pop("name"), r"field benchmark\.name: Field required$"),
-    (lambda d: d.update(schema_version=SCHEMA_VERSION + 1), r"schema_version 2 is newer than this molmo-lerobot"),
+    (lambda d: d.update(schema_version=SCHEMA_VERSION + 1),
+     rf"schema_version {SCHEMA_VERSION + 1} is newer than this molmo-lerobot"),
 ])
 def test_a_malformed_results_json_is_one_line_naming_the_field(tmp_path, edit, message):
     doc = json.loads((DATA / OLD[0]).read_text())

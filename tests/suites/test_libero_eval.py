@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from eval_runs import interrupted, molmo_eval
 from molmo_lerobot.config import compose
 from molmo_lerobot.errors import RunError
 from molmo_lerobot.export.merge import read_eval_records
@@ -138,3 +139,24 @@ def test_libero_run_refuses_environment_state_recording_up_front(tmp_path):
         run_evaluation(compose([*ARGS, "record=true", "record_environment_state=true", "limit=1",
                                 f"output_dir={tmp_path}"]))
     assert not tmp_path.joinpath("episodes.jsonl").exists()
+
+
+@needs_libero
+@pytest.mark.slow
+@pytest.mark.timeout(3600)
+def test_libero_run_interrupted_resumes_with_the_command_it_prints(tmp_path):
+    """Ctrl-C of ``molmo-eval policy=random benchmark=libero_object …`` once an episode is done prints
+    ``output_dir=… resume=true``; that command alone finishes the run with its options (policy, benchmark, its
+    image size, horizon, seed: none the defaults) and ends as the run never cut."""
+    args = [*ARGS, "limit=3", "seed=2"]
+    whole = run_evaluation(compose([*args, f"output_dir={tmp_path / 'whole'}"]))
+    cut = tmp_path / "cut"
+    done = molmo_eval(*interrupted(*args, out=cut, after=1, timeout=1200).split(), timeout=1800)
+    assert done.returncode == 0, done.stderr[-3000:]
+
+    def outcomes(rows):
+        return sorted((r["episode_index"], r["task_type"], r["seed"], r["success"], r["steps"], r["error"],
+                       r["extra"]["digest"]) for r in rows)
+
+    resumed = [json.loads(line) for line in (cut / "episodes.jsonl").read_text().splitlines()]
+    assert outcomes(resumed) == outcomes(r.to_dict() for r in whole.episodes) and len(resumed) == 3

@@ -11,6 +11,7 @@ import json
 import numpy as np
 import pytest
 
+from eval_runs import interrupted, molmo_eval
 from molmo_lerobot.config import compose
 from molmo_lerobot.policies.random_policy import RandomPolicy
 from molmo_lerobot.run_config import RunConfig
@@ -50,6 +51,31 @@ def test_pusht_run_resumes_the_episodes_left(tmp_path):
     run_evaluation(compose([*ARGS, "workers=1", "limit=2", "resume=true", f"output_dir={tmp_path}"]))
     lines = (tmp_path / "episodes.jsonl").read_text().splitlines()
     assert lines[:1] == kept and len(lines) == 2 and json.loads(lines[1])["seed"] == 1
+
+
+def _outcomes(out) -> list[tuple]:
+    rows = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    return sorted((r["episode_index"], r["seed"], r["steps"], r["success"], r["success_once"], r["error"],
+                   r["extra"]["success_any_step"]) for r in rows)
+
+
+@pytest.mark.parametrize("record", [pytest.param(False), pytest.param(True, marks=pytest.mark.slow)])
+def test_an_interrupted_run_resumes_with_the_command_it_prints(tmp_path, record):
+    """Ctrl-C mid-run prints ``output_dir=… resume=true``; that command alone finishes the run with its own
+    options (none of them the defaults) and ends as the uninterrupted run, its recording too."""
+    args = [*ARGS, "benchmark.image_size=64", "seed=3", "workers=1", "limit=6",
+            *(["record=true", "video.vcodec=h264"] if record else [])]
+    run_evaluation(compose([*args, f"output_dir={tmp_path / 'ref'}"]))
+    out = tmp_path / "run"
+    command = interrupted(*args, out=out, after=2)
+    done = molmo_eval(*command.split())
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert _outcomes(out) == _outcomes(tmp_path / "ref") and len(_outcomes(out)) == 6
+    if record:
+        from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+        ds = LeRobotDataset("local/x", root=out / "dataset", video_backend="pyav")
+        assert ds.meta.total_episodes == 6 and tuple(ds.meta.features["observation.image"]["shape"][:2]) == (64, 64)
 
 
 def test_random_policy_draws_targets_across_the_workspace():

@@ -6,6 +6,8 @@ A Hydra app (``@hydra.main``) over ``conf/eval.yaml`` (plus the config dirs plug
 preload the same modules), ``--cfg job|hydra|all``, ``--help``, ``--info``.
 Each job validates its config (:class:`~molmo_lerobot.run_config.RunConfig`) before any
 work. Bad overrides, config and run errors print one ``molmo-eval: error:`` message and exit 2.
+With ``resume=true`` the options the command line gives (:func:`~molmo_lerobot.config.given_keys`)
+are all it changes: the others are the run's (``output_dir=X resume=true`` is the whole command).
 """
 
 from __future__ import annotations
@@ -126,14 +128,17 @@ def _job(cfg: Any, jobs: list[dict[str, Any]], fork_servers: ForkServerPool) -> 
     from hydra.core.hydra_config import HydraConfig
     from hydra.types import RunMode
 
+    from molmo_lerobot.config import given_keys
     from molmo_lerobot.results import summary_lines
     from molmo_lerobot.run_config import RunConfig
     from molmo_lerobot.runner.evaluate import run_evaluation
 
     try:
+        given = given_keys(list(HydraConfig.get().overrides.task))  # a resume takes the others from the run
         if HydraConfig.get().mode == RunMode.MULTIRUN and cfg.get("output_dir") is None:
             cfg.output_dir = HydraConfig.get().runtime.output_dir
-        res = run_evaluation(RunConfig.of(cfg), fork_servers)
+            given.add("output_dir")
+        res = run_evaluation(RunConfig.of(cfg), fork_servers, given)
     except refused_errors() as exc:
         for line in str(exc).splitlines() or [type(exc).__name__]:  # one line per problem
             print(f"molmo-eval: error: {line}", file=sys.stderr)

@@ -203,8 +203,9 @@ class LeRobotPolicy(Policy):
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
         path = self.cfg.path
-        if not os.path.isdir(path) and (path.startswith((".", "/", "~")) or path.count("/") != 1):
-            raise FileNotFoundError(f"policy.path={path!r}: no such directory")
+        problem = path_problem(path)
+        if problem:
+            raise FileNotFoundError(problem)
         try:
             config = PreTrainedConfig.from_pretrained(path)
         except Exception as exc:
@@ -399,7 +400,34 @@ def make_lerobot_policy(cfg: dict[str, Any]) -> Policy:
     return LeRobotPolicy(cfg)
 
 
+#: the policy config file of a LeRobot ``save_pretrained`` directory
+CONFIG_NAME = "config.json"
+
+
+def path_problem(path: Any) -> str | None:
+    """What is wrong with ``policy.path`` that shows without loading it (``None``: nothing): none given, a
+    local path that is no directory, a directory without LeRobot's ``config.json``. A Hub repo id
+    (``owner/name``, not a local directory) is left to loading."""
+    if not isinstance(path, str) or path in ("", "???"):
+        return "policy.path: missing; give policy.path=<a save_pretrained directory or a Hub repo id>"
+    if os.path.isdir(path):
+        if not os.path.isfile(os.path.join(path, CONFIG_NAME)):
+            return (f"policy.path={path!r}: no {CONFIG_NAME} in that directory (not a LeRobot save_pretrained "
+                    "checkpoint)")
+        return None
+    if path.startswith((".", "/", "~")) or path.count("/") != 1:
+        return f"policy.path={path!r}: no such directory"
+    return None
+
+
+def lerobot_config_problems(cfg: dict[str, Any]) -> list[str]:
+    """``policy=lerobot``'s problems that show before any run directory: its ``policy.path``."""
+    problem = path_problem(cfg.get("path"))
+    return [problem] if problem else []
+
+
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
     return [PolicyType("lerobot", make_lerobot_policy, "any LeRobot pretrained policy (policy.path=…)",
-                       conventions=True, preload=("torch", "lerobot.policies.factory"))]
+                       conventions=True, preload=("torch", "lerobot.policies.factory"),
+                       check=lerobot_config_problems)]

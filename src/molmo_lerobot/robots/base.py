@@ -8,6 +8,7 @@ robot to a world :class:`mujoco.MjSpec` at a base pose, then :meth:`RobotType.bi
 
 from __future__ import annotations
 
+import hashlib
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
@@ -258,6 +259,20 @@ class RobotType(ABC):
     @abstractmethod
     def spec(self) -> mujoco.MjSpec:
         """A standalone spec of the robot with its base at the origin (also used for IK)."""
+
+    def model_sha256(self) -> str:
+        """SHA-256 of the robot's model as built here: every array of its compiled :meth:`spec` (bodies,
+        joints, actuators, meshes' vertices, names), not where its asset files lie nor the meshes' hull
+        polygons MuJoCo derives from their vertices (qhull's, which vary with the models the process
+        compiled before); what a run records of the robot that ran."""
+        model = self.spec().compile()
+        digest = hashlib.sha256()
+        for name in sorted(dir(model)):
+            value = getattr(model, name)
+            if (not name.startswith(("_", "mesh_poly")) and "path" not in name
+                    and isinstance(value, np.ndarray)):
+                digest.update(name.encode() + b"\0" + np.ascontiguousarray(value).tobytes())
+        return digest.hexdigest()
 
     @staticmethod
     def base_pose(values: Sequence[float]) -> list[float]:

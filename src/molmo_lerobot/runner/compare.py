@@ -1,7 +1,8 @@
 """Paired comparison of two runs on the episodes they share (``molmo-compare RUN_A RUN_B``).
 
-Two runs are comparable only if they evaluated the same benchmark (same content sha256)
-under the same trial definition: timing, horizons (run-level and per shared episode),
+Two runs are comparable only if they ran the same robots (name and model digest) on the same
+benchmark (same content sha256; where it differs, the options that made the episodes differ are
+named) under the same trial definition: timing, horizons (run-level and per shared episode),
 evaluation options and success-rule thresholds. A difference in any of these is refused
 (``allow_different_trials`` compares anyway and lists each difference); other differences
 (episode seeds, versions, other config keys) are flagged in the notes. Episodes are paired
@@ -29,6 +30,7 @@ from typing import Any
 from molmo_lerobot.benchmark.schema import known_task_type
 from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.results import RESULTS_FILE, SUCCESS_LABELS, EpisodeResult, RunFileError, read_run, wilson_ci
+from molmo_lerobot.runner.run_directory import robots_named
 
 METRICS = {key: SUCCESS_LABELS[key] for key in ("success", "success_once")}
 #: ``results.json`` fields that define the trial an episode is (besides the benchmark).
@@ -211,13 +213,40 @@ def _task(ea: EpisodeResult, eb: EpisodeResult) -> str:
     return known_task_type(cls) or str(cls or "unknown")
 
 
+def _robots(run: Run) -> set[tuple[str, str | None]] | None:
+    """The robots ``run`` ran, by name and model digest (``None``: not recorded, a run before they were)."""
+    robots = run.results.get("robots")
+    return None if robots is None else {(r["name"], r.get("sha256")) for r in robots}
+
+
+def _episode_options(run_a: Run, run_b: Run) -> list[str]:
+    """Where the runs' options that choose a benchmark's episodes differ (``benchmark.*``, ``seed``,
+    ``horizon``: an env suite's episodes are made from them), one ``"<key> <a> vs <b>"`` each."""
+    ca, cb = run_a.results.get("config") or {}, run_b.results.get("config") or {}
+    if not ca or not cb:
+        return []
+    return [d for key in ("benchmark", "seed", "horizon") for d in _differences(key, ca.get(key, _UNSET),
+                                                                                 cb.get(key, _UNSET))]
+
+
 def compare_runs(run_a: Run, run_b: Run, metric: str = "success",
                  allow_different_trials: bool = False) -> dict[str, Any]:
     """The comparison report (JSON-serializable); raises :class:`CompareError` if not comparable."""
     if metric not in METRICS:
         raise CompareError(f"unknown metric {metric!r} (available: {', '.join(METRICS)})")
+    robots_a, robots_b = (_robots(run) for run in (run_a, run_b))
+    if robots_a is not None and robots_b is not None and robots_a != robots_b:
+        raise CompareError(f"refusing to compare: {run_a.path} ran {robots_named(run_a.results['robots'])} but "
+                           f"{run_b.path} ran {robots_named(run_b.results['robots'])}; a paired comparison needs "
+                           "the same robot")
     sha_a, sha_b = run_a.benchmark["sha256"], run_b.benchmark["sha256"]
     if sha_a != sha_b:
+        causes = _episode_options(run_a, run_b)
+        if causes:
+            raise CompareError(
+                f"refusing to compare: {run_a.path} and {run_b.path} evaluated different episodes of "
+                f"{run_a.benchmark.get('name')!r}: {'; '.join(causes)} (benchmark sha256 {sha_a[:12]}… vs "
+                f"{sha_b[:12]}…); a paired comparison needs the same episodes")
         raise CompareError(
             f"refusing to compare: {run_a.path} evaluated benchmark {run_a.benchmark.get('name')!r} "
             f"(sha256 {sha_a[:12]}…) but {run_b.path} evaluated {run_b.benchmark.get('name')!r} "

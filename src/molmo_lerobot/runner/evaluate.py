@@ -18,6 +18,7 @@ import re
 import subprocess
 import sys
 import time
+from collections.abc import Collection
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from importlib import metadata
@@ -38,7 +39,7 @@ from molmo_lerobot.plugins import PluginError, Plugins
 from molmo_lerobot.results import EpisodeResult, RunSummary, summarize
 from molmo_lerobot.run_config import RunConfig, episode_work_problem
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
-from molmo_lerobot.runner.fingerprint import policy_checkpoints
+from molmo_lerobot.runner.fingerprint import plan_robot, policy_checkpoints, robots_of
 from molmo_lerobot.runner.forkserver import ForkServerPool, worker_preload
 from molmo_lerobot.runner.placement import check_devices
 from molmo_lerobot.runner.plan import EpisodePlan, EpisodePlanner
@@ -56,6 +57,7 @@ from molmo_lerobot.suites.benchmark import (
     is_suite,
     load_suite_benchmark,
     recording_layout,
+    suite_options,
     task_label,
 )
 from molmo_lerobot.suites.pipe import SuiteError
@@ -125,16 +127,18 @@ def resolve_benchmark_path(bench_cfg: dict[str, Any], plugins: Plugins) -> Path:
 
 def plugin_option_problems(run: RunContext) -> list[str]:
     """The run options only the installed plugins can check, one line each naming its key: the
-    policy's own options (its ``PolicyType.check``), ``camera.system``, ``horizons.<task type>``."""
+    policy's own options (its ``PolicyType.check``), ``camera.system``, ``robot.name``, ``horizons.<task type>``."""
     config = run.config
     policy = run.plugins.policy(str(config.policy["name"]))
     check = getattr(policy, "check", None)  # a duck-typed descriptor may lack it
     out = list(check(config.policy)) if check is not None else []
-    if config.camera.system is not None:
-        try:
-            run.plugins.camera_system(config.camera.system)
-        except PluginError as exc:
-            out.append(f"camera.system: {str(exc).splitlines()[0]}")
+    for key, kind, name in (("camera.system", "camera", config.camera.system), ("robot.name", "robot",
+                                                                               config.robot.name)):
+        if name is not None:
+            try:
+                run.plugins.resolve(kind, name)
+            except PluginError as exc:
+                out.append(f"{key}: {str(exc).splitlines()[0]}")
     task_types = run.plugins.names("task")
     for task in config.horizons:
         if task not in task_types:
@@ -167,20 +171,22 @@ def _make_executor(config: RunConfig, fork_servers: ForkServerPool | None = None
     raise RunError(f"unknown executor {ex['name']!r} (available: local, ray)")
 
 
-def run_evaluation(config: RunConfig | DictConfig | dict[str, Any],
-                   fork_servers: ForkServerPool | None = None) -> EvalResults:
+def run_evaluation(config: RunConfig | DictConfig | dict[str, Any], fork_servers: ForkServerPool | None = None,
+                   given: Collection[str] | None = None) -> EvalResults:
     """Evaluate ``config.policy`` on ``config.benchmark``; see ``conf/eval.yaml`` for every option.
     ``fork_servers``: where local workers' fork server is borrowed from and given back to (runs in
-    one process reusing it), instead of one started and stopped for this run."""
+    one process reusing it), instead of one started and stopped for this run. ``given``: the options
+    the command line gave (dotted keys, :func:`~molmo_lerobot.config.given_keys`); a resume takes the
+    others from the run (``None``: ``config`` states every option)."""
     from molmo_lerobot.benchmark.load import load_benchmark
 
     config = RunConfig.of(config)  # validated once (unless given a RunConfig): nonsense stops here
+    if config.resume:
+        config = _resumed_config(config, given)
+    options = config.plain()  # as given: run.json keeps them for a resume
     if config.push and not config.record:
         print("molmo-eval: push=true records the dataset it pushes (record=true)", file=sys.stderr)
-    update: dict[str, Any] = {"record": config.record or config.push or config.dataset_id is not None}
-    if config.resume and config.dataset_id and not config.output_dir:
-        update["output_dir"] = str(_stored_run_dir(config.dataset_id))  # resume the run that recorded it
-    config = config.model_copy(update=update)  # dataset_id stores what it records
+    config = config.model_copy(update={"record": config.record or config.push or config.dataset_id is not None})
     try:  # workers build the same context (plugin pins, MolmoSpaces data) from its portable config
         run = RunContext.build(config)
     except (SettingsError, AssetError, GraspError) as exc:
@@ -205,7 +211,7 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any],
     started = datetime.now(UTC)
     run_dir = RunDirectory(Path(config.output_dir or Path("runs") / f"{safe_name(bench.name)}-"
                                 f"{safe_name(policy_name)}-{started:%Y%m%d-%H%M%S}"))
-    update = {"output_dir": str(run_dir.path)}
+    update: dict[str, Any] = {"output_dir": str(run_dir.path)}
     if config.resume and config.limit is None:  # a resume keeps the run's limit unless given a new one
         update["limit"] = run_dir.recorded_limit()
     config = config.model_copy(update=update)
@@ -218,8 +224,8 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any],
         planner = EpisodePlanner(run, bench)
         plans, thresholds = _plan_run(planner, indices)
         horizons = planner.horizons
-    run_info = {**_run_info(config, run, bench, horizons), "selection": selection}
-    done = run_dir.open(run_info, config.resume, recorders)
+    run_info = {**_run_info(config, run, bench, horizons, robots_of(run, bench, plans)), "selection": selection}
+    done = run_dir.open(run_info, {**options, "output_dir": str(run_dir.path)}, config.resume, recorders)
     outside = sorted(r.episode_index for r in done if r.episode_index not in plans)
     if outside:  # cannot happen with an unchanged benchmark, selection and limit check; never drop them silently
         raise RunError(f"cannot resume {run_dir.path}: it records episodes {outside[:10]} that this run would not "
@@ -247,6 +253,17 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any],
         raise ExportError(f"export failed after the run was scored ({'; '.join(summary.export_errors)}); the score "
                           f"stands: {summary.n_success}/{summary.n_episodes} successes in {run_dir.results_file}")
     return EvalResults(run_summary=summary, episodes=ordered, output_dir=run_dir.path)
+
+
+def _resumed_config(config: RunConfig, given: Collection[str] | None) -> RunConfig:
+    """A resume's config: the run's own options (``run.json``) with those the command line gave anew
+    (:meth:`RunDirectory.resume_options`); the directory is ``output_dir`` or, with only ``dataset_id``,
+    the run that recorded that dataset."""
+    out = config.output_dir or (str(_stored_run_dir(config.dataset_id)) if config.dataset_id else None)
+    if out is None:
+        return config
+    keys = None if given is None else {*given, "output_dir"}
+    return RunConfig.of(RunDirectory(Path(out)).resume_options({**config.plain(), "output_dir": out}, keys))
 
 
 def _stored_run_dir(dataset_id: str) -> Path:
@@ -292,6 +309,9 @@ def _suite_benchmark(config: RunConfig) -> SuiteBenchmark:
     if config.record_environment_state:
         raise RunError(f"record_environment_state: env-suite episodes (benchmark={config.benchmark.name}) have no "
                        "environment state; their recording has the suite's own dataset layout")
+    if config.robot.name is not None:
+        raise RunError(f"robot.name: env-suite episodes (benchmark={config.benchmark.name}) run the robot their "
+                       "env builds; leave robot.name out")
     if config.sample is not None:
         raise RunError(f"sample: not available for env-suite benchmarks (benchmark={config.benchmark.name}); "
                        "use limit= or episodes=")
@@ -312,13 +332,14 @@ def _suite_plan(index: int, suite: str, episode: Any, horizon_from_cli: bool) ->
                           episode.digest)
 
 
-def _run_info(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBenchmark,
-              horizons: dict[str, float]) -> dict[str, Any]:
+def _run_info(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBenchmark, horizons: dict[str, float],
+              robots: list[dict[str, Any]]) -> dict[str, Any]:
     """What the run is (``run.json``; a resume must match it)."""
     prefer, plain = run.plugins.prefer, config.plain()
     return {
         "benchmark": {"name": bench.name, "sha256": bench.sha256, "n_episodes": len(bench.episodes),
                       "path": str(bench.path)},
+        "robots": robots,
         "policy": plain["policy"], "policy_checkpoint": policy_checkpoints(plain["policy"]), "seed": config.seed,
         "limit": config.limit, "horizon": config.horizon,
         "timing": plain["timing"], "mujoco": mujoco.__version__, "code": code_version(),
@@ -327,6 +348,8 @@ def _run_info(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBenchm
         "eval_options": {"horizons": horizons, "custom_object": plain["custom_object"],
                          "camera": plain["camera"], "robot": plain["robot"],
                          "end_on_success": config.end_on_success,
+                         # an env suite's options change its frames (image_size) or episodes
+                         **({"benchmark": suite_options(config)} if isinstance(bench, SuiteBenchmark) else {}),
                          **({"task_rules": config.task_rules} if config.task_rules != TASK_RULES[0]
                             else {}),  # the default is left out: runs from before the option resume unchanged
                          "molmospaces": run.settings.to_config(),
@@ -335,10 +358,14 @@ def _run_info(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBenchm
 
 
 def _complete(result: EpisodeResult, plans: dict[int, EpisodePlan]) -> EpisodeResult:
-    """Fill what the main process knows of every attempted episode (task type, prompt, horizon)."""
-    for key, value in plans[result.episode_index].described().items():
+    """Fill what the main process knows of every attempted episode (task type, prompt, horizon, robot)."""
+    plan = plans[result.episode_index]
+    for key, value in plan.described().items():
         if getattr(result, key) is None:
             setattr(result, key, value)
+    robot = plan_robot(plan)
+    if robot is not None:
+        result.extra.setdefault("robot", robot)
     return result
 
 

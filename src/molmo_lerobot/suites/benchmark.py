@@ -29,6 +29,7 @@ from molmo_lerobot.hashing import content_sha256
 from molmo_lerobot.results import EpisodeOutcome
 from molmo_lerobot.suites import libero, pusht
 from molmo_lerobot.suites.dataset import SuiteDatasetLayout
+from molmo_lerobot.suites.libero_dataset import ROBOT_TYPE as LIBERO_ROBOT
 from molmo_lerobot.suites.libero_dataset import libero_layout
 from molmo_lerobot.suites.pusht_dataset import pusht_layout
 
@@ -73,6 +74,8 @@ class SuiteKind:
     #: the dataset layout ``record=true`` writes (``recording(options)``: the schema of the suite's LeRobot
     #: datasets, ``lerobot/libero``'s, ``lerobot/pusht``'s); None: ``record=true`` is refused
     recording: Callable[[dict[str, Any]], SuiteDatasetLayout] | None = None
+    #: the robot its env builds (its datasets' ``robot_type``); None: none (PushT's pusher)
+    robot: str | None = None
 
 
 def _libero_label(episode: libero.LiberoEpisode) -> str:
@@ -89,7 +92,7 @@ SUITES: dict[str, SuiteKind] = {
         options={"episodes_per_task": 1, "image_size": libero.IMAGE_SIZE, "hard_reset": True},
         action_extra={"delta_groups": [libero.MOVE_GROUP]}, benchmarks=dict(libero.MAX_STEPS),
         check_episode=libero.episode_problems, distributions=libero.DISTRIBUTIONS, venv="libero",
-        recording=lambda o: libero_layout(o["image_size"])),
+        recording=lambda o: libero_layout(o["image_size"]), robot=LIBERO_ROBOT),
     "pusht": SuiteKind(
         episode=pusht.PushTEpisode, plan=pusht.plan_episodes,
         open=lambda o: pusht.PushTSuite(image_size=o["image_size"]),
