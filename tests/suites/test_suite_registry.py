@@ -71,7 +71,8 @@ def test_schema_only_checks_a_libero_benchmarks_options_without_the_libero_venv(
     assert "options    episodes_per_task=1, image_size=256, hard_reset=True" in out
     assert "checked    options only" in out
     assert main(["validate", "libero_90"]) == 2  # the catalogue is LIBERO's own: no venv, no validation
-    assert "the suite's task catalogue could not be read: suite env: no interpreter at /nonexistent" in (
+    assert "the suite's task catalogue could not be read: suite env molmo_lerobot.suites.libero_server: no " \
+           "interpreter at /nonexistent/bin/python; the LIBERO venv is /nonexistent: run `make .libero-venv`" in (
         capsys.readouterr().err)
 
 

@@ -46,7 +46,8 @@ SUITE_KEY = "env_suite"
 @dataclass(frozen=True)
 class SuiteKind:
     """What one env suite brings: its episode type and planner, its env (``open(options)``: an object with
-    ``tasks``, ``reset``, ``step``, ``close``), its policy interface and its options with their defaults."""
+    ``tasks``, ``reset``, ``step``, ``close`` and ``alive``), its policy interface and its options with their
+    defaults."""
 
     episode: type[Any]
     plan: Callable[..., list[Any]]
@@ -340,14 +341,18 @@ class SuiteSession(EpisodeOutcome):
 
 class SuiteSessions:
     """A worker's suite (LIBERO's process, PushT's env), started at its first suite episode and kept until
-    :meth:`close`."""
+    :meth:`close`; one whose process was lost is replaced at the next episode."""
 
     def __init__(self, config: RunConfig) -> None:
         self.config = config
         self._suite: Any = None
 
     def open(self, plan: EpisodePlan, policy: Policy | None, end_on_success: bool) -> SuiteSession:
+        """``plan`` opened on the worker's suite, started now if it is not running (the first episode, or
+        after the last one's process was lost: died, hung and killed)."""
         options = suite_options(self.config)
+        if self._suite is not None and not self._suite.alive:
+            self.close()
         if self._suite is None:
             self._suite = suite_kind(self.config).open(options)
         session = SuiteSession(plan, self._suite, options["image_size"], end_on_success)

@@ -22,7 +22,7 @@ import numpy as np
 
 from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.suites.episode import SuiteEpisode
-from molmo_lerobot.suites.pipe import SuiteProcess
+from molmo_lerobot.suites.pipe import SuiteProcess, SuiteProcessError
 
 #: LeRobot's per-suite step limits (``lerobot.envs.libero.TASK_SUITE_MAX_STEPS``; the test checks they agree)
 MAX_STEPS = {"libero_spatial": 280, "libero_object": 280, "libero_goal": 300, "libero_10": 520, "libero_90": 400}
@@ -100,10 +100,15 @@ class LiberoSuite(SuiteProcess):
     def __init__(self, venv: Path | None = None, image_size: int = IMAGE_SIZE, hard_reset: bool = True) -> None:
         venv = venv or libero_venv()
         self.image_size, self.hard_reset = image_size, hard_reset
+        remedy = (f"the LIBERO venv is {venv}: run `make .libero-venv` (it builds {_REPO / '.libero-venv'} and "
+                  "its config) or set MOLMO_LIBERO_VENV to a venv it built")
+        config = venv / "libero-config" / "config.yaml"
+        if (venv / "bin" / "python").exists() and not config.is_file():
+            raise SuiteProcessError(f"no LIBERO config at {config} (LIBERO would ask for one on stdin); {remedy}")
         super().__init__(venv / "bin" / "python", "molmo_lerobot.suites.libero_server",
-                         env={"LIBERO_CONFIG_PATH": str(venv / "libero-config"),
+                         env={"LIBERO_CONFIG_PATH": str(config.parent),
                               "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},
-                         pythonpath=[_REPO / "src"])
+                         pythonpath=[_REPO / "src"], remedy=remedy)
 
     def tasks(self, suite: str) -> list[dict[str, Any]]:
         return self.request("tasks", suite=suite)["tasks"]
