@@ -11,8 +11,8 @@ in a :class:`SuiteSession` on its own suite (LIBERO's process, PushT's env), sta
 kept across episodes (:class:`SuiteSessions`).
 
 Options (``benchmark.<key>=``): ``episodes_per_task`` (default 1; ``lerobot-eval``'s ``--eval.n_episodes``),
-``image_size`` (camera images, default LeRobot's: LIBERO 360, PushT 96), LIBERO's ``hard_reset`` (default true,
-LeRobot's default).
+``image_size`` (camera images, default LeRobot's: LIBERO 360, PushT 96; at most :data:`MAX_IMAGE_SIZE`),
+LIBERO's ``hard_reset`` (default true, LeRobot's default).
 """
 
 from __future__ import annotations
@@ -42,6 +42,9 @@ if TYPE_CHECKING:
 
 #: the key of a plan's spec that names its env suite (absent: one of our own episodes)
 SUITE_KEY = "env_suite"
+#: the largest ``benchmark.image_size``: the side of the largest frames drawn (LIBERO draws 4096², its offscreen
+#: buffer grown to fit; a side beyond that can exceed the GL renderbuffer limit)
+MAX_IMAGE_SIZE = 4096
 
 
 @dataclass(frozen=True)
@@ -124,6 +127,9 @@ def suite_options(config: RunConfig) -> dict[str, Any]:
     for key in ("episodes_per_task", "image_size"):
         if not isinstance(out[key], int) or isinstance(out[key], bool) or out[key] < 1:
             raise SuiteBenchmarkError(f"benchmark.{key}: expected an integer >= 1, got {out[key]!r}")
+    if out["image_size"] > MAX_IMAGE_SIZE:
+        raise SuiteBenchmarkError(f"benchmark.image_size: at most {MAX_IMAGE_SIZE} pixels a side, got "
+                                  f"{out['image_size']} (LeRobot's default: {kind.options['image_size']})")
     if not isinstance(out.get("hard_reset", True), bool):
         raise SuiteBenchmarkError(f"benchmark.hard_reset: expected true or false, got {out['hard_reset']!r}")
     unknown = sorted(set(bench) - {"name", "path", "suite", *out})
