@@ -2,15 +2,16 @@
 pipe: LIBERO's catalogue and observation layout; an episode's states and outcome follow from its task, seed and
 actions. A fake LIBERO venv's ``bin/python`` runs it (``standin_venv`` in ``test_suite_process_faults.py``).
 
-``$STANDIN_DIR``: each process writes its pid to ``pids`` there, and a ``fault`` file there (``kill|stop SEED
-STEP``) makes the process playing step STEP of the episode with seed SEED SIGKILL or SIGSTOP itself, once (the
-file is renamed to ``fault.done`` first).
+``$STANDIN_DIR``: each process writes its pid to ``pids`` there; a ``fault`` file there (``kill|stop SEED STEP``)
+makes the process playing step STEP of the episode with seed SEED SIGKILL or SIGSTOP itself, once (the file is
+renamed to ``fault.done`` first), and a ``slow_tasks`` file makes the task catalogue take ten minutes.
 """
 
 from __future__ import annotations
 
 import os
 import signal
+import time
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +29,9 @@ class Standin:
             f.write(f"{os.getpid()}\n")
 
     def tasks(self, suite: str) -> dict:
+        if (self.dir / "slow_tasks").exists():  # a catalogue that takes its time: long enough for a Ctrl-C
+            (self.dir / "in_tasks").touch()
+            time.sleep(600)
         return {"suite": suite, "tasks": TASKS}
 
     def reset(self, suite: str, task_id: int, init_state_index: int, seed: int, width: int, height: int,

@@ -107,6 +107,26 @@ def test_the_suite_process_of_a_killed_worker_dies_with_it_even_when_stopped(sta
     assert not alive(child)
 
 
+def test_ctrl_c_while_the_suite_lists_its_tasks_is_one_true_line(standin, tmp_path):
+    """Ctrl-C at the terminal (SIGINT to molmo-eval's process group) while the main process waits for LIBERO's task
+    catalogue: exit 130 with one line that promises no run directory, no traceback from the LIBERO process (it is
+    not in that group), and the LIBERO process is gone."""
+    (standin / "slow_tasks").touch()
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "molmo_lerobot.cli.eval", *ARGS, f"output_dir={out}"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not (standin / "in_tasks").exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and err.splitlines() == [
+        "molmo-eval: interrupted while no episode was running (setting the run up or finishing it); where it had "
+        "written a run directory, output_dir=<it> resume=true continues the run"], err
+    [pid] = [int(p) for p in (standin / "pids").read_text().split()]
+    assert not alive(pid) and not out.exists()
+
+
 def test_a_suite_process_that_never_answers_or_prompts_is_a_bounded_one_line_start_failure(tmp_path, monkeypatch):
     """An interpreter that never says hello: refused after ``MOLMO_SUITE_TIMEOUT_S`` and killed; a server whose
     start asks on stdin (LIBERO's import without its config): refused at once, its stdin being no terminal or pipe

@@ -74,9 +74,9 @@ def _main(multirun: bool) -> int:
     except RunInterrupted as exc:  # stops a sweep too
         print(f"molmo-eval: {exc}", file=sys.stderr)
         return 128 + exc.signum
-    except KeyboardInterrupt:
-        print("molmo-eval: interrupted; finished episodes are kept in episodes.jsonl "
-              "(rerun with resume=true to continue)", file=sys.stderr)
+    except KeyboardInterrupt:  # outside the supervisor, whose stop names the run directory (RunInterrupted)
+        print("molmo-eval: interrupted while no episode was running (setting the run up or finishing it); where "
+              "it had written a run directory, output_dir=<it> resume=true continues the run", file=sys.stderr)
         return 130
     if len(jobs) > 1 or multirun:
         print("\n".join(sweep_table(jobs)))
