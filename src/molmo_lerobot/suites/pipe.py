@@ -213,9 +213,11 @@ class SuiteProcess:
 
     def _read(self, size: int, deadline: float, op: str) -> bytes:
         buf = bytearray()
+        ready = select.poll()  # not select(): a worker may hold more than FD_SETSIZE files
+        ready.register(self._replies, select.POLLIN)
         while len(buf) < size:
             left = deadline - time.monotonic()
-            if left <= 0 or not select.select([self._replies], [], [], left)[0]:
+            if left <= 0 or not ready.poll(left * 1000):
                 what = "to start" if op == "start" else f"to answer {op!r}"
                 raise self._lost(f"took more than {self.timeout_s:g} s {what} ({TIMEOUT_ENV} sets the limit)"
                                  + self.remedy * (op == "start"))
