@@ -16,6 +16,7 @@ import export_synthetic as S  # the synthetic rollouts of tests/export
 import pytest
 
 from molmo_lerobot import fileio
+from molmo_lerobot.errors import INFRASTRUCTURE, error_kind
 from molmo_lerobot.fileio import UnsafePathError, atomic_write
 
 SRC = Path(__file__).parents[1] / "src" / "molmo_lerobot"
@@ -221,6 +222,7 @@ def test_libero_grasps_are_never_cached_through_a_link(tmp_path, outside, monkey
         grasps.LiberoGraspLibrary().path("libero_ketchup", "franka")
     assert str(err.value) == (f"{home}: {plant} is a symlink; refusing to write "
                               "'grasps/libero-v1/franka/libero_ketchup.npz' through it")
+    assert error_kind(err.value) == INFRASTRUCTURE, "an episode it ends is rerun by resume once the link is gone"
     assert _tree(outside) == []
 
 
@@ -234,8 +236,9 @@ def test_libero_textures_are_never_cached_through_a_link_and_a_linked_cache_dir_
     (home / "libero_textures").symlink_to(outside)
     monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(home))
     with pytest.raises(UnsafePathError, match=f"^{home}: libero_textures is a symlink; refusing to write "
-                                              "'libero_textures/16/textures/martin_novak_wood_table.png'"):
+                                              "'libero_textures/16/textures/martin_novak_wood_table.png'") as err:
         texture_file(src, size=16)
+    assert error_kind(err.value) == INFRASTRUCTURE, "an episode it ends is rerun by resume once the link is gone"
     assert _tree(outside) == []
     (tmp_path / "real_home").mkdir()
     monkeypatch.setenv("MOLMO_LEROBOT_HOME", str(tmp_path / "linked_home"))

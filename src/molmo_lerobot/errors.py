@@ -14,6 +14,7 @@ from __future__ import annotations
 import errno
 import traceback
 from pathlib import Path
+from typing import ClassVar
 
 EPISODE, INFRASTRUCTURE = "episode", "infrastructure"
 
@@ -30,9 +31,14 @@ class MolmoError(Exception):
     An error that gathers several problems puts one per line (``molmo-eval`` prints each as one
     ``error:`` line)."""
 
+    #: whose failure it is when it ends an episode (:func:`error_kind`)
+    kind: ClassVar[str] = EPISODE
+
 
 class InfrastructureError(MolmoError, RuntimeError):
     """A failure of what runs the episode, not of the episode (e.g. the policy server is gone)."""
+
+    kind = INFRASTRUCTURE
 
 
 class RunError(MolmoError, RuntimeError):
@@ -45,8 +51,10 @@ class ExportError(RunError):
 
 
 def error_kind(exc: BaseException) -> str:
-    """:data:`INFRASTRUCTURE` for an :class:`InfrastructureError` or a full/failing disk, else :data:`EPISODE`."""
-    if isinstance(exc, InfrastructureError) or (isinstance(exc, OSError) and exc.errno in MACHINE_ERRNOS):
+    """:data:`INFRASTRUCTURE` for an error whose :attr:`MolmoError.kind` says so (an :class:`InfrastructureError`,
+    a link planted where we write: ``fileio.UnsafePathError``) or a full/failing disk, else :data:`EPISODE`."""
+    if (isinstance(exc, MolmoError) and exc.kind == INFRASTRUCTURE) or (
+            isinstance(exc, OSError) and exc.errno in MACHINE_ERRNOS):
         return INFRASTRUCTURE
     return EPISODE
 

@@ -34,14 +34,17 @@ from collections.abc import Iterator
 from pathlib import Path, PurePosixPath
 from typing import IO, Any, NoReturn
 
-from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.errors import INFRASTRUCTURE, MolmoError
 
 _DIR = os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC
 _NEW = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC
 
 
 class UnsafePathError(MolmoError, OSError):
-    """A write would go through a symbolic link (or a non-directory) below its root."""
+    """A write would go through a symbolic link (or a non-directory) below its root. The machine's state, not
+    an episode's doing: an episode it ends is an infrastructure failure (rerun by ``resume=true`` once fixed)."""
+
+    kind = INFRASTRUCTURE
 
     def __str__(self) -> str:  # the one-line message, without "[Errno 40]"
         return self.strerror or super().__str__()

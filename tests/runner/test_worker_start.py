@@ -103,6 +103,38 @@ def test_fork_server_preloads_its_own_modules_and_leaves_the_global_one_alone():
     assert multiprocessing.forkserver._forkserver._preload_modules == before
 
 
+def _exit_zero():
+    pass
+
+
+def test_a_ctrl_c_while_the_fork_server_imports_neither_ends_it_nor_prints_a_traceback(tmp_path, monkeypatch,
+                                                                                      capfd):
+    """A Ctrl-C at the terminal during worker start-up reaches the fork server, busy importing the preload: it
+    carries on (the supervisor decides when to stop), and the next worker starts."""
+    import os
+    import signal
+    import time
+
+    (tmp_path / "slow_preload.py").write_text(f"import pathlib, time\npathlib.Path({str(tmp_path)!r}, 'importing')"
+                                              ".touch()\ntime.sleep(2)\n")
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(tmp_path), *sys.path]))  # the server's own sys.path
+    server = PreloadedForkServer(["molmo_lerobot.runner.worker_env", "slow_preload"])
+    try:
+        server.start()
+        deadline = time.monotonic() + 60
+        while not (tmp_path / "importing").exists() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert (tmp_path / "importing").exists(), "the server never imported the slow module"
+        os.kill(server.pid, signal.SIGINT)
+        proc = server.process(_exit_zero, (), name="after-ctrl-c")
+        proc.start()
+        proc.join(30)
+        assert proc.exitcode == 0
+    finally:
+        server.stop()
+    assert "KeyboardInterrupt" not in capfd.readouterr().err
+
+
 def test_preload_lists_keep_order_and_start_with_the_worker_environment():
     modules = preload_modules(["plugin_a", "numpy"], ["torch", "plugin_a"])
     assert modules[:len(BASE_PRELOAD)] == list(BASE_PRELOAD) and modules[0] == "molmo_lerobot.runner.worker_env"

@@ -67,8 +67,8 @@ def test_libero_run_scores_per_task_and_records(tmp_path):
     assert [(r["episode_index"], r["benchmark_episode_index"], r["steps"]) for r in records] == [(0, 0, 8), (1, 1, 8)]
 
 
-def _group(pgid: int) -> dict[int, str]:
-    """pid -> command line of every live (not zombie) process in process group ``pgid``."""
+def _processes() -> dict[int, tuple[int, int, str]]:
+    """pid -> (parent pid, process group, command line) of every live (not zombie) process."""
     out = {}
     for stat in Path("/proc").glob("[0-9]*/stat"):
         try:
@@ -76,9 +76,18 @@ def _group(pgid: int) -> dict[int, str]:
             cmd = (stat.parent / "cmdline").read_bytes().replace(b"\0", b" ").decode()
         except OSError:
             continue
-        if int(fields[2]) == pgid and fields[0] != "Z":
-            out[int(stat.parent.name)] = cmd
+        if fields[0] != "Z":
+            out[int(stat.parent.name)] = (int(fields[1]), int(fields[2]), cmd)
     return out
+
+
+def _group(pgid: int) -> dict[int, str]:
+    """pid -> command line of every live process in process group ``pgid``, and of the LIBERO processes its
+    processes started (each in a group of its own)."""
+    procs = _processes()
+    group = {pid for pid, (_, g, _) in procs.items() if g == pgid}
+    return {pid: cmd for pid, (parent, _, cmd) in procs.items()
+            if pid in group or (parent in group and "libero_server" in cmd)}
 
 
 def _frames(root: Path) -> dict[int, tuple[np.ndarray, np.ndarray]]:
@@ -96,9 +105,10 @@ def _frames(root: Path) -> dict[int, tuple[np.ndarray, np.ndarray]]:
 @pytest.mark.slow
 @pytest.mark.timeout(3600)  # three runs of 3 LIBERO episodes: ~25 min on the loaded 2-core machine
 def test_libero_run_killed_with_sigkill_resumes_to_the_uninterrupted_run(tmp_path):
-    """``molmo-eval … workers=2 record=true``, its whole process group (molmo-eval, its workers, their LIBERO
-    processes) SIGKILLed once an episode is done, then ``resume=true``: per episode the same results, and the
-    same recorded states and actions bit for bit, as the run never cut."""
+    """``molmo-eval … workers=2 record=true``, its whole process group (molmo-eval, its workers; their LIBERO
+    processes, each in a group of its own, die with them) SIGKILLed once an episode is done, then
+    ``resume=true``: per episode the same results, and the same recorded states and actions bit for bit, as the
+    run never cut."""
     args = [a for a in ARGS if a != "workers=1"] + ["workers=2", "limit=3", "record=true"]
     whole = run_evaluation(compose([*args, f"output_dir={tmp_path / 'whole'}"]))
 
@@ -115,9 +125,13 @@ def test_libero_run_killed_with_sigkill_resumes_to_the_uninterrupted_run(tmp_pat
     assert sum("libero_server" in cmd for cmd in group.values()) == 2, group  # both workers' LIBERO processes
     os.killpg(proc.pid, signal.SIGKILL)
     assert proc.wait() == -signal.SIGKILL
-    while _group(proc.pid) and time.monotonic() < deadline:
+
+    def left() -> dict[int, str]:
+        return {**_group(proc.pid), **{pid: group[pid] for pid in group if pid in _processes()}}
+
+    while left() and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert _group(proc.pid) == {}
+    assert left() == {}
     kept = episodes.read_text().splitlines()
     assert 1 <= len(kept) < 3 and not (cut / "results.json").exists()
 

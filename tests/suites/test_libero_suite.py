@@ -10,9 +10,9 @@ import pytest
 import torch
 from lerobot.processor.env_processor import LiberoProcessorStep
 
-from molmo_lerobot.suites.libero import MAX_STEPS, LiberoEpisode, plan_episodes
+from molmo_lerobot.suites.libero import MAX_STEPS, LiberoEpisode, LiberoSuite, plan_episodes
 from molmo_lerobot.suites.libero_server import axis_angle
-from molmo_lerobot.suites.pipe import SuiteError, SuiteProcess
+from molmo_lerobot.suites.pipe import SuiteError, SuiteProcess, SuiteProcessError
 
 TASKS = [{"task_id": 0, "instruction": "pick up the soup", "init_states": 50},
          {"task_id": 3, "instruction": "pick up the milk", "init_states": 2}]
@@ -74,5 +74,5 @@ def test_pipe_round_trip_errors_and_a_chatty_server(tmp_path):
 
 
 def test_a_missing_venv_is_one_clear_error(tmp_path):
-    with pytest.raises(Exception, match=r"no interpreter at .*make \.libero-venv"):
-        SuiteProcess(tmp_path / "bin" / "python", "molmo_lerobot.suites.libero_server")
+    with pytest.raises(SuiteProcessError, match=r"no interpreter at .*run `make \.libero-venv`.*MOLMO_LIBERO_VENV"):
+        LiberoSuite(tmp_path)

@@ -62,6 +62,19 @@ def test_validate_refuses_bad_suite_options_in_one_line(capsys):
         "molmo-bench: error: benchmark.episodes_per_task: expected an integer >= 1, got 0"]
     assert main(["validate", "pusht", "+benchmark.hard_reset=true"]) == 2
     assert "benchmark.hard_reset: not an option of env-suite benchmarks" in capsys.readouterr().err
+    assert main(["validate", "--schema-only", "libero_object", "benchmark.image_size=4096"]) == 0
+    assert main(["validate", "pusht", "benchmark.image_size=4097"]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "molmo-bench: error: benchmark.image_size: at most 4096 pixels a side, got 4097 (LeRobot's default: 96)"]
+
+
+def test_molmo_eval_refuses_an_image_size_no_frame_can_have_before_any_run_directory(tmp_path):
+    from eval_runs import refusal
+
+    out = tmp_path / "out"
+    assert refusal("benchmark=libero_object", "benchmark.image_size=100000", f"output_dir={out}") == [
+        "benchmark.image_size: at most 4096 pixels a side, got 100000 (LeRobot's default: 360)"]
+    assert not out.exists()
 
 
 def test_schema_only_checks_a_libero_benchmarks_options_without_the_libero_venv(capsys, monkeypatch):
@@ -71,7 +84,8 @@ def test_schema_only_checks_a_libero_benchmarks_options_without_the_libero_venv(
     assert "options    episodes_per_task=1, image_size=256, hard_reset=True" in out
     assert "checked    options only" in out
     assert main(["validate", "libero_90"]) == 2  # the catalogue is LIBERO's own: no venv, no validation
-    assert "the suite's task catalogue could not be read: suite env: no interpreter at /nonexistent" in (
+    assert "the suite's task catalogue could not be read: suite env molmo_lerobot.suites.libero_server: no " \
+           "interpreter at /nonexistent/bin/python; the LIBERO venv is /nonexistent: run `make .libero-venv`" in (
         capsys.readouterr().err)
 
 

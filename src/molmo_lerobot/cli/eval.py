@@ -35,7 +35,13 @@ def main() -> int:
 
     _cfg_alone_means_job(sys.argv)
     with reaping_children():  # exit only after every child process is reaped
-        return _main(multirun=any(a in ("-m", "--multirun") for a in sys.argv[1:]))
+        try:
+            return _main(multirun=any(a in ("-m", "--multirun") for a in sys.argv[1:]))
+        except KeyboardInterrupt:  # outside the supervisor, whose stop names the run directory (RunInterrupted)
+            print("molmo-eval: interrupted while no episode was running (setting the run up or finishing it); "
+                  "where it had written a run directory, output_dir=<it> resume=true continues the run",
+                  file=sys.stderr)
+            return 130
 
 
 def _cfg_alone_means_job(argv: list[str]) -> None:
@@ -76,10 +82,6 @@ def _main(multirun: bool) -> int:
     except RunInterrupted as exc:  # stops a sweep too
         print(f"molmo-eval: {exc}", file=sys.stderr)
         return 128 + exc.signum
-    except KeyboardInterrupt:
-        print("molmo-eval: interrupted; finished episodes are kept in episodes.jsonl "
-              "(rerun with resume=true to continue)", file=sys.stderr)
-        return 130
     if len(jobs) > 1 or multirun:
         print("\n".join(sweep_table(jobs)))
     return max(codes, default=0)

@@ -9,6 +9,8 @@ episode. For every slot the supervisor waits on the transport and reacts:
 * the worker dies (SIGKILL, segfault, OOM, node loss), during an episode or while starting →
   the episode is retried on a fresh worker up to ``retries`` times, then recorded as an
   infrastructure error naming the death (``resume=true`` runs it again); the run goes on;
+* a result is an infrastructure failure (the worker lives on: its suite process died or hung and
+  is replaced, a full disk, a lost policy server) → the episode is retried on that slot the same way;
 * a slot is free → it gets the pending item that follows its previous one in run order, else
   the start of the longest run of pending items that no slot continues (or that run's second
   half), so each worker plays stretches of consecutive episodes and its dataset shards are in
@@ -236,12 +238,16 @@ class Supervisor:
             self._on_result(item.failed(f"episode timed out after {self.timeout_s:g} s (watchdog)",
                                          attempts=self._attempts[item.episode_index]))
 
-    def _report(self, slot: _Slot, result: EpisodeResult) -> None:
-        if slot.item is None or slot.item.episode_index != result.episode_index:
+    def _report(self, slot: _Slot, result: EpisodeResult, retry: bool = True) -> None:
+        """The slot's episode is done; an infrastructure failure (its worker lives on, e.g. with a new suite
+        process) is retried on the slot while ``retry`` and retries are left, as a worker's death is."""
+        item = slot.item
+        if item is None or item.episode_index != result.episode_index:
             return  # not the episode this worker was given: a transport bug must not count twice
         result.attempts = self._attempts.get(result.episode_index, 1)
         slot.item = None
-        self._on_result(result)
+        if not (retry and result.rerun_on_resume and self._retry(slot, item, str(result.error))):
+            self._on_result(result)
 
     def _lost(self, slot: _Slot, reason: str, stop: bool = False) -> None:
         """The slot's worker is gone: retry its episode (bounded) or record it as an error."""
@@ -250,17 +256,20 @@ class Supervisor:
             self._retire(slot)
         else:
             slot.handle = None
-        if item is None:
-            return
+        if item is not None and not self._retry(slot, item, reason):
+            self._on_result(item.failed(reason, INFRASTRUCTURE, attempts=self._attempts[item.episode_index]))
+
+    def _retry(self, slot: _Slot, item: EpisodePlan, reason: str) -> bool:
+        """Put ``item`` back for the slot's next turn (its worker, or the next one), unless it is out of retries."""
         n = self._attempts[item.episode_index]
-        if n <= self.retries:
-            log.warning("episode %d: %s; retrying (attempt %d of %d)", item.episode_index, reason, n + 1,
-                        self.retries + 1)
-            position = self._position[item.episode_index]
-            self._pending[position] = item
-            slot.last = position - 1  # the slot's next worker retries it first
-        else:
-            self._on_result(item.failed(reason, INFRASTRUCTURE, attempts=n))
+        if n > self.retries:
+            return False
+        log.warning("episode %d: %s; retrying (attempt %d of %d)", item.episode_index, reason, n + 1,
+                    self.retries + 1)
+        position = self._position[item.episode_index]
+        self._pending[position] = item
+        slot.last = position - 1  # the slot retries it first
+        return True
 
     def _retire(self, slot: _Slot) -> None:
         """Ask the slot's worker to stop; it is killed if still there after ``stop_timeout_s``."""
@@ -293,7 +302,7 @@ class Supervisor:
             for slot in live:
                 for kind, payload in self.transport.events(slot.handle):
                     if kind == RESULT:
-                        self._report(slot, EpisodeResult.from_dict(payload))
+                        self._report(slot, EpisodeResult.from_dict(payload), retry=False)
                 if self.transport.ended(slot.handle):
                     slot.handle = None
             self._reap_retiring()

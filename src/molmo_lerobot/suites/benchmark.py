@@ -11,8 +11,8 @@ in a :class:`SuiteSession` on its own suite (LIBERO's process, PushT's env), sta
 kept across episodes (:class:`SuiteSessions`).
 
 Options (``benchmark.<key>=``): ``episodes_per_task`` (default 1; ``lerobot-eval``'s ``--eval.n_episodes``),
-``image_size`` (camera images, default LeRobot's: LIBERO 360, PushT 96), LIBERO's ``hard_reset`` (default true,
-LeRobot's default).
+``image_size`` (camera images, default LeRobot's: LIBERO 360, PushT 96; at most :data:`MAX_IMAGE_SIZE`),
+LIBERO's ``hard_reset`` (default true, LeRobot's default).
 """
 
 from __future__ import annotations
@@ -24,13 +24,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.errors import InfrastructureError, MolmoError, describe
 from molmo_lerobot.hashing import content_sha256
 from molmo_lerobot.results import EpisodeOutcome
 from molmo_lerobot.suites import libero, pusht
 from molmo_lerobot.suites.dataset import SuiteDatasetLayout
 from molmo_lerobot.suites.libero_dataset import ROBOT_TYPE as LIBERO_ROBOT
 from molmo_lerobot.suites.libero_dataset import libero_layout
+from molmo_lerobot.suites.pipe import SuiteError
 from molmo_lerobot.suites.pusht_dataset import pusht_layout
 
 if TYPE_CHECKING:
@@ -42,12 +43,16 @@ if TYPE_CHECKING:
 
 #: the key of a plan's spec that names its env suite (absent: one of our own episodes)
 SUITE_KEY = "env_suite"
+#: the largest ``benchmark.image_size``: the side of the largest frames drawn (LIBERO draws 4096², its offscreen
+#: buffer grown to fit; a side beyond that can exceed the GL renderbuffer limit)
+MAX_IMAGE_SIZE = 4096
 
 
 @dataclass(frozen=True)
 class SuiteKind:
     """What one env suite brings: its episode type and planner, its env (``open(options)``: an object with
-    ``tasks``, ``reset``, ``step``, ``close``), its policy interface and its options with their defaults."""
+    ``tasks``, ``reset``, ``step``, ``close`` and ``alive``), its policy interface and its options with their
+    defaults."""
 
     episode: type[Any]
     plan: Callable[..., list[Any]]
@@ -76,6 +81,9 @@ class SuiteKind:
     recording: Callable[[dict[str, Any]], SuiteDatasetLayout] | None = None
     #: the robot its env builds (its datasets' ``robot_type``); None: none (PushT's pusher)
     robot: str | None = None
+    #: a fault of the installed files its env reads in place (one line naming the file and what to reinstall),
+    #: or None: checked before any worker starts, and after an episode failed (then the machine's failure)
+    install_problem: Callable[[], str | None] | None = None
 
 
 def _libero_label(episode: libero.LiberoEpisode) -> str:
@@ -92,7 +100,8 @@ SUITES: dict[str, SuiteKind] = {
         options={"episodes_per_task": 1, "image_size": libero.IMAGE_SIZE, "hard_reset": True},
         action_extra={"delta_groups": [libero.MOVE_GROUP]}, benchmarks=dict(libero.MAX_STEPS),
         check_episode=libero.episode_problems, distributions=libero.DISTRIBUTIONS, venv="libero",
-        recording=lambda o: libero_layout(o["image_size"]), robot=LIBERO_ROBOT),
+        recording=lambda o: libero_layout(o["image_size"]), robot=LIBERO_ROBOT,
+        install_problem=libero.install_problem),
     "pusht": SuiteKind(
         episode=pusht.PushTEpisode, plan=pusht.plan_episodes,
         open=lambda o: pusht.PushTSuite(image_size=o["image_size"]),
@@ -122,6 +131,9 @@ def suite_options(config: RunConfig) -> dict[str, Any]:
     for key in ("episodes_per_task", "image_size"):
         if not isinstance(out[key], int) or isinstance(out[key], bool) or out[key] < 1:
             raise SuiteBenchmarkError(f"benchmark.{key}: expected an integer >= 1, got {out[key]!r}")
+    if out["image_size"] > MAX_IMAGE_SIZE:
+        raise SuiteBenchmarkError(f"benchmark.image_size: at most {MAX_IMAGE_SIZE} pixels a side, got "
+                                  f"{out['image_size']} (LeRobot's default: {kind.options['image_size']})")
     if not isinstance(out.get("hard_reset", True), bool):
         raise SuiteBenchmarkError(f"benchmark.hard_reset: expected true or false, got {out['hard_reset']!r}")
     unknown = sorted(set(bench) - {"name", "path", "suite", *out})
@@ -182,9 +194,18 @@ class SuiteBenchmark:
 
 
 def load_suite_benchmark(config: RunConfig) -> SuiteBenchmark:
-    """The suite's episodes for ``config``: its task catalogue (read from the suite's process), then
+    """The suite's episodes for ``config``: its installed files checked (:class:`~molmo_lerobot.errors.
+    InfrastructureError` naming the first broken one), its task catalogue (read from the suite's process), then
     ``episodes_per_task`` episodes per task with the run's seed, ``horizon`` overriding LeRobot's step limit."""
+    problem = install_problem(suite_kind(config))
+    if problem:
+        raise InfrastructureError(f"cannot run benchmark={config.benchmark.name}: {problem}")
     return plan_suite_benchmark(config, suite_tasks(config))
+
+
+def install_problem(kind: SuiteKind) -> str | None:
+    """What is broken in the suite's installed files (:attr:`SuiteKind.install_problem`), or None."""
+    return kind.install_problem() if kind.install_problem is not None else None
 
 
 def suite_tasks(config: RunConfig) -> list[dict[str, Any]]:
@@ -344,17 +365,28 @@ class SuiteSession(EpisodeOutcome):
 
 class SuiteSessions:
     """A worker's suite (LIBERO's process, PushT's env), started at its first suite episode and kept until
-    :meth:`close`."""
+    :meth:`close`; one whose process was lost is replaced at the next episode."""
 
     def __init__(self, config: RunConfig) -> None:
         self.config = config
         self._suite: Any = None
 
     def open(self, plan: EpisodePlan, policy: Policy | None, end_on_success: bool) -> SuiteSession:
+        """``plan`` opened on the worker's suite, started now if it is not running (the first episode, or
+        after the last one's process was lost: died, hung and killed)."""
         options = suite_options(self.config)
+        if self._suite is not None and not self._suite.alive:
+            self.close()
+        kind = suite_kind(self.config)
         if self._suite is None:
-            self._suite = suite_kind(self.config).open(options)
-        session = SuiteSession(plan, self._suite, options["image_size"], end_on_success)
+            self._suite = kind.open(options)
+        try:
+            session = SuiteSession(plan, self._suite, options["image_size"], end_on_success)
+        except SuiteError as exc:  # the episode's, unless the suite's installed files are broken now
+            problem = install_problem(kind) if not isinstance(exc, InfrastructureError) else None
+            if problem:
+                raise InfrastructureError(f"{problem} (the episode failed to start: {describe(exc)})") from exc
+            raise
         if policy is not None:
             policy.reset(session.policy_context())
         return session

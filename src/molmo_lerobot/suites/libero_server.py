@@ -149,8 +149,11 @@ class LiberoServer:
     """The request handlers; state: the LIBERO benchmark objects, one env per task, the current episode."""
 
     def __init__(self) -> None:
-        if "LIBERO_CONFIG_PATH" not in os.environ:
+        config = os.environ.get("LIBERO_CONFIG_PATH")
+        if config is None:
             raise SystemExit("libero_server: LIBERO_CONFIG_PATH is not set (LiberoSuite sets it)")
+        if not os.path.isfile(os.path.join(config, "config.yaml")):  # LIBERO's import would ask on stdin
+            raise SystemExit(f"libero_server: no LIBERO config at {config}/config.yaml")
         from libero.libero import benchmark
 
         self._benchmarks = benchmark.get_benchmark_dict()
@@ -240,11 +243,18 @@ class LiberoServer:
 
 
 def main() -> None:
-    server = LiberoServer()
+    servers: list[LiberoServer] = []
+
+    def start() -> dict[str, Any]:
+        server = LiberoServer()
+        servers.append(server)
+        return {"tasks": server.tasks, "reset": server.reset, "step": server.step, "close_envs": server.close_envs}
+
     try:
-        serve({"tasks": server.tasks, "reset": server.reset, "step": server.step, "close_envs": server.close_envs})
+        serve(start)
     finally:
-        server.close_envs()
+        for server in servers:
+            server.close_envs()
 
 
 if __name__ == "__main__":

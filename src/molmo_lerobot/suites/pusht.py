@@ -92,7 +92,10 @@ def policy_observation(obs: Mapping[str, Any], step: int) -> dict[str, Any]:
 
 class PushTSuite:
     """gym_pusht's env in this process, behind the suite interface :class:`~molmo_lerobot.suites.benchmark.
-    SuiteSession` plays (``tasks``, ``reset``, ``step``, ``close``)."""
+    SuiteSession` plays (``tasks``, ``reset``, ``step``, ``close``, ``alive``)."""
+
+    #: in the worker's own process: never lost on its own
+    alive = True
 
     def __init__(self, image_size: int = IMAGE_SIZE) -> None:
         os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")  # pygame's import banner
