@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from molmo_lerobot.allocator import child_env
 from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.suites.episode import SuiteEpisode
 from molmo_lerobot.suites.pipe import SuiteProcess
@@ -102,7 +103,7 @@ class LiberoSuite(SuiteProcess):
         self.image_size, self.hard_reset = image_size, hard_reset
         super().__init__(venv / "bin" / "python", "molmo_lerobot.suites.libero_server",
                          env={"LIBERO_CONFIG_PATH": str(venv / "libero-config"),
-                              "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},
+                              "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), **child_env()},
                          pythonpath=[_REPO / "src"])
 
     def tasks(self, suite: str) -> list[dict[str, Any]]:
