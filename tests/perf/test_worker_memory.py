@@ -117,7 +117,7 @@ def _report(name: str, samples: list[dict[str, Any]], n: int, roles: tuple[str, 
     rows = [summary(samples, role, n) for role in roles]
     for row in rows:
         print(f"{name} {row['role']}: peak {row['peak_mb']} MB, second half {row['slope_mb_per_episode_2nd_half']} "
-              f"MB/episode, last 5 episodes +{row['growth_last5_mb']} MB")
+              f"MB/episode, last 5 episodes {row['growth_last5_mb']} MB over the peak before them")
     append_rows(name, rows, test="worker_memory", episodes=n, **common)
 
 
