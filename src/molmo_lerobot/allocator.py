@@ -3,9 +3,9 @@
 glibc gives each thread that allocates an arena of its own, up to eight per core, and keeps what is
 freed in them for reuse. A recording worker runs some 40 threads (each camera's SVT-AV1 encoder
 starts ~17 per episode, Mesa's llvmpipe one per core), so a pick_v3 worker held 16 arenas on a
-2-core box whose free lists grew by ~60 MB with every house loaded: 2.0 of its 4.7 GB resident after
+2-core box whose free lists grew by ~60 MB with every house loaded: 2.0 of its 4.6 GB resident after
 14 houses was freed memory (``mallinfo2``'s ``fordblks``), against 1.3 GB in use and flat; bounded, it
-stays at 3.0 GB (``tests/perf/test_worker_memory.py``, the README's "Memory per worker"). A worker
+stays at 2.9 GB (``tests/perf/test_worker_memory.py``, the README's "Memory per worker"). A worker
 therefore starts with :data:`ARENA_MAX` arenas (:func:`bound_arenas`) and returns the free pages of
 every arena after each episode (:func:`release_free_memory`); a process started by exec (the LIBERO env
 server) gets the same bound from its environment (:func:`child_env`), read when it starts.
