@@ -41,6 +41,7 @@ from molmo_lerobot.run_config import RunConfig, episode_work_problem
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 from molmo_lerobot.runner.fingerprint import plan_robot, policy_checkpoints, robots_of
 from molmo_lerobot.runner.forkserver import ForkServerPool, worker_preload
+from molmo_lerobot.runner.memory import available_gb, benchmark_family, memory_warning
 from molmo_lerobot.runner.placement import check_devices
 from molmo_lerobot.runner.plan import EpisodePlan, EpisodePlanner
 from molmo_lerobot.runner.progress import Progress
@@ -231,6 +232,10 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any], fork_servers
         raise RunError(f"cannot resume {run_dir.path}: it records episodes {outside[:10]} that this run would not "
                        "evaluate")
 
+    if config.executor.name == "local" and (warning := memory_warning(  # before any worker starts
+            min(config.workers, len(plans)), benchmark_family(bench.name, config.benchmark.model_dump().get("suite")),
+            config.record, available_gb())):
+        print(warning, file=sys.stderr)
     t0 = time.perf_counter()
     startups: dict[str, dict[str, float]] = {}  # worker id -> where its start-up went
     results = _run_plans(config, run, bench, plans, {r.episode_index: _complete(r, plans) for r in done}, run_dir,

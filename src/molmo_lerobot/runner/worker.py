@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from molmo_lerobot.allocator import bound_arenas, release_free_memory
 from molmo_lerobot.cpu_threads import cap_threads
 from molmo_lerobot.errors import describe, error_kind
 from molmo_lerobot.recording import RecorderFactory, RecorderGroup
@@ -106,6 +107,7 @@ class EpisodeWorker:
         self.startup = startup or Startup()
         self.first_done = False
         config = job.config
+        bound_arenas()  # a Ray actor's too (a local worker has it from worker_env)
         cap_threads(config.worker_threads)
         with self.startup.phase("context_s"):
             self.run_context = RunContext.build(config, job.render_record)
@@ -180,6 +182,7 @@ class EpisodeWorker:
                 traceback.print_exc()
         result.duration_s = time.perf_counter() - t0
         self.recorders.end_episode(result)
+        release_free_memory()  # what the episode freed (its frames, a house the model cache let go)
         return result
 
     def close(self) -> None:

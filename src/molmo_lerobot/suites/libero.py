@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from molmo_lerobot import installed
+from molmo_lerobot.allocator import child_env
 from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.suites.episode import SuiteEpisode
 from molmo_lerobot.suites.pipe import SuiteProcess, SuiteProcessError
@@ -117,7 +118,7 @@ class LiberoSuite(SuiteProcess):
             raise SuiteProcessError(f"no LIBERO config at {config} (LIBERO would ask for one on stdin); {remedy}")
         super().__init__(venv / "bin" / "python", "molmo_lerobot.suites.libero_server",
                          env={"LIBERO_CONFIG_PATH": str(config.parent),
-                              "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},
+                              "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), **child_env()},
                          pythonpath=[_REPO / "src"], remedy=remedy)
 
     def tasks(self, suite: str) -> list[dict[str, Any]]:
