@@ -71,6 +71,11 @@ def test_an_interrupted_run_resumes_with_the_command_it_prints(tmp_path, record)
     done = molmo_eval(*command.split())
     assert done.returncode == 0, done.stderr[-2000:]
     assert _outcomes(out) == _outcomes(tmp_path / "ref") and len(_outcomes(out)) == 6
+    # an option of the run's benchmark group given with the bare resume command is refused naming it
+    # (composed in the run's groups, not Hydra's "no such key" against the default benchmark's)
+    changed = molmo_eval(*command.split(), "benchmark.image_size=128")
+    assert changed.returncode == 2 and "benchmark.image_size differs from the run's (64 in run.json, 128 given)" \
+        in changed.stderr, changed.stderr[-2000:]
     if record:
         from lerobot.datasets.lerobot_dataset import LeRobotDataset
 

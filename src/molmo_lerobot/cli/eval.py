@@ -34,6 +34,7 @@ def main() -> int:
     from molmo_lerobot.runner.supervisor import reaping_children
 
     _cfg_alone_means_job(sys.argv)
+    _resume_in_the_runs_groups(sys.argv)
     with reaping_children():  # exit only after every child process is reaped
         try:
             return _main(multirun=any(a in ("-m", "--multirun") for a in sys.argv[1:]))
@@ -51,6 +52,31 @@ def _cfg_alone_means_job(argv: list[str]) -> None:
         if a in ("--cfg", "-c") and (i + 1 == len(argv) or argv[i + 1] not in _CFG_TYPES):
             argv.insert(i + 1, "job")
             return
+
+
+def _resume_in_the_runs_groups(argv: list[str]) -> None:
+    """``output_dir=X resume=true`` composes in the run's config groups: the run's ``benchmark=`` and
+    ``policy=`` choices (from ``X/run.json``) are added to this process's command line where it names
+    none, so that an option of the run's groups given with it (``benchmark.image_size=128`` on a PushT
+    run) reaches the resume's check, which refuses it naming it, instead of Hydra's "no such key"
+    against the default groups. A run directory that cannot be read is left to the run to report."""
+    import json
+    from pathlib import Path
+
+    from molmo_lerobot.runner.run_directory import RUN_FILE
+
+    args = [a for a in argv[1:] if not a.startswith("-")]
+    values = dict(a.split("=", 1) for a in args if "=" in a)
+    if values.get("resume", "").lower() != "true" or not values.get("output_dir"):
+        return
+    try:
+        options = json.loads((Path(values["output_dir"]).expanduser() / RUN_FILE).read_text()).get("options", {})
+    except (OSError, ValueError, AttributeError):
+        return
+    for group in ("benchmark", "policy"):
+        name = options.get(group, {}).get("name") if isinstance(options.get(group), dict) else None
+        if isinstance(name, str) and group not in values and not options[group].get("path"):
+            argv.insert(1, f"{group}={name}")
 
 
 def _main(multirun: bool) -> int:
