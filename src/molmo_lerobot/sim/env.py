@@ -292,10 +292,9 @@ class Env:
         for group in groups:
             values = init.get(group) or self.robot_type.default_init_qpos[group]
             try:
-                qpos = self.robot_type.init_qpos(group, values)
+                self.robot_type.set_init_qpos(self.robot, d, group, values)
             except ValueError as exc:
                 raise ValueError(f"robot.init_qpos[{group!r}]: {exc}") from None
-            self.robot.set_qpos(d, group, qpos)
         for name, pose in self.spec.scene_modifications.object_poses.items():
             self._place(name, np.asarray(pose, dtype=np.float64))
         mujoco.mj_forward(m, d)
