@@ -100,6 +100,25 @@ def test_scene_loads_with_its_physics_metadata_and_modifications(assets, tmp_pat
     assert env.model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL and PHYSICS_OPTIONS["cone"] != env.model.opt.cone
 
 
+def test_user_scenes_of_one_house_index_in_two_runs_build_each_their_own(tmp_path):
+    """The compiled-model cache keys a MolmoSpaces house by its scene file too: two runs in one process
+    whose ``scene_xml_paths[0]`` differ get each their own scene (the first's was reused before)."""
+    from molmo_lerobot.benchmark.task_specs import parse_episode
+    from molmo_lerobot.runner.episode_env import build_env
+    from molmo_lerobot.sim.env import Timing
+
+    tables = []
+    for name, x in (("a", 0.3), ("b", 0.4)):
+        write_user_library(tmp_path / name)
+        scene = tmp_path / name / "scene.xml"
+        scene.write_text(scene.read_text().replace('name="table" pos="0.3 0 0"', f'name="table" pos="{x} 0 0"'))
+        run = RunContext.build({"scene_xml_paths": [str(scene)]})
+        env = build_env(parse_episode(user_pick_episode(), run.plugins), Timing(), run)
+        tables.append(float(env.model.body("table").pos[0]))
+        env.close()
+    assert tables == [0.3, 0.4]
+
+
 # Libraries ---------------------------------------------------------------------------------------
 
 

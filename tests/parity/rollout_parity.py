@@ -1,6 +1,7 @@
 """Our side of the rollout comparison (tests/parity/test_rollout_parity.py): an episode run by
-``molmo-eval``'s own loop (``runner.rollout.rollout``) with a policy replaying given actions, and the
-actions the comparison replays.
+``molmo-eval``'s own loop (``runner.rollout.rollout``) with a policy replaying given actions, the
+actions the comparison replays, and episodes rewritten as MolmoSpaces writes its files
+(:func:`their_format`).
 
 Actions are in MolmoSpaces' convention (``arm`` 7 joint targets, ``gripper`` 0 … 255, one row of 8 per
 step); ours reads them through ``policy.convention=molmospaces``. Three kinds, none depending on
@@ -107,8 +108,8 @@ class Episode:
     final: bool
 
 
-def _context(benchmark: str, horizon: int | None):
-    ctx = RunContext.build({"seed": 0, "horizon": horizon, "timing": {"sleep": True}})
+def _context(benchmark: str | Path, horizon: int | None, config: dict | None = None):
+    ctx = RunContext.build({"seed": 0, "horizon": horizon, "timing": {"sleep": True}, **(config or {})})
     bench = load_run_benchmark(benchmark, ctx.plugins)
     return ctx.for_benchmark(bench), bench
 
@@ -121,15 +122,15 @@ def save_model(model: mujoco.MjModel, path: Path) -> None:
     mujoco.mj_saveModel(m, str(path), None)
 
 
-def run(benchmark: str, index: int, policy: Policy | str, horizon: int | None,
-        actions: np.ndarray | None = None, mjb: Path | None = None) -> Episode:
-    """Episode ``index`` of ``benchmark`` through our rollout loop for ``horizon`` steps (None: the
-    episode's own), body sleeping on as in their loop; ``policy`` is ``"scripted"`` or a Policy. With
-    ``mjb`` the compiled model is saved there."""
+def run(benchmark: str | Path, index: int, policy: Policy | str, horizon: int | None,
+        actions: np.ndarray | None = None, mjb: Path | None = None, config: dict | None = None) -> Episode:
+    """Episode ``index`` of ``benchmark`` (a name or a path) through our rollout loop for ``horizon`` steps
+    (None: the episode's own), body sleeping on as in their loop; ``policy`` is ``"scripted"`` or a Policy.
+    With ``mjb`` the compiled model is saved there; ``config`` adds to the run config (``scene_xml_paths``)."""
     from molmo_lerobot.policies.factory import make_policy
     from molmo_lerobot.runner.episode_env import build_env
 
-    run, bench = _context(benchmark, horizon)
+    run, bench = _context(benchmark, horizon, config)
     plan = EpisodePlanner(run, bench).plan(index)
     spec = plan.episode(run.plugins)
     task_type = run.plugins.task_type(plan.task_type)
@@ -191,23 +192,72 @@ def their_metadata(env: Any) -> dict:
     return meta
 
 
-def init_arm(benchmark: str, index: int) -> np.ndarray:
+def init_arm(benchmark: str | Path, index: int, config: dict | None = None) -> np.ndarray:
     """The episode's arm start (its ``init_qpos``)."""
-    _, bench = _context(benchmark, None)
+    _, bench = _context(benchmark, None, config)
     return np.asarray(bench.episodes[index].robot.init_qpos["arm"], dtype=np.float64)
 
 
-def episode(benchmark: str, index: int, kind: str, steps: int, mjb: Path) -> Episode:
+def episode(benchmark: str | Path, index: int, kind: str, steps: int, mjb: Path,
+            config: dict | None = None) -> Episode:
     """Ours on one case: ``kind`` ``fixed`` / ``random`` replay ``steps`` actions; ``expert`` runs the
     scripted expert over the episode's horizon and records its actions (their side replays them: the
     gripper as ``255 g``, which our convention maps back to ``g`` within a rounding). The model goes to
-    ``mjb``."""
+    ``mjb``; ``config`` as :func:`run`'s."""
     if kind == "expert":  # the expert's own run: its states, and its actions for their side to replay
-        return run(benchmark, index, "scripted", None, mjb=mjb)
-    else:
-        arm = init_arm(benchmark, index)
-        actions = fixed_actions(arm, steps) if kind == "fixed" else random_actions(arm, steps, seed=index)
-    return run(benchmark, index, Replay(actions), len(actions), actions, mjb)
+        return run(benchmark, index, "scripted", None, mjb=mjb, config=config)
+    arm = init_arm(benchmark, index, config)
+    actions = fixed_actions(arm, steps) if kind == "fixed" else random_actions(arm, steps, seed=index)
+    return run(benchmark, index, Replay(actions), len(actions), actions, mjb, config)
+
+
+#: what MolmoSpaces' files carry that ours do not: the robot start of their ``FrankaRobotConfig`` (no base
+#: joints, the gripper open at their driver angles), the cameras their DROID camera system records (the
+#: wrist camera on ``gripper/base``, the exterior one on ``fr3_link0``) and its image size
+#: (tests/data/molmospaces/mixed_tasks holds episodes written so)
+THEIR_GRIPPER_OPEN = [0.00296, 0.00296]
+THEIR_CAMERAS = [
+    {"name": "wrist_camera", "type": "robot_mounted", "reference_body_names": ["robot_0/gripper/base"],
+     "camera_offset": [0.031, 0.074, 0.022], "lookat_offset": [0.0, 0.0, 0.08],
+     "camera_quaternion": [-0.006, -0.001, 0.986, 0.169], "fov": 56.74},
+    {"name": "exo_camera_1", "type": "robot_mounted", "reference_body_names": ["robot_0/fr3_link0"],
+     "camera_offset": [0.1, 0.57, 0.66], "lookat_offset": [0.0, 0.0, 0.08],
+     "camera_quaternion": [-0.363, -0.124, 0.426, 0.819], "fov": 71.0}]
+THEIR_RESOLUTION = [624, 352]
+
+
+def their_format(cases: list[tuple[str, int]], root: Path) -> tuple[Path, dict]:
+    """Episodes ``(benchmark, index)`` of our files rewritten as MolmoSpaces writes its own, each on a user
+    scene in their layout built here: house ``k`` is ``root/scenes/house_<k>.xml`` with
+    ``house_<k>_metadata.json`` beside it, the source episode's house as its scene dataset builds it,
+    written as MJCF; episode ``k`` (``root/benchmark/benchmark.json``) names it (``scene_dataset: user``,
+    house ``k``) and has :func:`raw_episode`'s task, their robot start, cameras and image size. Returns the
+    benchmark dir and the run config that finds the scenes (``scene_xml_paths``)."""
+    from molmo_lerobot.sim.env import PHYSICS_OPTIONS
+
+    (root / "scenes").mkdir(parents=True)
+    (root / "benchmark").mkdir()
+    episodes, scenes = [], []
+    for k, (benchmark, index) in enumerate(cases):
+        run, bench = _context(benchmark, None)
+        plan = EpisodePlanner(run, bench).plan(index)
+        spec = plan.episode(run.plugins)
+        dataset = run.plugins.scene_dataset(spec.scene_dataset)
+        world = dataset.build_episode(spec, run)
+        dataset.modify(world, spec, run)
+        for option, value in dataset.physics_options(PHYSICS_OPTIONS, run).items():
+            setattr(world.option, option, value)
+        scene = root / "scenes" / f"house_{k}.xml"
+        scene.write_text(world.to_xml())
+        (root / "scenes" / f"house_{k}_metadata.json").write_text(json.dumps(dataset.episode_metadata(spec, run)))
+        scenes.append(str(scene))
+        raw = raw_episode(bench, index, run.plugins.task_type(plan.task_type).name)
+        raw.update(scene_dataset="user", house_index=k, data_split="val", cameras=THEIR_CAMERAS,
+                   img_resolution=THEIR_RESOLUTION)
+        raw["robot"]["init_qpos"] = {"base": [], "arm": raw["robot"]["init_qpos"]["arm"], "gripper": THEIR_GRIPPER_OPEN}
+        episodes.append(raw)
+    (root / "benchmark" / "benchmark.json").write_text(json.dumps(episodes, indent=1))
+    return root / "benchmark", {"scene_xml_paths": scenes}
 
 
 def arm_xml() -> str:

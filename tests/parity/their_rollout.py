@@ -20,8 +20,10 @@ Substituted, because it cannot run on our model or here:
 * the grasp-library look-up (``get_joint_grasp_path``): their sampler applies an articulated object's
   ``joint_start_position`` only where the joint has a grasp file in their downloaded library; here
   every joint has one;
-* the renderer (``MjOpenGLRenderer``: the episodes have no cameras, nothing is rendered) and
-  downloaded resources (``theirs.offline``).
+* downloaded resources (``theirs.offline``).
+
+Their renderer is theirs (``MjOpenGLRenderer`` through MuJoCo's GL context, EGL here), counting its frames:
+an episode's recorded cameras are rendered at every observation their loop makes.
 """
 
 from __future__ import annotations
@@ -56,18 +58,18 @@ from molmo_spaces.robots.robot_views.franka_fr3_view import FrankaFR3ArmGroup  #
 from molmo_spaces.tasks.json_eval_task_sampler import JsonEvalTaskSampler  # noqa: E402
 
 
-class _NoRenderer:
-    """Stands in for their OpenGL renderer: nothing is rendered in these rollouts."""
+class _CountingRenderer(their_env.MjOpenGLRenderer):
+    """Their OpenGL renderer, counting the frames it renders."""
 
-    def __init__(self, *args, **kwargs) -> None:
-        pass
+    frames = 0
 
-    def close(self) -> None:
-        pass
+    def render(self, *args, **kwargs):
+        _CountingRenderer.frames += 1
+        return super().render(*args, **kwargs)
 
 
-their_env.MjOpenGLRenderer = _NoRenderer
-their_env.HAS_FILAMENT = False
+their_env.MjOpenGLRenderer = _CountingRenderer
+their_env.HAS_FILAMENT = False  # their classic renderer, as without the filament package
 # their sampler sets an articulated object's joint_start_position only on joints that have a grasp file
 # in their (downloaded) grasp library: every joint has one here
 their_grasps.get_joint_grasp_path = lambda asset_id, joint_name: Path(f"{asset_id}/{joint_name}.npz")
@@ -164,8 +166,9 @@ def rollouts(inputs: dict) -> dict:
     """inputs: ``arm_xml`` (our arm, for their robot dir), ``episodes``: ``[{"spec": episode JSON,
     "metadata": scene metadata, "horizon": T, "mjb": the compiled model's file}]`` and ``actions_<k>``
     (T, 8) per episode. Returns per episode ``states_<k>`` (T + 1, nq + nv), ``success_<k>`` (T,: their success
-    cache after each step) and ``final`` (their ``judge_success`` at the end, as the loop returns it)."""
-    out: dict = {"final": [], "steps": [], "seconds": []}
+    cache after each step), ``final`` (their ``judge_success`` at the end, as the loop returns it), ``frames``
+    (camera frames their renderer drew) and ``robot_qpos`` (the qpos addresses of the robot's joints)."""
+    out: dict = {"final": [], "steps": [], "seconds": [], "frames": [], "robot_qpos": []}
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         robot_dir = root / "robot"
@@ -176,9 +179,12 @@ def rollouts(inputs: dict) -> dict:
             scene.write_text("<mujoco/>")
             (root / f"scene_{k}_metadata.json").write_text(json.dumps(episode["metadata"]))
             model = mujoco.MjModel.from_binary_path(episode["mjb"])
-            start = time.perf_counter()
+            start, _CountingRenderer.frames = time.perf_counter(), 0
             final, success, states = _run(model, str(scene), episode, inputs[f"actions_{k}"], robot_dir)
             out["seconds"].append(round(time.perf_counter() - start, 1))
+            out["frames"].append(_CountingRenderer.frames)
+            out["robot_qpos"].append([int(model.jnt_qposadr[j]) for j in range(model.njnt)
+                                      if model.joint(j).name.startswith("robot_0/")])
             out["final"].append(final)
             out["steps"].append(len(success))
             out[f"success_{k}"] = np.asarray(success, dtype=bool)
@@ -213,6 +219,7 @@ def _run(model, scene_path: str, episode: dict, actions: np.ndarray, robot_dir: 
     policy = Replay(config)
     task.register_policy(policy)
     final = ParallelRolloutRunner.run_single_rollout(episode_seed=0, task=task, policy=policy)
+    env.cleanup_rendering()
     states = [*policy.states, _state(env.current_data)]
     success = [bool(s[0]) for s in task.success_cache[1:]]  # [0] is the reset's
     return bool(final), success, states

@@ -81,6 +81,23 @@ def test_molmospaces_init_qpos_starts_open(episode_env):
         env.close()
 
 
+def test_their_driver_angles_start_the_driver_joints_alone(episode_env):
+    """MolmoSpaces' gripper group writes its two driver joints only: the finger linkage starts where the
+    reset leaves it (0) and the joint equalities pull it along; one normalized value starts all of it."""
+    linkage = [f"robot_0/gripper/{name}" for name in franka_droid._FOLLOWERS]
+    for gripper, drivers, links in (([0.4, 0.3], [0.4, 0.3], [0.0] * 4), ([0.5], [0.4, 0.4], [0.4, -0.4, 0.4, -0.4])):
+        raw = ms_pick_episode()
+        raw["robot"]["init_qpos"]["gripper"] = gripper
+        env = episode_env(raw)
+        try:
+            m, d = env.model, env.data
+            assert env.robot.joint_qpos(d, "gripper").tolist() == drivers
+            assert [float(d.qpos[m.jnt_qposadr[m.joint(j).id]]) for j in linkage] == pytest.approx(links, abs=1e-15)
+            assert env.robot.targets(d, "gripper") == pytest.approx([float(np.mean(drivers)) / 0.8])
+        finally:
+            env.close()
+
+
 def test_gripper_command_spans_the_full_robotiq_travel(episode_env):
     env = episode_env(ms_pick_episode())
     u = env.model.actuator("robot_0/gripper/fingers_actuator").id

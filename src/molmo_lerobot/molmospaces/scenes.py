@@ -16,6 +16,7 @@ name, the rest becomes the prefix of its elements, and it gets a free joint if i
 
 from __future__ import annotations
 
+import json
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -146,6 +147,14 @@ class MolmoSpacesScenes(SceneDataset):
         for name, rel in spec.scene_modifications.added_objects.items():
             objects[name] = {"asset_id": Path(rel).stem, "object_enum": "temp_object", "is_static": False}
         return {**meta, "objects": objects}
+
+    def episode_source(self, spec: EpisodeSpec, ctx: SceneContext) -> str:
+        """The scene file (the run's assets dir or ``scene_xml_paths`` choose it) and the run's physics options."""
+        try:
+            path = str(self.scene_path(ctx.settings, spec.house_index, spec.data_split))
+        except layout.SceneLookupError:
+            path = ""
+        return json.dumps([path, ctx.settings.physics_options], sort_keys=True, default=str)
 
     def _load(self, path: Path) -> mujoco.MjSpec:
         try:

@@ -251,6 +251,11 @@ class RobotType(ABC):
             raise ValueError(f"expected {size} values, got {len(values)}")
         return np.asarray(values, dtype=np.float64)
 
+    def set_init_qpos(self, handle: RobotHandle, data: mujoco.MjData, group: str, values: Sequence[float]) -> None:
+        """Start ``group`` at an episode's ``robot.init_qpos[group]`` in freshly reset ``data``: by default
+        :meth:`init_qpos`'s public values through ``handle.set_qpos``; ``ValueError`` if they do not fit."""
+        handle.set_qpos(data, group, self.init_qpos(group, values))
+
     def configured(self, settings: object) -> RobotType:
         """This robot under the run's MolmoSpaces settings (``settings.assets_dir``: where a robot
         whose model is in their assets finds it); most robots take none."""

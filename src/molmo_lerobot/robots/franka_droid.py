@@ -37,7 +37,8 @@ on either hand.
 
 Move groups: ``arm`` (7 joint positions, rad) and ``gripper`` (1 value, 0 open … 1 closed,
 mapped linearly onto the actuator's 0 … 255). ``init_qpos["gripper"]`` takes MolmoSpaces' two
-driver-joint angles in radians (``[0.00296, 0.00296]`` = open) or one normalized value.
+driver-joint angles in radians (``[0.00296, 0.00296]`` = open), set on those two joints alone as their
+robot view sets them, or one normalized value, which sets the whole finger linkage.
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.paths import molmospaces_assets_dir, package_asset_dir
-from molmo_lerobot.robots.base import ArmGripperHandle, RobotType, add_mount
+from molmo_lerobot.robots.base import ArmGripperHandle, RobotHandle, RobotType, add_mount
 from molmo_lerobot.robots.franka import load_franka_spec
 from molmo_lerobot.sim.spec_compat import equality_data, set_joint_damping
 
@@ -291,6 +292,12 @@ class FrankaDroidHandle(ArmGripperHandle):
                          for name, (_, sign) in _FOLLOWERS.items()
                          if (j := mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{prefix}gripper/{name}")) >= 0]
 
+    def set_driver_angles(self, data: mujoco.MjData, angles: Sequence[float]) -> None:
+        """Write the two driver joints alone (rad, at rest), as MolmoSpaces' ``RobotIQGripperGroup`` writes
+        its ``joint_pos``: the finger linkage stays where it is until the joint equalities pull it along."""
+        data.qpos[self._drv_q] = angles
+        data.qvel[self._drv_v] = 0.0
+
     def _gripper_qpos(self, data):
         return float(np.clip(data.qpos[self._drv_q].mean() / DRIVER_CLOSED, 0.0, 1.0))
 
@@ -335,6 +342,17 @@ class FrankaDroid(RobotType):
                 raise ValueError(f"gripper driver angles {list(values)} outside [0, {DRIVER_CLOSED}] rad")
             return np.array([float(np.clip(np.mean(values) / DRIVER_CLOSED, 0.0, 1.0))])
         return super().init_qpos(group, values)
+
+    def set_init_qpos(self, handle: RobotHandle, data: mujoco.MjData, group: str, values: Sequence[float]) -> None:
+        """MolmoSpaces' two driver angles start the gripper as their robot view does: on the driver joints
+        alone (:meth:`FrankaDroidHandle.set_driver_angles`), the linkage at the reset's rest position; one
+        normalized value starts the whole linkage there."""
+        if group == "gripper" and len(values) == 2 and isinstance(handle, FrankaDroidHandle):
+            closed = self.init_qpos(group, values)  # checks the range
+            handle.set_driver_angles(data, values)
+            handle.command(data, group, closed)
+        else:
+            super().set_init_qpos(handle, data, group, values)
 
     def spec(self) -> mujoco.MjSpec:
         return load_droid_spec(arm=self.arm)

@@ -124,9 +124,10 @@ _MODEL_CACHE_SIZE = 4
 
 
 def _model_key(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: RobotType,
-               cameras: CameraSystem, profile: RenderProfile) -> str:
+               cameras: CameraSystem, profile: RenderProfile, ctx: SceneContext) -> str:
     mods = spec.scene_modifications.model_dump(mode="json", exclude={"object_poses"})
-    return json.dumps([spec.scene_dataset, spec.data_split, spec.house_index, robot.name,
+    return json.dumps([spec.scene_dataset, spec.data_split, spec.house_index, scene.episode_source(spec, ctx),
+                       robot.name,
                        vars(robot),  # a configured robot's settings (rby1: where its model is read from)
                        spec.task.robot_base_pose,
                        robot.base_size(spec.robot),
@@ -214,7 +215,7 @@ def make_env(spec: EpisodeSpec, timing: Timing, scene: SceneDataset, robot: Robo
     (``None``: the default profile with this process's overrides).
     """
     profile = resolve_profile(None) if profile is None else profile
-    key = _model_key(spec, timing, scene, robot, camera_system, profile)
+    key = _model_key(spec, timing, scene, robot, camera_system, profile, ctx)
     if key in _MODEL_CACHE:
         _MODEL_CACHE.move_to_end(key)
     else:
@@ -292,10 +293,9 @@ class Env:
         for group in groups:
             values = init.get(group) or self.robot_type.default_init_qpos[group]
             try:
-                qpos = self.robot_type.init_qpos(group, values)
+                self.robot_type.set_init_qpos(self.robot, d, group, values)
             except ValueError as exc:
                 raise ValueError(f"robot.init_qpos[{group!r}]: {exc}") from None
-            self.robot.set_qpos(d, group, qpos)
         for name, pose in self.spec.scene_modifications.object_poses.items():
             self._place(name, np.asarray(pose, dtype=np.float64))
         mujoco.mj_forward(m, d)

@@ -69,6 +69,11 @@ class SceneDataset(ABC):
         """The metadata of ``spec``'s house (default: :meth:`metadata` of its ``house_index``)."""
         return self.metadata(spec.house_index)
 
+    def episode_source(self, spec: EpisodeSpec, ctx: SceneContext) -> str:
+        """What of the run decides how ``spec``'s house builds, beyond the episode (part of the compiled
+        model's cache key; default: nothing, the house index decides)."""
+        return ""
+
     def modify(self, world: mujoco.MjSpec, spec: EpisodeSpec, ctx: SceneContext) -> None:
         """Apply ``scene_modifications``: remove bodies (exact names), attach added MJCF files."""
         mods = spec.scene_modifications
