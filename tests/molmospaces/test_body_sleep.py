@@ -53,7 +53,8 @@ def test_molmospaces_files_sleep_by_default_and_record_it(assets, tmp_path):
     res = _run(bench, out)
     assert res.summary["n_errors"] == 0, [e.error for e in res.episodes]
     assert _recorded_sleep(out) is True
-    with pytest.raises(RunError, match=r"its timing differs from this run's \(timing.sleep: true vs false\)"):
+    # the run's option was null (its scenes decided: true); a resume that gives another is refused naming it
+    with pytest.raises(RunError, match=r"timing.sleep differs from the run's \(null in run.json, false given\)"):
         _run(bench, out, "resume=true", "timing.sleep=false")
 
 
@@ -69,7 +70,7 @@ def test_ours_record_false_and_a_run_recorded_so_before_resumes(tmp_path):
     before = {"policy_dt_ms": 66.0, "ctrl_dt_ms": 2.0, "sim_dt_ms": 2.0, "control": "hold", "sleep": False}
     assert json.loads((out / "run.json").read_text())["timing"] == before  # what the old default wrote
     assert _run(bench, out, "resume=true").summary["n_episodes"] == 1
-    with pytest.raises(RunError, match=r"its timing differs from this run's \(timing.sleep: false vs true\)"):
+    with pytest.raises(RunError, match=r"timing.sleep differs from the run's \(null in run.json, true given\)"):
         _run(bench, out, "resume=true", "timing.sleep=true")
 
 
