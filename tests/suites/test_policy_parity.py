@@ -14,9 +14,11 @@ this process; LIBERO's side is in ``test_libero_parity.py`` (its LIBERO process)
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from lerobot_policy_reference import lerobot_eval_episodes, make_lerobot_env
 from policy_parity import assert_same_episodes, molmo_policy, needs_diffusers, play_session
@@ -73,5 +75,48 @@ def test_pusht_actions_are_lerobot_evals(tmp_path, name, save, size):
 @pytest.mark.slow
 @pytest.mark.parametrize(("name", "save", "size"), PUSHT_CHECKPOINTS)
 def test_pusht_full_episodes_actions_are_lerobot_evals(tmp_path, name, save, size):
-    rows = pusht_parity(save(tmp_path / name, "pusht", size), seed=0, episodes=10, horizon=pusht.MAX_STEPS)
+    rows = pusht_parity(save(tmp_path / name, "pusht", size), seed=0, episodes=3, horizon=pusht.MAX_STEPS)
     print(f"\n{name}: " + ", ".join(f"seed {r['seed']}: {r['steps']} steps, success {r['success']}" for r in rows))
+
+
+def recorded_episodes(run_dir: Path) -> list[dict[str, Any]]:
+    """A ``record=true`` PushT run's episodes from its directory: per benchmark episode its success, seed and steps
+    (``episodes.jsonl``) and its recorded actions (``dataset/``, float32 as the policy gave them)."""
+    import pandas as pd
+
+    from molmo_lerobot.results import read_run
+
+    results = sorted(read_run(run_dir, finished=False).episodes, key=lambda e: e.episode_index)
+    frames = pd.concat(pd.read_parquet(p) for p in sorted((run_dir / "dataset" / "data").rglob("*.parquet")))
+    evals = (run_dir / "dataset" / "meta" / "eval" / "episodes.jsonl").read_text().splitlines()
+    stored = {e["benchmark_episode_index"]: e["episode_index"] for e in map(json.loads, evals)}
+    out = []
+    for result in results:
+        rows = frames[frames["episode_index"] == stored[result.episode_index]].sort_values("frame_index")
+        out.append({"success": result.success, "seed": result.seed, "steps": result.steps,
+                    "actions": [np.asarray(a, dtype=np.float32).tolist() for a in rows["action"]]})
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("name", "save", "size"), PUSHT_CHECKPOINTS)
+def test_molmo_eval_runs_record_lerobot_evals_actions(tmp_path, name, save, size):
+    """``molmo-eval policy=lerobot policy.path=… benchmark=pusht record=true workers=2 worker_threads=null``: its
+    workers' episodes and the actions its dataset holds are LeRobot's. ``worker_threads=null`` leaves torch its
+    default thread count, as ``lerobot-eval`` does: CPU kernels round differently with another count (our default of
+    one thread per worker moves these actions by ~1e-7)."""
+    from lerobot.envs.configs import PushtEnv
+
+    from molmo_lerobot.runner.evaluate import run_evaluation
+
+    checkpoint, episodes, horizon = save(tmp_path / name, "pusht", size), 4, 40
+    run_evaluation(compose(["policy=lerobot", f"policy.path={checkpoint}", "policy.device=cpu", "benchmark=pusht",
+                            f"benchmark.episodes_per_task={episodes}", f"horizon={horizon}", "record=true",
+                            "workers=2", "worker_threads=null", "progress=false", f"output_dir={tmp_path / 'run'}"]))
+    cfg = PushtEnv(episode_length=horizon)
+    env = make_lerobot_env(cfg)
+    try:
+        theirs = lerobot_eval_episodes(cfg, env, checkpoint, 0, episodes)
+    finally:
+        env.close()
+    assert_same_episodes(recorded_episodes(tmp_path / "run"), theirs, f"molmo-eval pusht {name}")
