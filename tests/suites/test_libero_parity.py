@@ -8,6 +8,8 @@ state and both camera images the policy saw. The default run plays three short e
 reset reuses the task's compiled model and render context; LeRobot's rebuilds them); the ≥50-episode
 run across the five suites is ``-m slow`` (``MOLMO_LIBERO_PARITY_HORIZON`` shortens its episodes), and so is the
 check that the registry asset tree holds every file LIBERO loads (``molmo_lerobot.suites.libero_assets``).
+The LIBERO half of the policy parity (``test_policy_parity.py``): LeRobot checkpoints through ``eval_policy``
+(``lerobot_policy_reference.py``) and through ``policy=lerobot`` on a ``SuiteSession``, every action equal.
 """
 
 from __future__ import annotations
