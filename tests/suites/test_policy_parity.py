@@ -8,8 +8,8 @@ must not resize), and a tiny diffusion policy (an observation history and DDPM n
 sides seed per episode: ``lerobot_policy_reference.py``). LeRobot's side is ``lerobot_policy_reference.py``
 (``eval_main``'s set-up, ``eval_policy``); ours what a ``molmo-eval`` worker plays: the planned episodes as plans, a
 ``SuiteSession`` each, the run's policy (``make_policy`` of the composed config) and our rollout loop. PushT runs in
-this process; LIBERO's side is in ``test_libero_parity.py`` (its LIBERO process); ``-m slow`` plays PushT's full
-300-step episodes.
+this process; LIBERO's side is in ``test_libero_parity.py`` (its LIBERO process). ``-m slow`` plays PushT's full
+300-step episodes, and a real ``molmo-eval … record=true`` run per checkpoint whose dataset holds LeRobot's actions.
 """
 
 from __future__ import annotations
