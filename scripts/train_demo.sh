@@ -120,6 +120,8 @@ for policy in random trained; do
   stamp "4/5 pick_v1 ($EVAL_LIMIT episodes): policy $policy"
   args=(policy=random)
   [ "$policy" = trained ] && args=(policy=lerobot policy.path="$CKPT" policy.device="$DEVICE")
+  # images: trained on RES x RES frames, so pick_v1's 224 x 224 are letterboxed to that (not lerobot-eval's default)
+  [ "$policy" = trained ] && [ "$INPUTS" = images ] && args+=(policy.resize=pad)
   "$PYTHON" -m molmo_lerobot.cli.eval "${args[@]}" benchmark=pick_v1 limit="$EVAL_LIMIT" workers="$WORKERS" \
     end_on_success="$END_ON_SUCCESS" progress=false output_dir="$out" || [ -f "$out/results.json" ]
 done

@@ -9,7 +9,7 @@ import pytest
 
 #: Folders whose helper modules tests elsewhere import by name: ``hub_standin``, ``eval_runs`` (here),
 #: ``droid_variants`` (tasks/), ``save_tiny_act`` of ``test_lerobot_policy`` (policies/), ``rby1_standin``
-#: (sim/), ``droid_server`` (protocol/), ``export_synthetic`` (export/), ``libero_act`` and ``standin_dataset``
+#: (sim/), ``droid_server`` (protocol/), ``export_synthetic`` (export/), ``tiny_policies`` and ``standin_dataset``
 #: (suites/). Module names are unique across tests/.
 TESTS = Path(__file__).resolve().parent
 sys.path[:0] = [str(TESTS / sub) for sub in ("", "tasks", "policies", "sim", "protocol", "export", "suites")

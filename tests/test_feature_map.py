@@ -159,9 +159,9 @@ def test_the_adapters_agree_on_franka_droid_with_droid_cameras(droid_run, tmp_pa
     # policy=lerobot, trained on those features: the same images, state vector and action split
     policy = _lerobot_policy(tmp_path / "act", fmap)
     batch = policy._batch(obs)
-    np.testing.assert_array_equal(batch[STATE].numpy(), frame[STATE])
+    np.testing.assert_array_equal(batch[STATE][0].numpy(), frame[STATE])
     for c, _, _ in fmap.cameras:
-        np.testing.assert_array_equal(batch[image_feature(c)].permute(1, 2, 0).mul(255).round().byte().numpy(),
+        np.testing.assert_array_equal(batch[image_feature(c)][0].permute(1, 2, 0).mul(255).round().byte().numpy(),
                                       frame[image_feature(c)])
     _assert_parts_equal(policy._to_action(frame[ACTION][None].astype(np.float64)),
                         {g: np.float32(a) for g, a in action.items()})
@@ -218,7 +218,7 @@ def test_a_mobile_base_is_one_more_move_group(tmp_path):
 
     # policy=lerobot by default reads the episode's move groups in order; policy=replay splits the same way
     policy = _lerobot_policy(tmp_path / "act", fmap)
-    np.testing.assert_array_equal(policy._batch(obs)[STATE].numpy(), state)
+    np.testing.assert_array_equal(policy._batch(obs)[STATE][0].numpy(), state)
     _assert_parts_equal(policy._to_action(vector[None].astype(np.float64)), fmap.split_action(vector))
     np.save(tmp_path / "actions.npy", vector[None])
     replay = ReplayPolicy({"actions": str(tmp_path / "actions.npy")})

@@ -1,7 +1,7 @@
 """Episodes/min of LIBERO in ``molmo-eval`` against ``lerobot-eval --env.type=libero`` on the same episodes.
 
 Both sides play the same episodes with the same policy: a tiny ACT at random init with LeRobot's LIBERO
-features (``tests/suites/libero_act.py``), loaded by ``--policy.path=`` and ``policy.path=``. Theirs is
+features (``tests/suites/tiny_policies.py``), loaded by ``--policy.path=`` and ``policy.path=``. Theirs is
 ``lerobot-eval`` in the LIBERO venv with its defaults (hard reset, a video per episode, 360² cameras, the suite's
 step limit, ``select_action`` at every step); ours ``molmo-eval policy=lerobot policy.mode=chunk benchmark=libero_object
 benchmark.episodes_per_task=E workers=2``: the same actions (ACT's ``select_action`` plays out the chunk it
@@ -21,8 +21,8 @@ import json
 import os
 
 import pytest
-from libero_act import save_libero_act  # tests/suites (tests/conftest.py puts it on sys.path)
 from perf_rows import append_rows, eval_run, timed
+from tiny_policies import save_act  # tests/suites (tests/conftest.py puts it on sys.path)
 
 from molmo_lerobot.suites.libero import libero_venv
 
@@ -39,7 +39,7 @@ def test_libero_episodes_per_min_against_lerobot_eval(tmp_path):
     tasks = int(os.environ.get("MOLMO_PERF_LIBERO_TASKS", "2"))
     per_task = int(os.environ.get("MOLMO_PERF_LIBERO_EPISODES", "2"))
     workers = int(os.environ.get("MOLMO_PERF_LIBERO_WORKERS", "2"))
-    act = save_libero_act(tmp_path / "act", SIZE)
+    act = save_act(tmp_path / "act", "libero", SIZE)
     env = {**os.environ, "MUJOCO_GL": "egl", "HF_HUB_OFFLINE": "1", "LIBERO_CONFIG_PATH": str(venv / "libero-config")}
 
     theirs_wall, theirs_cpu, _ = timed(

@@ -83,6 +83,26 @@ def test_chunk_mode_returns_whole_chunk(act_dir):
     np.testing.assert_allclose(step.act(obs())["arm"], out["arm"][0], rtol=1e-5, atol=1e-6)
 
 
+def test_frames_reach_the_policy_at_their_size_as_lerobot_eval_hands_them(act_dir):
+    """By default (``resize=none``) the 48×64 frames reach a checkpoint declared at 24×32 as they are: the batch of
+    one that LeRobot's ``preprocess_observation`` makes of the env's observation; ``pad`` resizes only when asked."""
+    from lerobot.envs.utils import preprocess_observation
+
+    seen = obs()
+    policy = LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu"})
+    policy.reset(ctx())
+    batch = policy._batch(seen)
+    state = np.concatenate([seen["qpos"]["arm"], seen["qpos"]["gripper"]])
+    theirs = preprocess_observation({"pixels": {"front": seen["images"]["front"][None]}, "agent_pos": state[None]})
+    assert batch.keys() == {*theirs, "task"} and batch["task"] == ["pick the cube"]
+    for key, value in theirs.items():
+        assert value.shape == batch[key].shape and torch.equal(value, batch[key]), key
+    assert policy.act(seen)["arm"].shape == (7,)
+    padded = LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu", "resize": "pad"})
+    padded.reset(ctx())
+    assert padded._batch(seen)["observation.images.front"].shape == (1, 3, 24, 32)
+
+
 def test_missing_camera_and_bad_state_are_clear(act_dir):
     policy = LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu"})
     policy.reset(ctx())
@@ -102,7 +122,7 @@ def test_molmospaces_convention_state_and_gripper_units(tmp_path):
     native = {**obs(), "joint_qpos": {"arm": np.linspace(-1, 1, 7), "gripper": np.array([0.3, 0.31])},
               "joint_qvel": {"arm": np.zeros(7), "gripper": np.zeros(2)}, "tcp_pose": np.array([0, 0, 0, 1.0, 0, 0, 0]),
               "robot_base_pose": np.array([0, 0, 0, 1.0, 0, 0, 0])}
-    state = policy._batch(native)["observation.state"].numpy()
+    state = policy._batch(native)["observation.state"][0].numpy()
     np.testing.assert_array_equal(state, np.float32([*np.linspace(-1, 1, 7), 0.3, 0.31]))
     assert policy.act(native)["arm"].shape == (7,)
     assert policy._to_action(np.array([[0.0] * 7 + [255.0]]))["gripper"][0] == 1.0

@@ -8,6 +8,8 @@ state and both camera images the policy saw. The default run plays three short e
 reset reuses the task's compiled model and render context; LeRobot's rebuilds them); the ≥50-episode
 run across the five suites is ``-m slow`` (``MOLMO_LIBERO_PARITY_HORIZON`` shortens its episodes), and so is the
 check that the registry asset tree holds every file LIBERO loads (``molmo_lerobot.suites.libero_assets``).
+The LIBERO half of the policy parity (``test_policy_parity.py``): LeRobot checkpoints through ``eval_policy``
+(``lerobot_policy_reference.py``) and through ``policy=lerobot`` on a ``SuiteSession``, every action equal.
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 from parity_policies import POLICIES
+from policy_parity import assert_same_episodes, molmo_policy, needs_diffusers, play_session
+from tiny_policies import save_act, save_diffusion
 
 from molmo_lerobot.policies.base import Policy
 from molmo_lerobot.recording import Recorder
@@ -197,17 +201,58 @@ def test_registry_assets_hold_every_file_libero_loads(venv):
     assert report["tasks_built"] == 130
 
 
-def test_a_lerobot_checkpoint_runs_unchanged(suite_env, tmp_path):
-    """A LeRobot ACT (random init) with the features of LeRobot's LIBERO datasets, loaded as ``policy=lerobot
-    policy.path=…`` loads it, plays a short LIBERO episode through the suite."""
-    from libero_act import save_libero_act
+#: the policy-parity checkpoints (``test_policy_parity.py``): name, saver, declared image size (the env's: SIZE)
+LIBERO_CHECKPOINTS = [("act", save_act, SIZE), ("act_at_256", save_act, 256), ("diffusion", save_diffusion, SIZE)]
 
-    from molmo_lerobot.policies.lerobot_policy import LeRobotPolicy
-    from molmo_lerobot.suites.libero import PolicyActor
 
-    save_libero_act(tmp_path, SIZE)
-    policy = LeRobotPolicy({"name": "lerobot", "path": str(tmp_path), "device": "cpu"})
-    [episode] = plan_episodes("libero_object", suite_env.tasks("libero_object")[:1], 1, horizon=6)
-    outcome = play(suite_env, episode, PolicyActor(policy, episode))
-    assert outcome.steps == 6 and not outcome.success
-    assert len(outcome.final_state) == 8
+def lerobot_policy_episodes(venv: Path, suite: str, task_id: int, horizon: int, runs: list[dict]) -> list[list[dict]]:
+    """``lerobot_policy_reference.py``'s runs (checkpoint, seed, episodes) one after the other on one LIBERO env."""
+    args = {"suite": suite, "task_id": task_id, "size": SIZE, "horizon": horizon, "runs": runs}
+    env = {**os.environ, "LIBERO_CONFIG_PATH": str(venv / "libero-config"), "MUJOCO_GL": "egl"}
+    proc = subprocess.run([str(venv / "bin" / "python"), str(HERE / "lerobot_policy_reference.py"), json.dumps(args)],
+                          env=env, capture_output=True, text=True, timeout=3600)
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("[")]
+    assert proc.returncode == 0 and lines, proc.stdout[-2000:] + proc.stderr[-3000:]
+    return json.loads(lines[-1])
+
+
+def policy_parity(venv: Path, suite_env: LiberoSuite, checkpoints: list[tuple[str, Path]], suite: str, task_id: int,
+                  episodes: int, seed: int, horizon: int) -> list[list[dict]]:
+    """Each checkpoint's ``episodes`` in turn (LIBERO's init states advance across them, as on LeRobot's one env)
+    through LeRobot's evaluation and through ``policy=lerobot`` on a ``SuiteSession`` and our rollout loop; checks
+    they agree (actions bit for bit) and returns LeRobot's."""
+    task = suite_env.tasks(suite)[task_id]
+    planned = plan_episodes(suite, [task], episodes * len(checkpoints), seed=seed, horizon=horizon)
+    runs = [{"checkpoint": str(path), "seed": seed + i * episodes, "episodes": episodes}
+            for i, (_, path) in enumerate(checkpoints)]
+    theirs = lerobot_policy_episodes(venv, suite, task_id, horizon, runs)
+    for i, (name, path) in enumerate(checkpoints):
+        policy, ours = molmo_policy(path), []
+        for k in range(i * episodes, (i + 1) * episodes):
+            session = SuiteSession(_suite_plan(k, "libero", planned[k], True), suite_env, SIZE, end_on_success=True)
+            policy.reset(session.policy_context())
+            ours.append(play_session(session, policy, "eef"))
+        policy.close()
+        assert_same_episodes(ours, theirs[i], f"{suite} task {task_id} {name}")
+    return theirs
+
+
+def test_a_checkpoint_at_another_image_size_acts_as_under_lerobot_eval(venv, suite_env, tmp_path):
+    """The tiny ACT declared at 256², ``policy=lerobot`` at its defaults: LeRobot hands it the env's 128² frames (its
+    pre-processor decides), so must we; one 6-step episode, every action LeRobot's (the other checkpoints: slow)."""
+    name, save, size = LIBERO_CHECKPOINTS[1]
+    checkpoint = save(tmp_path / name, "libero", size)
+    policy_parity(venv, suite_env, [(name, checkpoint)], "libero_object", 0, episodes=1, seed=3, horizon=6)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(3 * 3600)
+@needs_diffusers
+def test_lerobot_checkpoints_act_as_under_lerobot_eval_longer(venv, suite_env, tmp_path):
+    """The three checkpoints (ACT at the env's size and at 256², diffusion), two 50-step episodes each, on
+    libero_object task 0."""
+    checkpoints = [(name, save(tmp_path / name, "libero", size)) for name, save, size in LIBERO_CHECKPOINTS]
+    theirs = policy_parity(venv, suite_env, checkpoints, "libero_object", 0, episodes=2, seed=0, horizon=50)
+    print("\n" + "\n".join(f"{name}: " + ", ".join(f"seed {e['seed']} {e['steps']} steps success {e['success']}"
+                                                    for e in episodes)
+                             for (name, _), episodes in zip(checkpoints, theirs, strict=True)))

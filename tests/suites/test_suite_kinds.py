@@ -43,7 +43,8 @@ def test_libero_session_keeps_libero_conventions():
     suite = LiberoStandIn()
     session = SuiteSession(plan, suite, 8, end_on_success=False)
     ctx = session.policy_context()
-    assert ctx.move_groups == {"eef": 7} and ctx.extra == {"delta_groups": ["eef"]} and ctx.policy_dt_s == 1 / 20
+    assert ctx.move_groups == {"eef": 7} and ctx.extra == {"delta_groups": ["eef"], "camera_features": {
+        "image": "observation.images.image", "image2": "observation.images.image2"}} and ctx.policy_dt_s == 1 / 20
     obs = session.observe()
     assert sorted(obs["images"]) == ["image", "image2"] and obs["qpos"]["eef"].shape == (8,)
     ended = None

@@ -94,7 +94,7 @@ def test_recorder_env_and_policy_see_the_same_vector(genv, tmp_path):
     assert policy.needs_environment_state and not policy.needs_images
     policy.reset(EpisodeContext(spec=None, episode_index=0, seed=0, prompt=ep.plan.prompt,
                                 move_groups=dict(ep.env.move_groups), policy_dt_s=0.066))
-    np.testing.assert_array_equal(policy._batch(obs)[ENV_STATE].numpy(), recorded)
+    np.testing.assert_array_equal(policy._batch(obs)[ENV_STATE][0].numpy(), recorded)
     with pytest.raises(KeyError, match=r"observation\.environment_state"):
         policy._batch({k: v for k, v in obs.items() if k != ENV_STATE_KEY})
     with pytest.raises(FeatureError, match=r"observation.environment_state: 3 values, expected 13"):

@@ -11,10 +11,23 @@ action vector is split into move groups in ``action_groups`` order (default: the
 ``convention: molmospaces`` the state takes MolmoSpaces' joint units (the Robotiq gripper as its
 two driver angles) and the action's gripper is their 0 … 255 command.
 
-``mode: step`` calls ``select_action`` every step (LeRobot's own action queue and temporal
-ensembling); ``mode: chunk`` returns the whole predicted chunk, which our rollout runs open
-loop (renders only at chunk ends). Loading refuses a checkpoint whose weights did not
-actually end up in the model (some LeRobot policies silently keep random weights).
+The policy gets what ``lerobot-eval`` hands it for one env (a batch of one): each image as a
+``(1, C, H, W)`` float32 tensor in [0, 1] at the size the env renders it (``resize: none``, the
+default: the policy's own pre-processor decides; ``pad``/``stretch`` resize to the checkpoint's
+declared size, only when asked), the state as ``(1, D)`` float32, the task as ``[prompt]``; then
+its own pre-processor, ``select_action``, post-processor. An env suite names the feature each of
+its cameras is in LeRobot's env (``EpisodeContext.extra["camera_features"]``: PushT's ``image`` is
+``observation.image``). :meth:`LeRobotPolicy.reset` seeds torch's RNG (LeRobot's ``set_seed``)
+with the episode's seed, so a sampling policy (diffusion) draws the same noise for an episode in
+any worker and on resume.
+
+``mode: step`` (the default: ``lerobot-eval``'s actions) calls ``select_action`` every step
+(LeRobot's own action queue, observation history and temporal ensembling); ``mode: chunk``
+returns the whole predicted chunk, which our rollout runs open loop (renders only at chunk ends:
+the same actions for a policy whose ``select_action`` plays out its chunk, like ACT without
+ensembling; not for one that keeps an observation history, like diffusion). Loading refuses a
+checkpoint whose weights did not actually end up in the model (some LeRobot policies silently
+keep random weights).
 """
 
 from __future__ import annotations
@@ -22,6 +35,7 @@ from __future__ import annotations
 import copy
 import os
 from collections import deque
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
@@ -64,7 +78,7 @@ class LeRobotPolicyConfig(BaseModel):
     state_key: str = STATE
     action_groups: list[str] | None = None
     task_key: str = "task"
-    resize: Literal["pad", "stretch", "none"] = "pad"
+    resize: Literal["none", "pad", "stretch"] = "none"
     verify_weights: bool = True
     max_unmatched_fraction: float = Field(default=0.01, ge=0.0, le=1.0)
     serve: bool = False
@@ -195,6 +209,7 @@ class LeRobotPolicy(Policy):
         config = self.policy.config
         self.batched = config.type in BATCHABLE_TYPES and getattr(config, "temporal_ensemble_coeff", None) is None
         self._groups: dict[str, int] = {}
+        self._camera_features: dict[str, str] = {}
         self._prompt = ""
         self._queue: deque[np.ndarray] | None = None  # a fork's own action queue (None: LeRobot's queue)
 
@@ -228,6 +243,9 @@ class LeRobotPolicy(Policy):
 
     # Policy interface ------------------------------------------------------------------
     def reset(self, ctx: EpisodeContext) -> None:
+        from lerobot.utils.random_utils import set_seed
+
+        set_seed(ctx.seed % 2**32)  # as lerobot-eval seeds its run (numpy takes seeds in [0, 2**32))
         if self._queue is not None:  # a fork: its own queue only (shared processors of these types are stateless)
             self._queue.clear()
         else:
@@ -235,6 +253,7 @@ class LeRobotPolicy(Policy):
             for pipeline in (self.preprocessor, self.postprocessor):
                 pipeline.reset()
         self._groups = dict(ctx.move_groups)
+        self._camera_features = dict(ctx.extra.get("camera_features", {}))
         self._prompt = ctx.prompt
 
     def fork(self) -> LeRobotPolicy | None:
@@ -242,7 +261,7 @@ class LeRobotPolicy(Policy):
         if not self.batched:
             return None
         twin = copy.copy(self)
-        twin._groups, twin._prompt, twin._queue = {}, "", deque()
+        twin._groups, twin._camera_features, twin._prompt, twin._queue = {}, {}, "", deque()
         return twin
 
     @classmethod
@@ -289,8 +308,8 @@ class LeRobotPolicy(Policy):
                 results[i] = exc
         if todo:
             lead = policies[todo[0][0]]
-            batch = {key: (torch.stack([b[key] for _, b in todo]) if torch.is_tensor(value)
-                           else [b[key] for _, b in todo])
+            batch = {key: (torch.cat([b[key] for _, b in todo]) if torch.is_tensor(value)
+                           else [item for _, b in todo for item in b[key]])
                      for key, value in todo[0][1].items()}
             with torch.inference_mode():
                 chunk = lead.policy.predict_action_chunk(lead.preprocessor(batch))
@@ -338,27 +357,20 @@ class LeRobotPolicy(Policy):
         return arr.reshape(-1, arr.shape[-1])
 
     def _batch(self, obs: Observation) -> dict[str, Any]:
+        """``obs`` as ``lerobot-eval`` hands a policy one env's observation: a batch of one (see the module)."""
         import torch
 
         view = self.convention.observation(obs)
         images = self.convention.images(view)
         batch: dict[str, Any] = {}
         for key, (_c, h, w) in self.image_features.items():
-            short = key.removeprefix(IMAGE_PREFIX)
-            camera = next((cam for cam, k in self.cfg.cameras.items() if k in (key, short)), None)
-            camera = camera or camera_of(key, images) or short
-            if camera not in images:
-                raise KeyError(
-                    f"policy feature {key!r} wants camera {camera!r}, observation has {sorted(images)} "
-                    f"(map it with policy.cameras.<camera>={key})"
-                )
+            camera = self._camera(key, images)
             img = np.asarray(images[camera])
-            if img.shape[:2] != (h, w):
-                if self.cfg.resize == "none":
-                    raise ValueError(f"camera {camera!r} gives {img.shape[:2]}, policy feature {key!r} wants {(h, w)}")
+            if self.cfg.resize != "none" and img.shape[:2] != (h, w):
                 img = resize_with_pad(img, h, w) if self.cfg.resize == "pad" else _stretch(img, h, w)
-            img = img if img.flags.writeable and img.flags.c_contiguous else np.array(img, order="C")
-            batch[key] = torch.from_numpy(img).permute(2, 0, 1).float().div_(255.0)
+            # as LeRobot's preprocess_observation: channels first, contiguous, float in [0, 1]
+            chw = torch.from_numpy(np.ascontiguousarray(img.transpose(2, 0, 1)))
+            batch[key] = chw[None].float().div_(255.0)
         if self.state_dim is not None:
             qpos = view.get("qpos") or {}
             groups = self.cfg.state if self.cfg.state is not None else list(self._groups)
@@ -370,14 +382,28 @@ class LeRobotPolicy(Policy):
                 raise ValueError(
                     f"{self.cfg.state_key} needs {self.state_dim} values, move groups {groups} give {state.shape[0]}"
                 )
-            batch[self.cfg.state_key] = torch.from_numpy(state)
+            batch[self.cfg.state_key] = torch.from_numpy(state)[None]
         if self.env_state_dim is not None:
             if obs.get(ENV_STATE_KEY) is None:
                 raise KeyError(f"policy feature {ENV_STATE!r}: the observation has no {ENV_STATE_KEY!r} "
                                "(the episode's task defines none)")
-            batch[ENV_STATE] = torch.from_numpy(env_state_vector(obs[ENV_STATE_KEY], self.env_state_dim))
-        batch[self.cfg.task_key] = obs.get("prompt", self._prompt) or self._prompt
+            batch[ENV_STATE] = torch.from_numpy(env_state_vector(obs[ENV_STATE_KEY], self.env_state_dim))[None]
+        batch[self.cfg.task_key] = [obs.get("prompt", self._prompt) or self._prompt]
         return batch
+
+    def _camera(self, feature: str, images: Mapping[str, Any]) -> str:
+        """The camera image ``feature`` takes: ``policy.cameras``, else the env's own name for it
+        (``camera_features``), else the camera recorded as it."""
+        short = feature.removeprefix(IMAGE_PREFIX)
+        named = [cam for cam, k in self.cfg.cameras.items() if k in (feature, short)]
+        named += [cam for cam, k in self._camera_features.items() if k == feature]
+        camera = next(iter(named), None) or camera_of(feature, images) or short
+        if camera not in images:
+            raise KeyError(
+                f"policy feature {feature!r} wants camera {camera!r}, observation has {sorted(images)} "
+                f"(map it with policy.cameras.<camera>={feature})"
+            )
+        return camera
 
     def close(self) -> None:
         self.policy = self.preprocessor = self.postprocessor = None

@@ -62,7 +62,8 @@ class SuiteKind:
     move_group: str
     action_dim: int
     control_hz: float
-    cameras: tuple[str, ...]
+    #: our camera -> the feature LeRobot's env hands a policy its frames as (``preprocess_observation``'s name)
+    cameras: dict[str, str]
     options: dict[str, Any]
     #: what the policy learns of the action (``EpisodeContext.extra``): ``delta_groups`` (LIBERO's delta-EEF
     #: command) or ``action_bounds`` (PushT's target position, within the workspace)
@@ -96,7 +97,8 @@ SUITES: dict[str, SuiteKind] = {
         episode=libero.LiberoEpisode, plan=libero.plan_episodes,
         open=lambda o: libero.LiberoSuite(image_size=o["image_size"], hard_reset=o["hard_reset"]),
         task_label=_libero_label, observation=libero.policy_observation, move_group=libero.MOVE_GROUP,
-        action_dim=libero.ACTION_DIM, control_hz=libero.CONTROL_HZ, cameras=("image", "image2"),
+        action_dim=libero.ACTION_DIM, control_hz=libero.CONTROL_HZ,
+        cameras={"image": "observation.images.image", "image2": "observation.images.image2"},
         options={"episodes_per_task": 1, "image_size": libero.IMAGE_SIZE, "hard_reset": True},
         action_extra={"delta_groups": [libero.MOVE_GROUP]}, benchmarks=dict(libero.MAX_STEPS),
         check_episode=libero.episode_problems, distributions=libero.DISTRIBUTIONS, venv="libero",
@@ -106,7 +108,7 @@ SUITES: dict[str, SuiteKind] = {
         episode=pusht.PushTEpisode, plan=pusht.plan_episodes,
         open=lambda o: pusht.PushTSuite(image_size=o["image_size"]),
         task_label=pusht.task_label, observation=pusht.policy_observation, move_group=pusht.MOVE_GROUP,
-        action_dim=pusht.ACTION_DIM, control_hz=pusht.CONTROL_HZ, cameras=(pusht.CAMERA,),
+        action_dim=pusht.ACTION_DIM, control_hz=pusht.CONTROL_HZ, cameras={pusht.CAMERA: "observation.image"},
         options={"episodes_per_task": 1, "image_size": pusht.IMAGE_SIZE},
         action_extra={"action_bounds": {pusht.MOVE_GROUP: pusht.WORKSPACE}}, benchmarks={"pusht": pusht.MAX_STEPS},
         check_episode=pusht.episode_problems, distributions=pusht.DISTRIBUTIONS,
@@ -307,7 +309,8 @@ class SuiteSession(EpisodeOutcome):
 
         return EpisodeContext(spec=None, episode_index=self.plan.episode_index, seed=self.plan.seed,
                               prompt=self.plan.prompt, move_groups=dict(self.env.move_groups),
-                              policy_dt_s=1.0 / self.kind.control_hz, extra=dict(self.kind.action_extra))
+                              policy_dt_s=1.0 / self.kind.control_hz,
+                              extra={**self.kind.action_extra, "camera_features": dict(self.kind.cameras)})
 
     def recorder_info(self, *, expert: bool, extra: dict[str, Any]) -> EpisodeInfo:
         from molmo_lerobot.recording import EpisodeInfo
