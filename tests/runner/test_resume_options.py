@@ -3,6 +3,8 @@ changes, and an option given that differs from the run's is refused, one line na
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from molmo_lerobot.config import compose, given_keys
@@ -77,3 +79,27 @@ def test_an_in_process_resume_states_every_option(run_dir):
 def test_a_directory_without_a_run_takes_the_options_as_given(tmp_path):
     given = _options("policy=random", "resume=true")
     assert RunDirectory(tmp_path / "new").resume_options(given, {"policy.name", "resume"}) is given
+
+
+def test_a_bare_resume_command_composes_in_the_runs_groups(tmp_path, monkeypatch):
+    """``output_dir=X resume=true`` and ``dataset_id=D resume=true`` get the run's benchmark and policy
+    choices where the command line names none (an option of the run's group then reaches the resume's check)."""
+    from molmo_lerobot.cli.eval import _resume_in_the_runs_groups
+    from molmo_lerobot.namespaces import DatasetStore
+
+    (tmp_path / "run.json").write_text(json.dumps({"options": {
+        "benchmark": {"name": "pusht", "path": None, "image_size": 64}, "policy": {"name": "random"}}}))
+    argv = ["molmo-eval", f"output_dir={tmp_path}", "resume=true", "benchmark.image_size=128"]
+    _resume_in_the_runs_groups(argv)
+    assert argv[1:] == ["policy=random", "benchmark=pusht", f"output_dir={tmp_path}", "resume=true",
+                        "benchmark.image_size=128"]
+    given = ["molmo-eval", f"output_dir={tmp_path}", "resume=true", "policy=scripted"]
+    _resume_in_the_runs_groups(given)
+    assert given[1:] == ["benchmark=pusht", f"output_dir={tmp_path}", "resume=true", "policy=scripted"]
+    monkeypatch.setattr(DatasetStore, "run_dir", lambda self, dataset_id: tmp_path)
+    by_id = ["molmo-eval", "dataset_id=me/run", "resume=true"]
+    _resume_in_the_runs_groups(by_id)
+    assert by_id[1:3] == ["policy=random", "benchmark=pusht"]
+    fresh = ["molmo-eval", f"output_dir={tmp_path}", "benchmark.image_size=128"]  # not a resume: untouched
+    _resume_in_the_runs_groups(fresh)
+    assert fresh == ["molmo-eval", f"output_dir={tmp_path}", "benchmark.image_size=128"]

@@ -55,23 +55,28 @@ def _cfg_alone_means_job(argv: list[str]) -> None:
 
 
 def _resume_in_the_runs_groups(argv: list[str]) -> None:
-    """``output_dir=X resume=true`` composes in the run's config groups: the run's ``benchmark=`` and
-    ``policy=`` choices (from ``X/run.json``) are added to this process's command line where it names
-    none, so that an option of the run's groups given with it (``benchmark.image_size=128`` on a PushT
-    run) reaches the resume's check, which refuses it naming it, instead of Hydra's "no such key"
-    against the default groups. A run directory that cannot be read is left to the run to report."""
+    """``output_dir=X resume=true`` (or ``dataset_id=D resume=true``) composes in the run's config groups:
+    the run's ``benchmark=`` and ``policy=`` choices (from its ``run.json``) are added to this process's
+    command line where it names none, so that an option of the run's groups given with it
+    (``benchmark.image_size=128`` on a PushT run) reaches the resume's check, which refuses it naming it,
+    instead of Hydra's "no such key" against the default groups. A run that cannot be found or read is
+    left to the run to report."""
+    args = [a for a in argv[1:] if not a.startswith("-")]
+    values = dict(a.split("=", 1) for a in args if "=" in a)
+    if values.get("resume", "").lower() != "true" or not (values.get("output_dir") or values.get("dataset_id")):
+        return
     import json
     from pathlib import Path
 
+    from molmo_lerobot.errors import MolmoError
+    from molmo_lerobot.namespaces import DatasetStore
     from molmo_lerobot.runner.run_directory import RUN_FILE
 
-    args = [a for a in argv[1:] if not a.startswith("-")]
-    values = dict(a.split("=", 1) for a in args if "=" in a)
-    if values.get("resume", "").lower() != "true" or not values.get("output_dir"):
-        return
     try:
-        options = json.loads((Path(values["output_dir"]).expanduser() / RUN_FILE).read_text()).get("options", {})
-    except (OSError, ValueError, AttributeError):
+        run_dir = (Path(values["output_dir"]).expanduser() if values.get("output_dir")
+                   else DatasetStore().run_dir(values["dataset_id"]))
+        options = json.loads((run_dir / RUN_FILE).read_text()).get("options", {})
+    except (OSError, ValueError, AttributeError, MolmoError):
         return
     for group in ("benchmark", "policy"):
         name = options.get(group, {}).get("name") if isinstance(options.get(group), dict) else None
