@@ -103,6 +103,15 @@ def test_frames_reach_the_policy_at_their_size_as_lerobot_eval_hands_them(act_di
     assert padded._batch(seen)["observation.images.front"].shape == (1, 3, 24, 32)
 
 
+def test_loading_a_checkpoint_leaves_no_temporary_file(act_dir, tmp_path, monkeypatch):
+    """LeRobot's config loading writes a temporary file it never removes; a load here leaves none."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu"})
+    assert list(tmp_path.iterdir()) == [] and tempfile.tempdir == str(tmp_path)
+
+
 def test_missing_camera_and_bad_state_are_clear(act_dir):
     policy = LeRobotPolicy({"name": "lerobot", "path": act_dir, "device": "cpu"})
     policy.reset(ctx())

@@ -34,8 +34,10 @@ from __future__ import annotations
 
 import copy
 import os
+import tempfile
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Literal
 
@@ -222,7 +224,8 @@ class LeRobotPolicy(Policy):
         if problem:
             raise FileNotFoundError(problem)
         try:
-            config = PreTrainedConfig.from_pretrained(path)
+            with _temporary_files_removed():
+                config = PreTrainedConfig.from_pretrained(path)
         except Exception as exc:
             raise ValueError(f"policy.path={path!r}: not a LeRobot pretrained policy "
                              f"({type(exc).__name__}: {exc})") from None
@@ -428,6 +431,19 @@ def make_lerobot_policy(cfg: dict[str, Any]) -> Policy:
 
 #: the policy config file of a LeRobot ``save_pretrained`` directory
 CONFIG_NAME = "config.json"
+
+
+@contextmanager
+def _temporary_files_removed() -> Iterator[None]:
+    """Temporary files made inside go to a directory of ours, removed after: LeRobot's
+    ``PreTrainedConfig.from_pretrained`` writes the config it parses to a ``NamedTemporaryFile(delete=False)``
+    and never removes it (a file in ``/tmp`` per policy load: per worker, per served policy)."""
+    with tempfile.TemporaryDirectory(prefix="molmo-lerobot-load-") as own:
+        before, tempfile.tempdir = tempfile.tempdir, own
+        try:
+            yield
+        finally:
+            tempfile.tempdir = before
 
 
 def path_problem(path: Any) -> str | None:
