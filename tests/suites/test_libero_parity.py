@@ -20,6 +20,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -59,10 +60,16 @@ def theirs(venv: Path, suite: str, task_id: int, episodes: int, seed: int, horiz
            hard_reset: bool = True) -> dict:
     args = {"suite": suite, "task_id": task_id, "episodes": episodes, "seed": seed, "horizon": horizon,
             "policy": policy, "size": SIZE, "hard_reset": hard_reset}
+    return _reference(venv, "lerobot_libero_reference.py", args, "{")
+
+
+def _reference(venv: Path, script: str, args: dict, opener: str) -> Any:
+    """The JSON document (its lines start with ``opener``) the LeRobot-side ``script`` prints last, run in
+    LIBERO's venv with ``args``."""
     env = {**os.environ, "LIBERO_CONFIG_PATH": str(venv / "libero-config"), "MUJOCO_GL": "egl"}
-    proc = subprocess.run([str(venv / "bin" / "python"), str(HERE / "lerobot_libero_reference.py"), json.dumps(args)],
+    proc = subprocess.run([str(venv / "bin" / "python"), str(HERE / script), json.dumps(args)],
                           env=env, capture_output=True, text=True, timeout=3600)
-    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith(opener)]
     assert proc.returncode == 0 and lines, proc.stdout[-2000:] + proc.stderr[-3000:]
     return json.loads(lines[-1])
 
@@ -208,12 +215,7 @@ LIBERO_CHECKPOINTS = [("act", save_act, SIZE), ("act_at_256", save_act, 256), ("
 def lerobot_policy_episodes(venv: Path, suite: str, task_id: int, horizon: int, runs: list[dict]) -> list[list[dict]]:
     """``lerobot_policy_reference.py``'s runs (checkpoint, seed, episodes) one after the other on one LIBERO env."""
     args = {"suite": suite, "task_id": task_id, "size": SIZE, "horizon": horizon, "runs": runs}
-    env = {**os.environ, "LIBERO_CONFIG_PATH": str(venv / "libero-config"), "MUJOCO_GL": "egl"}
-    proc = subprocess.run([str(venv / "bin" / "python"), str(HERE / "lerobot_policy_reference.py"), json.dumps(args)],
-                          env=env, capture_output=True, text=True, timeout=3600)
-    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("[")]
-    assert proc.returncode == 0 and lines, proc.stdout[-2000:] + proc.stderr[-3000:]
-    return json.loads(lines[-1])
+    return _reference(venv, "lerobot_policy_reference.py", args, "[")
 
 
 def policy_parity(venv: Path, suite_env: LiberoSuite, checkpoints: list[tuple[str, Path]], suite: str, task_id: int,
