@@ -26,7 +26,7 @@ from hydra.plugins.search_path_plugin import SearchPathPlugin
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from molmo_lerobot.benchmark.registry import benchmark_names
+from molmo_lerobot.benchmark_kinds import benchmark_kind, benchmark_kinds
 from molmo_lerobot.hookspecs import ConfigError
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.plugins import Plugins
@@ -76,13 +76,17 @@ def _default_policy_configs(plugins: Plugins, config_dirs: list[Path]) -> None:
 
 
 def _default_benchmark_configs(plugins: Plugins, config_dirs: list[Path]) -> None:
-    """``benchmark/<name>`` = ``{name: <name>, path: null}`` for each registered benchmark
-    (:mod:`molmo_lerobot.benchmark.registry`) no config dir has a ``benchmark/<name>.yaml`` for: the
-    shipped benchmarks and those plugins ship are ``benchmark=<name>`` without a yaml each."""
+    """``benchmark/<name>`` = its kind's options at their defaults (``{name: <name>, path: null}`` for episode
+    files) for each benchmark of every benchmark kind (:mod:`molmo_lerobot.benchmark_kinds`) no config dir has a
+    ``benchmark/<name>.yaml`` for: the shipped benchmarks, the env suites' and those plugins add are
+    ``benchmark=<name>`` without a yaml each, their options settable as ``benchmark.<key>=``."""
     store = ConfigStore.instance()
-    for name in benchmark_names(plugins):
-        if not any((d / "benchmark" / f"{name}.yaml").is_file() for d in config_dirs):
-            store.store(group="benchmark", name=name, node={"name": name, "path": None}, provider="molmo_lerobot")
+    for kind in benchmark_kinds(plugins):
+        for name in kind.benchmarks(plugins):
+            configured = any((d / "benchmark" / f"{name}.yaml").is_file() for d in config_dirs)
+            if not configured and benchmark_kind(plugins, name) is kind:
+                store.store(group="benchmark", name=name, node=kind.config_node(name),
+                            provider="molmo_lerobot")
 
 
 def run_defaults() -> dict[str, object]:

@@ -40,7 +40,7 @@ The reward is the task's own (``Task.reward``: e.g. the opening fraction for ope
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.gl import use_headless_gl
 
@@ -56,6 +56,9 @@ from molmo_lerobot.features import ENV_STATE_KEY, FeatureMap, is_wrist  # noqa: 
 from molmo_lerobot.molmospaces.preflight import preflight  # noqa: E402
 from molmo_lerobot.runner.episode import EpisodeSession, EpisodeSetupError, load_run_benchmark  # noqa: E402
 from molmo_lerobot.runner.plan import EpisodePlanner  # noqa: E402
+
+if TYPE_CHECKING:
+    from molmo_lerobot.plugins import Plugins
 
 NAMESPACE = "molmo_lerobot"
 
@@ -81,7 +84,7 @@ class MolmoEnv(gym.Env):
         #: molmo-eval validates its config (:class:`~molmo_lerobot.run_config.RunConfigError` names each problem)
         self.run = RunContext.build({**(eval_options or {}), "seed": run_seed, "horizon": horizon,
                                      "timing": timing or {}})
-        self.bench = load_run_benchmark(_not_a_suite(benchmark), self.run.plugins)
+        self.bench = load_run_benchmark(_not_a_suite(benchmark, self.run.plugins), self.run.plugins)
         self.run = self.run.for_benchmark(self.bench)  # the look its metadata names
         self.end_on_success = bool(end_on_success)
         self.environment_state = bool(environment_state)
@@ -222,20 +225,20 @@ class MolmoEnv(gym.Env):
             self._episode = None
 
 
-def _not_a_suite(benchmark: str) -> str:
-    """``benchmark``, unless it names an env-suite benchmark: those are LeRobot's own Gymnasium envs already
-    (``lerobot-eval --env.type=libero|pusht``, the envs molmo-eval is proven equal to), so this package
-    registers no id for them and says so in one line."""
+def _not_a_suite(benchmark: str, plugins: Plugins) -> str:
+    """``benchmark``, unless another benchmark kind than episode files claims it (an env suite's: LeRobot's own
+    Gymnasium envs already, ``lerobot-eval --env.type=libero|pusht``, the envs molmo-eval is proven equal to), so
+    this package registers no id for them and says so in one line."""
     from pathlib import Path
 
-    from molmo_lerobot.suites.benchmark import suite_benchmarks
+    from molmo_lerobot.benchmark_kinds import benchmark_kind
 
-    suite = suite_benchmarks().get(str(benchmark))
-    if suite is not None and not Path(str(benchmark)).exists():
+    kind = None if Path(str(benchmark)).exists() else benchmark_kind(plugins, str(benchmark))
+    if kind is not None and kind.name != "episodes":
         raise EpisodeSetupError(
-            f"benchmark {benchmark!r} is an env suite ({suite}): it runs in molmo-eval (benchmark={benchmark}) but "
-            f"is not a Gymnasium env of this package; as a Gymnasium env use LeRobot's own "
-            f"(lerobot-eval --env.type={suite})")
+            f"benchmark {benchmark!r} is of benchmark kind {kind.name!r} ({kind.description}): it runs in molmo-eval "
+            f"(benchmark={benchmark}) but is not a Gymnasium env of this package; as a Gymnasium env use its "
+            f"own (an env suite's: lerobot-eval --env.type={kind.name})")
     return benchmark
 
 

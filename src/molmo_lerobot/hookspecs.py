@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from molmo_lerobot.benchmark.packs import BenchmarkDir
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.cameras.base import CameraSystem
+    from molmo_lerobot.dataset_layout import DatasetLayout
     from molmo_lerobot.policies.base import PolicyType
     from molmo_lerobot.recording import RecorderFactory
     from molmo_lerobot.robots.base import RobotType
@@ -119,6 +120,18 @@ def molmo_benchmarks() -> list[BenchmarkDir]:
 
 
 @hookspec
+def molmo_benchmark_kinds() -> list[Any]:
+    """Benchmark kinds this plugin provides, each a :class:`~molmo_lerobot.benchmark_kinds.BenchmarkKind` (typed
+    ``Any`` here: that module's types name the plugin set, which imports this one). Each claims
+    benchmark names (``molmo-eval benchmark=<name>``, ``molmo-bench list``/``validate``) and gives their typed
+    options, their episode plan and, in each worker, the session that plays a plan. A run's benchmark is the
+    first kind's, in pluggy's call order, that claims its name (as a ``firstresult`` hook: mark yours
+    ``tryfirst`` to take a name from another); our episode files are the ``trylast`` kind ``episodes``. LIBERO
+    and PushT (:mod:`molmo_lerobot.suites.plugin`) are kinds.
+    """
+
+
+@hookspec
 def molmo_config_dirs() -> list[str]:
     """Directories holding Hydra config groups (``policy/<name>.yaml`` …) to add to the search path.
 
@@ -129,10 +142,12 @@ def molmo_config_dirs() -> list[str]:
 
 
 @hookspec
-def molmo_recorders(config: dict[str, Any]) -> list[RecorderFactory]:
+def molmo_recorders(config: dict[str, Any], dataset_layout: DatasetLayout | None) -> list[RecorderFactory]:
     """Recorder factories (:class:`~molmo_lerobot.recording.RecorderFactory`) for this run.
 
-    Called once in the main process with the resolved run config (a plain dict); return an
+    Called once in the main process with the resolved run config (a plain dict) and the
+    :class:`~molmo_lerobot.dataset_layout.DatasetLayout` the run's benchmark kind records in (an env
+    suite's published datasets'; None: a dataset's schema follows its first step); return an
     empty list unless the config asks for your recording, and raise :class:`ConfigError` if
     it asks for it wrongly (the run then fails with your message). Each factory is pickled to every
     worker and makes one recorder there that sees every step of the one rollout loop.

@@ -37,6 +37,7 @@ if TYPE_CHECKING:
     from molmo_lerobot.benchmark.packs import BenchmarkDir
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.cameras.base import CameraSystem
+    from molmo_lerobot.dataset_layout import DatasetLayout
     from molmo_lerobot.policies.base import PolicyType
     from molmo_lerobot.recording import RecorderFactory
     from molmo_lerobot.robots.base import RobotType
@@ -62,6 +63,7 @@ KIND_HOOKS = {
     "molmo_policies": "policy",
     "molmo_experts": "expert",
     "molmo_benchmarks": "benchmark",
+    "molmo_benchmark_kinds": "benchmark_kind",
     "molmo_config_dirs": "config",
     "molmo_episode_overrides": "override",
     "molmo_recorders": "recorder",
@@ -69,7 +71,7 @@ KIND_HOOKS = {
 #: kinds whose items are looked up by name (``plugins.prefer.<kind>``) → their hook
 PROVIDER_HOOKS = {kind: hook for hook, kind in KIND_HOOKS.items()
                   if kind in ("task", "robot", "camera", "scene", "asset_library", "grasp_library", "policy", "expert",
-                              "benchmark")}
+                              "benchmark", "benchmark_kind")}
 
 
 #: provider pins, ``{kind: {name: plugin}}`` (the run's ``plugins.prefer``)
@@ -382,6 +384,13 @@ class Plugins:
         """The scripted expert registered for a task type (by the task type's name)."""
         return self.resolve("expert", task_type)
 
+    def provided(self, kind: str) -> list[tuple[Any, PluginRecord]]:
+        """``(item, plugin)`` for every ``kind`` item of the working plugins, in pluggy's call order (the
+        order a ``firstresult`` hook would ask them in: ``tryfirst`` first, ``trylast`` last)."""
+        provided = self._collect()
+        return [(item, rec) for rec, _ in self._impls(PROVIDER_HOOKS[kind])
+                for item in provided.get(rec.pm_name, {}).get(kind, [])]
+
     def names(self, kind: str) -> list[str]:
         return sorted({item.name for providers in self._index(kind).values() for item, _ in providers})
 
@@ -396,8 +405,10 @@ class Plugins:
                 self._fail(rec, "molmo_config_dirs", exc)
         return dirs
 
-    def recorder_factories(self, config: dict[str, Any]) -> list[RecorderFactory]:
-        """Every ``molmo_recorders`` implementation's factories for this run config.
+    def recorder_factories(self, config: dict[str, Any],
+                           dataset_layout: DatasetLayout | None = None) -> list[RecorderFactory]:
+        """Every ``molmo_recorders`` implementation's factories for this run config (``dataset_layout``: the
+        :class:`~molmo_lerobot.dataset_layout.DatasetLayout` the run's benchmark kind records in, or None).
 
         A plugin that rejects the config (``ValueError``) fails the run with a
         :class:`ConfigError`; a third-party one that fails otherwise is marked broken and skipped
@@ -406,7 +417,8 @@ class Plugins:
         """
         factories: list[RecorderFactory] = []
         try:
-            for _, result in self._call("molmo_recorders", run_time=True, config=config):
+            for _, result in self._call("molmo_recorders", run_time=True, config=config,
+                                        dataset_layout=dataset_layout):
                 factories.extend(result or [])
         except ConfigError:
             raise

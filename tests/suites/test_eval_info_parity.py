@@ -23,16 +23,18 @@ from typing import Any
 import numpy as np
 import pytest
 
+from molmo_lerobot.benchmark_kinds import run_kind
 from molmo_lerobot.config import compose
 from molmo_lerobot.export.eval_info import EVAL_INFO_FILE, eval_info
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.random_policy import RandomPolicy
 from molmo_lerobot.results import summarize
 from molmo_lerobot.run_config import RunConfig
-from molmo_lerobot.runner.evaluate import _suite_plan, run_evaluation
+from molmo_lerobot.runner.evaluate import run_evaluation
 from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.suites import pusht
-from molmo_lerobot.suites.benchmark import SuiteSessions, load_suite_benchmark
+from molmo_lerobot.suites.benchmark import suite_plan
 
 pytest.importorskip("gym_pusht")
 
@@ -109,11 +111,12 @@ def molmo_eval_info(out: Path, whole_run: bool) -> tuple[dict[str, Any], dict[st
         run_evaluation(compose([*overrides, "workers=1", "progress=false", f"output_dir={out}"]))
         return json.loads((out / EVAL_INFO_FILE).read_text()), json.loads((out / "results.json").read_text())
     config = RunConfig.of(compose(overrides))
-    bench = load_suite_benchmark(config)
-    sessions, policy, results = SuiteSessions(config), RandomPolicy({}), []
+    bench = run_kind(Plugins(), config).benchmark_of(config)
+    sessions, policy, results = run_kind(Plugins(), config).sessions_of(config), RandomPolicy({}), []
     try:
         for i, episode in enumerate(bench.episodes):
-            session = sessions.open(_suite_plan(i, bench.suite, episode, True), policy, config.end_on_success)
+            session = sessions.open(suite_plan(i, bench.suite, episode, True), policy,
+                                    end_on_success=config.end_on_success)
             results.append(rollout(session, policy, [], "random"))
     finally:
         sessions.close()

@@ -32,10 +32,10 @@ from tiny_policies import save_act, save_diffusion
 
 from molmo_lerobot.policies.base import Policy
 from molmo_lerobot.recording import Recorder
-from molmo_lerobot.runner.evaluate import _suite_plan
 from molmo_lerobot.runner.rollout import rollout
-from molmo_lerobot.suites.benchmark import SuiteSession
-from molmo_lerobot.suites.libero import MAX_STEPS, LiberoSuite, libero_venv, plan_episodes, play
+from molmo_lerobot.suites.benchmark import SuiteSession, suite_plan
+from molmo_lerobot.suites.libero import MAX_STEPS, LiberoSuite, libero_venv, plan_episodes
+from molmo_lerobot.suites.plugin import LIBERO
 
 HERE = Path(__file__).parent
 SIZE = 128  # smaller than lerobot-eval's 360² to keep the test cheap; both sides render at it
@@ -74,21 +74,33 @@ def _reference(venv: Path, script: str, args: dict, opener: str) -> Any:
     return json.loads(lines[-1])
 
 
+class Scripted(Policy):
+    """``POLICIES[name]``'s action of each step, noting the 8-D state and the camera images it was shown."""
+
+    def __init__(self, name: str) -> None:
+        self.act_at = POLICIES[name]
+
+    def reset(self, ctx) -> None:
+        self.seed, self.seen = ctx.seed, {"states": [], "images": []}
+
+    def act(self, obs: dict) -> dict:
+        self.seen["states"].append([float(v) for v in obs["qpos"]["eef"]])
+        self.seen["images"].append({feature: hashlib.sha256(obs["images"][camera].tobytes()).hexdigest()
+                                    for camera, feature in LIBERO.cameras.items()})
+        return {"eef": self.act_at(self.seed, obs["step"])}
+
+
 def ours(suite_env: LiberoSuite, suite: str, task_id: int, episodes: int, seed: int, horizon: int,
          policy: str) -> list[dict]:
+    """The episodes through molmo-eval's own path: each a ``SuiteSession`` played by the one rollout loop."""
     task = suite_env.tasks(suite)[task_id]
     out = []
-    for episode in plan_episodes(suite, [task], episodes, seed=seed, horizon=horizon):
-        seen: dict = {"states": [], "images": []}
-
-        def act(obs: dict, step: int, episode=episode, seen=seen):
-            seen["states"].append([float(v) for v in obs["observation.state"]])
-            seen["images"].append({k: hashlib.sha256(obs[k].tobytes()).hexdigest()
-                                   for k in ("observation.images.image", "observation.images.image2")})
-            return POLICIES[policy](episode.seed, step)
-
-        outcome = play(suite_env, episode, act)
-        out.append({"success": outcome.success, "steps": outcome.steps, **seen})
+    for k, episode in enumerate(plan_episodes(suite, [task], episodes, seed=seed, horizon=horizon)):
+        agent = Scripted(policy)
+        session = SuiteSession(LIBERO, suite_plan(k, LIBERO, episode, True), suite_env, SIZE, end_on_success=True)
+        agent.reset(session.policy_context())
+        result = rollout(session, agent, [], policy)
+        out.append({"success": result.success, "steps": result.steps, **agent.seen})
     return out
 
 
@@ -154,7 +166,7 @@ def test_a_chunked_run_draws_a_quarter_of_the_frames_with_lerobot_evals_bits(thr
     state and the outcomes are LeRobot's, which drew every frame (a frame not drawn leaves the sim untouched)."""
     [task] = suite_env.tasks("libero_object")[:1]
     for k, episode in enumerate(plan_episodes("libero_object", [task], 3, seed=7, horizon=10)):
-        session = SuiteSession(_suite_plan(k, "libero", episode, True), suite_env, SIZE, end_on_success=True)
+        session = SuiteSession(LIBERO, suite_plan(k, LIBERO, episode, True), suite_env, SIZE, end_on_success=True)
         policy, states = ChunkedRandom(), States()
         policy.reset(session.policy_context())
         states.start_episode(None)
@@ -231,7 +243,8 @@ def policy_parity(venv: Path, suite_env: LiberoSuite, checkpoints: list[tuple[st
     for i, (name, path) in enumerate(checkpoints):
         policy, ours = molmo_policy(path), []
         for k in range(i * episodes, (i + 1) * episodes):
-            session = SuiteSession(_suite_plan(k, "libero", planned[k], True), suite_env, SIZE, end_on_success=True)
+            session = SuiteSession(LIBERO, suite_plan(k, LIBERO, planned[k], True), suite_env, SIZE,
+                                   end_on_success=True)
             policy.reset(session.policy_context())
             ours.append(play_session(session, policy, "eef"))
         policy.close()

@@ -21,10 +21,10 @@ from molmo_lerobot.export.merge import read_eval_records
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 from molmo_lerobot.policies.base import Policy
 from molmo_lerobot.results import summarize
-from molmo_lerobot.runner.evaluate import _suite_plan
 from molmo_lerobot.runner.rollout import rollout
-from molmo_lerobot.suites.benchmark import SuiteSession
+from molmo_lerobot.suites.benchmark import SuiteSession, suite_plan
 from molmo_lerobot.suites.libero import LiberoEpisode, libero_venv
+from molmo_lerobot.suites.plugin import LIBERO
 
 #: LeRobot's LIBERO layout as published (``HuggingFaceVLA/libero`` ``meta/info.json``, codebase v3.0: names,
 #: dtypes, shapes, fps 10, robot ``panda``), the cameras as video as ``lerobot/libero`` stores them. Written out
@@ -121,7 +121,7 @@ def test_a_suite_recording_has_lerobots_libero_layout_and_merges_with_theirs(tmp
                 LiberoEpisode("libero_object", 1, 0, 1, 6, "pick up the milk and place it in the basket")]
     results = []
     for i, episode in enumerate(episodes):
-        session = SuiteSession(_suite_plan(i, "libero", episode, True), FakeLibero(), SIZE, end_on_success=True)
+        session = SuiteSession(LIBERO, suite_plan(i, LIBERO, episode, True), FakeLibero(), SIZE, end_on_success=True)
         policy = Ramp()
         policy.reset(session.policy_context())
         recorder.start_episode(session.recorder_info(expert=False, extra={}))
@@ -186,7 +186,7 @@ def test_a_suite_step_draws_only_the_frames_someone_reads(needs_images):
     (a chunk's end) and none for a policy that reads none; the observation of a step without them has none."""
     episode = LiberoEpisode("libero_object", 0, 0, 0, 10, "pick up the soup and place it in the basket")
     env = FakeLibero()
-    session = SuiteSession(_suite_plan(0, "libero", episode, True), env, SIZE, end_on_success=True)
+    session = SuiteSession(LIBERO, suite_plan(0, LIBERO, episode, True), env, SIZE, end_on_success=True)
     policy = Chunks(needs_images)
     policy.reset(session.policy_context())
     result = rollout(session, policy, [], "chunks")
@@ -242,9 +242,9 @@ def test_a_suite_without_a_recording_layout_refuses_record_up_front(tmp_path, mo
 
     from molmo_lerobot.errors import RunError
     from molmo_lerobot.runner.evaluate import run_evaluation
-    from molmo_lerobot.suites import benchmark
+    from molmo_lerobot.suites import plugin
 
-    monkeypatch.setitem(benchmark.SUITES, "pusht", dataclasses.replace(benchmark.SUITES["pusht"], recording=None))
+    monkeypatch.setattr(plugin, "PUSHT", dataclasses.replace(plugin.PUSHT, recording=None))
     with pytest.raises(RunError, match=r"record=true: env suite 'pusht' \(benchmark=pusht\) has no recording layout"):
         run_evaluation(compose(["policy=random", "benchmark=pusht", "record=true", "limit=1", "progress=false",
                                 f"output_dir={tmp_path}"]))

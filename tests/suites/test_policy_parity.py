@@ -24,11 +24,12 @@ from lerobot_policy_reference import lerobot_eval_episodes, make_lerobot_env
 from policy_parity import assert_same_episodes, molmo_policy, needs_diffusers, play_session
 from tiny_policies import save_act, save_diffusion
 
+from molmo_lerobot.benchmark_kinds import run_kind
 from molmo_lerobot.config import compose
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.run_config import RunConfig
-from molmo_lerobot.runner.evaluate import _suite_plan
 from molmo_lerobot.suites import pusht
-from molmo_lerobot.suites.benchmark import SuiteSessions, load_suite_benchmark
+from molmo_lerobot.suites.benchmark import suite_plan
 
 pytest.importorskip("gym_pusht")
 
@@ -41,10 +42,10 @@ PUSHT_CHECKPOINTS = [pytest.param("act", save_act, pusht.IMAGE_SIZE, id="act"),
 def molmo_eval_episodes(checkpoint: Path, overrides: list[str]) -> list[dict[str, Any]]:
     """``molmo-eval policy=lerobot policy.path=<checkpoint> <overrides>``'s episodes as a worker plays them."""
     config = RunConfig.of(compose(["policy=random", *overrides]))
-    bench = load_suite_benchmark(config)
-    policy, sessions = molmo_policy(checkpoint), SuiteSessions(config)
+    bench = run_kind(Plugins(), config).benchmark_of(config)
+    policy, sessions = molmo_policy(checkpoint), run_kind(Plugins(), config).sessions_of(config)
     try:
-        plans = [_suite_plan(i, bench.suite, episode, True) for i, episode in enumerate(bench.episodes)]
+        plans = [suite_plan(i, bench.suite, episode, True) for i, episode in enumerate(bench.episodes)]
         return [play_session(sessions.open(plan, policy, end_on_success=True), policy, pusht.MOVE_GROUP)
                 for plan in plans]
     finally:

@@ -12,12 +12,14 @@ import numpy as np
 import pytest
 
 from eval_runs import interrupted, molmo_eval
+from molmo_lerobot.benchmark_kinds import BenchmarkKindError, run_kind
 from molmo_lerobot.config import compose
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.policies.random_policy import RandomPolicy
 from molmo_lerobot.run_config import RunConfig
-from molmo_lerobot.runner.evaluate import _suite_plan, run_evaluation
+from molmo_lerobot.runner.evaluate import run_evaluation
 from molmo_lerobot.suites import pusht
-from molmo_lerobot.suites.benchmark import SuiteBenchmarkError, SuiteSessions, load_suite_benchmark, suite_options
+from molmo_lerobot.suites.benchmark import suite_plan
 
 pytest.importorskip("gym_pusht")
 
@@ -85,10 +87,10 @@ def test_an_interrupted_run_resumes_with_the_command_it_prints(tmp_path, record)
 
 def test_random_policy_draws_targets_across_the_workspace():
     config = RunConfig.of(compose(["policy=random", "benchmark=pusht", "horizon=5"]))
-    bench = load_suite_benchmark(config)
-    sessions, policy = SuiteSessions(config), RandomPolicy({})
+    bench = run_kind(Plugins(), config).benchmark_of(config)
+    sessions, policy = run_kind(Plugins(), config).sessions_of(config), RandomPolicy({})
     try:
-        session = sessions.open(_suite_plan(0, bench.suite, bench.episodes[0], True), policy, end_on_success=False)
+        session = sessions.open(suite_plan(0, bench.suite, bench.episodes[0], True), policy, end_on_success=False)
         obs = session.observe()
         targets = policy.act(obs)[pusht.MOVE_GROUP]
     finally:
@@ -102,5 +104,5 @@ def test_random_policy_draws_targets_across_the_workspace():
 
 def test_pusht_refuses_libero_options():
     config = RunConfig.of(compose(["policy=random", "benchmark=pusht", "+benchmark.hard_reset=false"]))
-    with pytest.raises(SuiteBenchmarkError, match=r"benchmark.hard_reset: not an option .*: episodes_per_task, image_"):
-        suite_options(config)
+    with pytest.raises(BenchmarkKindError, match=r"benchmark.hard_reset: not an option .*: episodes_per_task, image_"):
+        run_kind(Plugins(), config).options_of(config)

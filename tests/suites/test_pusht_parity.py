@@ -19,13 +19,14 @@ from typing import Any
 import numpy as np
 import pytest
 
+from molmo_lerobot.benchmark_kinds import run_kind
 from molmo_lerobot.config import compose
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.policies.base import Policy
 from molmo_lerobot.run_config import RunConfig
-from molmo_lerobot.runner.evaluate import _suite_plan
 from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.suites import pusht
-from molmo_lerobot.suites.benchmark import SuiteSessions, load_suite_benchmark
+from molmo_lerobot.suites.benchmark import suite_plan
 
 pytest.importorskip("gym_pusht")
 
@@ -119,11 +120,11 @@ def our_episodes(policy: str, seed: int, episodes: int, horizon: int) -> list[di
     """Our side: ``molmo-eval benchmark=pusht seed=<seed> horizon=<horizon>``'s episodes, as a worker plays them."""
     config = RunConfig.of(compose(["policy=random", "benchmark=pusht", f"seed={seed}", f"horizon={horizon}",
                                    f"benchmark.episodes_per_task={episodes}"]))
-    bench = load_suite_benchmark(config)
-    sessions, agent, out = SuiteSessions(config), Replayed(POLICIES[policy]), []
+    bench = run_kind(Plugins(), config).benchmark_of(config)
+    sessions, agent, out = run_kind(Plugins(), config).sessions_of(config), Replayed(POLICIES[policy]), []
     try:
         for i, episode in enumerate(bench.episodes):
-            session = sessions.open(_suite_plan(i, bench.suite, episode, True), agent, end_on_success=False)
+            session = sessions.open(suite_plan(i, bench.suite, episode, True), agent, end_on_success=False)
             rewards: list[float] = []
             session.suite.step = _logging_step(session.suite, rewards)
             result = rollout(session, agent, [], "parity")

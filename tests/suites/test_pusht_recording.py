@@ -17,10 +17,10 @@ from molmo_lerobot.export.merge import read_eval_records
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 from molmo_lerobot.policies.base import Policy
 from molmo_lerobot.results import summarize
-from molmo_lerobot.runner.evaluate import _suite_plan
 from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.suites import pusht
-from molmo_lerobot.suites.benchmark import SuiteSession
+from molmo_lerobot.suites.benchmark import SuiteSession, suite_plan
+from molmo_lerobot.suites.plugin import PUSHT
 from molmo_lerobot.suites.pusht import PushTSuite
 
 #: ``lerobot/pusht``'s features as LeRobot's own code wrote them (``pusht_zarr_format`` at codebase v1.6, carried to
@@ -98,8 +98,8 @@ def test_a_pusht_recording_has_lerobots_pusht_layout_and_merges_with_theirs(tmp_
     results, seen = [], []
     try:
         for i, episode in enumerate(episodes):
-            plan = _suite_plan(i, "pusht", episode, False)
-            session = SuiteSession(plan, suite, pusht.IMAGE_SIZE, end_on_success=True)
+            plan = suite_plan(i, PUSHT, episode, False)
+            session = SuiteSession(PUSHT, plan, suite, pusht.IMAGE_SIZE, end_on_success=True)
             seen.append(session.observe()["qpos"]["agent"].copy())
             policy = Sweep()
             policy.reset(session.policy_context())

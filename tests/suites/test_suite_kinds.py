@@ -10,9 +10,9 @@ from dataclasses import asdict
 
 import numpy as np
 
-from molmo_lerobot.runner.evaluate import _suite_plan
 from molmo_lerobot.suites import libero
-from molmo_lerobot.suites.benchmark import SUITES, SuiteSession, plan_episode, task_label
+from molmo_lerobot.suites.benchmark import SuiteSession, suite_plan
+from molmo_lerobot.suites.plugin import LIBERO, PUSHT
 
 
 class LiberoStandIn:
@@ -38,10 +38,11 @@ class LiberoStandIn:
 def test_libero_session_keeps_libero_conventions():
     [episode] = libero.plan_episodes("libero_object", [{"task_id": 3, "init_states": 50, "instruction": "pick"}], 1,
                                      seed=7, horizon=10)
-    plan = _suite_plan(0, "libero", episode, False)
-    assert plan_episode(plan) == episode and task_label(episode) == "libero_object/task_03"
+    plan = suite_plan(0, LIBERO, episode, False)
+    assert plan.kind == "libero" and plan.task_type == "libero_object/task_03"
     suite = LiberoStandIn()
-    session = SuiteSession(plan, suite, 8, end_on_success=False)
+    session = SuiteSession(LIBERO, plan, suite, 8, end_on_success=False)
+    assert session.episode == episode
     ctx = session.policy_context()
     assert ctx.move_groups == {"eef": 7} and ctx.extra == {"delta_groups": ["eef"], "camera_features": {
         "image": "observation.images.image", "image2": "observation.images.image2"}} and ctx.policy_dt_s == 1 / 20
@@ -59,12 +60,22 @@ def test_libero_session_keeps_libero_conventions():
 
 
 def test_every_suite_kind_plans_what_it_reads_back():
-    for name, kind in SUITES.items():
+    for kind in (LIBERO, PUSHT):
         tasks = [{"task_id": 0, "task": "T", "init_states": 2, "instruction": ""}]
-        suite = "libero_goal" if name == "libero" else name
+        suite = "libero_goal" if kind is LIBERO else kind.name
         episodes = kind.plan(suite, tasks, 2, seed=5, horizon=4)
         assert [e.seed for e in episodes] == [5, 6]
         for i, episode in enumerate(episodes):
-            plan = _suite_plan(i, name, episode, True)
-            assert plan_episode(plan) == episode and plan.digest == episode.digest
-            assert plan.spec == {**asdict(episode), "env_suite": name}
+            plan = suite_plan(i, kind, episode, True)
+            assert plan.kind == kind.name and plan.digest == episode.digest and plan.spec == asdict(episode)
+            assert SuiteSession(kind, plan, _Replying(kind), 8, end_on_success=False).episode == episode
+
+
+class _Replying:
+    """A suite env whose reset replies nothing (the session reads the episode back from the plan)."""
+
+    def __init__(self, kind) -> None:
+        self.kind = kind
+
+    def reset(self, episode):
+        return {}

@@ -7,29 +7,29 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
-import yaml
 
+from molmo_lerobot.benchmark_kinds import benchmark_kind, benchmark_kinds, run_kind
 from molmo_lerobot.cli.bench import main
 from molmo_lerobot.config import compose
-from molmo_lerobot.paths import data_path
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.run_config import RunConfig
 from molmo_lerobot.suites import libero, pusht
-from molmo_lerobot.suites.benchmark import (
-    SUITES,
-    SuiteBenchmark,
-    load_suite_benchmark,
-    plan_problems,
-    suite_benchmarks,
-)
+from molmo_lerobot.suites.benchmark import SuiteBenchmark, plan_problems
 from molmo_lerobot.suites.libero import libero_venv
+from molmo_lerobot.suites.plugin import LIBERO, PUSHT
 
 
-def test_every_suite_benchmark_has_its_config_and_every_suite_config_is_listed():
-    configs = {p.stem: (yaml.safe_load(p.read_text()) or {}).get("suite")
-               for p in (data_path("conf") / "benchmark").glob("*.yaml")}
-    assert {k: v for k, v in configs.items() if v} == suite_benchmarks()
-    assert suite_benchmarks() == {"libero_spatial": "libero", "libero_object": "libero", "libero_goal": "libero",
-                                  "libero_10": "libero", "libero_90": "libero", "pusht": "pusht"}
+def test_every_suite_benchmark_is_a_config_of_its_kinds_defaults():
+    plugins = Plugins()
+    assert [kind.name for kind in benchmark_kinds(plugins)] == ["libero", "pusht", "episodes"]
+    suites = {name: kind.name for kind in benchmark_kinds(plugins)[:2] for name in kind.benchmarks(plugins)}
+    assert suites == {"libero_spatial": "libero", "libero_object": "libero", "libero_goal": "libero",
+                      "libero_10": "libero", "libero_90": "libero", "pusht": "pusht"}
+    assert all(benchmark_kind(plugins, name).name == kind for name, kind in suites.items())
+    assert dict(compose(["benchmark=libero_10"]).benchmark) == {
+        "name": "libero_10", "path": None, "episodes_per_task": 1, "image_size": 360, "hard_reset": True}
+    assert dict(compose(["benchmark=pusht"]).benchmark) == {
+        "name": "pusht", "path": None, "episodes_per_task": 50, "image_size": 96}
 
 
 def test_list_names_every_benchmark_with_its_kind_episodes_horizon_and_sources(capsys):
@@ -47,8 +47,8 @@ def test_list_names_every_benchmark_with_its_kind_episodes_horizon_and_sources(c
 def test_validate_a_suite_benchmark_plans_what_molmo_eval_plans(capsys):
     assert main(["validate", "pusht", "benchmark.episodes_per_task=3", "seed=5", "horizon=40"]) == 0
     out = capsys.readouterr().out
-    bench = load_suite_benchmark(RunConfig.of(compose(["benchmark=pusht", "benchmark.episodes_per_task=3",
-                                                       "seed=5", "horizon=40"])))
+    config = RunConfig.of(compose(["benchmark=pusht", "benchmark.episodes_per_task=3", "seed=5", "horizon=40"]))
+    bench = run_kind(Plugins(), config).benchmark_of(config)
     assert [e.seed for e in bench.episodes] == [5, 6, 7]
     assert "episodes   3 over 1 tasks (3 per task, seed 5)" in out
     assert "horizon    40 (LeRobot's step limit 300)" in out
@@ -59,13 +59,16 @@ def test_validate_a_suite_benchmark_plans_what_molmo_eval_plans(capsys):
 def test_validate_refuses_bad_suite_options_in_one_line(capsys):
     assert main(["validate", "pusht", "benchmark.episodes_per_task=0"]) == 2
     assert capsys.readouterr().err.strip().splitlines() == [
-        "molmo-bench: error: benchmark.episodes_per_task: expected an integer >= 1, got 0"]
+        "molmo-bench: error: benchmark.episodes_per_task: Input should be greater than or equal to 1, got 0 "
+        "(benchmark=pusht; default 50)"]
     assert main(["validate", "pusht", "+benchmark.hard_reset=true"]) == 2
-    assert "benchmark.hard_reset: not an option of env-suite benchmarks" in capsys.readouterr().err
+    assert ("benchmark.hard_reset: not an option of pusht benchmarks (benchmark=pusht) (options: episodes_per_task, "
+            "image_size)") in capsys.readouterr().err
     assert main(["validate", "--schema-only", "libero_object", "benchmark.image_size=4096"]) == 0
     assert main(["validate", "pusht", "benchmark.image_size=4097"]) == 2
     assert capsys.readouterr().err.strip().splitlines() == [
-        "molmo-bench: error: benchmark.image_size: at most 4096 pixels a side, got 4097 (LeRobot's default: 96)"]
+        "molmo-bench: error: benchmark.image_size: Input should be less than or equal to 4096, got 4097 "
+        "(benchmark=pusht; default 96)"]
 
 
 def test_molmo_eval_refuses_an_image_size_no_frame_can_have_before_any_run_directory(tmp_path):
@@ -73,7 +76,8 @@ def test_molmo_eval_refuses_an_image_size_no_frame_can_have_before_any_run_direc
 
     out = tmp_path / "out"
     assert refusal("benchmark=libero_object", "benchmark.image_size=100000", f"output_dir={out}") == [
-        "benchmark.image_size: at most 4096 pixels a side, got 100000 (LeRobot's default: 360)"]
+        "benchmark.image_size: Input should be less than or equal to 4096, got 100000 (benchmark=libero_object; "
+        "default 360)"]
     assert not out.exists()
 
 
@@ -84,7 +88,7 @@ def test_schema_only_checks_a_libero_benchmarks_options_without_the_libero_venv(
     assert "options    episodes_per_task=1, image_size=256, hard_reset=True" in out
     assert "checked    options only" in out
     assert main(["validate", "libero_90"]) == 2  # the catalogue is LIBERO's own: no venv, no validation
-    assert "the suite's task catalogue could not be read: suite env molmo_lerobot.suites.libero_server: no " \
+    assert "the benchmark's episodes could not be planned: suite env molmo_lerobot.suites.libero_server: no " \
            "interpreter at /nonexistent/bin/python; the LIBERO venv is /nonexistent: run `make .libero-venv`" in (
         capsys.readouterr().err)
 
@@ -95,7 +99,7 @@ CATALOGUE = [{"task_id": 0, "instruction": "pick the soup", "init_states": 2},
 
 def test_plan_problems_name_each_episode_and_field():
     good = libero.plan_episodes("libero_object", CATALOGUE, 3, seed=0, horizon=10)
-    bench = SuiteBenchmark("libero_object", good, None, "libero")  # type: ignore[arg-type]
+    bench = SuiteBenchmark("libero_object", good, None, LIBERO)  # type: ignore[arg-type]
     assert plan_problems(bench, CATALOGUE) == []
     assert [(e.task_id, e.init_state_index) for e in good] == [(0, 0), (0, 1), (0, 0), (1, 0), (1, 1), (1, 2)]
     bad = [dataclasses.replace(good[0], init_state_index=2), dataclasses.replace(good[1], task_id=10),
@@ -112,10 +116,9 @@ def test_plan_problems_name_each_episode_and_field():
         "libero_object episode 5: suite 'libero_goal': expected 'libero_object'",
         "libero_object episode 6: a PushTEpisode, expected a LiberoEpisode",
     ]
-    pusht_bench = SuiteBenchmark("pusht", [pusht.PushTEpisode("pusht", "PushT-v1", 0, 10, "")], None, "pusht")  # type: ignore[arg-type]
+    pusht_bench = SuiteBenchmark("pusht", [pusht.PushTEpisode("pusht", "PushT-v1", 0, 10, "")], None, PUSHT)  # type: ignore[arg-type]
     assert plan_problems(pusht_bench, [{"task_id": 0, "task": "PushT-v0", "instruction": ""}]) == [
         "pusht episode 0: task 'PushT-v1': PushT's tasks are 'PushT-v0'"]
-    assert set(SUITES) == {"libero", "pusht"}
 
 
 def test_the_gymnasium_entry_point_refuses_a_suite_benchmark_in_one_line():
@@ -123,8 +126,8 @@ def test_the_gymnasium_entry_point_refuses_a_suite_benchmark_in_one_line():
     from molmo_lerobot.runner.episode import EpisodeSetupError
 
     assert not any(i.endswith(("/libero_object", "/pusht")) for i in register_benchmarks())
-    with pytest.raises(EpisodeSetupError, match=r"benchmark 'pusht' is an env suite \(pusht\): it runs in molmo-eval "
-                                                r".* use LeRobot's own \(lerobot-eval --env.type=pusht\)"):
+    with pytest.raises(EpisodeSetupError, match=r"benchmark 'pusht' is of benchmark kind 'pusht' .*: it runs in "
+                                                r"molmo-eval .* \(an env suite's: lerobot-eval --env.type=pusht\)"):
         MolmoEnv("pusht")
 
 

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import os
 import re
 import shutil
@@ -48,8 +47,8 @@ from molmo_lerobot.benchmark.load import Benchmark, BenchmarkError, Problem, loa
 from molmo_lerobot.benchmark.molmospaces import known_task_name
 from molmo_lerobot.benchmark.schema import NATIVE_TASK_CLS
 from molmo_lerobot.benchmark.task_specs import parse_episode
+from molmo_lerobot.benchmark_kinds import benchmark_kind, benchmark_kinds
 from molmo_lerobot.plugins import PluginConflict, Plugins
-from molmo_lerobot.suites.benchmark import suite_benchmarks
 
 #: the exit status for a benchmark that cannot be run (``molmo-eval`` refuses it with the same)
 INVALID = 2
@@ -116,115 +115,64 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "list":
         return _list()
     if args.command == "validate":
-        if args.path in suite_benchmarks() and not Path(args.path).exists():
-            return _validate_suite(args.path, schema_only=args.schema_only, overrides=args.overrides)
+        kind = None if Path(args.path).exists() else benchmark_kind(Plugins(), args.path)
+        if kind is not None and kind.name != "episodes":
+            return _validate_kind(args.path, schema_only=args.schema_only, overrides=args.overrides)
         return _validate(args.path, schema_only=args.schema_only, overrides=args.overrides)
     return _generate(args)
 
 
 def _list() -> int:
-    """One line per benchmark (name, kind, episodes, horizon, directory), then each env suite's sources."""
-    from omegaconf import OmegaConf
-
-    from molmo_lerobot.benchmark.registry import benchmark_dir, benchmark_names
-    from molmo_lerobot.paths import data_path
-    from molmo_lerobot.suites.benchmark import SUITES
-
+    """One line per benchmark of every benchmark kind (name, kind, episodes, horizon, where), then where each
+    kind's env and assets come from."""
     plugins = Plugins()
     rows = [("benchmark", "kind", "episodes", "horizon", "where")]
-    for name in benchmark_names(plugins):
-        try:
-            path = benchmark_dir(name, plugins)
-        except PluginConflict as exc:
-            rows.append((name, "directory", "?", "?", str(exc)))
-            continue
-        meta_file = path / "benchmark_metadata.json"
-        meta = json.loads(meta_file.read_text()) if meta_file.is_file() else {}
-        rows.append((name, "directory", str(meta.get("num_episodes", "?")), "per episode", str(path)))
-    sources = []
-    for kind_name, kind in SUITES.items():
-        for name, steps in kind.benchmarks.items():
-            conf = data_path("conf") / "benchmark" / f"{name}.yaml"
-            per_task = OmegaConf.select(OmegaConf.load(conf), "episodes_per_task") if conf.is_file() else None
-            per_task = per_task or kind.options["episodes_per_task"]
-            rows.append((name, f"env suite {kind_name}", f"{per_task} per task", f"{steps} (LeRobot's)", str(conf)))
-        sources.append(f"env suite {kind_name}: " + ", ".join(_distribution(d, kind.venv) for d in kind.distributions))
+    about = []
+    for kind in benchmark_kinds(plugins):
+        rows += [(name, row.kind, row.episodes, row.horizon, row.where)
+                 for name, row in kind.benchmarks(plugins).items() if benchmark_kind(plugins, name) is kind]
+        about += kind.about(plugins)
     widths = [max(len(row[i]) for row in rows) for i in range(4)]
     for row in rows:
         print("  ".join(cell.ljust(w) for cell, w in zip(row[:4], widths, strict=True)) + "  " + row[4])
     print()
-    print("\n".join(sources))
+    print("\n".join(about))
     return 0
 
 
-def _distribution(name: str, venv: str) -> str:
-    """``name version (licence)`` of an installed distribution (``venv="libero"``: as the LIBERO venv sees it,
-    its own site-packages first)."""
-    import importlib.metadata as md
-
-    from molmo_lerobot.suites.libero import libero_venv
-
-    path = [str(p) for p in libero_venv().glob("lib/python*/site-packages")] if venv == "libero" else []
-    found = next(iter(md.distributions(name=name, path=[*path, *sys.path])), None)
-    if found is None:
-        return f"{name} (not installed{'; make .libero-venv' if venv == 'libero' else ''})"
-    meta = found.metadata
-    licence = meta.get("License-Expression") or meta.get("License") or "licence not declared"
-    return f"{name} {found.version} ({licence})"
-
-
-def _validate_suite(name: str, *, schema_only: bool, overrides: list[str] | None = None) -> int:
-    """``molmo-bench validate <suite benchmark>``: the options, then the planned episodes against the task
-    catalogue the suite's own env lists (one line per problem naming the episode and field; exit 2)."""
+def _validate_kind(name: str, *, schema_only: bool, overrides: list[str] | None = None) -> int:
+    """``molmo-bench validate <name>`` of a benchmark kind other than episode files: its options, then its
+    episodes planned and checked by the kind (an env suite's against the task catalogue its own env lists;
+    one line per problem naming the episode and field; exit 2)."""
+    from molmo_lerobot.benchmark_kinds import BenchmarkKindError, run_kind
     from molmo_lerobot.config import ConfigError, compose
-    from molmo_lerobot.run_config import RunConfig, RunConfigError
-    from molmo_lerobot.suites.benchmark import (
-        SUITES,
-        SuiteBenchmarkError,
-        plan_problems,
-        plan_suite_benchmark,
-        suite_options,
-        suite_tasks,
-        task_label,
-    )
-
-    try:
-        config = RunConfig.of(compose([f"benchmark={name}", *(overrides or [])]))
-        kind_name = str(config.benchmark.model_dump().get("suite"))
-        options = suite_options(config)
-    except (ConfigError, RunConfigError, SuiteBenchmarkError) as exc:
-        print(f"molmo-bench: error: {exc}", file=sys.stderr)
-        return INVALID
-    kind = SUITES[kind_name]
-    print(f"benchmark  {name}  (env suite {kind_name}: conf/benchmark/{name}.yaml)")
-    print("options    " + ", ".join(f"{k}={v}" for k, v in options.items()))
-    if schema_only:
-        print("checked    options only (the task catalogue is the suite env's: run without --schema-only)")
-        return 0
     from molmo_lerobot.errors import InfrastructureError
+    from molmo_lerobot.run_config import RunConfig, RunConfigError
     from molmo_lerobot.suites.pipe import SuiteError
 
     try:
-        tasks = suite_tasks(config)
-    except (InfrastructureError, SuiteError, OSError, ImportError) as exc:
-        print(f"molmo-bench: error: {name}: the suite's task catalogue could not be read: {exc}", file=sys.stderr)
+        config = RunConfig.of(compose([f"benchmark={name}", *(overrides or [])]))
+        kind = run_kind(Plugins(), config)
+        options = kind.options_of(config)
+    except (ConfigError, RunConfigError, BenchmarkKindError) as exc:
+        print(f"molmo-bench: error: {exc}", file=sys.stderr)
         return INVALID
-    bench = plan_suite_benchmark(config, tasks)
-    problems = plan_problems(bench, tasks)
+    print(f"benchmark  {name}  (benchmark kind {kind.name}: {kind.description})")
+    print("options    " + ", ".join(f"{k}={v}" for k, v in options.model_dump(exclude={"name", "path"}).items()))
+    if schema_only:
+        print("checked    options only (run without --schema-only to plan and check its episodes)")
+        return 0
+    try:
+        lines, problems = kind.validate(config)
+    except (InfrastructureError, SuiteError, OSError, ImportError) as exc:
+        print(f"molmo-bench: error: {name}: the benchmark's episodes could not be planned: {exc}", file=sys.stderr)
+        return INVALID
     if problems:
         for line in problems:
             print(line, file=sys.stderr)
         print(f"molmo-bench: {len(problems)} problem{'s' * (len(problems) != 1)}", file=sys.stderr)
         return INVALID
-    labels = Counter(task_label(e) for e in bench.episodes)
-    horizons = sorted({e.horizon for e in bench.episodes})
-    print(f"episodes   {len(bench.episodes)} over {len(tasks)} tasks ({options['episodes_per_task']} per task, "
-          f"seed {config.seed})")
-    shown = list(labels.items())
-    print("tasks      " + ", ".join(f"{k} ({v})" for k, v in shown[:12]) + (", ..." if len(shown) > 12 else ""))
-    print(f"horizon    {', '.join(map(str, horizons))} (LeRobot's step limit {kind.benchmarks[name]})")
-    print(f"sha256     {bench.sha256}")
-    print("checked    options and episode plan against the suite's task catalogue: ok")
+    print("\n".join(lines))
     return 0
 
 

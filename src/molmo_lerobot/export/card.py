@@ -9,7 +9,7 @@ from molmo_lerobot.features import IMAGE_PREFIX, STATE
 from molmo_lerobot.results import Rates, RunSummary
 
 if TYPE_CHECKING:
-    from molmo_lerobot.suites.dataset import SuiteDatasetLayout
+    from molmo_lerobot.dataset_layout import DatasetLayout
 
 TAGS = ["molmo-lerobot", "evaluation", "rollouts", "mujoco", "simulation", "synthetic"]
 
@@ -50,7 +50,7 @@ def _cameras(meta_info: dict[str, Any]) -> list[str]:
     return out
 
 
-def _what_it_holds(meta_info: dict[str, Any], layout: SuiteDatasetLayout | None) -> str:
+def _what_it_holds(meta_info: dict[str, Any], layout: DatasetLayout | None) -> str:
     """What the frames are and what ``observation.state`` and ``action`` hold: our robots' joint positions and
     targets, or an env suite's layout's own account of each of its features (their dtypes and shapes as stored)."""
     features = meta_info.get("features") or {}
@@ -71,7 +71,7 @@ def _what_it_holds(meta_info: dict[str, Any], layout: SuiteDatasetLayout | None)
 
 
 def description(meta_info: dict[str, Any], summary: RunSummary, records: list[dict[str, Any]],
-                layout: SuiteDatasetLayout | None = None) -> str:
+                layout: DatasetLayout | None = None) -> str:
     """The card's prose: what the data is (simulated), robot, sensors, tasks, scores, limitations; ``layout``: an
     env suite's recording, whose features it describes."""
     bench_name = summary.benchmark.name if summary.benchmark else "?"
@@ -123,7 +123,7 @@ def description(meta_info: dict[str, Any], summary: RunSummary, records: list[di
 
 
 def make_card(meta_info: Any, summary: RunSummary, repo_id: str, records: list[dict[str, Any]],
-              on_hub: bool = False, layout: SuiteDatasetLayout | None = None) -> Any:
+              on_hub: bool = False, layout: DatasetLayout | None = None) -> Any:
     """A :class:`huggingface_hub.DatasetCard` from LeRobot's template (``meta_info``: LeRobot's
     ``DatasetInfo``), with this description. ``on_hub`` (``push=true``): the template's "visualize this
     dataset" link to the Hub's viewer; a local dataset instead gets the ``lerobot-dataset-viz`` command

@@ -13,7 +13,7 @@ Layout added to the LeRobot dataset root:
 
 Dataset episodes follow benchmark order (each worker shard holds consecutive episodes, so the
 merge only copies and concatenates, never re-encodes), and every frame carries ``eval.episode_index``, but in an
-env suite's recording, whose schema is the suite's published datasets' (:mod:`molmo_lerobot.suites.dataset`).
+env suite's recording, whose schema is the suite's published datasets' (:mod:`molmo_lerobot.dataset_layout`).
 
 * ``meta/eval/episodes.jsonl``: one record per attempted episode: ``episode_index`` (the
   dataset episode, or null when not stored, with ``not_recorded``), ``benchmark_episode_index``,
@@ -43,7 +43,7 @@ from molmo_lerobot.export.shards import SHARDS_DIR, Shard, list_shards, new_sess
 from molmo_lerobot.results import RESULTS_FILE, EpisodeResult, RunSummary
 
 if TYPE_CHECKING:
-    from molmo_lerobot.suites.dataset import SuiteDatasetLayout
+    from molmo_lerobot.dataset_layout import DatasetLayout
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +73,7 @@ class MergedDataset:
     session: str = field(default_factory=new_session)
     #: an env suite's fixed schema (its LeRobot datasets', which the card describes); None: each shard's schema
     #: follows its first step
-    layout: SuiteDatasetLayout | None = None
+    layout: DatasetLayout | None = None
 
     @property
     def fps(self) -> int:

@@ -3,18 +3,21 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot import hookimpl
 
+if TYPE_CHECKING:
+    from molmo_lerobot.dataset_layout import DatasetLayout
+
 
 @hookimpl
-def molmo_recorders(config: dict[str, Any]) -> list[Any]:
+def molmo_recorders(config: dict[str, Any], dataset_layout: DatasetLayout | None) -> list[Any]:
     from molmo_lerobot.export.glance import GlanceRecorderFactory
 
     factories: list[Any] = [GlanceRecorderFactory()]
     if config.get("record"):
         from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 
-        factories.append(LeRobotRecorderFactory.from_config(config))
+        factories.append(LeRobotRecorderFactory.from_config(config, dataset_layout))
     return factories

@@ -10,7 +10,7 @@ its first success, but at least ``record_min_frames`` frames (100: the action ch
 ACT and SmolVLA, so no demonstration is shorter than the chunk a policy trained on it predicts); the
 rollout itself, and so the score, runs on to the horizon either way.
 An env-suite run (``benchmark=libero_object``, ``pusht``) records in the suite's fixed schema instead, that of the
-suite's LeRobot datasets (:mod:`molmo_lerobot.suites.dataset`), so that its dataset merges with theirs.
+suite's LeRobot datasets (:mod:`molmo_lerobot.dataset_layout`), so that its dataset merges with theirs.
 ``finalize`` then merges the shards into ``output_dir/dataset`` with
 ``lerobot.datasets.aggregate.aggregate_datasets``, writes the eval records, the dataset card
 and ``results.json`` into it, and pushes to the Hub when ``push=true``.
@@ -36,7 +36,7 @@ from molmo_lerobot.results import EpisodeResult, Push, RunSummary
 from molmo_lerobot.run_config import RunConfig
 
 if TYPE_CHECKING:
-    from molmo_lerobot.suites.dataset import SuiteDatasetLayout
+    from molmo_lerobot.dataset_layout import DatasetLayout
 
 log = logging.getLogger(__name__)
 
@@ -86,9 +86,12 @@ class LeRobotRecorderFactory(MergedDataset, RecorderFactory):
     min_frames: int = RunConfig.model_fields["record_min_frames"].default
 
     @classmethod
-    def from_config(cls, cfg: RunConfig | dict[str, Any]) -> LeRobotRecorderFactory:
+    def from_config(cls, cfg: RunConfig | dict[str, Any],
+                    layout: DatasetLayout | None = None) -> LeRobotRecorderFactory:
         """Build from the run config (``record``, ``push``, ``hub``, ``video``, ``timing`` …), validated
-        first (:meth:`RunConfig.of <molmo_lerobot.run_config.RunConfig.of>`: the missing keys take its defaults)."""
+        first (:meth:`RunConfig.of <molmo_lerobot.run_config.RunConfig.of>`: the missing keys take its defaults);
+        ``layout``: the fixed schema the run's benchmark kind records in (an env suite's datasets'), None: each
+        recording's first step decides it."""
         run = RunConfig.of(cfg)
         bench, policy = run.benchmark.name, str(run.policy["name"])
         repo_id = run.hub.repo_id
@@ -99,9 +102,6 @@ class LeRobotRecorderFactory(MergedDataset, RecorderFactory):
             validate_repo_id(repo_id)
         else:
             repo_id = f"local/{_slug(bench)}-{_slug(policy)}"
-        from molmo_lerobot.suites.benchmark import recording_layout
-
-        layout = recording_layout(run)
         policy_dt_ms = 1000.0 / layout.step_hz if layout is not None else float(run.timing.policy_dt_ms)
         return cls(repo_id=repo_id, policy_dt_ms=policy_dt_ms, benchmark=bench,
                    policy=policy, push=run.push, private=run.hub.private,
@@ -224,7 +224,7 @@ class LeRobotRecorder(Recorder):
         self.shards_dir = output_dir / SHARDS_DIR
         self._ds: Any = None
         self._root: Path | None = None
-        self._layout: FrameLayout | SuiteDatasetLayout | None = None
+        self._layout: FrameLayout | DatasetLayout | None = None
         self._seq = 0
         self._saved: list[dict[str, Any]] = []
         self._discarded: list[dict[str, Any]] = []
@@ -295,7 +295,7 @@ class LeRobotRecorder(Recorder):
         self._close_shard()
 
     # Shards ----------------------------------------------------------------------------
-    def _open_shard(self, layout: FrameLayout | SuiteDatasetLayout, horizon: int) -> None:
+    def _open_shard(self, layout: FrameLayout | DatasetLayout, horizon: int) -> None:
         fileio.make_dirs(self.shards_dir, root=self.shards_dir.parent)  # LeRobot makes the new shard in it
         root = self.shards_dir / shard_name(self.factory.session, self.worker_id, self._seq)
         while root.exists():  # never reuse a directory, whatever left it there

@@ -44,7 +44,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -55,6 +55,19 @@ if TYPE_CHECKING:
 
 Observation = dict[str, Any]
 Action = dict[str, np.ndarray]
+
+
+class PlannedEpisode(Protocol):
+    """What a context reads of an episode's plan (:class:`~molmo_lerobot.episode_plan.EpisodePlan`)."""
+
+    @property
+    def episode_index(self) -> int: ...
+
+    @property
+    def seed(self) -> int: ...
+
+    @property
+    def prompt(self) -> str: ...
 
 
 @dataclass
@@ -77,6 +90,14 @@ class EpisodeContext:
     catalog: AssetCatalog | None = None
     expert: PolicyType | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def of_plan(cls, plan: PlannedEpisode, move_groups: dict[str, int], policy_dt_s: float, *,
+                spec: EpisodeSpec | None = None, **privileged: Any) -> EpisodeContext:
+        """The context of planned episode ``plan`` (its index, seed and prompt), as every session builds it;
+        ``privileged``: ``env``, ``catalog``, ``expert`` (scripted experts only) and ``extra``."""
+        return cls(spec=spec, episode_index=plan.episode_index, seed=plan.seed, prompt=plan.prompt,
+                   move_groups=dict(move_groups), policy_dt_s=policy_dt_s, **privileged)
 
 
 class Policy(ABC):

@@ -36,11 +36,11 @@ if TYPE_CHECKING:
     from molmo_lerobot.benchmark.load import Benchmark
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.context import RunContext
+    from molmo_lerobot.episode_plan import EpisodePlan
     from molmo_lerobot.plugins import Plugins
     from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
     from molmo_lerobot.recording import EpisodeInfo
     from molmo_lerobot.results import EpisodeResult
-    from molmo_lerobot.runner.plan import EpisodePlan
     from molmo_lerobot.sim.env import Env
     from molmo_lerobot.tasks.base import Task
 
@@ -162,11 +162,17 @@ class EpisodeSession(EpisodeOutcome):
         if privileged:
             with contextlib.suppress(LookupError):  # none: the policy says whether it needs one
                 expert = self.run.plugins.expert(self.plan.task_type)
-        return EpisodeContext(spec=self.spec, episode_index=self.plan.episode_index, seed=self.plan.seed,
-                              prompt=self.plan.prompt, move_groups=dict(self.env.move_groups),
-                              policy_dt_s=self.env.timing.policy_dt_s,
-                              env=self.env if privileged else None,
-                              catalog=self.run.catalog if privileged else None, expert=expert)
+        return EpisodeContext.of_plan(self.plan, self.env.move_groups, self.env.timing.policy_dt_s, spec=self.spec,
+                                      env=self.env if privileged else None,
+                                      catalog=self.run.catalog if privileged else None, expert=expert)
+
+    @property
+    def move_groups(self) -> dict[str, int]:
+        return dict(self.env.move_groups)
+
+    @property
+    def renderer_setup_s(self) -> float:
+        return self.env.renderer_setup_s
 
     def recorder_info(self, *, expert: bool, extra: dict[str, Any]) -> EpisodeInfo:
         """What a recorder learns when the episode starts (``extra``: the run's, e.g. policy and benchmark)."""

@@ -19,31 +19,30 @@ import subprocess
 import sys
 import time
 from collections.abc import Collection
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import mujoco
 from omegaconf import DictConfig
 
 from molmo_lerobot.assets.grasps import GraspError
 from molmo_lerobot.assets.libraries import AssetError
-from molmo_lerobot.benchmark.registry import benchmark_dir
+from molmo_lerobot.benchmark_kinds import BenchmarkEpisodes, BenchmarkKind, BenchmarkKindError, run_kind
 from molmo_lerobot.context import RunContext
+from molmo_lerobot.episode_plan import EpisodePlan
 from molmo_lerobot.errors import ExportError, InfrastructureError, RunError
-from molmo_lerobot.molmospaces.preflight import preflight
 from molmo_lerobot.molmospaces.settings import SettingsError
-from molmo_lerobot.plugins import PluginError, Plugins
+from molmo_lerobot.plugins import PluginError
 from molmo_lerobot.results import EpisodeResult, RunSummary, summarize
-from molmo_lerobot.run_config import RunConfig, episode_work_problem
+from molmo_lerobot.run_config import RunConfig
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
-from molmo_lerobot.runner.fingerprint import plan_robot, policy_checkpoints, robots_of
+from molmo_lerobot.runner.fingerprint import policy_checkpoints
 from molmo_lerobot.runner.forkserver import ForkServerPool, worker_preload
 from molmo_lerobot.runner.memory import available_gb, benchmark_family, memory_warning
 from molmo_lerobot.runner.placement import check_devices
-from molmo_lerobot.runner.plan import EpisodePlan, EpisodePlanner
 from molmo_lerobot.runner.progress import Progress
 from molmo_lerobot.runner.run_directory import RunDirectory
 from molmo_lerobot.runner.selection import selection_of
@@ -51,20 +50,6 @@ from molmo_lerobot.runner.supervisor import RunInterrupted
 from molmo_lerobot.runner.worker import WorkerJob, startup_summary
 from molmo_lerobot.serving.run_server import ServeError, served_policy
 from molmo_lerobot.sim.env import TASK_RULES
-from molmo_lerobot.suites.benchmark import (
-    SUITE_KEY,
-    SuiteBenchmark,
-    SuiteBenchmarkError,
-    is_suite,
-    load_suite_benchmark,
-    recording_layout,
-    suite_options,
-    task_label,
-)
-from molmo_lerobot.suites.pipe import SuiteError
-
-if TYPE_CHECKING:
-    from molmo_lerobot.benchmark.load import Benchmark
 
 
 @dataclass
@@ -120,12 +105,6 @@ def safe_name(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._-")[:100] or "unnamed"
 
 
-def resolve_benchmark_path(bench_cfg: dict[str, Any], plugins: Plugins) -> Path:
-    if bench_cfg.get("path"):
-        return Path(bench_cfg["path"]).expanduser()
-    return benchmark_dir(str(bench_cfg["name"]), plugins)
-
-
 def plugin_option_problems(run: RunContext) -> list[str]:
     """The run options only the installed plugins can check, one line each naming its key: the
     policy's own options (its ``PolicyType.check``), ``camera.system``, ``robot.name``, ``horizons.<task type>``."""
@@ -179,8 +158,6 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any], fork_servers
     one process reusing it), instead of one started and stopped for this run. ``given``: the options
     the command line gave (dotted keys, :func:`~molmo_lerobot.config.given_keys`); a resume takes the
     others from the run (``None``: ``config`` states every option)."""
-    from molmo_lerobot.benchmark.load import load_benchmark
-
     config = RunConfig.of(config)  # validated once (unless given a RunConfig): nonsense stops here
     if config.resume:
         config = _resumed_config(config, given)
@@ -196,18 +173,14 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any], fork_servers
     problems = plugin_option_problems(run)  # unknown or broken policy plugin: fail before any work
     if problems:
         raise RunError("\n".join(problems))
-    recorders = run.plugins.recorder_factories(config.plain())  # e.g. a bad hub.repo_id fails here, before any output
+    kind = _kind(run)  # the benchmark's kind, its options and what it cannot do checked before any work
+    # e.g. a bad hub.repo_id fails here, before any output
+    recorders = run.plugins.recorder_factories(config.plain(), kind.recording_layout(config))
     executor = _make_executor(config, fork_servers)
-    bench: Benchmark | SuiteBenchmark
-    if is_suite(config):  # an env suite's episodes (LIBERO, PushT), played in each worker's suite
-        bench = _suite_benchmark(config)
-        run = run.with_sleep(bool(config.timing.sleep))  # not our physics: recorded as given, unset false
-    else:
-        bench = load_benchmark(resolve_benchmark_path(config.benchmark.model_dump(), run.plugins), run.plugins)
-        try:  # the render profile it names and whether its episodes sleep travel to the workers
-            run = run.for_benchmark(bench)
-        except ValueError as exc:  # an unknown profile, a bad MOLMO_SCENE_* override, scenes that disagree on sleep
-            raise RunError(str(exc)) from None
+    try:
+        bench, run = kind.load(run)
+    except (BenchmarkKindError, InfrastructureError) as exc:
+        raise RunError(str(exc)) from None
     config = config.model_copy(update={"timing": run.config.timing})  # run.json records timing.sleep as decided
     started = datetime.now(UTC)
     run_dir = RunDirectory(Path(config.output_dir or Path("runs") / f"{safe_name(bench.name)}-"
@@ -216,16 +189,11 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any], fork_servers
     if config.resume and config.limit is None:  # a resume keeps the run's limit unless given a new one
         update["limit"] = run_dir.recorded_limit()
     config = config.model_copy(update=update)
-    indices, selection = selection_of(config, bench)  # type: ignore[arg-type]  # episodes, origins, path, name
-    if isinstance(bench, SuiteBenchmark):
-        plans = {i: _suite_plan(i, bench.suite, bench.episodes[i], config.horizon is not None) for i in indices}
-        thresholds: dict[str, Any] = {}
-        horizons: dict[str, float] = {}
-    else:
-        planner = EpisodePlanner(run, bench)
-        plans, thresholds = _plan_run(planner, indices)
-        horizons = planner.horizons
-    run_info = {**_run_info(config, run, bench, horizons, robots_of(run, bench, plans)), "selection": selection}
+    indices, selection = selection_of(config, bench)
+    planned = kind.plan(run, bench, indices)
+    plans = planned.plans
+    run_info = {**_run_info(config, run, kind, bench, planned.horizons, kind.robots(run, plans)),
+                "selection": selection}
     done = run_dir.open(run_info, {**options, "output_dir": str(run_dir.path)}, config.resume, recorders)
     outside = sorted(r.episode_index for r in done if r.episode_index not in plans)
     if outside:  # cannot happen with an unchanged benchmark, selection and limit check; never drop them silently
@@ -233,16 +201,16 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any], fork_servers
                        "evaluate")
 
     if config.executor.name == "local" and (warning := memory_warning(  # before any worker starts
-            min(config.workers, len(plans)), benchmark_family(bench.name, config.benchmark.model_dump().get("suite")),
+            min(config.workers, len(plans)), benchmark_family(bench.name, kind.name),
             config.record, available_gb())):
         print(warning, file=sys.stderr)
     t0 = time.perf_counter()
     startups: dict[str, dict[str, float]] = {}  # worker id -> where its start-up went
-    results = _run_plans(config, run, bench, plans, {r.episode_index: _complete(r, plans) for r in done}, run_dir,
-                         executor, recorders, startups)
+    results = _run_plans(config, run, bench, plans, {r.episode_index: _complete(r, plans, kind) for r in done},
+                         run_dir, executor, recorders, startups, kind)
     ordered = [results[i] for i in sorted(results)]
     summary = summarize(
-        ordered, **run_info, thresholds=thresholds, versions=_versions(), workers=config.workers,
+        ordered, **run_info, thresholds=planned.thresholds, versions=_versions(), workers=config.workers,
         executor=config.executor.name, output_dir=str(run_dir.path),
         started_at=started.isoformat(), wall_time_s=round(time.perf_counter() - t0, 3), config=config.plain(),
         startup=startup_summary(startups),
@@ -280,65 +248,20 @@ def _stored_run_dir(dataset_id: str) -> Path:
         raise RunError(f"cannot resume dataset_id={dataset_id}: {exc}; pass output_dir=") from None
 
 
-def _plan_run(planner: EpisodePlanner, indices: list[int]) -> tuple[dict[int, EpisodePlan], dict[str, Any]]:
-    """Every episode of the run planned, the run checked to simulate here (one :class:`RunError`
-    line otherwise, before any output or worker), and each task type's thresholds and horizons."""
-    run, bench = planner.run, planner.bench
-    plans = {i: planner.plan(i) for i in indices}
-    cannot = preflight(bench, run, indices, skip=[i for i, plan in plans.items() if plan.problems])
-    if cannot:
-        raise RunError(cannot)
-    timing = run.config.timing.model_dump()
-    thresholds: dict[str, dict[str, Any]] = {}
-    too_long: list[str] = []
-    for i, plan in plans.items():
-        if plan.error is not None:  # recorded as such, never simulated
-            continue
-        work = episode_work_problem(plan.steps, timing, f"{bench.where(i)} ({plan.horizon_source})")
-        if work:
-            too_long.append(work)
-        task_type = run.plugins.task_type(plan.task_type)
-        entry = thresholds.setdefault(task_type.name,
-                                      {**task_type.thresholds(plan.episode(run.plugins)), "horizon_steps": []})
-        if plan.horizon not in entry["horizon_steps"]:
-            entry["horizon_steps"].append(plan.horizon)
-    if too_long:
-        more = f" (and {len(too_long) - 1} more episodes)" if len(too_long) > 1 else ""
-        raise RunError(too_long[0] + more)
-    _warn_default_horizons(bench.path, [plan.described() for plan in plans.values()], timing["policy_dt_ms"])
-    return plans, thresholds
-
-
-def _suite_benchmark(config: RunConfig) -> SuiteBenchmark:
-    """The run's env-suite benchmark, its options checked; what suite runs cannot do refused here."""
-    if config.record_environment_state:
-        raise RunError(f"record_environment_state: env-suite episodes (benchmark={config.benchmark.name}) have no "
-                       "environment state; their recording has the suite's own dataset layout")
-    if config.robot.name is not None:
-        raise RunError(f"robot.name: env-suite episodes (benchmark={config.benchmark.name}) run the robot their "
-                       "env builds; leave robot.name out")
-    if config.sample is not None:
-        raise RunError(f"sample: not available for env-suite benchmarks (benchmark={config.benchmark.name}); "
-                       "use limit= or episodes=")
+def _kind(run: RunContext) -> BenchmarkKind[Any]:
+    """The kind of the run's benchmark (:func:`~molmo_lerobot.benchmark_kinds.run_kind`), the run's options
+    checked against it (its ``benchmark.*`` model, what it cannot do); one :class:`RunError` line otherwise."""
     try:
-        if config.record and recording_layout(config) is None:
-            raise RunError(f"record=true: env suite {config.benchmark.model_dump().get('suite')!r} "
-                           f"(benchmark={config.benchmark.name}) has no recording layout; run without record")
-        return load_suite_benchmark(config)
-    except (SuiteBenchmarkError, InfrastructureError, SuiteError) as exc:
+        kind = run_kind(run.plugins, run.config)
+        kind.options_of(run.config)
+        kind.check_run(run.config)
+    except BenchmarkKindError as exc:
         raise RunError(str(exc)) from None
+    return kind
 
 
-def _suite_plan(index: int, suite: str, episode: Any, horizon_from_cli: bool) -> EpisodePlan:
-    """Episode ``index`` of env suite ``suite``'s benchmark as a plan: its spec the episode's fields plus
-    ``env_suite``, its seed and digest the episode's own, its task the suite's label (``<suite>/task_<id>``)."""
-    return EpisodePlan.of(index, {**asdict(episode), SUITE_KEY: suite}, episode.seed, task_label(episode),
-                          episode.instruction, episode.horizon, "cli" if horizon_from_cli else "lerobot",
-                          episode.digest)
-
-
-def _run_info(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBenchmark, horizons: dict[str, float],
-              robots: list[dict[str, Any]]) -> dict[str, Any]:
+def _run_info(config: RunConfig, run: RunContext, kind: BenchmarkKind[Any], bench: BenchmarkEpisodes,
+              horizons: dict[str, float], robots: list[dict[str, Any]]) -> dict[str, Any]:
     """What the run is (``run.json``; a resume must match it)."""
     prefer, plain = run.plugins.prefer, config.plain()
     return {
@@ -353,8 +276,7 @@ def _run_info(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBenchm
         "eval_options": {"horizons": horizons, "custom_object": plain["custom_object"],
                          "camera": plain["camera"], "robot": plain["robot"],
                          "end_on_success": config.end_on_success,
-                         # an env suite's options change its frames (image_size) or episodes
-                         **({"benchmark": suite_options(config)} if isinstance(bench, SuiteBenchmark) else {}),
+                         **kind.run_options(config),  # e.g. an env suite's: they change its frames or episodes
                          **({"task_rules": config.task_rules} if config.task_rules != TASK_RULES[0]
                             else {}),  # the default is left out: runs from before the option resume unchanged
                          "molmospaces": run.settings.to_config(),
@@ -362,21 +284,22 @@ def _run_info(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBenchm
     }
 
 
-def _complete(result: EpisodeResult, plans: dict[int, EpisodePlan]) -> EpisodeResult:
+def _complete(result: EpisodeResult, plans: dict[int, EpisodePlan], kind: BenchmarkKind[Any]) -> EpisodeResult:
     """Fill what the main process knows of every attempted episode (task type, prompt, horizon, robot)."""
     plan = plans[result.episode_index]
     for key, value in plan.described().items():
         if getattr(result, key) is None:
             setattr(result, key, value)
-    robot = plan_robot(plan)
+    robot = kind.robot(plan)
     if robot is not None:
         result.extra.setdefault("robot", robot)
     return result
 
 
-def _run_plans(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBenchmark, plans: dict[int, EpisodePlan],
+def _run_plans(config: RunConfig, run: RunContext, bench: BenchmarkEpisodes, plans: dict[int, EpisodePlan],
                results: dict[int, EpisodeResult], run_dir: RunDirectory, executor: Any,
-               recorders: list[Any], startups: dict[str, dict[str, float]]) -> dict[int, EpisodeResult]:
+               recorders: list[Any], startups: dict[str, dict[str, float]],
+               kind: BenchmarkKind[Any]) -> dict[int, EpisodeResult]:
     """Record the plans that cannot run and run the others on ``executor``, each result appended to
     ``episodes.jsonl`` as it comes; ``results`` (those done before a resume) gains every episode,
     ``startups`` each worker's start-up breakdown."""
@@ -389,7 +312,7 @@ def _run_plans(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBench
     try:
         with progress:
             def record(result: EpisodeResult) -> None:
-                log.append(_complete(result, plans))
+                log.append(_complete(result, plans, kind))
                 results[result.episode_index] = result
                 progress.episode_done(result.success, result.error is not None)
 
@@ -421,22 +344,3 @@ def _run_plans(config: RunConfig, run: RunContext, bench: Benchmark | SuiteBench
     if missing:
         raise RunError(f"run ended with {len(missing)} episodes unaccounted for: {missing[:10]}")
     return results
-
-
-def _warn_default_horizons(path: Path, described: list[dict[str, Any]], policy_dt_ms: float) -> None:
-    """One stderr line when episodes run the task types' default horizons (MolmoSpaces' table:
-    pick 20 s, pick-and-place 40 s, open/close 30 s): MolmoSpaces refuses a file without
-    ``task_horizon_sec`` unless given a horizon; here it runs, says so, and records
-    ``horizon_source: default`` per episode (molmo-compare checks per-episode horizons)."""
-    used: dict[str, int] = {}
-    count = 0
-    for d in described:
-        if d["horizon_source"] == "default":
-            used[d["task_type"]] = d["horizon"]
-            count += 1
-    if count:
-        table = ", ".join(f"{task} {steps * policy_dt_ms / 1000:.3g} s = {steps} steps"
-                          for task, steps in sorted(used.items()))
-        print(f"molmo-eval: warning: {path}: {count} episode{'s' * (count != 1)} carry no task.task_horizon_sec; "
-              f"running MolmoSpaces' default horizons ({table}); MolmoSpaces refuses such a file without a "
-              "horizon: pass horizon=<steps> or horizons.<task>=<seconds> to choose", file=sys.stderr)

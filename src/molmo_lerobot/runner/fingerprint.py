@@ -1,5 +1,5 @@
-"""Content hashes of the policy checkpoints and robots a run uses, so a run knows exactly which weights
-and which robot it scored.
+"""Content hashes of the policy checkpoints a run uses, so a run knows exactly which weights it scored (the
+robots' are their benchmark kind's: :meth:`~molmo_lerobot.benchmark_kinds.BenchmarkKind.robots`).
 
 ``run.json`` and ``results.json`` record them under ``policy_checkpoint`` and ``robots``; ``resume=true``
 refuses to continue a run whose checkpoint changed since (a retrained ``checkpoints/last``
@@ -11,15 +11,7 @@ from __future__ import annotations
 
 import hashlib
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
-
-from molmo_lerobot.plugins import PluginError
-from molmo_lerobot.suites.benchmark import SUITE_KEY, SUITES, SuiteBenchmark
-
-if TYPE_CHECKING:
-    from molmo_lerobot.benchmark.load import Benchmark
-    from molmo_lerobot.context import RunContext
-    from molmo_lerobot.runner.plan import EpisodePlan
+from typing import Any
 
 #: policy config keys that name a checkpoint (a file or a ``save_pretrained`` directory)
 CHECKPOINT_KEYS = ("path", "checkpoint", "checkpoint_path", "pretrained_path")
@@ -58,35 +50,3 @@ def policy_checkpoints(policy_cfg: dict[str, Any]) -> dict[str, Any] | None:
         local = Path(value).expanduser()
         out[key] = checkpoint_sha256(local) if local.exists() else {"path": value, "sha256": None}
     return out or None
-
-
-def plan_robot(plan: EpisodePlan) -> str | None:
-    """The robot episode ``plan`` runs: its spec's ``robot.robot_name`` (after the run's overrides:
-    ``robot.name``), an env suite's own robot (LIBERO's Panda), ``None`` for none (PushT's pusher)."""
-    if SUITE_KEY in plan.spec:
-        return SUITES[plan.spec[SUITE_KEY]].robot
-    robot = plan.spec.get("robot")
-    name = robot.get("robot_name") if isinstance(robot, dict) else None
-    return name if isinstance(name, str) else None
-
-
-def robots_of(run: RunContext, bench: Benchmark | SuiteBenchmark,
-              plans: dict[int, EpisodePlan]) -> list[dict[str, Any]]:
-    """The robots the run's episodes run (``run.json``'s and ``results.json``'s ``robots``): each one's
-    name, version (the distribution that provides it) and ``sha256`` of its model as built for this run
-    (:meth:`~molmo_lerobot.robots.base.RobotType.model_sha256`: MolmoSpaces' model where installed
-    differs from the registry-built one).
-    An env suite builds its own robot in its env: name only."""
-    out = []
-    for name in sorted({ran for plan in plans.values() if (ran := plan_robot(plan)) is not None}):
-        if isinstance(bench, SuiteBenchmark):
-            out.append({"name": name, "version": None, "sha256": None})
-            continue
-        try:
-            provider = run.plugins.provider("robot", name)
-            robot = run.plugins.robot(name).configured(run.settings)
-            sha256 = robot.model_sha256()
-        except (PluginError, OSError, ValueError):  # its episodes are recorded as errors, saying why
-            continue
-        out.append({"name": name, "version": f"{provider.distribution} {provider.version}", "sha256": sha256})
-    return out

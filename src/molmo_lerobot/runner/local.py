@@ -31,6 +31,7 @@ from multiprocessing.connection import Connection, wait
 from multiprocessing.context import ForkServerContext, SpawnContext
 from typing import Any
 
+from molmo_lerobot.episode_plan import EpisodePlan
 from molmo_lerobot.gl import use_headless_gl
 from molmo_lerobot.runner.forkserver import (
     ForkServerPool,
@@ -38,7 +39,6 @@ from molmo_lerobot.runner.forkserver import (
     exit_status_lost,
     inherited_gpu_state,
 )
-from molmo_lerobot.runner.plan import EpisodePlan
 from molmo_lerobot.runner.progress import redirect_worker_output
 from molmo_lerobot.runner.supervisor import (
     DEAD,

@@ -10,11 +10,10 @@ import numpy as np
 from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:
+    from molmo_lerobot.benchmark_kinds import Session
     from molmo_lerobot.policies.base import Policy
     from molmo_lerobot.recording import Recorder, RecorderGroup
     from molmo_lerobot.results import EpisodeResult
-    from molmo_lerobot.runner.episode import EpisodeSession
-    from molmo_lerobot.suites.benchmark import SuiteSession
 
 
 class ActionError(MolmoError, ValueError):
@@ -85,14 +84,14 @@ def split_actions(out: Any, move_groups: dict[str, int], policy: str) -> list[Ch
     return steps
 
 
-def rollout(session: EpisodeSession | SuiteSession, policy: Policy, recorders: RecorderGroup | list[Recorder],
+def rollout(session: Session, policy: Policy, recorders: RecorderGroup | list[Recorder],
             policy_name: str) -> EpisodeResult:
     """Play ``session`` (open, its policy reset) with ``policy`` until it ends; its result.
 
     Chunks run open loop: the policy is asked for a new action (and gets a new observation) when
     the queue is empty. The episode ends after a step whose action says ``done``, with
     ``end_on_success`` after the first successful step, else at the horizon
-    (:meth:`EpisodeSession.end <molmo_lerobot.runner.episode.EpisodeSession.end>`). Images are
+    (the session's ``end``: every :class:`~molmo_lerobot.benchmark_kinds.Session` keeps its outcome alike). Images are
     rendered only when someone needs them: the policy at the steps where it gets an observation,
     recorders at the steps they ask for (an env suite that draws inside its step is told before
     the step). A recorder that raises fails its output, not the episode (:class:`RecorderGroup`).
@@ -105,7 +104,7 @@ def rollout(session: EpisodeSession | SuiteSession, policy: Policy, recorders: R
     queue: deque[ChunkStep] = deque()
     while True:
         if not queue:
-            queue.extend(split_actions(policy.act(obs), session.env.move_groups, policy_name))
+            queue.extend(split_actions(policy.act(obs), session.move_groups, policy_name))
         planned = queue.popleft()
         said_done = bool(planned.get(DONE_KEY, False))
         action = session.complete({g: a for g, a in planned.items() if isinstance(a, np.ndarray)})

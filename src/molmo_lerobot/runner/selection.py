@@ -21,14 +21,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from molmo_lerobot.benchmark.load import Benchmark
 from molmo_lerobot.errors import RunError
 
 if TYPE_CHECKING:
+    from molmo_lerobot.benchmark_kinds import BenchmarkEpisodes
     from molmo_lerobot.run_config import RunConfig
 
 
-def selection_of(config: RunConfig, bench: Benchmark) -> tuple[list[int], dict[str, Any] | None]:
+def selection_of(config: RunConfig, bench: BenchmarkEpisodes) -> tuple[list[int], dict[str, Any] | None]:
     """The benchmark indices the run evaluates, in order, and the ``selection`` record (None for
     ``limit`` or every episode: ``limit`` is recorded by itself). Raises :class:`RunError` (one line
     naming the benchmark file and the index) for an index outside the benchmark."""
@@ -47,7 +47,7 @@ def selection_of(config: RunConfig, bench: Benchmark) -> tuple[list[int], dict[s
     return list(range(n))[:config.limit], None
 
 
-def stratified_sample(bench: Benchmark, k: int, seed: int) -> list[int]:
+def stratified_sample(bench: BenchmarkEpisodes, k: int, seed: int) -> list[int]:
     """``k`` benchmark indices (all if ``k`` >= the benchmark) spread over its (house, task) strata."""
     strata: dict[tuple[int, str], list[int]] = defaultdict(list)
     for i, ep in enumerate(bench.episodes):

@@ -41,9 +41,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from molmo_lerobot.episode_plan import EpisodePlan
 from molmo_lerobot.errors import INFRASTRUCTURE, MolmoError
 from molmo_lerobot.results import EpisodeResult
-from molmo_lerobot.runner.plan import EpisodePlan
 from molmo_lerobot.runner.worker import WorkerJob
 
 log = logging.getLogger(__name__)

@@ -19,17 +19,17 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot.allocator import bound_arenas, release_free_memory
+from molmo_lerobot.benchmark_kinds import run_kind
 from molmo_lerobot.cpu_threads import cap_threads
 from molmo_lerobot.errors import describe, error_kind
 from molmo_lerobot.recording import RecorderFactory, RecorderGroup
 from molmo_lerobot.results import EpisodeResult
 from molmo_lerobot.runner.placement import nvidia_gpus, place, slot_of
 from molmo_lerobot.runner.rollout import rollout
-from molmo_lerobot.suites.benchmark import SUITE_KEY, SuiteSession, SuiteSessions
 
 if TYPE_CHECKING:
+    from molmo_lerobot.episode_plan import EpisodePlan
     from molmo_lerobot.run_config import RunConfig
-    from molmo_lerobot.runner.plan import EpisodePlan
 
 
 @dataclass
@@ -129,8 +129,8 @@ class EpisodeWorker:
         cap_threads(config.worker_threads)  # a policy that imported torch reads the cap now
         with self.startup.phase("recorders_s"):
             self.recorders = RecorderGroup([f.make(worker_id, Path(job.output_dir)) for f in job.recorders])
-        #: the worker's env-suite process, kept across its suite episodes (none until the first)
-        self.suites = SuiteSessions(config)
+        #: the opener of the run's sessions, from the benchmark's kind (an env suite's keeps its process)
+        self.sessions = run_kind(self.run_context.plugins, config).sessions(self.run_context)
         self.stopping = False
         self._in_rollout = False
 
@@ -145,19 +145,12 @@ class EpisodeWorker:
         """Run one planned episode; any exception (a policy's ``KeyboardInterrupt`` or ``SystemExit``
         too) becomes this episode's recorded error, with its ``error_kind``. A recorder that fails
         changes only ``output_errors``, never the outcome. :class:`WorkerStop` propagates."""
-        from molmo_lerobot.runner.episode import EpisodeSession
-
         t0 = time.perf_counter()
         result: EpisodeResult
         try:
             t_scene = time.perf_counter()
-            session: EpisodeSession | SuiteSession
-            if SUITE_KEY in plan.spec:  # an env suite's episode: played in the worker's suite process
-                session = self.suites.open(plan, self.policy, self.run_context.config.end_on_success)
-            else:
-                session = EpisodeSession.open(plan, self.run_context, policy=self.policy,
-                                              environment_state=self.environment_state_asker,
-                                              end_on_success=self.run_context.config.end_on_success)
+            session = self.sessions.open(plan, self.policy, environment_state=self.environment_state_asker,
+                                         end_on_success=self.run_context.config.end_on_success)
             scene_s = time.perf_counter() - t_scene
             try:
                 self.recorders.start_episode(session.recorder_info(
@@ -175,7 +168,7 @@ class EpisodeWorker:
                 session.close()
             if not self.first_done:
                 self.first_done = True
-                self.startup.phases.update(first_scene_s=scene_s, renderer_s=session.env.renderer_setup_s)
+                self.startup.phases.update(first_scene_s=scene_s, renderer_s=session.renderer_setup_s)
         except (Exception, KeyboardInterrupt, SystemExit) as exc:
             result = plan.failed(describe(exc), error_kind(exc))
             if os.environ.get("MOLMO_DEBUG"):
@@ -190,6 +183,6 @@ class EpisodeWorker:
             self.recorders.close()
         finally:
             try:
-                self.suites.close()
+                self.sessions.close()
             finally:
                 self.policy.close()

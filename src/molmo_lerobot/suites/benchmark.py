@@ -1,62 +1,85 @@
-"""Env-suite benchmarks: ``molmo-eval benchmark=libero_object`` and its kin, ``benchmark=pusht``.
+"""Env-suite benchmarks as a benchmark kind: ``molmo-eval benchmark=libero_object`` and its kin, ``benchmark=pusht``.
 
-A suite benchmark is named by a config with ``suite: libero`` or ``suite: pusht`` (``conf/benchmark/libero_*.yaml``,
-``pusht.yaml``); its episodes are the suite's own episode specs (:class:`~molmo_lerobot.suites.libero.LiberoEpisode`,
-:class:`~molmo_lerobot.suites.pusht.PushTEpisode`, planned in ``lerobot-eval``'s order and seeding from the suite's
-task catalogue), not MolmoSpaces episode files. What differs between suites is one :class:`SuiteKind`. Each
-becomes an :class:`~molmo_lerobot.runner.plan.EpisodePlan` (spec: the episode's fields plus ``env_suite``;
-digest: the episode's), so workers, executors, resume, ``results.json`` (one ``per_task`` row per LIBERO task),
-``episodes.jsonl``, compare and report are the same code as for our benchmarks. A worker plays a suite plan
-in a :class:`SuiteSession` on its own suite (LIBERO's process, PushT's env), started at its first such episode and
-kept across episodes (:class:`SuiteSessions`).
+An env suite (LeRobot's LIBERO, PushT) is described by one :class:`SuiteKind` (its episode type and planner, its
+env, its policy interface, its typed options) and runs as an :class:`EnvSuiteKind`, the
+:class:`~molmo_lerobot.benchmark_kinds.BenchmarkKind` that :mod:`molmo_lerobot.suites.plugin` registers for it.
+Its benchmarks' episodes are the suite's own episode specs (planned in ``lerobot-eval``'s order and seeding from
+the suite's task catalogue), not MolmoSpaces episode files; each becomes an
+:class:`~molmo_lerobot.episode_plan.EpisodePlan` of its kind (spec: the episode's fields; seed and digest: the
+episode's), so workers, executors, resume, ``results.json`` (one ``per_task`` row per task), ``episodes.jsonl``,
+compare and report are the same code as for our benchmarks. A worker plays a suite plan in a
+:class:`SuiteSession` on its own suite (LIBERO's process, PushT's env), started at its first episode and kept
+across episodes (:class:`SuiteSessions`).
 
-Options (``benchmark.<key>=``): ``episodes_per_task`` (default 1; ``lerobot-eval``'s ``--eval.n_episodes``),
-``image_size`` (camera images, default LeRobot's: LIBERO 360, PushT 96; at most :data:`MAX_IMAGE_SIZE`),
-LIBERO's ``hard_reset`` (default true, LeRobot's default).
+Options (``benchmark.<key>=``, :class:`SuiteOptions` and each suite's subclass): ``episodes_per_task``
+(``lerobot-eval``'s ``--eval.n_episodes``), ``image_size`` (camera images, default LeRobot's; at most
+:data:`MAX_IMAGE_SIZE`), and a suite's own (LIBERO's ``hard_reset``).
 """
 
 from __future__ import annotations
 
+import importlib.metadata as md
+import sys
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
+from pydantic import Field
 
-from molmo_lerobot.errors import InfrastructureError, MolmoError, describe
+from molmo_lerobot.benchmark_kinds import (
+    BenchmarkKind,
+    BenchmarkKindError,
+    BenchmarkOptions,
+    EpisodeSessions,
+    Listing,
+    RunPlan,
+)
+from molmo_lerobot.episode_plan import EpisodePlan
+from molmo_lerobot.errors import InfrastructureError, describe
 from molmo_lerobot.hashing import content_sha256
 from molmo_lerobot.results import EpisodeOutcome
-from molmo_lerobot.suites import libero, pusht
-from molmo_lerobot.suites.dataset import SuiteDatasetLayout
-from molmo_lerobot.suites.libero_dataset import ROBOT_TYPE as LIBERO_ROBOT
-from molmo_lerobot.suites.libero_dataset import libero_layout
 from molmo_lerobot.suites.pipe import SuiteError
-from molmo_lerobot.suites.pusht_dataset import pusht_layout
 
 if TYPE_CHECKING:
+    from molmo_lerobot.context import RunContext
+    from molmo_lerobot.dataset_layout import DatasetLayout
+    from molmo_lerobot.plugins import Plugins
     from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
     from molmo_lerobot.recording import EpisodeInfo
     from molmo_lerobot.results import EpisodeResult
     from molmo_lerobot.run_config import RunConfig
-    from molmo_lerobot.runner.plan import EpisodePlan
 
-#: the key of a plan's spec that names its env suite (absent: one of our own episodes)
-SUITE_KEY = "env_suite"
 #: the largest ``benchmark.image_size``: the side of the largest frames drawn (LIBERO draws 4096², its offscreen
 #: buffer grown to fit; a side beyond that can exceed the GL renderbuffer limit)
 MAX_IMAGE_SIZE = 4096
 
 
-@dataclass(frozen=True)
-class SuiteKind:
-    """What one env suite brings: its episode type and planner, its env (``open(options)``: an object with
-    ``tasks``, ``reset``, ``step``, ``close`` and ``alive``), its policy interface and its options with their
-    defaults."""
+#: a camera image's side in pixels
+ImageSize = Annotated[int, Field(ge=1, le=MAX_IMAGE_SIZE)]
 
+
+class SuiteOptions(BenchmarkOptions):
+    """The options of every env-suite benchmark; a suite's subclass sets ``image_size``'s default (LeRobot's)."""
+
+    #: episodes per task (``lerobot-eval``'s ``--eval.n_episodes``): episode ``k`` of a task, seed ``seed + k``
+    episodes_per_task: int = Field(1, ge=1)
+    #: the side of the camera images, in pixels
+    image_size: ImageSize
+
+
+@dataclass(frozen=True)
+class SuiteKind[OptionsT: SuiteOptions]:
+    """What one env suite brings: its episode type and planner, its env (``open(options)``: an object with
+    ``tasks``, ``reset``, ``step``, ``close`` and ``alive``), its policy interface and its options."""
+
+    #: the kind's name (``results.json``'s plans carry it; ``molmo-plugins`` lists it)
+    name: str
     episode: type[Any]
     plan: Callable[..., list[Any]]
-    open: Callable[[dict[str, Any]], Any]
+    open: Callable[[OptionsT], Any]
     task_label: Callable[[Any], str]
     observation: Callable[[Any, int], Observation]
     move_group: str
@@ -64,107 +87,145 @@ class SuiteKind:
     control_hz: float
     #: our camera -> the feature LeRobot's env hands a policy its frames as (``preprocess_observation``'s name)
     cameras: dict[str, str]
-    options: dict[str, Any]
+    options: type[OptionsT]
     #: what the policy learns of the action (``EpisodeContext.extra``): ``delta_groups`` (LIBERO's delta-EEF
     #: command) or ``action_bounds`` (PushT's target position, within the workspace)
     action_extra: dict[str, Any]
-    #: its benchmarks (``benchmark=<name>``, each a ``conf/benchmark/<name>.yaml``) and LeRobot's step limit
-    #: of each (the default horizon)
+    #: its benchmarks (``benchmark=<name>``) and LeRobot's step limit of each (the default horizon)
     benchmarks: dict[str, int]
     #: the problems of one planned episode against the suite's task catalogue (``[]``: none)
     check_episode: Callable[[Any, list[dict[str, Any]]], list[str]]
     #: the distributions its env and assets come from (``molmo-bench list`` shows their version and licence)
     distributions: tuple[str, ...]
-    #: where those distributions live: ``"main"`` (this venv) or ``"libero"`` (the LIBERO venv)
-    venv: str = "main"
+    #: the site-packages directories those distributions live in besides this venv's (LIBERO's venv)
+    site_packages: Callable[[], list[str]] = list
     #: the dataset layout ``record=true`` writes (``recording(options)``: the schema of the suite's LeRobot
     #: datasets, ``lerobot/libero``'s, ``lerobot/pusht``'s); None: ``record=true`` is refused
-    recording: Callable[[dict[str, Any]], SuiteDatasetLayout] | None = None
+    recording: Callable[[OptionsT], DatasetLayout] | None = None
     #: the robot its env builds (its datasets' ``robot_type``); None: none (PushT's pusher)
     robot: str | None = None
     #: a fault of the installed files its env reads in place (one line naming the file and what to reinstall),
     #: or None: checked before any worker starts, and after an episode failed (then the machine's failure)
     install_problem: Callable[[], str | None] | None = None
+    #: how to install the suite, said where a distribution is missing (``make .libero-venv``)
+    remedy: str = ""
+
+    def problem(self) -> str | None:
+        """What is broken in the suite's installed files, or None."""
+        return self.install_problem() if self.install_problem is not None else None
 
 
-def _libero_label(episode: libero.LiberoEpisode) -> str:
-    return f"{episode.suite}/task_{episode.task_id:02d}"
+class EnvSuiteKind[OptionsT: SuiteOptions](BenchmarkKind[OptionsT]):
+    """The benchmark kind of one env suite: its benchmarks planned from the task catalogue its own env lists."""
 
+    def __init__(self, suite: SuiteKind[OptionsT]) -> None:
+        self.suite = suite
+        self.name = suite.name
+        self.options = suite.options
+        self.description = f"LeRobot's {suite.name} env suite"
 
-#: the suites molmo-eval runs (``benchmark.suite``)
-SUITES: dict[str, SuiteKind] = {
-    "libero": SuiteKind(
-        episode=libero.LiberoEpisode, plan=libero.plan_episodes,
-        open=lambda o: libero.LiberoSuite(image_size=o["image_size"], hard_reset=o["hard_reset"]),
-        task_label=_libero_label, observation=libero.policy_observation, move_group=libero.MOVE_GROUP,
-        action_dim=libero.ACTION_DIM, control_hz=libero.CONTROL_HZ,
-        cameras={"image": "observation.images.image", "image2": "observation.images.image2"},
-        options={"episodes_per_task": 1, "image_size": libero.IMAGE_SIZE, "hard_reset": True},
-        action_extra={"delta_groups": [libero.MOVE_GROUP]}, benchmarks=dict(libero.MAX_STEPS),
-        check_episode=libero.episode_problems, distributions=libero.DISTRIBUTIONS, venv="libero",
-        recording=lambda o: libero_layout(o["image_size"]), robot=LIBERO_ROBOT,
-        install_problem=libero.install_problem),
-    "pusht": SuiteKind(
-        episode=pusht.PushTEpisode, plan=pusht.plan_episodes,
-        open=lambda o: pusht.PushTSuite(image_size=o["image_size"]),
-        task_label=pusht.task_label, observation=pusht.policy_observation, move_group=pusht.MOVE_GROUP,
-        action_dim=pusht.ACTION_DIM, control_hz=pusht.CONTROL_HZ, cameras={pusht.CAMERA: "observation.image"},
-        options={"episodes_per_task": 1, "image_size": pusht.IMAGE_SIZE},
-        action_extra={"action_bounds": {pusht.MOVE_GROUP: pusht.WORKSPACE}}, benchmarks={"pusht": pusht.MAX_STEPS},
-        check_episode=pusht.episode_problems, distributions=pusht.DISTRIBUTIONS,
-        recording=lambda o: pusht_layout(o["image_size"])),
-}
+    def benchmarks(self, plugins: Plugins) -> dict[str, Listing]:
+        per_task = self.suite.options.model_fields["episodes_per_task"].default
+        return {name: Listing(f"env suite {self.name}", f"{per_task} per task", f"{steps} (LeRobot's)",
+                              f"{self.name}:{name}") for name, steps in self.suite.benchmarks.items()}
 
+    def check_run(self, config: RunConfig) -> None:
+        name = config.benchmark.name
+        if config.record_environment_state:
+            raise BenchmarkKindError(f"record_environment_state: env-suite episodes (benchmark={name}) have no "
+                                     "environment state; their recording has the suite's own dataset layout")
+        if config.robot.name is not None:
+            raise BenchmarkKindError(f"robot.name: env-suite episodes (benchmark={name}) run the robot their env "
+                                     "builds; leave robot.name out")
+        if config.sample is not None:
+            raise BenchmarkKindError(f"sample: not available for env-suite benchmarks (benchmark={name}); use "
+                                     "limit= or episodes=")
+        if config.record and self.suite.recording is None:
+            raise BenchmarkKindError(f"record=true: env suite {self.name!r} (benchmark={name}) has no recording "
+                                     "layout; run without record")
+        self.options_of(config)
 
-def suite_benchmarks() -> dict[str, str]:
-    """Every env-suite benchmark (``benchmark=<name>``) and its suite (a key of :data:`SUITES`)."""
-    return {name: kind for kind, suite in SUITES.items() for name in suite.benchmarks}
+    def load(self, run: RunContext) -> tuple[SuiteBenchmark, RunContext]:
+        """:meth:`benchmark_of` the run; not our physics: ``timing.sleep`` is recorded as given, unset false."""
+        return self.benchmark_of(run.config), run.with_sleep(bool(run.config.timing.sleep))
 
+    def benchmark_of(self, config: RunConfig) -> SuiteBenchmark:
+        """The suite's episodes for ``config``: its installed files checked (:class:`~molmo_lerobot.errors.
+        InfrastructureError` naming the first broken one), its task catalogue (read from the suite's env), then
+        ``episodes_per_task`` episodes per task with the run's seed, ``horizon`` overriding LeRobot's step
+        limit."""
+        problem = self.suite.problem()
+        if problem:
+            raise InfrastructureError(f"cannot run benchmark={config.benchmark.name}: {problem}")
+        return self.plan_benchmark(config, self.tasks(config))
 
-class SuiteBenchmarkError(MolmoError, ValueError):
-    """A suite benchmark's options are wrong; the message names the key."""
+    def tasks(self, config: RunConfig) -> list[dict[str, Any]]:
+        """The task catalogue of the run's benchmark, as the suite's own env lists it (LIBERO: its process in
+        the LIBERO venv; PushT: gym_pusht's one task)."""
+        env = self.suite.open(self.options_of(config))
+        try:
+            return env.tasks(str(config.benchmark.name))
+        finally:
+            env.close()
 
+    def plan_benchmark(self, config: RunConfig, tasks: list[dict[str, Any]]) -> SuiteBenchmark:
+        """The run's episodes of the benchmark whose task catalogue is ``tasks``."""
+        name = str(config.benchmark.name)
+        episodes = self.suite.plan(name, tasks, self.options_of(config).episodes_per_task, seed=config.seed,
+                                   horizon=config.horizon)
+        return SuiteBenchmark(name, episodes, Path(f"{self.name}:{name}"), self.suite)
 
-def suite_options(config: RunConfig) -> dict[str, Any]:
-    """The suite benchmark's options from ``benchmark.*``, checked (one clear error naming the key)."""
-    bench = config.benchmark.model_dump()
-    kind = suite_kind(config)
-    out = {key: bench.get(key, default) for key, default in kind.options.items()}
-    for key in ("episodes_per_task", "image_size"):
-        if not isinstance(out[key], int) or isinstance(out[key], bool) or out[key] < 1:
-            raise SuiteBenchmarkError(f"benchmark.{key}: expected an integer >= 1, got {out[key]!r}")
-    if out["image_size"] > MAX_IMAGE_SIZE:
-        raise SuiteBenchmarkError(f"benchmark.image_size: at most {MAX_IMAGE_SIZE} pixels a side, got "
-                                  f"{out['image_size']} (LeRobot's default: {kind.options['image_size']})")
-    if not isinstance(out.get("hard_reset", True), bool):
-        raise SuiteBenchmarkError(f"benchmark.hard_reset: expected true or false, got {out['hard_reset']!r}")
-    unknown = sorted(set(bench) - {"name", "path", "suite", *out})
-    if unknown:
-        raise SuiteBenchmarkError(f"benchmark.{unknown[0]}: not an option of env-suite benchmarks "
-                                  f"(options: {', '.join(out)})")
-    return out
+    def plan(self, run: RunContext, bench: Any, indices: list[int]) -> RunPlan:
+        cli = run.config.horizon is not None
+        return RunPlan({i: suite_plan(i, self.suite, bench.episodes[i], cli) for i in indices})
 
+    def sessions(self, run: RunContext) -> SuiteSessions:
+        return self.sessions_of(run.config)
 
-def suite_kind(config: RunConfig) -> SuiteKind:
-    """The env suite ``benchmark.suite`` names (one clear error when it is none)."""
-    name = config.benchmark.model_dump().get("suite")
-    if name not in SUITES:
-        raise SuiteBenchmarkError(f"benchmark.suite: unknown env suite {name!r} (known: {', '.join(SUITES)})")
-    return SUITES[name]
+    def sessions_of(self, config: RunConfig) -> SuiteSessions:
+        """A worker's opener of ``config``'s sessions (what :meth:`sessions` gives; no run context needed)."""
+        return SuiteSessions(self.suite, self.options_of(config))
 
+    def run_options(self, config: RunConfig) -> dict[str, Any]:
+        """The suite's options (they change its frames, ``image_size``, or its episodes)."""
+        return {"benchmark": self.options_of(config).model_dump(exclude={"name", "path"})}
 
-def is_suite(config: RunConfig) -> bool:
-    """Whether ``config.benchmark`` names an env-suite benchmark."""
-    return bool(config.benchmark.model_dump().get("suite"))
+    def recording_layout(self, config: RunConfig) -> DatasetLayout | None:
+        return self.suite.recording(self.options_of(config)) if self.suite.recording is not None else None
 
+    def robot(self, plan: EpisodePlan) -> str | None:
+        return self.suite.robot
 
-def recording_layout(config: RunConfig) -> SuiteDatasetLayout | None:
-    """The dataset schema ``record=true`` writes a suite run in (the suite's LeRobot datasets' layout, at the
-    run's ``image_size``); None for other runs, whose schema follows each recording's first step."""
-    if not is_suite(config):
-        return None
-    kind = suite_kind(config)
-    return kind.recording(suite_options(config)) if kind.recording is not None else None
+    def about(self, plugins: Plugins) -> list[str]:
+        """The suite's distributions, each with its version and licence as installed."""
+        path = [*self.suite.site_packages(), *sys.path]
+        out = []
+        for name in self.suite.distributions:
+            found = next(iter(md.distributions(name=name, path=path)), None)
+            if found is None:
+                out.append(f"{name} (not installed{'; ' + self.suite.remedy if self.suite.remedy else ''})")
+                continue
+            meta = found.metadata
+            licence = meta.get("License-Expression") or meta.get("License") or "licence not declared"
+            out.append(f"{name} {found.version} ({licence})")
+        return [f"env suite {self.name}: " + ", ".join(out)]
+
+    def validate(self, config: RunConfig) -> tuple[list[str], list[str]]:
+        """The benchmark planned against the task catalogue the suite's own env lists, and its problems."""
+        tasks = self.tasks(config)
+        bench = self.plan_benchmark(config, tasks)
+        problems = plan_problems(bench, tasks)
+        if problems:
+            return [], problems
+        labels = Counter(self.suite.task_label(e) for e in bench.episodes)
+        shown = list(labels.items())
+        per_task = self.options_of(config).episodes_per_task
+        return [f"episodes   {len(bench.episodes)} over {len(tasks)} tasks ({per_task} per task, seed {config.seed})",
+                "tasks      " + ", ".join(f"{k} ({v})" for k, v in shown[:12]) + (", ..." if len(shown) > 12 else ""),
+                f"horizon    {', '.join(map(str, sorted({e.horizon for e in bench.episodes})))} (LeRobot's step "
+                f"limit {self.suite.benchmarks[bench.name]})",
+                f"sha256     {bench.sha256}",
+                "checked    options and episode plan against the suite's task catalogue: ok"], []
 
 
 @dataclass(frozen=True)
@@ -179,8 +240,8 @@ class SuiteBenchmark:
     name: str
     episodes: list[Any]
     path: Path
-    #: the env suite (a key of :data:`SUITES`)
-    suite: str
+    #: the env suite it is a benchmark of
+    suite: SuiteKind[Any]
 
     @property
     def sha256(self) -> str:
@@ -195,49 +256,14 @@ class SuiteBenchmark:
         return f"{self.name} episode {index}"
 
 
-def load_suite_benchmark(config: RunConfig) -> SuiteBenchmark:
-    """The suite's episodes for ``config``: its installed files checked (:class:`~molmo_lerobot.errors.
-    InfrastructureError` naming the first broken one), its task catalogue (read from the suite's process), then
-    ``episodes_per_task`` episodes per task with the run's seed, ``horizon`` overriding LeRobot's step limit."""
-    problem = install_problem(suite_kind(config))
-    if problem:
-        raise InfrastructureError(f"cannot run benchmark={config.benchmark.name}: {problem}")
-    return plan_suite_benchmark(config, suite_tasks(config))
-
-
-def install_problem(kind: SuiteKind) -> str | None:
-    """What is broken in the suite's installed files (:attr:`SuiteKind.install_problem`), or None."""
-    return kind.install_problem() if kind.install_problem is not None else None
-
-
-def suite_tasks(config: RunConfig) -> list[dict[str, Any]]:
-    """The task catalogue of the run's suite benchmark, as the suite's own env lists it (LIBERO: its
-    process in the LIBERO venv; PushT: gym_pusht's one task)."""
-    options = suite_options(config)
-    suite = suite_kind(config).open(options)
-    try:
-        return suite.tasks(str(config.benchmark.name))
-    finally:
-        suite.close()
-
-
-def plan_suite_benchmark(config: RunConfig, tasks: list[dict[str, Any]]) -> SuiteBenchmark:
-    """The run's episodes of the suite benchmark whose task catalogue is ``tasks``."""
-    options = suite_options(config)
-    kind_name, name = str(config.benchmark.model_dump()["suite"]), str(config.benchmark.name)
-    episodes = SUITES[kind_name].plan(name, tasks, options["episodes_per_task"], seed=config.seed,
-                                      horizon=config.horizon)
-    return SuiteBenchmark(name, episodes, Path(f"{kind_name}:{name}"), kind_name)
-
-
 def plan_problems(bench: SuiteBenchmark, tasks: list[dict[str, Any]]) -> list[str]:
     """What is wrong with ``bench``'s episodes against the suite's task catalogue ``tasks``, one line each
     naming the episode and field: the episode type and suite, a seed and a horizon >= 1, the suite's own checks
     (LIBERO: a task id of the catalogue, an init-state index within that task's init states, its instruction;
     PushT: its task), and no episode twice."""
-    kind = SUITES[bench.suite]
+    kind = bench.suite
     if bench.name not in kind.benchmarks:
-        return [f"{bench.name}: not a benchmark of env suite {bench.suite!r} ({', '.join(kind.benchmarks)})"]
+        return [f"{bench.name}: not a benchmark of env suite {kind.name!r} ({', '.join(kind.benchmarks)})"]
     out: list[str] = []
     seen: dict[str, int] = {}
     for i, episode in enumerate(bench.episodes):
@@ -258,43 +284,28 @@ def plan_problems(bench: SuiteBenchmark, tasks: list[dict[str, Any]]) -> list[st
     return out
 
 
-def task_label(episode: Any) -> str:
-    """The episode's task as ``results.json``'s ``per_task`` key: ``libero_object/task_03``, ``pusht/PushT-v0``."""
-    return next(k.task_label(episode) for k in SUITES.values() if isinstance(episode, k.episode))
-
-
-def plan_episode(plan: EpisodePlan) -> Any:
-    """The suite episode a plan carries."""
-    cls = SUITES[plan.spec[SUITE_KEY]].episode
-    return cls(**{f.name: plan.spec[f.name] for f in fields(cls)})
-
-
-class _SuiteEnv:
-    """What the rollout loop and the worker read of a session's env."""
-
-    def __init__(self, kind: SuiteKind) -> None:
-        self.move_groups = {kind.move_group: kind.action_dim}
-        self.renderer_setup_s = 0.0
-
-
-class _SuiteTask:
-    def __init__(self) -> None:
-        self.last_reward = 0.0
-
-    def reward(self) -> float:
-        return self.last_reward
+def suite_plan(index: int, suite: SuiteKind[Any], episode: Any, horizon_from_cli: bool) -> EpisodePlan:
+    """Episode ``index`` of one of ``suite``'s benchmarks as a plan of its kind: its spec the episode's fields, its
+    seed and digest the episode's own, its task the suite's label (``<suite>/task_<id>``)."""
+    return EpisodePlan.of(index, asdict(episode), episode.seed, suite.task_label(episode), episode.instruction,
+                          episode.horizon, "cli" if horizon_from_cli else "lerobot", episode.digest, kind=suite.name)
 
 
 class SuiteSession(EpisodeOutcome):
-    """One suite episode, open: the :class:`~molmo_lerobot.runner.episode.EpisodeSession` interface the
-    rollout loop plays, over the worker's suite process. ``lerobot-eval``'s rules: the episode ends at its
-    first terminated step (LIBERO's goal reached) or at the horizon; it succeeds when its last step did."""
+    """One suite episode, open: the :class:`~molmo_lerobot.benchmark_kinds.Session` the rollout loop plays, over
+    the worker's suite env. ``lerobot-eval``'s rules: the episode ends at its first terminated step (LIBERO's goal
+    reached) or at the horizon; it succeeds when its last step did."""
 
-    def __init__(self, plan: EpisodePlan, suite: Any, image_size: int, end_on_success: bool) -> None:
-        self.plan, self.suite, self.image_size = plan, suite, image_size
-        self.kind = SUITES[plan.spec[SUITE_KEY]]
-        self.episode = plan_episode(plan)
-        self.env, self.task = _SuiteEnv(self.kind), _SuiteTask()
+    #: a suite env draws its frames in its own step: no renderer of ours to set up
+    renderer_setup_s = 0.0
+
+    def __init__(self, kind: SuiteKind[Any], plan: EpisodePlan, suite: Any, image_size: int,
+                 end_on_success: bool) -> None:
+        if plan.kind != kind.name:
+            raise ValueError(f"episode {plan.episode_index}: a plan of kind {plan.kind!r}, not of env suite "
+                             f"{kind.name!r}")
+        self.kind, self.plan, self.suite, self.image_size = kind, plan, suite, image_size
+        self.episode = kind.episode(**{f.name: plan.spec[f.name] for f in fields(kind.episode)})
         self.end_on_success = end_on_success
         super().__init__()
         self.terminated = False
@@ -304,20 +315,22 @@ class SuiteSession(EpisodeOutcome):
     def horizon(self) -> int:
         return int(self.plan.horizon or 0)
 
+    @property
+    def move_groups(self) -> dict[str, int]:
+        return {self.kind.move_group: self.kind.action_dim}
+
     def policy_context(self) -> EpisodeContext:
         from molmo_lerobot.policies.base import EpisodeContext
 
-        return EpisodeContext(spec=None, episode_index=self.plan.episode_index, seed=self.plan.seed,
-                              prompt=self.plan.prompt, move_groups=dict(self.env.move_groups),
-                              policy_dt_s=1.0 / self.kind.control_hz,
-                              extra={**self.kind.action_extra, "camera_features": dict(self.kind.cameras)})
+        return EpisodeContext.of_plan(self.plan, self.move_groups, 1.0 / self.kind.control_hz,
+                                      extra={**self.kind.action_extra, "camera_features": dict(self.kind.cameras)})
 
     def recorder_info(self, *, expert: bool, extra: dict[str, Any]) -> EpisodeInfo:
         from molmo_lerobot.recording import EpisodeInfo
 
         return EpisodeInfo(identity=self.plan.identity, fps=float(self.kind.control_hz),
                            camera_names=list(self.kind.cameras), img_resolution=(self.image_size, self.image_size),
-                           joint_names={}, move_groups=dict(self.env.move_groups), expert=expert,
+                           joint_names={}, move_groups=self.move_groups, expert=expert,
                            extra={**self._suite_fields(), **extra})
 
     def observe(self, images: bool = True) -> Observation:
@@ -337,9 +350,9 @@ class SuiteSession(EpisodeOutcome):
         """One step of the suite's env; ``images``: the next :meth:`observe` asks for frames, so the step
         draws them (LIBERO draws inside its step; a frame nobody reads is not drawn)."""
         reply = self.suite.step(np.asarray(action[self.kind.move_group], dtype=np.float64), images=images)
-        self._obs, self.task.last_reward = reply["observation"], float(reply["reward"])
+        self._obs = reply["observation"]
         self.terminated = bool(reply["terminated"])
-        return self.count_step(bool(reply["success"]), observed, self.task.last_reward)
+        return self.count_step(bool(reply["success"]), observed, float(reply["reward"]))
 
     def end(self, said_done: bool = False, terminated: bool = False) -> str | None:
         """As :meth:`EpisodeOutcome.end`, the suite's env ending the episode when it says ``terminated``."""
@@ -363,30 +376,32 @@ class SuiteSession(EpisodeOutcome):
         return {k: v for k, v in asdict(self.episode).items() if k not in ("seed", "horizon", "instruction")}
 
     def close(self) -> None:
-        """Nothing: the suite process outlives the episode (:class:`SuiteSessions`)."""
+        """Nothing: the suite env outlives the episode (:class:`SuiteSessions`)."""
 
 
-class SuiteSessions:
-    """A worker's suite (LIBERO's process, PushT's env), started at its first suite episode and kept until
+class SuiteSessions(EpisodeSessions):
+    """A worker's suite env (LIBERO's process, PushT's env), started at its first episode and kept until
     :meth:`close`; one whose process was lost is replaced at the next episode."""
 
-    def __init__(self, config: RunConfig) -> None:
-        self.config = config
+    def __init__(self, kind: SuiteKind[Any], options: SuiteOptions) -> None:
+        self.kind, self.options = kind, options
         self._suite: Any = None
 
-    def open(self, plan: EpisodePlan, policy: Policy | None, end_on_success: bool) -> SuiteSession:
-        """``plan`` opened on the worker's suite, started now if it is not running (the first episode, or
+    def open(self, plan: EpisodePlan, policy: Policy | None, *, environment_state: str | None = None,
+             end_on_success: bool = False) -> SuiteSession:
+        """``plan`` opened on the worker's suite env, started now if it is not running (the first episode, or
         after the last one's process was lost: died, hung and killed)."""
-        options = suite_options(self.config)
+        if environment_state:
+            raise ValueError(f"env suite {self.kind.name!r} has no environment state (asked for by "
+                             f"{environment_state})")
         if self._suite is not None and not self._suite.alive:
             self.close()
-        kind = suite_kind(self.config)
         if self._suite is None:
-            self._suite = kind.open(options)
+            self._suite = self.kind.open(self.options)
         try:
-            session = SuiteSession(plan, self._suite, options["image_size"], end_on_success)
+            session = SuiteSession(self.kind, plan, self._suite, self.options.image_size, end_on_success)
         except SuiteError as exc:  # the episode's, unless the suite's installed files are broken now
-            problem = install_problem(kind) if not isinstance(exc, InfrastructureError) else None
+            problem = self.kind.problem() if not isinstance(exc, InfrastructureError) else None
             if problem:
                 raise InfrastructureError(f"{problem} (the episode failed to start: {describe(exc)})") from exc
             raise

@@ -5,15 +5,15 @@ that content (:attr:`LiberoEpisode.digest`). :func:`plan_episodes` lays them out
 --env.type=libero --eval.n_episodes=N --eval.batch_size=1 --seed=S`` plays them: per task, episode ``k`` starts
 from init state ``k`` with seed ``S + k`` and runs for at most LeRobot's step limit for the suite
 (:data:`MAX_STEPS`). :class:`LiberoSuite` runs them through ``libero_server`` in the LIBERO venv
-(``make .libero-venv``; ``MOLMO_LIBERO_VENV`` names another), and :func:`play` is the step loop, with
-``lerobot-eval``'s accounting: an episode ends at its first terminated step (LIBERO's goal reached) or at the
-horizon, and succeeds when its last step did.
+(``make .libero-venv``; ``MOLMO_LIBERO_VENV`` names another); :mod:`molmo_lerobot.suites.plugin` makes it
+the benchmark kind ``libero``, whose sessions keep ``lerobot-eval``'s accounting (an episode ends at its first
+terminated step, LIBERO's goal reached, or at the horizon, and succeeds when its last step did).
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,7 +22,6 @@ import numpy as np
 
 from molmo_lerobot import installed
 from molmo_lerobot.allocator import child_env
-from molmo_lerobot.policies.base import EpisodeContext, Policy
 from molmo_lerobot.suites.episode import SuiteEpisode
 from molmo_lerobot.suites.pipe import SuiteProcess, SuiteProcessError
 
@@ -96,15 +95,6 @@ def episode_problems(episode: LiberoEpisode, tasks: Iterable[Mapping[str, Any]])
     return out
 
 
-@dataclass(frozen=True)
-class Outcome:
-    success: bool
-    steps: int
-    reward: float
-    #: the 8-D state after the last step (the parity test compares it bit for bit)
-    final_state: tuple[float, ...]
-
-
 class LiberoSuite(SuiteProcess):
     """``libero_server`` in the LIBERO venv, configured offline (the venv's own LIBERO config)."""
 
@@ -134,24 +124,6 @@ class LiberoSuite(SuiteProcess):
         return self.request("step", action=np.asarray(action, dtype=np.float64), images=images)
 
 
-def play(suite: LiberoSuite, episode: LiberoEpisode,
-         policy: Callable[[dict[str, Any], int], np.ndarray]) -> Outcome:
-    """Run ``episode``; ``policy(observation, step)`` returns a 7-D action (the observation carries ``task``)."""
-    obs = suite.reset(episode)
-    reward, success, steps = 0.0, False, episode.horizon
-    for step in range(episode.horizon):
-        action = np.asarray(policy({**obs, "task": episode.instruction}, step), dtype=np.float64)
-        if action.shape != (ACTION_DIM,):
-            raise ValueError(f"episode {episode.digest[:12]}: the policy returned shape {action.shape}, "
-                             f"expected ({ACTION_DIM},)")
-        reply = suite.step(action)
-        obs, reward, success = reply["observation"], reward + reply["reward"], reply["success"]
-        if reply["terminated"]:
-            steps = step + 1
-            break
-    return Outcome(bool(success), steps, float(reward), tuple(float(v) for v in obs["observation.state"]))
-
-
 def policy_observation(obs: Mapping[str, Any], step: int) -> dict[str, Any]:
     """A LIBERO observation in our policy interface (:mod:`molmo_lerobot.policies.base`): cameras ``image``
     and ``image2`` (so ``policy=lerobot`` feeds them to ``observation.images.image``/``image2``; none when the
@@ -160,26 +132,3 @@ def policy_observation(obs: Mapping[str, Any], step: int) -> dict[str, Any]:
     if "observation.images.image" in obs:
         out["images"] = {"image": obs["observation.images.image"], "image2": obs["observation.images.image2"]}
     return out
-
-
-class PolicyActor:
-    """A molmo-eval :class:`~molmo_lerobot.policies.base.Policy` as :func:`play`'s policy: reset at an
-    episode's first step, its chunks run open loop, one 7-D action per step."""
-
-    def __init__(self, policy: Policy, episode: LiberoEpisode, episode_index: int = 0) -> None:
-        self.policy, self.episode, self.index = policy, episode, episode_index
-        self._queue: list[np.ndarray] = []
-
-    def __call__(self, obs: dict[str, Any], step: int) -> np.ndarray:
-        if step == 0:
-            self._queue.clear()
-            self.policy.reset(EpisodeContext(spec=None, episode_index=self.index, seed=self.episode.seed,
-                                             prompt=self.episode.instruction, move_groups={MOVE_GROUP: ACTION_DIM},
-                                             policy_dt_s=1.0 / CONTROL_HZ))
-        if not self._queue:
-            out = self.policy.act(policy_observation(obs, step))
-            if not isinstance(out, dict) or MOVE_GROUP not in out:
-                raise ValueError(f"episode {self.episode.digest[:12]}: the policy returned no {MOVE_GROUP!r} action")
-            actions = np.asarray(out[MOVE_GROUP], dtype=np.float64)
-            self._queue = list(actions[None] if actions.ndim == 1 else actions)
-        return self._queue.pop(0)

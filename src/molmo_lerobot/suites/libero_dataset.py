@@ -19,7 +19,7 @@ features). The cameras are video (``lerobot/libero``'s storage). The images are 
 
 from __future__ import annotations
 
-from molmo_lerobot.suites.dataset import SuiteDatasetLayout, Vector
+from molmo_lerobot.dataset_layout import DatasetLayout, Vector
 from molmo_lerobot.suites.libero import ACTION_DIM, CONTROL_HZ, MOVE_GROUP
 
 #: the datasets' declared frame rate (LIBERO steps at 20 Hz; each frame is one step)
@@ -30,9 +30,9 @@ STATE_DIM = 8
 DATASET_IMAGE_SIZE = 256
 
 
-def libero_layout(image_size: int) -> SuiteDatasetLayout:
+def libero_layout(image_size: int) -> DatasetLayout:
     """The frame schema of a LIBERO recording at ``image_size``²."""
-    return SuiteDatasetLayout(
+    return DatasetLayout(
         image_size=image_size,
         cameras=(("image", "observation.images.image", "the agent-view camera, turned 180° as LeRobot does"),
                  ("image2", "observation.images.image2", "the wrist camera, turned 180°")),

@@ -19,7 +19,7 @@ The images are the ones the policy saw, at ``benchmark.image_size`` (default 96,
 
 from __future__ import annotations
 
-from molmo_lerobot.suites.dataset import SuiteDatasetLayout, Vector
+from molmo_lerobot.dataset_layout import DatasetLayout, Vector
 from molmo_lerobot.suites.pusht import ACTION_DIM, CAMERA, CONTROL_HZ, MOVE_GROUP
 
 #: ``convert_dataset_v1_to_v2``'s robot type for a dataset converted without a robot config
@@ -31,9 +31,9 @@ def _motors(n: int) -> dict[str, list[str]]:
     return {"motors": [f"motor_{i}" for i in range(n)]}
 
 
-def pusht_layout(image_size: int) -> SuiteDatasetLayout:
+def pusht_layout(image_size: int) -> DatasetLayout:
     """The frame schema of a PushT recording at ``image_size``²."""
-    return SuiteDatasetLayout(
+    return DatasetLayout(
         image_size=image_size,
         cameras=((CAMERA, "observation.image", "gym_pusht's top-down rendering of the table"),),
         move_group=MOVE_GROUP,

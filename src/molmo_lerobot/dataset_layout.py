@@ -1,9 +1,10 @@
-"""An env suite's recording layout: the frame schema of the suite's published LeRobot datasets.
+"""A fixed recording layout: the frame schema of published LeRobot datasets a benchmark kind records in.
 
 LeRobot's ``aggregate_datasets`` merges only datasets whose features (names, dtypes, shapes), fps and robot type
-are all equal, so ``record=true`` on a suite run writes exactly the features of that suite's datasets
-(:mod:`~molmo_lerobot.suites.libero_dataset`, :mod:`~molmo_lerobot.suites.pusht_dataset`) and nothing more; the
-eval record of each episode is in ``meta/eval/episodes.jsonl``, as for every recording.
+are all equal, so ``record=true`` on an env-suite run writes exactly the features of that suite's datasets
+(:meth:`BenchmarkKind.recording_layout <molmo_lerobot.benchmark_kinds.BenchmarkKind.recording_layout>`, e.g.
+LIBERO's and PushT's) and nothing more; the eval record of each episode is in ``meta/eval/episodes.jsonl``, as
+for every recording.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ class Vector:
 
 
 @dataclass(frozen=True)
-class SuiteDatasetLayout:
+class DatasetLayout:
     """The frame schema of a suite's recording at ``image_size``² (the ``FrameLayout`` interface the recorder
     writes with: ``features``, ``frame``, ``robot_type``, ``fps``; ``describe`` for the dataset card)."""
 

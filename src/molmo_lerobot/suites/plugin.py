@@ -1,0 +1,70 @@
+"""Built-in plugin: LeRobot's env suites as benchmark kinds (``libero``: ``benchmark=libero_object`` and the other
+LIBERO suites; ``pusht``: ``benchmark=pusht``), each with its typed options and defaults, stated here once."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import Field
+
+from molmo_lerobot import hookimpl
+from molmo_lerobot.suites import libero, pusht
+from molmo_lerobot.suites.benchmark import EnvSuiteKind, ImageSize, SuiteKind, SuiteOptions
+from molmo_lerobot.suites.libero_dataset import ROBOT_TYPE as LIBERO_ROBOT
+from molmo_lerobot.suites.libero_dataset import libero_layout
+from molmo_lerobot.suites.pusht_dataset import pusht_layout
+
+
+class LiberoOptions(SuiteOptions):
+    """LIBERO's options: LeRobot's ``LiberoEnv`` defaults."""
+
+    image_size: ImageSize = libero.IMAGE_SIZE
+    #: rebuild the scene per episode (LeRobot's default)
+    hard_reset: bool = True
+
+
+class PushTOptions(SuiteOptions):
+    """PushT's options: gym_pusht's 96² image; ``lerobot-eval``'s 50 episodes."""
+
+    episodes_per_task: int = Field(50, ge=1)
+    image_size: ImageSize = pusht.IMAGE_SIZE
+
+
+def _open_libero(options: LiberoOptions) -> libero.LiberoSuite:
+    return libero.LiberoSuite(image_size=options.image_size, hard_reset=options.hard_reset)
+
+
+def _open_pusht(options: PushTOptions) -> pusht.PushTSuite:
+    return pusht.PushTSuite(image_size=options.image_size)
+
+
+def _libero_label(episode: libero.LiberoEpisode) -> str:
+    return f"{episode.suite}/task_{episode.task_id:02d}"
+
+
+def _libero_site_packages() -> list[str]:
+    return [str(p) for p in libero.libero_venv().glob("lib/python*/site-packages")]
+
+
+LIBERO: SuiteKind[LiberoOptions] = SuiteKind(
+    name="libero", episode=libero.LiberoEpisode, plan=libero.plan_episodes, open=_open_libero,
+    task_label=_libero_label, observation=libero.policy_observation, move_group=libero.MOVE_GROUP,
+    action_dim=libero.ACTION_DIM, control_hz=libero.CONTROL_HZ,
+    cameras={"image": "observation.images.image", "image2": "observation.images.image2"}, options=LiberoOptions,
+    action_extra={"delta_groups": [libero.MOVE_GROUP]}, benchmarks=dict(libero.MAX_STEPS),
+    check_episode=libero.episode_problems, distributions=libero.DISTRIBUTIONS, site_packages=_libero_site_packages,
+    recording=lambda o: libero_layout(o.image_size), robot=LIBERO_ROBOT, install_problem=libero.install_problem,
+    remedy="make .libero-venv")
+
+PUSHT: SuiteKind[PushTOptions] = SuiteKind(
+    name="pusht", episode=pusht.PushTEpisode, plan=pusht.plan_episodes, open=_open_pusht,
+    task_label=pusht.task_label, observation=pusht.policy_observation, move_group=pusht.MOVE_GROUP,
+    action_dim=pusht.ACTION_DIM, control_hz=pusht.CONTROL_HZ, cameras={pusht.CAMERA: "observation.image"},
+    options=PushTOptions, action_extra={"action_bounds": {pusht.MOVE_GROUP: pusht.WORKSPACE}},
+    benchmarks={"pusht": pusht.MAX_STEPS}, check_episode=pusht.episode_problems, distributions=pusht.DISTRIBUTIONS,
+    recording=lambda o: pusht_layout(o.image_size))
+
+
+@hookimpl
+def molmo_benchmark_kinds() -> list[EnvSuiteKind[Any]]:
+    return [EnvSuiteKind(LIBERO), EnvSuiteKind(PUSHT)]
