@@ -75,12 +75,12 @@ def _bytes_per_episode(cfg, res) -> tuple[int, int]:
     from molmo_lerobot.benchmark.load import load_benchmark
     from molmo_lerobot.context import RunContext
     from molmo_lerobot.run_config import RunConfig
-    from molmo_lerobot.runner.evaluate import resolve_benchmark_path
+    from molmo_lerobot.runner.episode_files import benchmark_path
     from molmo_lerobot.runner.plan import EpisodePlanner
 
     plain = RunConfig.of(cfg).plain()
     ctx = RunContext.build(plain)
-    planner = EpisodePlanner(ctx, load_benchmark(resolve_benchmark_path(plain["benchmark"], ctx.plugins), ctx.plugins))
+    planner = EpisodePlanner(ctx, load_benchmark(benchmark_path(plain["benchmark"], ctx.plugins), ctx.plugins))
     plan = max(len(pickle.dumps(planner.plan(e.episode_index))) for e in res.episodes)
     result = max(len(pickle.dumps(e.to_dict())) for e in res.episodes)
     return plan, result

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from molmo_lerobot.plugins import Plugins
-from molmo_lerobot.runner.evaluate import _warn_default_horizons
+from molmo_lerobot.runner.episode_files import warn_default_horizons
 
 
 def test_default_table_is_molmospaces():
@@ -20,11 +20,11 @@ def test_episodes_on_default_horizons_get_one_warning_naming_the_file(capsys):
     described = [{"task_type": "pick", "horizon": 303, "horizon_source": "default"},
                  {"task_type": "pick", "horizon": 303, "horizon_source": "task_horizon_sec"},
                  {"task_type": "open", "horizon": 455, "horizon_source": "default"}]
-    _warn_default_horizons(Path("/data/ms/benchmark.json"), described, 66.0)
+    warn_default_horizons(Path("/data/ms/benchmark.json"), described, 66.0)
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert err.startswith("molmo-eval: warning: /data/ms/benchmark.json: 2 episodes carry no task.task_horizon_sec; "
                           "running MolmoSpaces' default horizons (open 30 s = 455 steps, pick 20 s = 303 steps)")
     assert "horizon=<steps> or horizons.<task>=<seconds>" in err
-    _warn_default_horizons(Path("x"), described[1:2], 66.0)
+    warn_default_horizons(Path("x"), described[1:2], 66.0)
     assert capsys.readouterr().err == ""

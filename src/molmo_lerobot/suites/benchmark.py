@@ -126,7 +126,7 @@ class EnvSuiteKind[OptionsT: SuiteOptions](BenchmarkKind[OptionsT]):
 
     def benchmarks(self, plugins: Plugins) -> dict[str, Listing]:
         per_task = self.suite.options.model_fields["episodes_per_task"].default
-        return {name: Listing(f"env suite {self.name}", f"{per_task} per task", f"{steps} (LeRobot's)",
+        return {name: Listing(f"env suite {self.name}", f"{per_task} per task", f"{steps} (the suite's)",
                               f"{self.name}:{name}") for name, steps in self.suite.benchmarks.items()}
 
     def check_run(self, config: RunConfig) -> None:
