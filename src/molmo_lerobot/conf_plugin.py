@@ -1,11 +1,12 @@
-"""Built-in plugin contributing the core Hydra config directory (``conf/``) and the shipped benchmarks
-(``benchmarks/``)."""
+"""Built-in plugin contributing the core Hydra config directory (``conf/``), the shipped benchmarks
+(``benchmarks/``) and the built-in executors (``executor=local|ray``)."""
 
 from __future__ import annotations
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.packs import BenchmarkDir, benchmark_pack
 from molmo_lerobot.paths import data_path
+from molmo_lerobot.runner.executors import LOCAL, RAY, ExecutorType
 
 
 @hookimpl
@@ -16,3 +17,8 @@ def molmo_config_dirs() -> list[str]:
 @hookimpl
 def molmo_benchmarks() -> list[BenchmarkDir]:
     return benchmark_pack(data_path("benchmarks"))
+
+
+@hookimpl
+def molmo_executors() -> list[ExecutorType]:
+    return [LOCAL, RAY]

@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from molmo_lerobot.policies.base import PolicyType
     from molmo_lerobot.recording import RecorderFactory
     from molmo_lerobot.robots.base import RobotType
+    from molmo_lerobot.runner.executors import ExecutorType
     from molmo_lerobot.sim.scenes import SceneDataset
     from molmo_lerobot.tasks.base import TaskType
 
@@ -115,6 +116,17 @@ def molmo_benchmarks() -> list[BenchmarkDir]:
     (``name`` → directory); :func:`~molmo_lerobot.benchmark.packs.benchmark_pack` lists every
     benchmark directory of a folder. ``molmo-eval benchmark=<name>``, ``molmo-bench validate <name>``
     and the Gymnasium id ``molmo_lerobot/<name>`` then find them.
+    """
+
+
+@hookspec
+def molmo_executors() -> list[ExecutorType]:
+    """Executors, keyed by ``name`` as used on the command line (``executor=<name>``).
+
+    An :class:`~molmo_lerobot.runner.executors.ExecutorType` has an ``options`` pydantic model (its
+    ``executor.<key>`` options and their defaults, checked before a run writes anything; Hydra's
+    ``executor/<name>`` config node is made from it) and ``factory(workers, options, timeout_s, retries,
+    fork_servers)``: the run's executor (a :class:`~molmo_lerobot.runner.supervisor.Supervisor`).
     """
 
 
