@@ -28,6 +28,7 @@ from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetLibraryType, GraspLibraryType
+    from molmo_lerobot.benchmark.generators import BenchmarkGenerator
     from molmo_lerobot.benchmark.packs import BenchmarkDir
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.cameras.base import CameraSystem
@@ -116,6 +117,17 @@ def molmo_benchmarks() -> list[BenchmarkDir]:
     (``name`` → directory); :func:`~molmo_lerobot.benchmark.packs.benchmark_pack` lists every
     benchmark directory of a folder. ``molmo-eval benchmark=<name>``, ``molmo-bench validate <name>``
     and the Gymnasium id ``molmo_lerobot/<name>`` then find them.
+    """
+
+
+@hookspec
+def molmo_generators() -> list[BenchmarkGenerator]:
+    """Benchmark generators, keyed by ``name`` as used by ``molmo-bench generate <name>``.
+
+    A :class:`~molmo_lerobot.benchmark.generators.BenchmarkGenerator` has a ``description``, the
+    ``tasks`` it takes (``--task``; the first is the default) and ``generate(task, n_houses,
+    episodes_per_house, seed, name)``: the episodes (JSON-ready, validated before anything is written)
+    and the benchmark's metadata, fully determined by the arguments.
     """
 
 
