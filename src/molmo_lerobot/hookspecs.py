@@ -116,7 +116,7 @@ def molmo_benchmarks() -> list[BenchmarkDir]:
     """Benchmarks this plugin ships, each a :class:`~molmo_lerobot.benchmark.packs.BenchmarkDir`
     (``name`` → directory); :func:`~molmo_lerobot.benchmark.packs.benchmark_pack` lists every
     benchmark directory of a folder. ``molmo-eval benchmark=<name>``, ``molmo-bench validate <name>``
-    and the Gymnasium id ``molmo_lerobot/<name>`` then find them.
+    and the Gymnasium id ``molmo_lerobot/<name>`` (once ``gym_env.register_benchmarks()`` ran) then find them.
     """
 
 
