@@ -1,5 +1,6 @@
 """Built-in plugin contributing the core Hydra config directory (``conf/``), the shipped benchmarks
-(``benchmarks/``) and the benchmark kind that runs them and every other episode file (``episodes``, asked last)."""
+(``benchmarks/``), the built-in executors (``executor=local|ray``) and the benchmark kind that runs the shipped
+benchmarks and every other episode file (``episodes``, asked last)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,8 @@ from typing import Any
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.packs import BenchmarkDir, benchmark_pack
 from molmo_lerobot.paths import data_path
+from molmo_lerobot.runner.builtin_executors import LOCAL, RAY
+from molmo_lerobot.runner.executors import ExecutorType
 
 
 @hookimpl
@@ -18,6 +21,11 @@ def molmo_config_dirs() -> list[str]:
 @hookimpl
 def molmo_benchmarks() -> list[BenchmarkDir]:
     return benchmark_pack(data_path("benchmarks"))
+
+
+@hookimpl
+def molmo_executors() -> list[ExecutorType]:
+    return [LOCAL, RAY]
 
 
 @hookimpl(trylast=True)

@@ -1,12 +1,15 @@
 """Hydra config: ``conf/`` plus every config directory plugins contribute.
 
 Plugin config dirs join Hydra's search path through a Hydra ``SearchPathPlugin``
-(:class:`PluginConfigDirs`), so ``molmo-eval`` (a Hydra app), :func:`compose` and
-``molmo-eval --info searchpath`` all see them. ``molmo_open_map`` is a config node for
-free-form maps (``horizons``, ``camera.overrides``, ``plugins.prefer``, a policy's
-``cameras``): placed with ``- /molmo_open_map@<key>`` in a defaults list, ``<key>.<new>=v``
-works on the command line without Hydra's ``+``. Config comes before any run, so these read a
-plugin set of their own (discovery is the same everywhere).
+(``hydra_plugins.molmo_lerobot_searchpath``, found by Hydra's own plugin discovery), which calls
+:func:`add_plugin_configs`; so ``molmo-eval`` (a Hydra app), :func:`compose` and
+``molmo-eval --info searchpath`` all see them, and importing this module changes nothing. That is also
+when the config nodes that are not files are stored in Hydra's ConfigStore: ``molmo_run_defaults``,
+each executor's ``executor/<name>`` (its options model's defaults), and ``molmo_open_map``, a config node
+for free-form maps (``horizons``, ``camera.overrides``, ``plugins.prefer``, a policy's ``cameras``):
+placed with ``- /molmo_open_map@<key>`` in a defaults list, ``<key>.<new>=v`` works on the command line
+without Hydra's ``+``. Config comes before any run, so these read a plugin set of their own (discovery
+is the same everywhere).
 """
 
 from __future__ import annotations
@@ -20,19 +23,17 @@ from hydra import initialize_config_dir
 from hydra.core.config_search_path import ConfigSearchPath
 from hydra.core.config_store import ConfigStore
 from hydra.core.global_hydra import GlobalHydra
-from hydra.core.plugins import Plugins as HydraPlugins
 from hydra.errors import HydraException, OverrideParseException
-from hydra.plugins.search_path_plugin import SearchPathPlugin
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from molmo_lerobot.benchmark_kinds import benchmark_kind, benchmark_kinds
 from molmo_lerobot.hookspecs import ConfigError
 from molmo_lerobot.paths import data_path
-from molmo_lerobot.plugins import Plugins
+from molmo_lerobot.plugins import PluginError, Plugins
 from molmo_lerobot.run_config import RunConfig
 
-__all__ = ["ConfigError", "PluginConfigDirs", "compose", "config_message", "given_keys", "primary_config_dir"]
+__all__ = ["ConfigError", "add_plugin_configs", "compose", "config_message", "given_keys", "primary_config_dir"]
 
 
 #: the run config's keys that pick a file of ``conf/<group>/`` (or a plugin's config dir)
@@ -43,26 +44,26 @@ def primary_config_dir() -> Path:
     return data_path("conf").resolve()
 
 
-class PluginConfigDirs(SearchPathPlugin):
-    """Appends every ``molmo_config_dirs`` directory to the search path of our configs, and gives
-    every registered policy and benchmark that none of them configures a default ``policy/<name>``
-    / ``benchmark/<name>``."""
-
-    def manipulate_search_path(self, search_path: ConfigSearchPath) -> None:
-        primary = primary_config_dir()
-        paths = {Path(e.path.removeprefix("file://")).resolve() for e in search_path.get_path()
-                 if e.path and "://" not in e.path.removeprefix("file://")}
-        if primary not in paths:
-            return  # some other Hydra app in this process
-        seen = [primary]
-        plugins = Plugins()
-        for d in plugins.config_dirs():
-            path = Path(d).resolve()
-            if path not in seen:
-                seen.append(path)
-                search_path.append(provider="molmo-plugin", path=f"file://{path}")
-        _default_policy_configs(plugins, seen)
-        _default_benchmark_configs(plugins, seen)
+def add_plugin_configs(search_path: ConfigSearchPath) -> None:
+    """Append every ``molmo_config_dirs`` directory to ``search_path`` (that of our configs) and store the
+    config nodes that are not files: ``molmo_open_map``, ``molmo_run_defaults``, each executor's
+    ``executor/<name>`` and a default ``policy/<name>`` / ``benchmark/<name>`` for every registered policy
+    and benchmark that no config dir configures."""
+    store = ConfigStore.instance()
+    open_map = OmegaConf.create({})
+    OmegaConf.set_struct(open_map, False)  # keys may be added below it without `+`
+    store.store(name="molmo_open_map", node=open_map, provider="molmo_lerobot")
+    store.store(name="molmo_run_defaults", node=run_defaults(), provider="molmo_lerobot")
+    seen = [primary_config_dir()]
+    plugins = Plugins()
+    for d in plugins.config_dirs():
+        path = Path(d).resolve()
+        if path not in seen:
+            seen.append(path)
+            search_path.append(provider="molmo-plugin", path=f"file://{path}")
+    _default_policy_configs(plugins, seen)
+    _default_benchmark_configs(plugins, seen)
+    _executor_configs(plugins, seen)
 
 
 def _default_policy_configs(plugins: Plugins, config_dirs: list[Path]) -> None:
@@ -89,22 +90,24 @@ def _default_benchmark_configs(plugins: Plugins, config_dirs: list[Path]) -> Non
                             provider="molmo_lerobot")
 
 
+def _executor_configs(plugins: Plugins, config_dirs: list[Path]) -> None:
+    """``executor/<name>`` = the options model's defaults for each registered executor no config dir has an
+    ``executor/<name>.yaml`` for: the model states the options once (``executor.<key>=`` overrides them);
+    a name several plugins provide gets ``{name: <name>}``, and the run says which to pin."""
+    store = ConfigStore.instance()
+    for name in plugins.names("executor"):
+        if not any((d / "executor" / f"{name}.yaml").is_file() for d in config_dirs):
+            try:
+                node = plugins.resolve("executor", name).defaults()
+            except PluginError:
+                node = {"name": name}
+            store.store(group="executor", name=name, node=node, provider="molmo_lerobot")
+
+
 def run_defaults() -> dict[str, object]:
     """``RunConfig``'s defaults, the one statement of them, as the ``molmo_run_defaults`` node
     ``conf/eval.yaml`` lists; the config groups (``policy``, ``benchmark``, ``executor``) are its own."""
     return {k: v for k, v in RunConfig().plain().items() if k not in CONFIG_GROUPS}
-
-
-def _register() -> None:
-    open_map = OmegaConf.create({})
-    OmegaConf.set_struct(open_map, False)  # keys may be added below it without `+`
-    store = ConfigStore.instance()
-    store.store(name="molmo_open_map", node=open_map, provider="molmo_lerobot")
-    store.store(name="molmo_run_defaults", node=run_defaults(), provider="molmo_lerobot")
-    HydraPlugins.instance().register(PluginConfigDirs)
-
-
-_register()
 
 
 def given_keys(overrides: list[str]) -> set[str]:

@@ -1,7 +1,8 @@
 """Our benchmarks as Gymnasium environments, in LeRobot's env convention.
 
 ``gymnasium.make("molmo_lerobot/<benchmark>")`` works for every shipped benchmark once this
-module is imported (``molmo_lerobot/Benchmark`` takes ``benchmark=<name or directory>``).
+module is imported, which loads no plugin; :func:`register_benchmarks` adds the ids of the benchmarks
+plugins ship (``molmo_lerobot/Benchmark`` takes ``benchmark=<name or directory>`` without it).
 The env steps the very ``Env`` and ``Task`` objects that ``molmo-eval``'s rollout steps; it
 adds no physics or success logic of its own. The env-suite benchmarks (``libero_*``, ``pusht``) have no id here:
 they are LeRobot's own envs (``--env.type=libero|pusht``), which ``molmo-eval`` plays and is proven equal to.
@@ -50,10 +51,12 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 from gymnasium import spaces  # noqa: E402
 
+from molmo_lerobot.benchmark.packs import benchmark_pack  # noqa: E402
 from molmo_lerobot.context import RunContext  # noqa: E402
 from molmo_lerobot.errors import MolmoError  # noqa: E402
 from molmo_lerobot.features import ENV_STATE_KEY, FeatureMap, is_wrist  # noqa: E402
 from molmo_lerobot.molmospaces.preflight import preflight  # noqa: E402
+from molmo_lerobot.paths import data_path  # noqa: E402
 from molmo_lerobot.runner.episode import EpisodeSession, EpisodeSetupError, load_run_benchmark  # noqa: E402
 from molmo_lerobot.runner.plan import EpisodePlanner  # noqa: E402
 
@@ -246,13 +249,17 @@ def _not_a_suite(benchmark: str, plugins: Plugins) -> str:
 ENTRY_POINT = f"{__name__}:MolmoEnv"
 
 
-def register_benchmarks(namespace: str = NAMESPACE) -> list[str]:
-    """Register ``<namespace>/<name>`` for every registered benchmark and ``<namespace>/Benchmark``."""
+def register_benchmarks(namespace: str = NAMESPACE, plugins: Plugins | None = None) -> list[str]:
+    """Register ``<namespace>/<name>`` for every benchmark the plugins register (``plugins``; None: the
+    installed ones, loaded now) and ``<namespace>/Benchmark``; the ids registered."""
     from molmo_lerobot.benchmark.registry import benchmark_names
     from molmo_lerobot.plugins import Plugins
 
+    return _register(namespace, benchmark_names(plugins or Plugins()))
+
+
+def _register(namespace: str, names: list[str]) -> list[str]:
     ids = []
-    names = benchmark_names(Plugins())
     for name in names:
         env_id = f"{namespace}/{name}"
         if env_id not in gym.registry:
@@ -264,4 +271,6 @@ def register_benchmarks(namespace: str = NAMESPACE) -> list[str]:
     return [*ids, generic]
 
 
-register_benchmarks()
+# The benchmarks this package ships (the core plugin's), found without loading any plugin;
+# a plugin's benchmarks get their ids from register_benchmarks().
+_register(NAMESPACE, [b.name for b in benchmark_pack(data_path("benchmarks"))])

@@ -28,6 +28,7 @@ from molmo_lerobot.errors import MolmoError
 
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetLibraryType, GraspLibraryType
+    from molmo_lerobot.benchmark.generators import BenchmarkGenerator
     from molmo_lerobot.benchmark.packs import BenchmarkDir
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.cameras.base import CameraSystem
@@ -35,6 +36,7 @@ if TYPE_CHECKING:
     from molmo_lerobot.policies.base import PolicyType
     from molmo_lerobot.recording import RecorderFactory
     from molmo_lerobot.robots.base import RobotType
+    from molmo_lerobot.runner.executors import ExecutorType
     from molmo_lerobot.sim.scenes import SceneDataset
     from molmo_lerobot.tasks.base import TaskType
 
@@ -115,7 +117,29 @@ def molmo_benchmarks() -> list[BenchmarkDir]:
     """Benchmarks this plugin ships, each a :class:`~molmo_lerobot.benchmark.packs.BenchmarkDir`
     (``name`` → directory); :func:`~molmo_lerobot.benchmark.packs.benchmark_pack` lists every
     benchmark directory of a folder. ``molmo-eval benchmark=<name>``, ``molmo-bench validate <name>``
-    and the Gymnasium id ``molmo_lerobot/<name>`` then find them.
+    and the Gymnasium id ``molmo_lerobot/<name>`` (once ``gym_env.register_benchmarks()`` ran) then find them.
+    """
+
+
+@hookspec
+def molmo_generators() -> list[BenchmarkGenerator]:
+    """Benchmark generators, keyed by ``name`` as used by ``molmo-bench generate <name>``.
+
+    A :class:`~molmo_lerobot.benchmark.generators.BenchmarkGenerator` has a ``description``, the
+    ``tasks`` it takes (``--task``; the first is the default) and ``generate(task, n_houses,
+    episodes_per_house, seed, name)``: the episodes (JSON-ready, validated before anything is written)
+    and the benchmark's metadata, fully determined by the arguments.
+    """
+
+
+@hookspec
+def molmo_executors() -> list[ExecutorType]:
+    """Executors, keyed by ``name`` as used on the command line (``executor=<name>``).
+
+    An :class:`~molmo_lerobot.runner.executors.ExecutorType` has an ``options`` pydantic model (its
+    ``executor.<key>`` options and their defaults, checked before a run writes anything; Hydra's
+    ``executor/<name>`` config node is made from it) and ``factory(workers, options, timeout_s, retries,
+    fork_servers)``: the run's executor (a :class:`~molmo_lerobot.runner.supervisor.Supervisor`).
     """
 
 

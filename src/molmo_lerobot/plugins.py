@@ -34,6 +34,7 @@ from molmo_lerobot.hookspecs import ConfigError
 
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetLibraryType, GraspLibraryType
+    from molmo_lerobot.benchmark.generators import BenchmarkGenerator
     from molmo_lerobot.benchmark.packs import BenchmarkDir
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.cameras.base import CameraSystem
@@ -41,12 +42,13 @@ if TYPE_CHECKING:
     from molmo_lerobot.policies.base import PolicyType
     from molmo_lerobot.recording import RecorderFactory
     from molmo_lerobot.robots.base import RobotType
+    from molmo_lerobot.runner.executors import ExecutorType
     from molmo_lerobot.sim.scenes import SceneDataset
     from molmo_lerobot.tasks.base import TaskType
 
     #: what :meth:`Plugins.resolve` gives for a kind not spelled as a literal
     type Provided = (TaskType | RobotType | CameraSystem | SceneDataset | AssetLibraryType | GraspLibraryType
-                     | PolicyType | BenchmarkDir)
+                     | PolicyType | BenchmarkDir | ExecutorType | BenchmarkGenerator)
 
 ENTRY_POINT_GROUP = hookspecs.PROJECT
 #: the distribution whose entry points are the built-in plugins
@@ -64,6 +66,8 @@ KIND_HOOKS = {
     "molmo_experts": "expert",
     "molmo_benchmarks": "benchmark",
     "molmo_benchmark_kinds": "benchmark_kind",
+    "molmo_executors": "executor",
+    "molmo_generators": "generator",
     "molmo_config_dirs": "config",
     "molmo_episode_overrides": "override",
     "molmo_recorders": "recorder",
@@ -71,7 +75,7 @@ KIND_HOOKS = {
 #: kinds whose items are looked up by name (``plugins.prefer.<kind>``) → their hook
 PROVIDER_HOOKS = {kind: hook for hook, kind in KIND_HOOKS.items()
                   if kind in ("task", "robot", "camera", "scene", "asset_library", "grasp_library", "policy", "expert",
-                              "benchmark", "benchmark_kind")}
+                              "benchmark", "benchmark_kind", "executor", "generator")}
 
 
 #: provider pins, ``{kind: {name: plugin}}`` (the run's ``plugins.prefer``)
@@ -291,6 +295,10 @@ class Plugins:
     def resolve(self, kind: Literal["policy", "expert"], name: str, prefer: Pins | None = None) -> PolicyType: ...
     @overload
     def resolve(self, kind: Literal["benchmark"], name: str, prefer: Pins | None = None) -> BenchmarkDir: ...
+    @overload
+    def resolve(self, kind: Literal["executor"], name: str, prefer: Pins | None = None) -> ExecutorType: ...
+    @overload
+    def resolve(self, kind: Literal["generator"], name: str, prefer: Pins | None = None) -> BenchmarkGenerator: ...
     @overload
     def resolve(self, kind: str, name: str, prefer: Pins | None = None) -> Provided: ...
 

@@ -299,7 +299,7 @@ class BenchmarkConfig(_OpenSection):
 
 
 class ExecutorConfig(_OpenSection):
-    """``conf/executor/<name>.yaml``; its executor checks the other options."""
+    """``executor=<name>``; the executor's options model (``molmo_executors``) checks the other options."""
 
     name: str
 

@@ -9,7 +9,11 @@ import types
 
 import pytest
 
+from molmo_lerobot import hookimpl
+from molmo_lerobot.benchmark.generators import BenchmarkGenerator
+from molmo_lerobot.cli import bench
 from molmo_lerobot.cli.bench import main
+from molmo_lerobot.plugins import Plugins
 
 
 def test_validate_prints_a_summary(data, capsys):
@@ -54,26 +58,59 @@ def test_validate_unknown_task_with_installed_plugins(tmp_path, data, capsys):
     assert f"{tmp_path / 'benchmark.json'}: episode 0: field task.task_cls: unknown task 'x.y.Z'" in err
 
 
+def _stand_in(name, tasks, calls, episodes):
+    """A generator returning the fixture ``episodes`` (the real ones build scenes), recording its calls."""
+
+    def generate(task, n_houses, episodes_per_house, seed, bench):
+        calls.append((task, n_houses, episodes_per_house, seed, bench))
+        return episodes[: n_houses * episodes_per_house], {"name": bench, "num_episodes": n_houses * episodes_per_house}
+
+    return BenchmarkGenerator(name, f"the {name} stand-in", tasks, generate)
+
+
 @pytest.fixture
 def fake_generator(monkeypatch, data):
-    """A stand-in ``content.tabletop.generate`` module returning the fixture episodes (the real one builds scenes)."""
+    """A stand-in ``content.tabletop.generate`` plugin module whose ``v1`` returns the fixture episodes."""
     episodes = json.loads((data / "pick_list" / "benchmark.json").read_text())
     calls = []
-
-    def generate_benchmark(task, n_houses, episodes_per_house, seed, name):
-        calls.append((task, n_houses, episodes_per_house, seed, name))
-        if task != "pick":
-            raise ValueError(f"unknown task {task!r} for the generator")
-        return episodes[: n_houses * episodes_per_house], {"name": name, "num_episodes": n_houses * episodes_per_house}
 
     def write_benchmark(out_dir, eps, metadata):
         (out_dir / "benchmark.json").write_text(json.dumps(eps))
         (out_dir / "benchmark_metadata.json").write_text(json.dumps(metadata))
 
     module = types.ModuleType("molmo_lerobot.content.tabletop.generate")
-    module.generate_benchmark, module.write_benchmark = generate_benchmark, write_benchmark
+    module.molmo_generators = hookimpl(lambda: [_stand_in("v1", ("pick",), calls, episodes)])
+    module.write_benchmark = write_benchmark
     monkeypatch.setitem(sys.modules, "molmo_lerobot.content.tabletop.generate", module)
     return types.SimpleNamespace(calls=calls, episodes=episodes)
+
+
+def test_a_generator_plugin_is_listed_and_run(tmp_path, data, monkeypatch, capsys):
+    episodes = json.loads((data / "pick_list" / "benchmark.json").read_text())
+    calls = []
+
+    class Tiny:
+        @hookimpl
+        def molmo_generators(self):
+            return [_stand_in("tiny", ("pick", "lift"), calls, episodes)]
+
+    class WithTiny(Plugins):
+        def __init__(self):
+            super().__init__()
+            self.add(Tiny(), "tiny")
+
+    monkeypatch.setattr(bench, "Plugins", WithTiny)
+    with pytest.raises(SystemExit):
+        main(["generate", "--help"])
+    assert "tiny: the tiny stand-in (--task pick, lift)" in " ".join(capsys.readouterr().out.split())
+    out = tmp_path / "tiny"
+    assert main(["generate", "tiny", "--houses", "1", "--episodes-per-house", "2", "--seed", "5", "--name", "tiny",
+                 "--out", str(out)]) == 0
+    assert calls == [("pick", 1, 2, 5, "tiny")]
+    assert json.loads((out / "benchmark.json").read_text()) == episodes[:2]
+    assert main(["generate", "tiyn", "--houses", "1", "--episodes-per-house", "1", "--name", "x",
+                 "--out", str(tmp_path / "x")]) == 2
+    assert "unknown generator 'tiyn'; did you mean 'tiny'?" in capsys.readouterr().err
 
 
 def test_generate_writes_and_summarizes(tmp_path, fake_generator, capsys):
@@ -97,7 +134,7 @@ def test_generate_never_leaves_partial_output(tmp_path, fake_generator, capsys):
     assert list(tmp_path.iterdir()) == []
     assert main(["generate", "--task", "stack", "--houses", "1", "--episodes-per-house", "1", "--name", "x",
                  "--out", str(out)]) == 2
-    assert "unknown task 'stack' for the generator" in capsys.readouterr().err
+    assert "generator 'v1' makes 'pick' episodes only, not --task 'stack'" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
 
 

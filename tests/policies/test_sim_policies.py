@@ -70,6 +70,39 @@ def test_scripted_returns_chunks_without_images(episodes):
         env.close()
 
 
+def test_scripted_refuses_a_robot_without_a_hand_naming_it(episodes, monkeypatch):
+    """No silent fallback to another robot's fingers: a robot stating no hand geometry is refused at reset."""
+    from molmo_lerobot.robots.franka import Franka
+
+    run = RunContext.build()
+    spec = parse_episode(episodes[0], run.plugins)
+    policy = run.plugins.policy("scripted").factory({"name": "scripted"})
+    env = build_env(spec, Timing(), run)
+    try:
+        env.reset(0)
+        monkeypatch.setattr(Franka, "hand_geometry", None)
+        with pytest.raises(ValueError, match=r"^scripted pick: robot 'franka' has no hand geometry "
+                                             r"\(RobotType.hand_geometry\)"):
+            policy.reset(EpisodeContext(spec=spec, episode_index=0, seed=0, prompt="", move_groups=env.move_groups,
+                                        policy_dt_s=0.066, env=env, catalog=run.catalog,
+                                        expert=run.plugins.expert("pick")))
+    finally:
+        env.close()
+
+
+def test_each_robot_states_the_hand_its_built_in_grasps_are_computed_for():
+    from molmo_lerobot.assets.builtin import HANDS, PANDA_HAND, ROBOTIQ_2F85
+
+    plugins = Plugins()
+    hands = {name: plugins.robot(name).hand_geometry for name in ("franka", "franka_droid", "franka_droid_fr3",
+                                                                   "mobile_franka", "rby1")}
+    assert hands == {"franka": PANDA_HAND, "franka_droid": ROBOTIQ_2F85, "franka_droid_fr3": ROBOTIQ_2F85,
+                     "mobile_franka": ROBOTIQ_2F85, "rby1": None}
+    for name in ("franka", "franka_droid", "franka_droid_fr3"):
+        robot = plugins.robot(name)
+        assert HANDS[robot.hand] == robot.hand_geometry, name
+
+
 def test_scripted_needs_privileged_env(episodes):
     plugins = Plugins()
     spec = parse_episode(episodes[0], plugins)

@@ -8,6 +8,7 @@ import pytest
 
 from molmo_lerobot.config import compose
 from molmo_lerobot.errors import RunError
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.run_config import RunConfig
 from molmo_lerobot.runner.evaluate import _make_executor, run_evaluation
 from molmo_lerobot.runner.ray_executor import RayExecutor, RayTransport
@@ -16,13 +17,14 @@ from molmo_lerobot.runner.ray_executor import RayExecutor, RayTransport
 def test_executor_ray_config_reaches_the_executor():
     cfg = RunConfig.of(compose(["executor=ray", "workers=3", "episode_timeout_s=12",
                                 "executor.num_gpus_per_worker=0.5"]))
-    ex = _make_executor(cfg)
+    plugins = Plugins()
+    ex = _make_executor(cfg, plugins)
     assert isinstance(ex, RayExecutor)
     assert (ex.workers, ex.transport.address, ex.transport.include_dashboard) == (3, None, False)
     assert (ex.timeout_s, ex.retries, ex.transport.num_gpus_per_worker) == (12.0, 1, 0.5)
     bad = RunConfig.of({**cfg.plain(), "executor": {"name": "ray", "adress": "auto"}})
-    with pytest.raises(RunError, match="executor=ray: bad option"):
-        _make_executor(bad)
+    with pytest.raises(RunError, match=r"^executor.adress: executor ray has no such option \(options: address, "):
+        _make_executor(bad, plugins)
     with pytest.raises(ValueError, match="workers must be >= 1"):
         RayExecutor(0)
 

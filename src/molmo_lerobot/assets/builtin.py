@@ -38,7 +38,8 @@ PANDA_HAND = HandGeometry(tcp_to_fingertip=0.035, palm_to_tcp=0.058, max_grasp_w
 #: closing swings the pads 1.4 cm forward, so the fingertips end 1.8 cm beyond it
 ROBOTIQ_2F85 = HandGeometry(tcp_to_fingertip=0.018, palm_to_tcp=0.054, max_grasp_width=0.075, pad_half_width=0.01,
                             open_half_span=0.06)
-#: robot -> the hand its analytic built-in grasps are computed for (others use ``franka``'s)
+#: hand name (``RobotType.hand``) -> the geometry the built-in grasp library computes its analytic grasps
+#: for; a robot states its own hand's geometry (``RobotType.hand_geometry``)
 HANDS: dict[str, HandGeometry] = {"franka": PANDA_HAND, "franka_droid": ROBOTIQ_2F85}
 
 #: widest object dimension a built-in object may have across a grasped dimension (the Panda's limit)

@@ -21,8 +21,8 @@ same overrides (``seed=``, ``horizon=``, ``benchmark.episodes_per_task=`` …): 
 against the task catalogue the suite's own env lists (LIBERO: started in the LIBERO venv; ``--schema-only``
 checks the options alone).
 ``generate`` writes a deterministic benchmark (``benchmark.json`` + ``benchmark_metadata.json``)
-with one of :data:`GENERATORS` (default ``v1``) and validates it; the output directory appears only
-once it is complete. Each shipped benchmark is what its generator writes for the arguments its
+with one of the plugins' generators (``molmo_generators``; default ``v1``) and validates it; the output
+directory appears only once it is complete. Each shipped benchmark is what its generator writes for the arguments its
 ``benchmark_metadata.json`` records (``generator``), byte for byte; the ``*_v3`` benchmarks are the
 ``*_v2`` episodes with render profile v3 named in their metadata.
 """
@@ -30,16 +30,13 @@ once it is complete. Each shipped benchmark is what its generator writes for the
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import re
 import shutil
 import sys
 import tempfile
 from collections import Counter
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from pydantic import ValidationError
 
@@ -48,49 +45,14 @@ from molmo_lerobot.benchmark.molmospaces import known_task_name
 from molmo_lerobot.benchmark.schema import NATIVE_TASK_CLS
 from molmo_lerobot.benchmark.task_specs import parse_episode
 from molmo_lerobot.benchmark_kinds import benchmark_kind, benchmark_kinds
-from molmo_lerobot.plugins import PluginConflict, Plugins
+from molmo_lerobot.plugins import PluginConflict, PluginError, Plugins
 
 #: the exit status for a benchmark that cannot be run (``molmo-eval`` refuses it with the same)
 INVALID = 2
 
 
-@dataclass(frozen=True)
-class Generator:
-    """One ``molmo-bench generate <name>``: the module whose ``generate_benchmark`` makes the episodes."""
-
-    module: str
-    tasks: tuple[str, ...]  # the --task values; the first is the default
-    about: str
-    #: ``generate_benchmark(task, houses, episodes_per_house, seed, name)``; ``False``: one task, no task argument
-    takes_task: bool = True
-
-    def generate(self, task: str | None, houses: int, per_house: int, seed: int,
-                 name: str) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-        task = task or self.tasks[0]
-        make = importlib.import_module(self.module).generate_benchmark
-        if self.takes_task:
-            return make(task, houses, per_house, seed, name)
-        if task not in self.tasks:
-            raise ValueError(f"generate: this generator makes {self.tasks[0]!r} episodes only, not --task {task!r}")
-        return make(houses, per_house, seed, name)
-
-
-#: every generator ``molmo-bench generate`` runs (the shipped benchmarks name theirs in their metadata)
-GENERATORS = {
-    "v1": Generator("molmo_lerobot.content.tabletop.generate",
-                    ("pick", "pick_and_place", "pick_and_place_next_to", "pick_and_place_color", "open", "close"),
-                    "the procedural (and articulated) tabletop, Franka Panda, exocentric + wrist camera"),
-    "v2": Generator("molmo_lerobot.content.libero.generate",
-                    ("pick", "pick_and_place", "next_to", "color", "open", "close"),
-                    "textured LIBERO rooms (and LIBERO cabinets), franka_droid, DROID cameras"),
-    "nav": Generator("molmo_lerobot.content.libero.generate_nav", ("nav_to_obj",),
-                     "nav_to_obj in multi-room nav_houses, mobile_franka", takes_task=False),
-    "door": Generator("molmo_lerobot.content.doors.generate", ("door_opening",),
-                      "open the door between two door_rooms rooms, mobile_franka", takes_task=False),
-}
-
-
 def main(argv: list[str] | None = None) -> int:
+    plugins = Plugins()
     parser = argparse.ArgumentParser(prog="molmo-bench", description="Check and make benchmarks.")
     sub = parser.add_subparsers(dest="command", required=True)
     sub.add_parser("list", help="every benchmark molmo-eval runs: registered directories and env suites")
@@ -100,10 +62,8 @@ def main(argv: list[str] | None = None) -> int:
     val.add_argument("overrides", nargs="*", metavar="KEY=VALUE",
                      help="run-config overrides that locate data (molmospaces.assets_dir=…, scene_xml_paths=[…], …)")
     gen = sub.add_parser("generate", help="generate a benchmark deterministically",
-                         epilog="generators: " + "; ".join(f"{n}: {g.about} (--task {', '.join(g.tasks)})"
-                                                            for n, g in GENERATORS.items()))
-    gen.add_argument("generator", nargs="?", default="v1", choices=list(GENERATORS),
-                     help="which generator (default v1)")
+                         epilog="generators: " + "; ".join(_generators(plugins)))
+    gen.add_argument("generator", nargs="?", default="v1", help="which generator (default v1)")
     gen.add_argument("--task", help="what the episodes ask (default: the generator's first task)")
     gen.add_argument("--houses", type=int, required=True, help="number of scenes (houses)")
     gen.add_argument("--episodes-per-house", type=int, required=True)
@@ -119,7 +79,20 @@ def main(argv: list[str] | None = None) -> int:
         if kind is not None and kind.name != "episodes":
             return _validate_kind(args.path, schema_only=args.schema_only, overrides=args.overrides)
         return _validate(args.path, schema_only=args.schema_only, overrides=args.overrides)
-    return _generate(args)
+    return _generate(args, plugins)
+
+
+def _generators(plugins: Plugins) -> list[str]:
+    """One line per generator ``molmo-bench generate`` runs: name, description, tasks."""
+    out = []
+    for name in plugins.names("generator"):
+        try:
+            g = plugins.resolve("generator", name)
+        except PluginError as exc:  # a clash: listed, refused when run
+            out.append(f"{name}: {exc}")
+            continue
+        out.append(f"{name}: {g.description} (--task {', '.join(g.tasks)})")
+    return out
 
 
 def _list() -> int:
@@ -266,7 +239,7 @@ def _task_label(task_cls: str, task_type: str | None) -> str:
     return NATIVE_TASK_CLS.get(task_cls) or known_task_name(task_cls, task_type) or task_cls
 
 
-def _generate(args: argparse.Namespace) -> int:
+def _generate(args: argparse.Namespace, plugins: Plugins) -> int:
     from molmo_lerobot.benchmark.output import write_benchmark
 
     if args.houses < 1 or args.episodes_per_house < 1:
@@ -281,12 +254,11 @@ def _generate(args: argparse.Namespace) -> int:
         print(f"molmo-bench: error: {out} exists (use --force to replace it)", file=sys.stderr)
         return 2
     try:
-        episodes, metadata = GENERATORS[args.generator].generate(args.task, args.houses, args.episodes_per_house,
-                                                                 args.seed, args.name)
+        generator = plugins.resolve("generator", args.generator)
+        episodes, metadata = generator.run(args.task, args.houses, args.episodes_per_house, args.seed, args.name)
     except (ValueError, LookupError) as exc:
         print(f"molmo-bench: error: {exc}", file=sys.stderr)
         return 2
-    plugins = Plugins()
     bad: list[Problem] = []
     for i, ep in enumerate(episodes):
         try:

@@ -13,12 +13,17 @@ returned as chunks, so the environment renders only at chunk ends.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from molmo_lerobot.assets.builtin import HANDS, PANDA_HAND
+from molmo_lerobot.assets.builtin import HandGeometry
 from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.expert_motion import PhasedExpert, object_grasps
 from molmo_lerobot.poses import pose_matrix
+
+if TYPE_CHECKING:
+    from molmo_lerobot.robots.base import RobotType
 
 PREGRASP_DISTANCE = 0.10
 LIFT_HEIGHT = 0.12
@@ -33,12 +38,22 @@ TABLE_CLEARANCE = 0.004
 SETTLE_S = 0.3
 
 
+def hand_geometry(robot_type: RobotType) -> HandGeometry:
+    """The robot's gripper geometry (``RobotType.hand_geometry``); ``ValueError`` naming a robot without one."""
+    hand = robot_type.hand_geometry
+    if hand is None:
+        raise ValueError(f"scripted pick: robot {robot_type.name!r} has no hand geometry (RobotType.hand_geometry), "
+                         "which its grasp planning needs")
+    return hand
+
+
 class ScriptedPick(PhasedExpert):
     """Pick expert: see the module docstring."""
 
     def reset(self, ctx: EpisodeContext) -> None:
         env = self._start(ctx, ["approach", "descend", "close", "lift", "hold"])
         self.target = env.spec.task.pickup_obj_name
+        self.hand = hand_geometry(env.robot_type)
 
     # Planning -----------------------------------------------------------------------------------
     def _object_T(self) -> np.ndarray:
@@ -66,7 +81,7 @@ class ScriptedPick(PhasedExpert):
         world = T_obj @ local
         approach = world[:, :3, 2]
         down = -approach[:, 2]
-        hand = HANDS.get(env.robot_type.hand, PANDA_HAND)  # other robots: fingers as long as the Panda's
+        hand = self.hand
         tips = world[:, :3, 3] + hand.tcp_to_fingertip * approach
         support = self._support_height(T_obj)
         ok = (down >= np.cos(np.radians(MAX_TILT_DEG))) & (tips[:, 2] >= support + TABLE_CLEARANCE)

@@ -17,6 +17,7 @@ from typing import ClassVar
 import mujoco
 import numpy as np
 
+from molmo_lerobot.assets.builtin import HandGeometry
 from molmo_lerobot.sim.geometry import subtree
 
 
@@ -238,6 +239,9 @@ class RobotType(ABC):
     #: the robot whose hand this one carries: grasp libraries and hand geometry are looked up by it
     #: (None: its own name); a new version of a robot with the same gripper and TCP names the old one
     hand_of: str | None = None
+    #: its gripper seen from the TCP (finger reach, span), what scripted grasping plans with;
+    #: None: a robot whose hand the scripted experts do not know (they refuse it)
+    hand_geometry: HandGeometry | None = None
 
     @property
     def hand(self) -> str:

@@ -28,6 +28,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
+from molmo_lerobot.assets.builtin import PANDA_HAND
 from molmo_lerobot.paths import package_asset_dir
 from molmo_lerobot.robots.base import ArmGripperHandle, RobotType, add_mount
 from molmo_lerobot.sim.spec_compat import set_joint_damping
@@ -144,6 +145,7 @@ class Franka(RobotType):
 
     name = "franka"
     aliases = ("franka_panda",)  # never franka_droid: that is a Robotiq 2F-85, see franka_droid.py
+    hand_geometry = PANDA_HAND
     move_groups: ClassVar[dict[str, int]] = {"arm": 7, "gripper": 1}
     joint_names: ClassVar[dict[str, list[str]]] = {"arm": [f"panda_joint{k}" for k in range(1, 8)],
                                                    "gripper": ["panda_gripper"]}

@@ -54,6 +54,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
+from molmo_lerobot.assets.builtin import ROBOTIQ_2F85
 from molmo_lerobot.paths import molmospaces_assets_dir, package_asset_dir
 from molmo_lerobot.robots.base import ArmGripperHandle, RobotHandle, RobotType, add_mount
 from molmo_lerobot.robots.franka import load_franka_spec
@@ -328,6 +329,7 @@ class FrankaDroid(RobotType):
                                                    "gripper": ["robotiq_gripper"]}
     default_camera_system = "FrankaDroidCameraSystem"
     default_base_size = BASE_SIZE
+    hand_geometry = ROBOTIQ_2F85
     #: the registry-built arm (:data:`ARMS`) used where MolmoSpaces' model is not installed
     arm = "panda"
     #: MolmoSpaces' FrankaRobotConfig.init_qpos (gripper open)

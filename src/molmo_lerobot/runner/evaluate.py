@@ -35,18 +35,17 @@ from molmo_lerobot.context import RunContext
 from molmo_lerobot.episode_plan import EpisodePlan
 from molmo_lerobot.errors import ExportError, InfrastructureError, RunError
 from molmo_lerobot.molmospaces.settings import SettingsError
-from molmo_lerobot.plugins import PluginError
+from molmo_lerobot.plugins import PluginError, Plugins
 from molmo_lerobot.results import EpisodeResult, RunSummary, summarize
 from molmo_lerobot.run_config import RunConfig
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
 from molmo_lerobot.runner.fingerprint import policy_checkpoints
 from molmo_lerobot.runner.forkserver import ForkServerPool, worker_preload
 from molmo_lerobot.runner.memory import available_gb, benchmark_family, memory_warning
-from molmo_lerobot.runner.placement import check_devices
 from molmo_lerobot.runner.progress import Progress
 from molmo_lerobot.runner.run_directory import RunDirectory
 from molmo_lerobot.runner.selection import selection_of
-from molmo_lerobot.runner.supervisor import RunInterrupted
+from molmo_lerobot.runner.supervisor import RunInterrupted, Supervisor
 from molmo_lerobot.runner.worker import WorkerJob, startup_summary
 from molmo_lerobot.serving.run_server import ServeError, served_policy
 from molmo_lerobot.sim.env import TASK_RULES
@@ -128,27 +127,19 @@ def plugin_option_problems(run: RunContext) -> list[str]:
     return out
 
 
-def _make_executor(config: RunConfig, fork_servers: ForkServerPool | None = None) -> Any:
-    ex = config.executor.model_dump()  # the executor's options are its own (conf/executor/<name>.yaml)
-    common: dict[str, Any] = dict(timeout_s=float(config.episode_timeout_s), retries=config.episode_retries)
-    if ex["name"] == "local":
-        from molmo_lerobot.runner.local import LocalExecutor
-
-        try:
-            check_devices(ex)  # read by each worker, checked here
-            return LocalExecutor(config.workers, start_method=ex.get("start_method", "forkserver"),
-                                 fork_servers=fork_servers, **common)
-        except ValueError as exc:
-            raise RunError(str(exc)) from None
-    if ex["name"] == "ray":
-        from molmo_lerobot.runner.ray_executor import RayExecutor
-
-        options: dict[str, Any] = {k: v for k, v in ex.items() if k != "name"}
-        try:
-            return RayExecutor(config.workers, **options, **common)
-        except TypeError as exc:
-            raise RunError(f"executor=ray: bad option ({exc}); see conf/executor/ray.yaml") from None
-    raise RunError(f"unknown executor {ex['name']!r} (available: local, ray)")
+def _make_executor(config: RunConfig, plugins: Plugins, fork_servers: ForkServerPool | None = None) -> Supervisor:
+    """The run's executor: the plugin of ``executor.name``, its options checked against its model."""
+    ex = config.executor.model_dump()
+    try:
+        kind = plugins.resolve("executor", str(ex["name"]))
+        options = kind.validate(ex)
+    except (PluginError, ValueError) as exc:
+        raise RunError(str(exc)) from None
+    try:
+        return kind.factory(config.workers, options, float(config.episode_timeout_s), config.episode_retries,
+                            fork_servers)
+    except ValueError as exc:
+        raise RunError(f"executor={kind.name}: {exc}") from None
 
 
 def run_evaluation(config: RunConfig | DictConfig | dict[str, Any], fork_servers: ForkServerPool | None = None,
@@ -176,7 +167,7 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any], fork_servers
     kind = _kind(run)  # the benchmark's kind, its options and what it cannot do checked before any work
     # e.g. a bad hub.repo_id fails here, before any output
     recorders = run.plugins.recorder_factories(config.plain(), kind.recording_layout(config))
-    executor = _make_executor(config, fork_servers)
+    executor = _make_executor(config, run.plugins, fork_servers)
     try:
         bench, run = kind.load(run)
     except (BenchmarkKindError, InfrastructureError) as exc:

@@ -52,6 +52,8 @@ from molmo_lerobot.errors import MolmoError
 if TYPE_CHECKING:
     from molmo_lerobot.context import RunContext
 
+#: How local worker processes start: forked from the run's fork server, or each a fresh interpreter
+START_METHODS = ("forkserver", "spawn")
 #: What every worker imports, whatever its policy; the first sets the worker environment.
 BASE_PRELOAD = ("molmo_lerobot.runner.worker_env", "numpy", "mujoco", "molmo_lerobot.runner.local",
                 "molmo_lerobot.context", "molmo_lerobot.runner.episode_env")

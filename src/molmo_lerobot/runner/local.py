@@ -34,6 +34,7 @@ from typing import Any
 from molmo_lerobot.episode_plan import EpisodePlan
 from molmo_lerobot.gl import use_headless_gl
 from molmo_lerobot.runner.forkserver import (
+    START_METHODS,
     ForkServerPool,
     PreloadedForkServer,
     exit_status_lost,
@@ -55,9 +56,6 @@ from molmo_lerobot.runner.supervisor import (
 from molmo_lerobot.runner.worker import EpisodeWorker, Startup, WorkerJob, WorkerStop
 
 log = logging.getLogger(__name__)
-
-#: How worker processes start (see the module docstring)
-START_METHODS = ("forkserver", "spawn")
 
 #: Seconds an orphaned worker has to stop gracefully before it exits regardless.
 ORPHAN_GRACE_S = 10.0

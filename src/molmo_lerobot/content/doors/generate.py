@@ -21,6 +21,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from molmo_lerobot import hookimpl
+from molmo_lerobot.benchmark.generators import BenchmarkGenerator
 from molmo_lerobot.benchmark.output import rounded
 from molmo_lerobot.content.doors.scenes import DOOR_NAME, DoorRooms, door_geometry
 from molmo_lerobot.poses import yaw_quat
@@ -139,3 +141,14 @@ def generate_benchmark(n_houses: int, episodes_per_house: int, seed: int,
                       "episodes_per_house": episodes_per_house, "seed": seed, "version": GENERATOR_VERSION},
     }
     return episodes, metadata
+
+
+def _generate(task: str, n_houses: int, episodes_per_house: int, seed: int,
+              name: str) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    return generate_benchmark(n_houses, episodes_per_house, seed, name)  # one task: door_opening
+
+
+@hookimpl
+def molmo_generators() -> list[BenchmarkGenerator]:
+    return [BenchmarkGenerator("door", "open the door between two door_rooms rooms, mobile_franka", ("door_opening",),
+                               _generate)]

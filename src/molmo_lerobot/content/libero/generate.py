@@ -39,6 +39,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from molmo_lerobot import hookimpl
+from molmo_lerobot.benchmark.generators import BenchmarkGenerator
 from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
 from molmo_lerobot.content.libero.episode_fields import CAMERA_SYSTEM, episode_fields, start_arm
 from molmo_lerobot.content.libero.generate_articulated import TASKS as ARTICULATED_TASKS
@@ -355,3 +357,9 @@ def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: 
                                                                              for s in sorted(set(styles.values()))})
     meta["camera_system_class"] = CAMERA_SYSTEM
     return episodes, meta
+
+
+@hookimpl
+def molmo_generators() -> list[BenchmarkGenerator]:
+    return [BenchmarkGenerator("v2", "textured LIBERO rooms (and LIBERO cabinets), franka_droid, DROID cameras",
+                               (*TASKS, *ARTICULATED_TASKS), generate_benchmark)]

@@ -20,6 +20,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from molmo_lerobot import hookimpl
+from molmo_lerobot.benchmark.generators import BenchmarkGenerator
 from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
 from molmo_lerobot.content.libero.nav_houses import NavHouses, display_name
 from molmo_lerobot.content.libero.objects import LIBERO_OBJECTS
@@ -133,3 +135,13 @@ def generate_benchmark(n_houses: int, episodes_per_house: int, seed: int,
                                                  for n in sorted(set(rooms.values()))})
     meta["camera_system_class"] = MobileFranka.default_camera_system
     return episodes, meta
+
+
+def _generate(task: str, n_houses: int, episodes_per_house: int, seed: int,
+              name: str) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    return generate_benchmark(n_houses, episodes_per_house, seed, name)  # one task: nav_to_obj
+
+
+@hookimpl
+def molmo_generators() -> list[BenchmarkGenerator]:
+    return [BenchmarkGenerator("nav", "nav_to_obj in multi-room nav_houses, mobile_franka", ("nav_to_obj",), _generate)]

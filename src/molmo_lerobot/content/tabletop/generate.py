@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from molmo_lerobot import hookimpl
 from molmo_lerobot.assets.builtin import (
     BUILTIN_OBJECTS,
     BUILTIN_RECEPTACLES,
@@ -25,6 +26,7 @@ from molmo_lerobot.assets.builtin import (
     BuiltinObject,
     BuiltinReceptacle,
 )
+from molmo_lerobot.benchmark.generators import BenchmarkGenerator
 from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
 from molmo_lerobot.content.tabletop.scene import ProceduralTabletop, ProceduralTabletopReceptacles
 from molmo_lerobot.poses import look_rotation, mat_to_quat, quat_mul, yaw_quat
@@ -301,3 +303,9 @@ def generate_benchmark(task: str, n_houses: int, episodes_per_house: int, seed: 
                    f"Franka Panda, exocentric + wrist camera (generator v{GENERATOR_VERSION}, seed {seed})")
     return episodes, benchmark_metadata(name, task, description, episodes, houses, episodes_per_house, seed,
                                         BUILTIN_OBJECTS, GENERATOR_VERSION, **extra)
+
+
+@hookimpl
+def molmo_generators() -> list[BenchmarkGenerator]:
+    return [BenchmarkGenerator("v1", "the procedural (and articulated) tabletop, Franka Panda, exocentric + wrist "
+                               "camera", (*TASK_CLS, *EXTERNAL_GENERATORS), generate_benchmark)]
