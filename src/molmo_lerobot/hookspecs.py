@@ -36,7 +36,7 @@ if TYPE_CHECKING:
     from molmo_lerobot.policies.base import PolicyType
     from molmo_lerobot.recording import RecorderFactory
     from molmo_lerobot.robots.base import RobotType
-    from molmo_lerobot.runner.executors import ExecutorType
+    from molmo_lerobot.executor_types import ExecutorType
     from molmo_lerobot.sim.scenes import SceneDataset
     from molmo_lerobot.tasks.base import TaskType
 
@@ -136,7 +136,7 @@ def molmo_generators() -> list[BenchmarkGenerator]:
 def molmo_executors() -> list[ExecutorType]:
     """Executors, keyed by ``name`` as used on the command line (``executor=<name>``).
 
-    An :class:`~molmo_lerobot.runner.executors.ExecutorType` has an ``options`` pydantic model (its
+    An :class:`~molmo_lerobot.executor_types.ExecutorType` has an ``options`` pydantic model (its
     ``executor.<key>`` options and their defaults, checked before a run writes anything; Hydra's
     ``executor/<name>`` config node is made from it) and ``factory(workers, options, timeout_s, retries,
     fork_servers)``: the run's executor (a :class:`~molmo_lerobot.runner.supervisor.Supervisor`).

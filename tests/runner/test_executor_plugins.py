@@ -15,7 +15,7 @@ from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.run_config import RunConfig
 from molmo_lerobot.runner.builtin_executors import LOCAL
 from molmo_lerobot.runner.evaluate import _make_executor, run_evaluation
-from molmo_lerobot.runner.executors import ExecutorOptions, ExecutorType
+from molmo_lerobot.executor_types import ExecutorOptions, ExecutorType
 from molmo_lerobot.runner.local import LocalExecutor
 
 

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 from pydantic import ValidationInfo, field_validator
 from pydantic_core import PydanticCustomError
 
-from molmo_lerobot.runner.executors import ExecutorOptions, ExecutorType
+from molmo_lerobot.executor_types import ExecutorOptions, ExecutorType
 from molmo_lerobot.runner.forkserver import START_METHODS
 from molmo_lerobot.runner.placement import check_devices
 
