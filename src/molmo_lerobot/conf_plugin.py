@@ -8,9 +8,9 @@ from typing import Any
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.packs import BenchmarkDir, benchmark_pack
+from molmo_lerobot.executor_types import ExecutorType
 from molmo_lerobot.paths import data_path
 from molmo_lerobot.runner.builtin_executors import LOCAL, RAY
-from molmo_lerobot.executor_types import ExecutorType
 
 
 @hookimpl

@@ -33,10 +33,10 @@ if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.cameras.base import CameraSystem
     from molmo_lerobot.dataset_layout import DatasetLayout
+    from molmo_lerobot.executor_types import ExecutorType
     from molmo_lerobot.policies.base import PolicyType
     from molmo_lerobot.recording import RecorderFactory
     from molmo_lerobot.robots.base import RobotType
-    from molmo_lerobot.executor_types import ExecutorType
     from molmo_lerobot.sim.scenes import SceneDataset
     from molmo_lerobot.tasks.base import TaskType
 

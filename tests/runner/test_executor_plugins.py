@@ -11,11 +11,11 @@ import pytest
 from molmo_lerobot import hookimpl
 from molmo_lerobot.config import compose
 from molmo_lerobot.errors import RunError
+from molmo_lerobot.executor_types import ExecutorOptions, ExecutorType
 from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.run_config import RunConfig
 from molmo_lerobot.runner.builtin_executors import LOCAL
 from molmo_lerobot.runner.evaluate import _make_executor, run_evaluation
-from molmo_lerobot.executor_types import ExecutorOptions, ExecutorType
 from molmo_lerobot.runner.local import LocalExecutor
 
 
