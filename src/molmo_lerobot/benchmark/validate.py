@@ -84,7 +84,7 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, scenes: SceneContex
     if not episode.cameras:  # a camera system places them: camera.system=, source.camera_system_class, the robot's
         from molmo_lerobot.cameras.base import STANDARD, choose_camera_system
 
-        system = choose_camera_system(episode, None, getattr(robot, "default_camera_system", None))
+        system = choose_camera_system(episode, None, robot.default_camera_system if robot is not None else None)
         if system == STANDARD:
             warning("cameras", "no cameras: the run's camera system (camera.system=...) places them")
         else:
