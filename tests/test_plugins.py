@@ -10,6 +10,7 @@ import sys
 import textwrap
 from pathlib import Path
 from types import SimpleNamespace
+from typing import ClassVar
 
 import pytest
 
@@ -19,22 +20,46 @@ from molmo_lerobot.benchmark.validate import validate_benchmark
 from molmo_lerobot.cli.plugins import format_table
 from molmo_lerobot.config import ConfigError
 from molmo_lerobot.context import RunContext
-from molmo_lerobot.plugins import ENTRY_POINT_GROUP, PluginConflict, PluginError, Plugins
+from molmo_lerobot.plugins import ENTRY_POINT_GROUP, BuiltinHookError, PluginConflict, PluginError, Plugins
+from molmo_lerobot.robots.base import RobotType
 from molmo_lerobot.run_config import RunConfig
 
 DATA = Path(__file__).resolve().parent / "data" / "molmospaces"
 #: what episode overrides see of a run with the default config
 NO_RUN = SimpleNamespace(config=RunConfig())
+#: ``brokenbots``' ``duckbot``: a robot that is not a RobotType
+DUCKBOT_ERROR = ("molmo_robots() gave robot 'duckbot' as a types.SimpleNamespace, "
+                 "not a molmo_lerobot.robots.base.RobotType (subclass it)")
+
+
+class Bot(RobotType):
+    """A robot's names only (never built)."""
+
+    move_groups: ClassVar[dict[str, int]] = {"arm": 6}
+
+    def __init__(self, name: str, aliases: tuple[str, ...] = ()) -> None:
+        self.name, self.aliases = name, aliases
+
+    def spec(self):
+        raise NotImplementedError("a test robot has no model")
+
+    def add_to(self, world, base_pose, base_size=None):
+        raise NotImplementedError("a test robot has no model")
+
+    def bind(self, model):
+        raise NotImplementedError("a test robot has no model")
 
 
 @pytest.fixture
 def broken_dist(tmp_path: Path) -> Path:
-    """A distribution ``brokenbots`` with a plugin that fails to import, one whose hook raises, one that works."""
+    """A distribution ``brokenbots`` with a plugin that fails to import, one whose hook raises, one that works
+    and one whose robot is not a RobotType."""
     info = tmp_path / "brokenbots-0.1.dist-info"
     info.mkdir()
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: brokenbots\nVersion: 0.1\n")
     (info / "entry_points.txt").write_text(
-        f"[{ENTRY_POINT_GROUP}]\nur5 = brokenbots_ur5\nkuka = brokenbots_kuka\ngoodbot = brokenbots_good\n")
+        f"[{ENTRY_POINT_GROUP}]\nur5 = brokenbots_ur5\nkuka = brokenbots_kuka\ngoodbot = brokenbots_good\n"
+        "duckbot = brokenbots_duck\n")
     (tmp_path / "brokenbots_ur5.py").write_text('raise RuntimeError("ur5 driver missing")\n')
     (tmp_path / "brokenbots_kuka.py").write_text(textwrap.dedent("""
         from molmo_lerobot import hookspecs
@@ -44,12 +69,32 @@ def broken_dist(tmp_path: Path) -> Path:
             raise RuntimeError("kuka meshes not found")
     """))
     (tmp_path / "brokenbots_good.py").write_text(textwrap.dedent("""
+        from molmo_lerobot import hookspecs
+        from molmo_lerobot.robots.base import RobotType
+
+        class GoodBot(RobotType):
+            name, aliases, move_groups = "goodbot", ("gb",), {"arm": 6}
+
+            def spec(self):
+                raise NotImplementedError
+
+            def add_to(self, world, base_pose, base_size=None):
+                raise NotImplementedError
+
+            def bind(self, model):
+                raise NotImplementedError
+
+        @hookspecs.hookimpl
+        def molmo_robots():
+            return [GoodBot()]
+    """))
+    (tmp_path / "brokenbots_duck.py").write_text(textwrap.dedent("""
         from types import SimpleNamespace
         from molmo_lerobot import hookspecs
 
         @hookspecs.hookimpl
         def molmo_robots():
-            return [SimpleNamespace(name="goodbot", aliases=("gb",), move_groups={"arm": 6})]
+            return [SimpleNamespace(name="duckbot", move_groups={"arm": 6})]
     """))
     return tmp_path
 
@@ -71,6 +116,31 @@ def test_broken_plugins_are_recorded_and_the_rest_works(broken_dist, monkeypatch
     assert plugins.robot("franka_droid").name == "franka_droid"  # built-ins unaffected (Robotiq, never the Panda)
     assert rec["kuka"].status == "error"
     assert "molmo_robots() failed: RuntimeError: kuka meshes not found" in rec["kuka"].error
+
+
+def test_a_plugin_giving_an_item_not_of_its_kinds_base_class_is_broken(broken_dist, monkeypatch):
+    plugins = _with_broken(broken_dist, monkeypatch)
+    rec = {r.name: r for r in plugins.records}
+    assert plugins.broken()  # collects
+    assert (rec["duckbot"].status, rec["duckbot"].error) == ("error", DUCKBOT_ERROR)
+    assert rec["duckbot"].provides == [] and plugins.robot("goodbot").name == "goodbot"
+    with pytest.raises(PluginError) as info:
+        plugins.robot("duckbot")
+    assert f"plugin 'duckbot' from brokenbots failed to load: {DUCKBOT_ERROR}" in str(info.value)
+
+
+def test_a_builtin_plugin_giving_an_item_not_of_its_kinds_base_class_raises(monkeypatch):
+    import molmo_lerobot.tasks.pick as pick
+
+    @hookimpl
+    def molmo_task_types():
+        return [SimpleNamespace(name="pick")]
+
+    monkeypatch.setattr(pick, "molmo_task_types", molmo_task_types)
+    with pytest.raises(BuiltinHookError) as info:
+        Plugins().task_type("pick")
+    assert str(info.value) == ("the built-in plugin 'pick' (molmo-lerobot 0.1.0): molmo_task_types() gave task 'pick' "
+                               "as a types.SimpleNamespace, not a molmo_lerobot.tasks.base.TaskType (subclass it)")
 
 
 @pytest.mark.parametrize(
@@ -128,6 +198,7 @@ def test_molmo_plugins_lists_broken_plugins_and_exits_0(broken_dist):
     assert rows["goodbot"].split()[1:5] == ["robot", "brokenbots", "0.1", "ok"]
     assert rows["franka"].split()[1:2] == ["robot"] and rows["franka"].endswith("ok")
     assert "goodbot (brokenbots_good)\n  hooks:    molmo_robots\n  provides: robot:goodbot" in res.stdout
+    assert rows["duckbot"].endswith(f"error: {DUCKBOT_ERROR}")
     assert "plugins failed to load" in res.stderr
 
 
@@ -157,7 +228,7 @@ def test_specname_implementations_are_used():
     class Bots:
         @hookimpl(specname="molmo_robots")
         def provide_bots(self):
-            return [SimpleNamespace(name="specbot", aliases=("sb",))]
+            return [Bot("specbot", aliases=("sb",))]
 
     plugins = _bare((Bots(), "bots"))
     assert plugins.robot("sb").name == "specbot"

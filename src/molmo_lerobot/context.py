@@ -74,7 +74,7 @@ class RunContext:
         worker job built by hand) as that scene dataset says (:attr:`SceneDataset.sleeps`)."""
         if self.config.timing.sleep is not None:
             return self.timing
-        return self.with_sleep(bool(getattr(self.plugins.scene_dataset(scene_dataset), "sleeps", False))).timing
+        return self.with_sleep(self.plugins.scene_dataset(scene_dataset).sleeps).timing
 
     @property
     def render_profile(self) -> RenderProfile:
@@ -119,7 +119,7 @@ def scenes_sleep(bench: Benchmark, plugins: Plugins) -> bool:
             scene = plugins.scene_dataset(name)
         except PluginError:
             continue
-        says.setdefault(bool(getattr(scene, "sleeps", False)), []).append(name)  # a duck-typed one may lack it
+        says.setdefault(scene.sleeps, []).append(name)
     if len(says) > 1:
         raise RunConfigError([f"timing.sleep: benchmark {bench.path} mixes scene datasets whose episodes sleep "
                               f"({', '.join(says[True])}) with ones whose episodes do not "

@@ -8,6 +8,11 @@ what the broken plugin would have provided fails, naming it. The project's own p
 (:attr:`PluginRecord.builtin`) are never skipped as broken: their hooks' failures are raised
 (:class:`BuiltinHookError`).
 
+Every item a provider hook returns must be an instance of its kind's base class
+(:data:`KIND_BASES`, checked once as the plugins are collected): a third-party plugin giving
+anything else is marked broken naming the kind, the item and the class expected; a built-in one
+raises. Past registration, callers use the base classes' members directly.
+
 Two plugins that provide the same name (a robot ``franka``, a policy ``random``) are a
 clash: ``molmo-plugins`` lists it, and resolving that name fails naming both providers
 unless the run pins one (``plugins.prefer.<kind>.<name>=<plugin>``, see :meth:`Plugins.set_preferences`).
@@ -19,6 +24,8 @@ own :class:`Plugins` (each process of the run builds one, with the run's pins).
 from __future__ import annotations
 
 import difflib
+import functools
+import importlib
 import importlib.metadata as md
 import sys
 import traceback
@@ -76,6 +83,29 @@ KIND_HOOKS = {
 PROVIDER_HOOKS = {kind: hook for hook, kind in KIND_HOOKS.items()
                   if kind in ("task", "robot", "camera", "scene", "asset_library", "grasp_library", "policy", "expert",
                               "benchmark", "benchmark_kind", "executor", "generator")}
+
+#: provider kind → ``"module:Class"`` every item of that kind must be an instance of; imported when
+#: first needed (:func:`base_class`), so this module imports none of them
+KIND_BASES = {
+    "task": "molmo_lerobot.tasks.base:TaskType",
+    "robot": "molmo_lerobot.robots.base:RobotType",
+    "camera": "molmo_lerobot.cameras.base:CameraSystem",
+    "scene": "molmo_lerobot.sim.scenes:SceneDataset",
+    "asset_library": "molmo_lerobot.assets.catalog:AssetLibraryType",
+    "grasp_library": "molmo_lerobot.assets.catalog:GraspLibraryType",
+    "policy": "molmo_lerobot.policies.base:PolicyType",
+    "expert": "molmo_lerobot.policies.base:PolicyType",
+    "benchmark": "molmo_lerobot.benchmark.packs:BenchmarkDir",
+}
+
+
+@functools.cache
+def base_class(kind: str) -> type | None:
+    """The class :data:`KIND_BASES` names for ``kind``, imported; ``None`` for a kind it does not list."""
+    if kind not in KIND_BASES:
+        return None
+    module, _, name = KIND_BASES[kind].partition(":")
+    return getattr(importlib.import_module(module), name)
 
 
 #: provider pins, ``{kind: {name: plugin}}`` (the run's ``plugins.prefer``)
@@ -229,6 +259,15 @@ class Plugins:
                                    f"{_one_line(exc)}") from exc
         self._break(rec, f"{hook_name}() failed: {_one_line(exc)}", warn=warn)
 
+    def _wrong_type(self, rec: PluginRecord, hook_name: str, kind: str, item: Any, expected: str) -> None:
+        """A provider hook gave ``item``, which is not a ``expected``: a third-party plugin is marked
+        broken, a built-in one raises :class:`BuiltinHookError`."""
+        what = (f"{hook_name}() gave {kind} {item.name!r} as a {type(item).__module__}.{type(item).__qualname__}, "
+                f"not a {expected.replace(':', '.')} (subclass it)")
+        if rec.builtin:
+            raise BuiltinHookError(f"the built-in plugin {rec.label}: {what}")
+        self._break(rec, what)
+
     def _call(self, hook_name: str, *, run_time: bool = False, **kwargs: Any) -> Iterable[tuple[PluginRecord, Any]]:
         """``(plugin, result)`` of each implementation of ``hook_name`` that did not fail."""
         for rec, impl in self._impls(hook_name):
@@ -237,11 +276,13 @@ class Plugins:
                 yield rec, result
 
     def _collect(self) -> dict[str, dict[str, list[Any]]]:
-        """Every provider hook of every plugin, called once; a plugin failing one provides nothing."""
+        """Every provider hook of every plugin, called once; a plugin failing one, or giving an item
+        that is not of its kind's base class (:data:`KIND_BASES`), provides nothing."""
         if self._provided is not None:
             return self._provided
         provided: dict[str, dict[str, list[Any]]] = {}
         for kind, hook in PROVIDER_HOOKS.items():
+            base = base_class(kind)
             for rec, items in self._call(hook):
                 try:
                     items = list(items or [])
@@ -250,6 +291,10 @@ class Plugins:
                             raise TypeError(f"returned {type(item).__name__} without a string 'name'")
                 except Exception as exc:
                     self._fail(rec, hook, exc)
+                    continue
+                wrong = next((item for item in items if base is not None and not isinstance(item, base)), None)
+                if wrong is not None:
+                    self._wrong_type(rec, hook, kind, wrong, KIND_BASES[kind])
                     continue
                 provided.setdefault(rec.pm_name, {})[kind] = items
         ok = {r.pm_name: r for r in self.records if r.status == "ok"}

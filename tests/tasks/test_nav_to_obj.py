@@ -51,7 +51,7 @@ def _at(env, pose) -> None:
 def _task(run, env, raw: dict, **task) -> NavToObjTask:
     raw = copy.deepcopy(raw)
     raw["task"].update(task)
-    t = NavToObjTask(parse_episode(raw, run.plugins), env)
+    t = NavToObjTask(parse_episode(raw, run.plugins).task, env)
     t.setup()
     return t
 
@@ -67,7 +67,7 @@ def test_the_candidates_prompt_and_threshold_are_theirs(run, scene):
     task = {**raw["task"], "pickup_obj_name": "a", "pickup_obj_candidates": ["a", "b", "c"],
             "pickup_obj_category": None}
     spec = parse_episode({**raw, "task": task}, run.plugins)
-    assert candidate_names(spec, objects) == ["a", "c"]  # narrowed to the target's category, as theirs
+    assert candidate_names(spec.task, objects) == ["a", "c"]  # narrowed to the target's category, as theirs
 
 
 def test_distance_boundary_and_reward(run, scene):

@@ -3,13 +3,11 @@
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import mujoco
 import pytest
 
 from molmo_lerobot.sim.geometry import subtree
-from molmo_lerobot.tasks.open_close import OpenCloseTask
+from molmo_lerobot.tasks.open_close import OpenCloseTask, OpenCloseTaskSpec
 
 # a cabinet whose first joint is an unlimited knob (range 0..0), then a door
 CABINET = """
@@ -42,8 +40,8 @@ class CabinetEnv:
 
 def task(rules: str) -> tuple[OpenCloseTask, CabinetEnv]:
     env = CabinetEnv(rules)
-    spec = SimpleNamespace(task=SimpleNamespace(pickup_obj_name="cabinet", task_success_threshold=0.2,
-                                                joint_name="door", joint_index=1, joint_start_position=0.0))
+    spec = OpenCloseTaskSpec.model_construct(pickup_obj_name="cabinet", task_success_threshold=0.2,
+                                             joint_name="door", joint_index=1, joint_start_position=0.0)
     return OpenCloseTask(spec, env, "open"), env
 
 

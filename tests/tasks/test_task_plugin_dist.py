@@ -39,10 +39,10 @@ MODULE = textwrap.dedent('''\
         wait_sec: float = Field(default=0.5, gt=0, le=5.0)
 
 
-    class WaitTask(Task):
-        def __init__(self, spec, env):
-            env.body_id(spec.task.pickup_obj_name, "task.pickup_obj_name")
-            self.env, self.wait_sec, self.start = env, spec.task.wait_sec, None
+    class WaitTask(Task[WaitTaskSpec]):
+        def __init__(self, spec: WaitTaskSpec, env):
+            env.body_id(spec.pickup_obj_name, "task.pickup_obj_name")
+            self.spec, self.env, self.wait_sec, self.start = spec, env, spec.wait_sec, None
 
         def setup(self):
             self.start = float(self.env.data.time)
@@ -51,17 +51,17 @@ MODULE = textwrap.dedent('''\
             return float(self.env.data.time) - self.start >= self.wait_sec
 
 
-    class WaitTaskType(TaskType):
+    class WaitTaskType(TaskType[WaitTaskSpec]):
         name = "toy_wait"
         aliases = ("molmo_toy_task.WaitTask",)
         spec_model = WaitTaskSpec
         default_horizon_sec = 1.0
 
         def thresholds(self, spec):
-            return {"wait_sec": spec.task.wait_sec}
+            return {"wait_sec": self.task_spec(spec).wait_sec}
 
         def create(self, spec, env):
-            return WaitTask(spec, env)
+            return WaitTask(self.task_spec(spec), env)
 
 
     class StillExpert(Policy):

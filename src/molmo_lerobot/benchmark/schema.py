@@ -193,10 +193,6 @@ class BaseTaskSpec(_Model):
     robot_base_pose: Pose7
     task_horizon_sec: float | None = Field(default=None, gt=0, le=MAX_TASK_HORIZON_SEC)
 
-    if TYPE_CHECKING:
-        # A task may get its fields as extras (a GenericTaskSpec, extra="allow"): any other name reads as Any.
-        def __getattr__(self, name: str) -> Any: ...
-
     @property
     def task_name(self) -> str:
         """The key to look the task type up by in the plugin registry."""

@@ -76,7 +76,7 @@ def task_spec_model(plugins: Plugins, task: Mapping[str, Any]) -> tuple[str, typ
             raise
         except PluginError:
             continue
-        return found.name, getattr(found, "spec_model", GenericTaskSpec)
+        return found.name, found.spec_model
     name = molmospaces.known_task_name(task_cls, task_type) if isinstance(task_cls, str) else None
     name = name or (molmospaces.known_task_name(task_type) if task_type else None)
     if name in MOLMOSPACES_ONLY_SPECS:

@@ -15,7 +15,6 @@ get it. ``cameras: []`` means the run's camera system (``camera.system``) or the
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
 from typing import Any
 
 from molmo_lerobot.benchmark import molmospaces
@@ -23,7 +22,7 @@ from molmo_lerobot.benchmark.load import Benchmark, Problem
 from molmo_lerobot.benchmark.schema import EpisodeSpec
 from molmo_lerobot.features import image_feature
 from molmo_lerobot.plugins import PluginConflict, PluginError, Plugins
-from molmo_lerobot.sim.scenes import SceneContext
+from molmo_lerobot.sim.scenes import SceneContext, SceneDataset
 
 
 def validate_benchmark(bench: Benchmark, plugins: Plugins, scenes: SceneContext) -> list[Problem]:
@@ -55,21 +54,18 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, scenes: SceneContex
 
     robot = _lookup(plugins, "robot", episode.robot.robot_name, "robot.robot_name", warning, "robot",
                     "install a robot plugin that provides it")
-    sizes = getattr(robot, "move_groups", None)
-    if isinstance(sizes, Mapping):
+    if robot is not None:
         for group, values in episode.robot.init_qpos.items():
             field = f"robot.init_qpos.{group}"
-            if group not in sizes:
+            if group not in robot.move_groups:
                 if values:  # MolmoSpaces writes empty lists for groups a robot lacks ("base": [])
                     warning(field, f"robot {robot.name!r} has no move group {group!r} "
-                                   f"(move groups: {', '.join(sizes)})")
-            elif hasattr(robot, "init_qpos"):
-                try:
-                    robot.init_qpos(group, values)
-                except ValueError as exc:
-                    warning(field, str(exc))
-            elif len(values) != sizes[group]:
-                warning(field, f"expected {sizes[group]} values, got {len(values)}")
+                                   f"(move groups: {', '.join(robot.move_groups)})")
+                continue
+            try:
+                robot.init_qpos(group, values)
+            except ValueError as exc:
+                warning(field, str(exc))
 
     robot_extra = episode.robot.model_extra or {}
     if "base_size" in robot_extra:
@@ -81,15 +77,14 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, scenes: SceneContex
             problem("robot.base_size", str(exc))
 
     scene = _lookup(plugins, "scene_dataset", episode.scene_dataset, "scene_dataset", problem, "scene dataset")
-    missing = getattr(scene, "missing", None)
-    reason = missing(episode, scenes) if missing is not None else None
+    reason = scene.missing(episode, scenes) if scene is not None else None
     if reason:
         warning("scene_dataset", reason)
 
     if not episode.cameras:  # a camera system places them: camera.system=, source.camera_system_class, the robot's
         from molmo_lerobot.cameras.base import STANDARD, choose_camera_system
 
-        system = choose_camera_system(episode, None, getattr(robot, "default_camera_system", None))
+        system = choose_camera_system(episode, None, robot.default_camera_system if robot is not None else None)
         if system == STANDARD:
             warning("cameras", "no cameras: the run's camera system (camera.system=...) places them")
         else:
@@ -109,12 +104,11 @@ def validate_episode(episode: EpisodeSpec, plugins: Plugins, scenes: SceneContex
 
     if not episode.language.task_description.strip():
         problem("language.task_description", "empty task description")
-    spec_problems = getattr(task_type, "spec_problems", None)  # TaskType's; a duck-typed plugin may lack it
-    if spec_problems is not None and not contradiction:
+    if task_type is not None and not contradiction:
         def metadata() -> Any:
             return _scene_metadata(scene, episode) if scene is not None and not reason else None
 
-        for p in spec_problems(episode, metadata):
+        for p in task_type.spec_problems(episode, metadata):
             (warning if p.warning else problem)(p.field, p.message)
     return out
 
@@ -141,13 +135,10 @@ def _task_type_contradiction(episode: EpisodeSpec, plugins: Plugins, task_type: 
     return None
 
 
-def _scene_metadata(scene: Any, episode: EpisodeSpec) -> Any:
+def _scene_metadata(scene: SceneDataset, episode: EpisodeSpec) -> Any:
     """The episode's house metadata where its scene dataset gives it cheaply, else ``None``."""
-    metadata = getattr(scene, "metadata", None)
-    if metadata is None:
-        return None
     try:
-        return metadata(episode.house_index)
+        return scene.metadata(episode.house_index)
     except Exception:  # data not installed here, a house out of range: the preflight reports those
         return None
 

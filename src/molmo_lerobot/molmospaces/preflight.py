@@ -35,12 +35,12 @@ def _missing(spec: Any, run: RunContext, camera_system: str | None) -> tuple[str
     scene = found["scene_dataset"]
     if hasattr(scene, "fetch"):
         scene.fetch(spec, run)  # scenes installed on demand arrive now, before any worker starts
-    reason = scene.missing(spec, run) if hasattr(scene, "missing") else None
+    reason = scene.missing(spec, run)
     if reason:
         return ("house_index" if "scene_xml_paths" in reason else "scene_dataset"), reason
-    if hasattr(scene, "missing") and spec.scene_modifications.added_objects:
-        from molmo_lerobot.molmospaces.scenes import resolve_object_file
+    from molmo_lerobot.molmospaces.scenes import MolmoSpacesScenes, resolve_object_file
 
+    if isinstance(scene, MolmoSpacesScenes) and spec.scene_modifications.added_objects:
         for name, rel in spec.scene_modifications.added_objects.items():
             field = f"scene_modifications.added_objects[{name!r}]"
             try:
@@ -50,7 +50,7 @@ def _missing(spec: Any, run: RunContext, camera_system: str | None) -> tuple[str
     if not spec.cameras:
         from molmo_lerobot.cameras.base import STANDARD, choose_camera_system
 
-        system = choose_camera_system(spec, camera_system, getattr(found.get("robot"), "default_camera_system", None))
+        system = choose_camera_system(spec, camera_system, found["robot"].default_camera_system)
         if system == STANDARD:
             return "cameras", "cameras: [] and no camera system: set camera.system= or source.camera_system_class"
         try:
@@ -71,8 +71,7 @@ def _install_problem(bench: Any, run: RunContext, indices: list[int]) -> str | N
             scene = run.plugins.scene_dataset(name)
         except PluginError:
             continue  # reported per episode below
-        check = getattr(scene, "install_problem", None)
-        problem = check() if check is not None else None
+        problem = scene.install_problem()
         if problem:
             return f"cannot simulate scene dataset {name!r}: {problem}"
     return None

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from molmo_lerobot import hookimpl
+from molmo_lerobot.benchmark.task_specs import NavToObjTaskSpec
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
 from molmo_lerobot.sim.navigation import Grid, descend, free_space, geom_boxes, occupancy, path_lengths
 from molmo_lerobot.tasks.nav_to_obj import candidate_names
@@ -62,7 +63,9 @@ class ScriptedNav(Policy):
             raise ValueError("scripted nav expert needs privileged simulator access and a robot with a 'base' group")
         self.arm = env.robot.targets(env.data, "arm")
         self.gripper = env.robot.targets(env.data, "gripper")
-        names = [n for n in candidate_names(env.spec, env.scene_metadata.get("objects", {}))
+        if not isinstance(env.spec.task, NavToObjTaskSpec):
+            raise ValueError(f"scripted nav expert: a nav_to_obj episode's task, not {type(env.spec.task).__name__}")
+        names = [n for n in candidate_names(env.spec.task, env.scene_metadata.get("objects", {}))
                  if n in {env.model.body(b).name for b in range(env.model.nbody)}]
         if not names:
             raise ValueError("scripted nav expert: no target candidate is in the scene")

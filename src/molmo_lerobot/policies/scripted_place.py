@@ -26,7 +26,7 @@ from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.policies.scripted_pick import ScriptedPick
 from molmo_lerobot.poses import frame_matrix
 from molmo_lerobot.sim import geometry
-from molmo_lerobot.tasks.pick_and_place import PickAndPlaceNextToTaskSpec
+from molmo_lerobot.tasks.pick_and_place import PickAndPlaceNextToTaskSpec, PickAndPlaceTaskSpec
 
 DROP_CLEARANCE = 0.02
 SET_DOWN_CLEARANCE = 0.006
@@ -73,8 +73,11 @@ class ScriptedPlace(ScriptedPick):
 
     def reset(self, ctx: EpisodeContext) -> None:
         super().reset(ctx)
-        self.receptacle = self.env.spec.task.place_receptacle_name
-        self.next_to = isinstance(self.env.spec.task, PickAndPlaceNextToTaskSpec)
+        task = self.env.spec.task
+        if not isinstance(task, PickAndPlaceTaskSpec):
+            raise ValueError(f"scripted place expert: a pick-and-place episode's task, not {type(task).__name__}")
+        self.receptacle = task.place_receptacle_name
+        self.next_to = isinstance(task, PickAndPlaceNextToTaskSpec)
         self.phases = ["approach", "descend", "close", "lift", "carry", "release", "retreat", "hold"]
         self.retries = 1
 

@@ -12,13 +12,16 @@ import hashlib
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import mujoco
 import numpy as np
 
 from molmo_lerobot.assets.builtin import HandGeometry
 from molmo_lerobot.sim.geometry import subtree
+
+if TYPE_CHECKING:
+    from molmo_lerobot.benchmark.schema import EpisodeSpec
 
 
 class RobotHandle(ABC):
@@ -300,10 +303,10 @@ class RobotType(ABC):
             return self.default_base_size
         return parse_base_size(extra["base_size"])
 
-    def place(self, world: mujoco.MjSpec, episode: object) -> None:
-        """Add the robot to ``world`` where ``episode`` (an ``EpisodeSpec``) puts it: at
+    def place(self, world: mujoco.MjSpec, episode: EpisodeSpec) -> None:
+        """Add the robot to ``world`` where ``episode`` puts it: at
         ``task.robot_base_pose``, on the pedestal of :meth:`base_size`."""
-        pose, size = episode.task.robot_base_pose, self.base_size(episode.robot)  # type: ignore[attr-defined]
+        pose, size = episode.task.robot_base_pose, self.base_size(episode.robot)
         if size is None:
             self.add_to(world, pose)  # robots of older plugins take no base_size
         else:

@@ -90,8 +90,7 @@ def install_failure(exc: Exception, spec: EpisodeSpec, run: RunContext) -> Excep
     dataset's installed files are broken now (``resume=true`` reruns the episode once they are
     repaired), else ``exc`` itself."""
     try:
-        check = getattr(run.plugins.scene_dataset(spec.scene_dataset), "install_problem", None)
-        problem = check() if check is not None else None
+        problem = run.plugins.scene_dataset(spec.scene_dataset).install_problem()
     except Exception:
         return exc
     if problem is None:
@@ -217,8 +216,8 @@ class EpisodeSession(EpisodeOutcome):
         from molmo_lerobot.results import EpisodeResult
 
         plan = self.plan
-        odd = tuple(getattr(self.task, "start_warnings", ()))  # a duck-typed task may define neither
-        notes: tuple[str, ...] = getattr(self.task, "parity_notes", tuple)()  # judged now, in the final state
+        odd = tuple(self.task.start_warnings)
+        notes = self.task.parity_notes()  # judged now, in the final state
         return EpisodeResult(
             episode_index=plan.episode_index, house_index=plan.house_index, task_cls=plan.task_cls,
             success=self.success, success_once=self.success_once, steps=self.steps, seed=plan.seed,

@@ -109,8 +109,7 @@ def plugin_option_problems(run: RunContext) -> list[str]:
     policy's own options (its ``PolicyType.check``), ``camera.system``, ``robot.name``, ``horizons.<task type>``."""
     config = run.config
     policy = run.plugins.policy(str(config.policy["name"]))
-    check = getattr(policy, "check", None)  # a duck-typed descriptor may lack it
-    out = list(check(config.policy)) if check is not None else []
+    out = list(policy.check(config.policy)) if policy.check is not None else []
     for key, kind, name in (("camera.system", "camera", config.camera.system), ("robot.name", "robot",
                                                                                config.robot.name)):
         if name is not None:

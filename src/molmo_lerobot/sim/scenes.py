@@ -54,6 +54,11 @@ class SceneDataset(ABC):
     def metadata(self, house_index: int) -> dict[str, Any]:
         """House description, JSON-ready. At least ``objects``: ``{body_name: {"asset_id": uid, ...}}``."""
 
+    def missing(self, spec: EpisodeSpec, ctx: SceneContext) -> str | None:
+        """Why ``spec``'s scene cannot load here (what, where, how to get it), or ``None``: checked by
+        ``molmo-bench validate`` before any simulation; none by default."""
+        return None
+
     def install_problem(self) -> str | None:
         """One line naming a fault of the installed files the dataset reads in place (and how to
         repair it), or ``None``; checked once per run before any worker starts, and again when an

@@ -3,7 +3,9 @@
 A :class:`TaskType` is what a task plugin returns from ``molmo_task_types()``; it is keyed
 by ``name`` and ``aliases`` (MolmoSpaces' dotted ``task_cls`` paths) and owns ``spec_model``,
 the pydantic model its episodes' ``task`` is validated with. ``create(spec, env)`` returns a
-:class:`Task` bound to one episode's environment. A task never imports its scripted
+:class:`Task` bound to one episode's environment. Both are generic over that model
+(``TaskType[PickTaskSpec]``), so a task reads its spec's fields, defaults included, as typed
+attributes (:meth:`TaskType.task_spec`). A task never imports its scripted
 expert: experts register for the task types they serve (hook ``molmo_experts``).
 """
 
@@ -12,7 +14,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import mujoco
 import numpy as np
@@ -24,8 +26,11 @@ if TYPE_CHECKING:
     from molmo_lerobot.sim.env import Env
 
 
-class Task(ABC):
+class Task[SpecT: BaseTaskSpec](ABC):
     """One episode's task. ``setup`` runs after ``env.reset``; ``success`` after every policy step."""
+
+    #: the episode's ``task``, as its task type's spec model
+    spec: SpecT
 
     @abstractmethod
     def setup(self) -> None:
@@ -95,15 +100,23 @@ class SpecProblem:
     warning: bool = False
 
 
-class TaskType(ABC):
+class TaskType[SpecT: BaseTaskSpec](ABC):
     """A task plugin's descriptor."""
 
     name: str
     aliases: tuple[str, ...] = ()
-    #: the model of ``EpisodeSpec.task`` (a :class:`BaseTaskSpec` subclass with this task's fields)
-    spec_model: type[BaseTaskSpec] = GenericTaskSpec
+    #: the model of ``EpisodeSpec.task`` (a :class:`BaseTaskSpec` subclass with this task's fields);
+    #: a task type that sets none takes its fields as given (:class:`GenericTaskSpec`)
+    spec_model: type[SpecT] = cast("type[SpecT]", GenericTaskSpec)
     #: horizon used when neither the CLI nor the episode (``task_horizon_sec``) gives one
     default_horizon_sec: float
+
+    def task_spec(self, spec: EpisodeSpec) -> SpecT:
+        """``spec.task`` as :attr:`spec_model` (validated with it where the episode was parsed with
+        another model); a ``pydantic.ValidationError`` (a ``ValueError``) names the field that does not fit."""
+        if isinstance(spec.task, self.spec_model):
+            return spec.task
+        return self.spec_model.model_validate(spec.task.model_dump())
 
     @abstractmethod
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
@@ -116,5 +129,5 @@ class TaskType(ABC):
         return []
 
     @abstractmethod
-    def create(self, spec: EpisodeSpec, env: Env) -> Task:
+    def create(self, spec: EpisodeSpec, env: Env) -> Task[SpecT]:
         """A task instance for this episode; raise ``ValueError`` naming the field if the spec does not fit."""

@@ -40,7 +40,6 @@ if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.sim.env import Env
 
-DEFAULT_THRESHOLD = 0.67
 #: MolmoSpaces' ``door_open_reward``
 OPEN_REWARD = 1.0
 #: hinge turn (rad) MolmoSpaces tests the handle's motion with to tell push from pull
@@ -89,11 +88,11 @@ def is_pushing(model: mujoco.MjModel, data: mujoco.MjData, door: int, robot_xyz:
     return bool(np.linalg.norm(turned - robot_xyz) > np.linalg.norm(now - robot_xyz))
 
 
-class DoorOpeningTask(Task):
+class DoorOpeningTask(Task[DoorOpeningTaskSpec]):
     """Open ``task.door_body_name`` to ``door_openness_threshold`` of its hinge range."""
 
-    def __init__(self, spec: EpisodeSpec, env: Env) -> None:
-        t = spec.task
+    def __init__(self, spec: DoorOpeningTaskSpec, env: Env) -> None:
+        t = self.spec = spec
         self.env = env
         self.door = env.body_id(t.door_body_name, "task.door_body_name")
         m = env.model
@@ -114,7 +113,7 @@ class DoorOpeningTask(Task):
         d.qpos[self.qadr] = self.start
         d.qvel[m.jnt_dofadr[self.hinge]] = 0.0
         mujoco.mj_forward(m, d)
-        self.pushing = is_pushing(m, d, self.door, np.asarray(self.env.spec.task.robot_base_pose[:3]))
+        self.pushing = is_pushing(m, d, self.door, np.asarray(self.spec.robot_base_pose[:3]))
         warnings = [f"{field}: {what}" for field, what in start_warnings(self.range, self.start, self.threshold)]
         lo, hi = (float(v) for v in m.jnt_range[self.hinge])
         if m.jnt_limited[self.hinge] and not lo - 1e-9 <= self.start <= hi + 1e-9:
@@ -162,29 +161,29 @@ def start_warnings(joint_range: Sequence[float] | None, start: float,
     return out
 
 
-class DoorOpeningTaskType(TaskType):
+class DoorOpeningTaskType(TaskType[DoorOpeningTaskSpec]):
     name = "door_opening"
     aliases = ("molmo_lerobot.tasks.door_opening.DoorOpeningTask", *task_aliases("door_opening"))
     spec_model = DoorOpeningTaskSpec
     default_horizon_sec = 40.0  # their door data-generation config: 400 steps at 100 ms
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
-        return {"door_openness_threshold": float(spec.task.door_openness_threshold)}
+        return {"door_openness_threshold": float(self.task_spec(spec).door_openness_threshold)}
 
     def spec_problems(self, spec: EpisodeSpec, scene_metadata: Callable[[], Mapping[str, Any] | None]
                       ) -> list[SpecProblem]:
         """Warnings (MolmoSpaces runs such episodes): a reversed range, a start outside it or already open."""
-        t = spec.task
+        t = self.task_spec(spec)
         start = float(t.articulated_joint_reset_state[0]) if t.articulated_joint_reset_state else 0.0
         return [SpecProblem(field, what, warning=True)
                 for field, what in start_warnings(t.articulated_joint_range, start, float(t.door_openness_threshold))]
 
     def create(self, spec: EpisodeSpec, env: Env) -> DoorOpeningTask:
-        task = DoorOpeningTask(spec, env)
+        task = DoorOpeningTask(self.task_spec(spec), env)
         task.apply_start_state()
         return task
 
 
 @hookimpl
-def molmo_task_types() -> list[TaskType]:
+def molmo_task_types() -> list[TaskType[Any]]:
     return [DoorOpeningTaskType()]

@@ -34,7 +34,6 @@ if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.sim.env import Env
 
-DEFAULT_SUCC_POS_THRESHOLD = 1.5
 #: the camera the target must be seen from (their camera registry name)
 HEAD_CAMERA = "head_camera"
 
@@ -45,31 +44,30 @@ def nav_prompt(object_name: str, n_candidates: int = 1) -> str:
         else f"Navigate to the {object_name}"
 
 
-def candidate_names(spec: EpisodeSpec, objects: dict[str, Any]) -> list[str]:
+def candidate_names(task: NavToObjTaskSpec, objects: dict[str, Any]) -> list[str]:
     """The episode's target instances, narrowed by category where ``objects`` (scene metadata) knows it."""
-    task = spec.task
     name = task.pickup_obj_name
     candidates = list(task.pickup_obj_candidates or [])
     if not candidates:
         return [name]
-    category = getattr(task, "pickup_obj_category", None) or objects.get(name, {}).get("category")
+    category = (task.model_extra or {}).get("pickup_obj_category") or objects.get(name, {}).get("category")
     if category is None:
         return candidates
     same = [c for c in candidates if objects.get(c, {}).get("category") == category]
     return same or candidates
 
 
-class NavToObjTask(Task):
+class NavToObjTask(Task[NavToObjTaskSpec]):
     """Reach within ``succ_pos_threshold`` of the nearest target, seeing it (module docstring)."""
 
-    def __init__(self, spec: EpisodeSpec, env: Env) -> None:
-        self.env = env
-        self.threshold = float(spec.task.succ_pos_threshold)
+    def __init__(self, spec: NavToObjTaskSpec, env: Env) -> None:
+        self.spec, self.env = spec, env
+        self.threshold = float(spec.succ_pos_threshold)
         if HEAD_CAMERA not in env.camera_names:
             raise ValueError(f"cameras: nav_to_obj judges visibility from {HEAD_CAMERA!r}, which the episode's "
                              f"cameras ({', '.join(env.camera_names) or 'none'}) do not include")
         names = candidate_names(spec, env.scene_metadata.get("objects", {}))
-        field = "task.pickup_obj_candidates" if spec.task.pickup_obj_candidates else "task.pickup_obj_name"
+        field = "task.pickup_obj_candidates" if spec.pickup_obj_candidates else "task.pickup_obj_name"
         present = [n for n in names if n in self._bodies()]
         if not present:
             raise ValueError(f"{field}: none of {names} is a body in the scene")
@@ -123,14 +121,14 @@ class NavToObjTask(Task):
         return self.reward() > 0.0
 
 
-class NavToObjTaskType(TaskType):
+class NavToObjTaskType(TaskType[NavToObjTaskSpec]):
     name = "nav_to_obj"
     aliases = ("molmo_lerobot.tasks.nav_to_obj.NavToObjTask", *task_aliases("nav_to_obj"))
     spec_model = NavToObjTaskSpec
     default_horizon_sec = 100.0  # their NavToObjBaseConfig: task_horizon 500 steps × policy_dt 200 ms
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
-        return {"succ_pos_threshold": float(spec.task.succ_pos_threshold)}
+        return {"succ_pos_threshold": float(self.task_spec(spec).succ_pos_threshold)}
 
     def spec_problems(self, spec: EpisodeSpec, scene_metadata: Callable[[], Mapping[str, Any] | None]
                       ) -> list[SpecProblem]:
@@ -138,17 +136,18 @@ class NavToObjTaskType(TaskType):
         objects = (scene_metadata() or {}).get("objects")
         if not isinstance(objects, Mapping):
             return []
-        names = candidate_names(spec, dict(objects))
+        task = self.task_spec(spec)
+        names = candidate_names(task, dict(objects))
         if any(n in objects for n in names):
             return []
-        field = "task.pickup_obj_candidates" if spec.task.pickup_obj_candidates else "task.pickup_obj_name"
+        field = "task.pickup_obj_candidates" if task.pickup_obj_candidates else "task.pickup_obj_name"
         return [SpecProblem(field, f"none of {names} is an object of house {spec.house_index} "
                                    f"({len(objects)} objects, e.g. {', '.join(sorted(objects)[:3])})")]
 
     def create(self, spec: EpisodeSpec, env: Env) -> NavToObjTask:
-        return NavToObjTask(spec, env)
+        return NavToObjTask(self.task_spec(spec), env)
 
 
 @hookimpl
-def molmo_task_types() -> list[TaskType]:
+def molmo_task_types() -> list[TaskType[Any]]:
     return [NavToObjTaskType()]

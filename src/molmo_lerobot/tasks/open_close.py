@@ -38,7 +38,6 @@ if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.sim.env import Env
 
-DEFAULT_THRESHOLD = 0.20
 _ARTICULATED = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
 
 
@@ -52,7 +51,7 @@ class OpenCloseTaskSpec(BaseTaskSpec):
     joint_index: int = 0
     joint_start_position: float | list[float]
     joint_goal_position: float | None = None
-    task_success_threshold: float = Field(default=DEFAULT_THRESHOLD, ge=0, le=1)  # opening fraction
+    task_success_threshold: float = Field(default=0.20, ge=0, le=1)  # opening fraction
     any_inst_of_category: bool = False
 
 
@@ -71,16 +70,16 @@ def articulated_joints(env: Env, body_name: str) -> list[int]:
     return [j for j in range(m.njnt) if int(m.jnt_bodyid[j]) in bodies and int(m.jnt_type[j]) in _ARTICULATED]
 
 
-class OpenCloseTask(Task):
-    """Open (``mode="open"``) or close (``mode="close"``) a joint of ``spec.task.pickup_obj_name``."""
+class OpenCloseTask(Task[OpenCloseTaskSpec]):
+    """Open (``mode="open"``) or close (``mode="close"``) a joint of ``spec.pickup_obj_name``."""
 
-    def __init__(self, spec: EpisodeSpec, env: Env, mode: str) -> None:
+    def __init__(self, spec: OpenCloseTaskSpec, env: Env, mode: str) -> None:
         if mode not in ("open", "close"):
             raise ValueError(f"task_type must be 'open' or 'close', got {mode!r}")
-        t = spec.task
+        t = self.spec = spec
         self.env, self.mode = env, mode
         self.object_name = t.pickup_obj_name
-        self.threshold = float(getattr(t, "task_success_threshold", DEFAULT_THRESHOLD))
+        self.threshold = float(t.task_success_threshold)
         env.body_id(self.object_name, "task.pickup_obj_name")
         m = env.model
         #: articulated joints of the object, in model order
@@ -88,7 +87,7 @@ class OpenCloseTask(Task):
         if not self.joints:
             raise ValueError(f"task.pickup_obj_name: {self.object_name!r} has no hinge or slide joint")
         self.joint = self._resolve_joint(t.joint_name)
-        index = int(getattr(t, "joint_index", 0) or 0)
+        index = int(t.joint_index)
         if not 0 <= index < len(self.joints):
             raise ValueError(f"task.joint_index: {index} out of range ({self.object_name!r} has "
                              f"{len(self.joints)} articulated joints)")
@@ -97,7 +96,7 @@ class OpenCloseTask(Task):
         #: joints the open rule judges: the object's, or every articulated object's of its category,
         #: objects in model order (MolmoSpaces' scan of the top-level bodies)
         self.open_joints = list(self.joints)
-        if getattr(t, "any_inst_of_category", False):
+        if t.any_inst_of_category:
             objects = env.scene_metadata.get("objects", {})
             category = objects.get(self.object_name, {}).get("category")
             if category is None:
@@ -180,19 +179,16 @@ class OpenCloseTask(Task):
                 f"task_rules={other} judges the final state {verdict}",)
 
 
-class _OpenCloseType(TaskType):
+class _OpenCloseType(TaskType[OpenCloseTaskSpec]):
     mode: str
     spec_model = OpenCloseTaskSpec
     default_horizon_sec = 30.0  # MolmoSpaces' table; the open/close v1 files carry 15 s
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
-        return {"task_success_threshold": float(getattr(spec.task, "task_success_threshold", DEFAULT_THRESHOLD))}
+        return {"task_success_threshold": float(self.task_spec(spec).task_success_threshold)}
 
     def create(self, spec: EpisodeSpec, env: Env) -> OpenCloseTask:
-        for field in ("pickup_obj_name", "joint_name", "joint_start_position"):
-            if getattr(spec.task, field, None) is None:
-                raise ValueError(f"task.{field}: missing (an {self.mode} task needs it)")
-        task = OpenCloseTask(spec, env, self.mode)
+        task = OpenCloseTask(self.task_spec(spec), env, self.mode)
         task.apply_start_state()
         return task
 
@@ -208,5 +204,5 @@ class CloseTaskType(_OpenCloseType):
 
 
 @hookimpl
-def molmo_task_types() -> list[TaskType]:
+def molmo_task_types() -> list[TaskType[Any]]:
     return [OpenTaskType(), CloseTaskType()]

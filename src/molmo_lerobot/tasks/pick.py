@@ -30,9 +30,6 @@ if TYPE_CHECKING:
     from molmo_lerobot.benchmark.schema import EpisodeSpec
     from molmo_lerobot.sim.env import Env
 
-DEFAULT_SUCC_POS_THRESHOLD = 0.01
-
-
 class PickTaskSpec(BaseTaskSpec):
     """Pick: lift the object at least ``succ_pos_threshold`` metres, touching only the robot."""
 
@@ -40,30 +37,29 @@ class PickTaskSpec(BaseTaskSpec):
     pickup_obj_start_pose: Pose7
     pickup_obj_goal_pose: Pose7 | None = None
     receptacle_name: str | None = None
-    succ_pos_threshold: float = Field(default=DEFAULT_SUCC_POS_THRESHOLD, ge=0)  # metres
+    succ_pos_threshold: float = Field(default=0.01, ge=0)  # metres
 
 
-class PickTask(Task):
-    """Pick ``spec.task.pickup_obj_name``."""
+class PickTask(Task[PickTaskSpec]):
+    """Pick ``spec.pickup_obj_name``."""
 
     environment_state_names = (*pose_names("object"), *(f"object_half_{c}" for c in "xyz"),
                                *(f"tcp_to_object_{c}" for c in "xyz"))
 
-    def __init__(self, spec: EpisodeSpec, env: Env) -> None:
-        name = getattr(spec.task, "pickup_obj_name", None)
+    def __init__(self, spec: PickTaskSpec, env: Env) -> None:
+        name = spec.pickup_obj_name
         if not name:
             raise ValueError("task.pickup_obj_name: missing (a pick task needs the object to pick)")
-        self.env = env
+        self.spec, self.env = spec, env
         self.object_name = name
-        self.threshold = float(getattr(spec.task, "succ_pos_threshold", DEFAULT_SUCC_POS_THRESHOLD))
+        self.threshold = float(spec.succ_pos_threshold)
         self._object = env.body_id(name, "task.pickup_obj_name")
         self.object_bodies = env.subtree_bodies(name)
         self.start_height: float | None = None
         self.half_extents: np.ndarray | None = None
 
     def setup(self) -> None:
-        start = getattr(self.env.spec.task, "pickup_obj_start_pose", None)
-        self.start_height = float(start[2]) if start else float(self.env.data.xpos[self._object][2])
+        self.start_height = float(self.spec.pickup_obj_start_pose[2])
         self.half_extents = geometry.half_extents_in_body(self.env.model, self.env.data, self._object)
 
     def lift(self) -> float:
@@ -89,19 +85,19 @@ class PickTask(Task):
         return np.concatenate([pose_in_base(self.env, self._object), self.half_extents, to_object])
 
 
-class PickTaskType(TaskType):
+class PickTaskType(TaskType[PickTaskSpec]):
     name = "pick"
     aliases = ("molmo_lerobot.tasks.pick.PickTask", *task_aliases("pick"))
     spec_model = PickTaskSpec
     default_horizon_sec = 20.0
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
-        return {"succ_pos_threshold": float(getattr(spec.task, "succ_pos_threshold", DEFAULT_SUCC_POS_THRESHOLD))}
+        return {"succ_pos_threshold": float(self.task_spec(spec).succ_pos_threshold)}
 
     def create(self, spec: EpisodeSpec, env: Env) -> PickTask:
-        return PickTask(spec, env)
+        return PickTask(self.task_spec(spec), env)
 
 
 @hookimpl
-def molmo_task_types() -> list[TaskType]:
+def molmo_task_types() -> list[TaskType[Any]]:
     return [PickTaskType()]

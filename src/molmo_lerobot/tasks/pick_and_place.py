@@ -35,7 +35,7 @@ import math
 from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, Field
+from pydantic import BeforeValidator, Field
 from scipy.spatial.transform import Rotation
 from shapely.geometry import Point
 
@@ -101,20 +101,6 @@ class PickAndPlaceColorTaskSpec(PickAndPlaceTaskSpec):
 # Helpers -----------------------------------------------------------------------------------------
 
 
-_PLACE_FIELDS = ("receptacle_supported_weight_frac", "max_place_receptacle_pos_displacement",
-                 "max_place_receptacle_rot_displacement")
-_GAP_FIELDS = ("min_surface_to_surface_gap", "max_surface_to_surface_gap")
-
-
-def _resolved(spec: EpisodeSpec, fields: tuple[str, ...], model: type[BaseModel]) -> dict[str, float]:
-    """Each field from the episode's task, else ``model``'s default."""
-    out = {}
-    for name in fields:
-        value = getattr(spec.task, name, None)
-        out[name] = float(model.model_fields[name].default if value is None else value)
-    return out
-
-
 def tilt(start: np.ndarray, now: np.ndarray) -> float:
     """Radians the rotation from ``start`` to ``now`` (3x3 world rotations) turns the world's up axis."""
     up = (now @ start.T)[:, 2]
@@ -129,21 +115,22 @@ def weight(env: Env, body: int) -> float:
 # Tasks -------------------------------------------------------------------------------------------
 
 
-class PickAndPlaceTask(Task):
+class PickAndPlaceTask[SpecT: PickAndPlaceTaskSpec](Task[SpecT]):
     """Put ``task.pickup_obj_name`` in/on ``task.place_receptacle_name`` (rule: module docstring).
 
     Environment state: the object's and then the receptacle's pose in the robot base frame."""
 
     environment_state_names = (*pose_names("object"), *pose_names("receptacle"))
 
-    def __init__(self, spec: EpisodeSpec, env: Env) -> None:
-        for field in ("pickup_obj_name", "place_receptacle_name"):
-            if not getattr(spec.task, field, None):
+    def __init__(self, spec: SpecT, env: Env) -> None:
+        for field, name in (("pickup_obj_name", spec.pickup_obj_name),
+                            ("place_receptacle_name", spec.place_receptacle_name)):
+            if not name:
                 raise ValueError(f"task.{field}: missing (a {type(self).__name__} needs it)")
-        self.env = env
+        self.spec, self.env = spec, env
         m = env.model
-        self.object_name = spec.task.pickup_obj_name
-        self.receptacle_name = spec.task.place_receptacle_name
+        self.object_name = spec.pickup_obj_name
+        self.receptacle_name = spec.place_receptacle_name
         self._object = env.body_id(self.object_name, "task.pickup_obj_name")
         self._receptacle = env.body_id(self.receptacle_name, "task.place_receptacle_name")
         if geometry.root_body(m, self._object) != self._object:
@@ -155,20 +142,18 @@ class PickAndPlaceTask(Task):
         #: the receptacle's top-level body and everything in it: what "supported by" counts
         self.receptacle_root = geometry.root_body(m, self._receptacle)
         self.receptacle_root_bodies = geometry.subtree(m, self.receptacle_root)
-        t = _resolved(spec, _PLACE_FIELDS, PickAndPlaceTaskSpec)
-        self.min_support = t["receptacle_supported_weight_frac"]
-        self.max_pos = t["max_place_receptacle_pos_displacement"]
-        self.max_rot = t["max_place_receptacle_rot_displacement"]
-        self.carry_pos = float(getattr(spec.task, "carry_forward_rel_pos_threshold", None) or CARRY_FORWARD_POS)
-        self.carry_rot = float(getattr(spec.task, "carry_forward_rel_rot_threshold", None) or CARRY_FORWARD_ROT)
+        self.min_support = float(spec.receptacle_supported_weight_frac)
+        self.max_pos = float(spec.max_place_receptacle_pos_displacement)
+        self.max_rot = float(spec.max_place_receptacle_rot_displacement)
+        extra = spec.model_extra or {}  # fields no spec model declares: an episode may carry them
+        self.carry_pos = float(extra.get("carry_forward_rel_pos_threshold") or CARRY_FORWARD_POS)
+        self.carry_rot = float(extra.get("carry_forward_rel_rot_threshold") or CARRY_FORWARD_ROT)
         self.start_pose: np.ndarray | None = None
         self.supported_rel_poses: list[np.ndarray] = []
 
     def setup(self) -> None:
-        """The receptacle's start pose: ``place_receptacle_start_pose``, else its pose now."""
-        given = getattr(self.env.spec.task, "place_receptacle_start_pose", None)
-        pose = np.asarray(given, dtype=np.float64) if given else self.env.body_pose(self.receptacle_name)
-        self.start_pose = pose_matrix(unit_pose(pose))
+        """The receptacle's start pose: ``place_receptacle_start_pose``."""
+        self.start_pose = pose_matrix(unit_pose(np.asarray(self.spec.place_receptacle_start_pose, dtype=np.float64)))
         self.supported_rel_poses = []
 
     def environment_state(self) -> np.ndarray:
@@ -263,13 +248,12 @@ class PickAndPlaceTask(Task):
         return 1.0 if self.success() else 0.0
 
 
-class PickAndPlaceNextToTask(PickAndPlaceTask):
+class PickAndPlaceNextToTask(PickAndPlaceTask[PickAndPlaceNextToTaskSpec]):
     """Put the object beside the receptacle, on the surface the receptacle stands on."""
 
-    def __init__(self, spec: EpisodeSpec, env: Env) -> None:
+    def __init__(self, spec: PickAndPlaceNextToTaskSpec, env: Env) -> None:
         super().__init__(spec, env)
-        gaps = _resolved(spec, _GAP_FIELDS, PickAndPlaceNextToTaskSpec)
-        self.min_gap, self.max_gap = gaps["min_surface_to_surface_gap"], gaps["max_surface_to_surface_gap"]
+        self.min_gap, self.max_gap = float(spec.min_surface_to_surface_gap), float(spec.max_surface_to_surface_gap)
         if self.min_gap > self.max_gap:
             raise ValueError(f"task.min_surface_to_surface_gap {self.min_gap} exceeds "
                              f"task.max_surface_to_surface_gap {self.max_gap}")
@@ -350,62 +334,68 @@ class PickAndPlaceNextToTask(PickAndPlaceTask):
         return self.on_same_surface()
 
 
-class PickAndPlaceColorTask(PickAndPlaceTask):
+class PickAndPlaceColorTask(PickAndPlaceTask[PickAndPlaceColorTaskSpec]):
     """Pick and place among receptacles told apart by colour; paints ``task.object_colors`` on creation."""
 
-    def __init__(self, spec: EpisodeSpec, env: Env) -> None:
+    def __init__(self, spec: PickAndPlaceColorTaskSpec, env: Env) -> None:
         super().__init__(spec, env)
-        colors = getattr(spec.task, "object_colors", None) or {}
+        colors = spec.object_colors or {}
         m = env.model  # each Env owns its model copy, so painting never leaks into another episode
         for name, rgba in colors.items():
             env.body_id(name, "task.object_colors")
             for g in geometry.body_geoms(m, env.subtree_bodies(name)):  # visible geoms, as MolmoSpaces
                 m.geom_matid[g] = -1
                 m.geom_rgba[g] = rgba
-        for name in getattr(spec.task, "other_receptacle_names", None) or []:
+        for name in spec.other_receptacle_names or []:
             env.body_id(name, "task.other_receptacle_names")
 
 
 # Task types --------------------------------------------------------------------------------------
 
 
-class _PlaceFamily(TaskType):
+class _PlaceFamily[SpecT: PickAndPlaceTaskSpec](TaskType[SpecT]):
     default_horizon_sec = 40.0
-    task_class: type[PickAndPlaceTask]
-    spec_model = PickAndPlaceTaskSpec
-    fields: tuple[str, ...] = _PLACE_FIELDS
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
-        return _resolved(spec, self.fields, self.spec_model)
+        t = self.task_spec(spec)
+        return {"receptacle_supported_weight_frac": float(t.receptacle_supported_weight_frac),
+                "max_place_receptacle_pos_displacement": float(t.max_place_receptacle_pos_displacement),
+                "max_place_receptacle_rot_displacement": float(t.max_place_receptacle_rot_displacement)}
 
-    def create(self, spec: EpisodeSpec, env: Env) -> PickAndPlaceTask:
-        return self.task_class(spec, env)
 
-
-class PickAndPlaceTaskType(_PlaceFamily):
+class PickAndPlaceTaskType(_PlaceFamily[PickAndPlaceTaskSpec]):
     name = "pick_and_place"
     aliases = ("molmo_lerobot.tasks.pick_and_place.PickAndPlaceTask", *task_aliases("pick_and_place"))
-    task_class = PickAndPlaceTask
+    spec_model = PickAndPlaceTaskSpec
+
+    def create(self, spec: EpisodeSpec, env: Env) -> PickAndPlaceTask[PickAndPlaceTaskSpec]:
+        return PickAndPlaceTask(self.task_spec(spec), env)
 
 
-class PickAndPlaceNextToTaskType(_PlaceFamily):
+class PickAndPlaceNextToTaskType(_PlaceFamily[PickAndPlaceNextToTaskSpec]):
     name = "pick_and_place_next_to"
     aliases = ("molmo_lerobot.tasks.pick_and_place.PickAndPlaceNextToTask", *task_aliases("pick_and_place_next_to"))
-    task_class = PickAndPlaceNextToTask
     spec_model = PickAndPlaceNextToTaskSpec
-    fields = _PLACE_FIELDS + _GAP_FIELDS
+
+    def create(self, spec: EpisodeSpec, env: Env) -> PickAndPlaceNextToTask:
+        return PickAndPlaceNextToTask(self.task_spec(spec), env)
 
     def thresholds(self, spec: EpisodeSpec) -> dict[str, Any]:
-        return {**super().thresholds(spec), "surface_gap_tolerance": GAP_TOLERANCE}
+        t = self.task_spec(spec)
+        return {**super().thresholds(spec), "min_surface_to_surface_gap": float(t.min_surface_to_surface_gap),
+                "max_surface_to_surface_gap": float(t.max_surface_to_surface_gap),
+                "surface_gap_tolerance": GAP_TOLERANCE}
 
 
-class PickAndPlaceColorTaskType(_PlaceFamily):
+class PickAndPlaceColorTaskType(_PlaceFamily[PickAndPlaceColorTaskSpec]):
     name = "pick_and_place_color"
     aliases = ("molmo_lerobot.tasks.pick_and_place.PickAndPlaceColorTask", *task_aliases("pick_and_place_color"))
-    task_class = PickAndPlaceColorTask
     spec_model = PickAndPlaceColorTaskSpec
+
+    def create(self, spec: EpisodeSpec, env: Env) -> PickAndPlaceColorTask:
+        return PickAndPlaceColorTask(self.task_spec(spec), env)
 
 
 @hookimpl
-def molmo_task_types() -> list[TaskType]:
+def molmo_task_types() -> list[TaskType[Any]]:
     return [PickAndPlaceTaskType(), PickAndPlaceNextToTaskType(), PickAndPlaceColorTaskType()]

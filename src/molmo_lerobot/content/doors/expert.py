@@ -32,6 +32,7 @@ import mujoco
 import numpy as np
 
 from molmo_lerobot import hookimpl
+from molmo_lerobot.benchmark.task_specs import DoorOpeningTaskSpec
 from molmo_lerobot.policies.base import EpisodeContext, PolicyType
 from molmo_lerobot.policies.expert_motion import CONTACT_STEP, IKSolver, PhasedExpert, _min_jerk
 from molmo_lerobot.poses import frame_matrix
@@ -103,6 +104,11 @@ class ScriptedDoor(PhasedExpert):
         env = self._start(ctx, ["drive", "reach", "insert", "close", "swing", "release", "retreat", "hold"])
         if "base" not in env.move_groups:
             raise ValueError(f"scripted door expert: robot {env.robot_type.name!r} has no base move group")
+        task = env.spec.task
+        if not isinstance(task, DoorOpeningTaskSpec):
+            raise ValueError(f"scripted door expert: a door_opening episode's task, not {type(task).__name__}")
+        #: the hinge's start (the episode's reset state, else 0)
+        self.q0 = float(task.articulated_joint_reset_state[0] if task.articulated_joint_reset_state else 0.0)
         self.ik: BaseFrozenIK = BaseFrozenIK(env.robot_type, tuple(float(v) for v in env.spec.task.robot_base_pose),
                                env.robot_type.base_size(env.spec.robot))
         m, d = env.model, env.data
@@ -196,9 +202,7 @@ class ScriptedDoor(PhasedExpert):
         """Facing through the doorway, inside it between the jambs (:data:`JAMB_MARGIN` clear), no
         nearer the turned leaf than :data:`LEAF_MARGIN` (the leaf at the base's edge nearer the hinge):
         of the lanes across the doorway, the one that puts the base nearest ``STAND`` behind the handle."""
-        q0 = float(self.env.spec.task.articulated_joint_reset_state[0]
-                   if self.env.spec.task.articulated_joint_reset_state else 0.0)
-        tan = math.tan(min(abs(q - q0), 1.45))
+        tan = math.tan(min(abs(q - self.q0), 1.45))
         out = -self.approach0[:2]  # the robot's side of the wall
         h = self._grasp_T(q)[:2, 3] - self.anchor
         ideal = np.array([float(h @ self.leaf_dir), float(h @ out) + STAND])  # (lane, depth)

@@ -24,9 +24,10 @@ import numpy as np
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.generators import BenchmarkGenerator
 from molmo_lerobot.benchmark.output import rounded
+from molmo_lerobot.benchmark.task_specs import DoorOpeningTaskSpec
 from molmo_lerobot.content.doors.scenes import DOOR_NAME, DoorRooms, door_geometry
 from molmo_lerobot.poses import yaw_quat
-from molmo_lerobot.tasks.door_opening import DEFAULT_THRESHOLD, PULL_PROMPT, PUSH_PROMPT, is_pushing
+from molmo_lerobot.tasks.door_opening import PULL_PROMPT, PUSH_PROMPT, is_pushing
 
 GENERATOR_VERSION = 1
 TASK_CLS = "molmo_spaces.tasks.opening_tasks.DoorOpeningTask"
@@ -109,7 +110,7 @@ def _episode(house: int, index: int, seed: int) -> dict[str, Any]:
             "door_body_name": DOOR_NAME,
             "articulated_joint_range": [rounded(v) for v in door["range"]],
             "articulated_joint_reset_state": [0.0],
-            "door_openness_threshold": DEFAULT_THRESHOLD,
+            "door_openness_threshold": DoorOpeningTaskSpec.model_fields["door_openness_threshold"].default,
             "task_horizon_sec": HORIZON_SEC,
         },
         "task_relevant_objects": [DOOR_NAME],

@@ -23,12 +23,13 @@ import numpy as np
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.generators import BenchmarkGenerator
 from molmo_lerobot.benchmark.output import benchmark_metadata, rounded
+from molmo_lerobot.benchmark.task_specs import NavToObjTaskSpec
 from molmo_lerobot.content.libero.nav_houses import NavHouses, display_name
 from molmo_lerobot.content.libero.objects import LIBERO_OBJECTS
 from molmo_lerobot.poses import yaw_quat
 from molmo_lerobot.robots.mobile_franka import MobileFranka
 from molmo_lerobot.sim.navigation import free_space, occupancy, path_lengths
-from molmo_lerobot.tasks.nav_to_obj import DEFAULT_SUCC_POS_THRESHOLD, nav_prompt
+from molmo_lerobot.tasks.nav_to_obj import nav_prompt
 
 GENERATOR_VERSION = 1
 TASK_CLS = "molmo_lerobot.tasks.nav_to_obj.NavToObjTask"
@@ -108,7 +109,7 @@ def _nav_episode(scene: NavHouses, house: int, index: int, seed: int) -> dict[st
             "pickup_obj_name": target,
             "pickup_obj_candidates": candidates,
             "pickup_obj_category": category,
-            "succ_pos_threshold": DEFAULT_SUCC_POS_THRESHOLD,
+            "succ_pos_threshold": NavToObjTaskSpec.model_fields["succ_pos_threshold"].default,
             "task_horizon_sec": HORIZON_SEC,
         },
         "task_relevant_objects": candidates,
