@@ -96,6 +96,9 @@ KIND_BASES = {
     "policy": "molmo_lerobot.policies.base:PolicyType",
     "expert": "molmo_lerobot.policies.base:PolicyType",
     "benchmark": "molmo_lerobot.benchmark.packs:BenchmarkDir",
+    "benchmark_kind": "molmo_lerobot.benchmark_kinds:BenchmarkKind",
+    "executor": "molmo_lerobot.executor_types:ExecutorType",
+    "generator": "molmo_lerobot.benchmark.generators:BenchmarkGenerator",
 }
 
 
