@@ -99,7 +99,7 @@ def test_a_plugins_own_top_level_key_is_kept():
     from molmo_lerobot.run_config import RunConfig
 
     run = RunConfig.of({"trace_dir": "/tmp/t", "policy": {"name": "sine", "amplitude": 0.3}})
-    assert run.plain()["trace_dir"] == "/tmp/t" and run.policy == {"name": "sine", "amplitude": 0.3}
+    assert run.plain()["trace_dir"] == "/tmp/t" and run.plain()["policy"] == {"name": "sine", "amplitude": 0.3}
     assert RunConfig.of(run) is run  # validated once
 
 

@@ -3,17 +3,20 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from molmo_lerobot import hookimpl
 
+if TYPE_CHECKING:
+    from molmo_lerobot.run_config import RunConfig
+
 
 @hookimpl
-def molmo_recorders(config: dict[str, Any]) -> list[Any]:
+def molmo_recorders(config: RunConfig) -> list[Any]:
     from molmo_lerobot.export.glance import GlanceRecorderFactory
 
     factories: list[Any] = [GlanceRecorderFactory()]
-    if config.get("record"):
+    if config.record:
         from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 
         factories.append(LeRobotRecorderFactory.from_config(config))

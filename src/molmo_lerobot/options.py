@@ -1,0 +1,100 @@
+"""A config group validated against its pydantic model: one line per problem, each naming its dotted key.
+
+The run config (:class:`~molmo_lerobot.run_config.RunConfig`) and the groups a plugin's model
+describes (``policy``: :class:`~molmo_lerobot.policies.base.PolicyOptions`) report alike:
+``policy.chunk: expected an integer in 1..10000, got 0``, or one line listing a section's
+unknown keys with the known ones. A validator raises :func:`problem` with ``{key}`` where the
+dotted key goes; :func:`rule` makes one from a predicate.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from pydantic import BaseModel, BeforeValidator, ValidationError
+from pydantic_core import PydanticCustomError
+
+from molmo_lerobot.errors import MolmoError
+
+#: the pydantic error type of :func:`problem`
+PROBLEM = "run_config"
+
+
+class OptionsError(MolmoError, ValueError):
+    """A config group is invalid; ``problems`` holds one line per problem."""
+
+    def __init__(self, problems: list[str]) -> None:
+        self.problems = list(problems)
+        super().__init__("\n".join(self.problems))
+
+
+def is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def is_number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def optional(ok: Callable[[Any], bool]) -> Callable[[Any], bool]:
+    return lambda v: v is None or ok(v)
+
+
+def problem(text: str) -> PydanticCustomError:
+    """A problem line; ``{key}`` in it becomes the dotted key (see :func:`problem_lines`)."""
+    return PydanticCustomError(PROBLEM, text)  # no context: pydantic leaves the text as it is
+
+
+def rule(ok: Callable[[Any], bool], text: str) -> BeforeValidator:
+    """Values for which ``ok`` is false fail with ``text`` (``{key}``: the key, ``{got}``: the value)."""
+    def check(value: Any) -> Any:
+        if not ok(value):
+            raise problem(text.replace("{got}", repr(value)))
+        return value
+    return BeforeValidator(check)
+
+
+def bounded(low: float, high: float, *, integer: bool) -> BeforeValidator:
+    """A number (``integer``: a whole one) in ``low..high``."""
+    kind = "an integer" if integer else "a number"
+    return rule(lambda v: (is_int(v) if integer else is_number(v)) and math.isfinite(v) and low <= v <= high,
+                f"{{key}}: expected {kind} in {low:g}..{high:g}, got {{got}}")
+
+
+def problem_lines(exc: ValidationError, known: Callable[[str], list[str]], prefix: str = "") -> list[str]:
+    """One line per problem of ``exc``, each naming its key (``prefix`` + the error's location); unknown
+    keys grouped per section, listed with the section's ``known(section)`` keys."""
+    out: list[str] = []
+    unknown: dict[str, list[str]] = {}
+    for error in exc.errors():
+        key = ".".join([*filter(None, [prefix]), *(str(p) for p in error["loc"])])
+        if error["type"] == PROBLEM:
+            out.extend(error["msg"].replace("{key}", key).splitlines())
+        elif error["type"] == "missing":
+            out.append(f"{key}: missing (it has no default)")
+        elif error["type"] == "extra_forbidden":
+            section, _, name = key.rpartition(".")
+            unknown.setdefault(section, []).append(name)
+        else:
+            msg = error["msg"]
+            out.append(f"{key}: {msg[:1].lower()}{msg[1:]}, got {error['input']!r}")
+    for section, names in unknown.items():
+        out.append(f"{section}: unknown keys {sorted(names)} (known: {', '.join(known(section))})")
+    return out
+
+
+def validate_group[M: BaseModel](group: str, model: type[M], data: Mapping[str, Any]) -> M:
+    """The config group ``group`` (``policy``) validated by ``model``; :class:`OptionsError` lists every
+    problem, each naming ``<group>.<key>``."""
+    try:
+        return model.model_validate(dict(data))
+    except ValidationError as exc:
+        def known(section: str) -> list[str]:
+            fields: type[BaseModel] | None = model
+            for part in section.split(".")[1:]:
+                annotation = fields.model_fields[part].annotation if fields and part in fields.model_fields else None
+                fields = annotation if isinstance(annotation, type) and issubclass(annotation, BaseModel) else None
+            return list(fields.model_fields) if fields else []
+        raise OptionsError(problem_lines(exc, known, group)) from None
