@@ -2,9 +2,9 @@
 
 The run config (:class:`~molmo_lerobot.run_config.RunConfig`) and the groups a plugin's model
 describes (``policy``: :class:`~molmo_lerobot.policies.base.PolicyOptions`) report alike:
-``policy.chunk: expected an integer in 1..10000, got 0``, or one line listing a section's
-unknown keys with the known ones. A validator raises :func:`problem` with ``{key}`` where the
-dotted key goes; :func:`rule` makes one from a predicate.
+``policy.chunk: expected an integer in 1..10000, got 0``, or one line naming a section's
+unknown keys (``policy.sclae: unknown key (known: name, …)``). A validator raises :func:`problem`
+with ``{key}`` where the dotted key goes; :func:`rule` makes one from a predicate.
 """
 
 from __future__ import annotations
@@ -64,8 +64,8 @@ def bounded(low: float, high: float, *, integer: bool) -> BeforeValidator:
 
 
 def problem_lines(exc: ValidationError, known: Callable[[str], list[str]], prefix: str = "") -> list[str]:
-    """One line per problem of ``exc``, each naming its key (``prefix`` + the error's location); unknown
-    keys grouped per section, listed with the section's ``known(section)`` keys."""
+    """One line per problem of ``exc``, each naming its key (``prefix`` + the error's location); a
+    section's unknown keys in one line, with the section's ``known(section)`` keys."""
     out: list[str] = []
     unknown: dict[str, list[str]] = {}
     for error in exc.errors():
@@ -81,7 +81,8 @@ def problem_lines(exc: ValidationError, known: Callable[[str], list[str]], prefi
             msg = error["msg"]
             out.append(f"{key}: {msg[:1].lower()}{msg[1:]}, got {error['input']!r}")
     for section, names in unknown.items():
-        out.append(f"{section}: unknown keys {sorted(names)} (known: {', '.join(known(section))})")
+        keys = ", ".join(".".join(filter(None, [section, name])) for name in sorted(names))
+        out.append(f"{keys}: unknown key{'s' if len(names) > 1 else ''} (known: {', '.join(known(section))})")
     return out
 
 

@@ -64,8 +64,10 @@ def test_a_policy_yaml_states_no_default_of_its_own(plugins):
 def test_an_unknown_policy_key_is_refused_naming_it():
     """Before: ``policy=random +policy.sclae=0.3`` ran with scale 0.15, the typo unread."""
     line = _problems("policy=random", "+policy.sclae=0.3")
-    assert line == [f"policy: unknown keys ['sclae'] (known: {', '.join(RandomOptions.model_fields)})"]
-    assert _problems("policy=remote", "+policy.hots=gpu-box")[0].startswith("policy: unknown keys ['hots']")
+    assert line == [f"policy.sclae: unknown key (known: {', '.join(RandomOptions.model_fields)})"]
+    assert _problems("policy=remote", "+policy.hots=gpu-box")[0].startswith("policy.hots: unknown key (known: name, ")
+    assert _problems("policy=scripted", "+policy.chunck=4", "+policy.sped=2")[0].startswith(
+        "policy.chunck, policy.sped: unknown keys (known: name, ")
     # the keys every policy shares are typed in the run config itself
     assert config_problems(compose(["policy=random", "policy.convention=droid"])) == [
         "policy.convention: input should be 'native' or 'molmospaces', got 'droid'"]
@@ -74,7 +76,7 @@ def test_an_unknown_policy_key_is_refused_naming_it():
 def test_a_run_refuses_an_unknown_policy_key_before_any_output(tmp_path):
     out = tmp_path / "out"
     assert refusal("policy=random", "+policy.sclae=0.3", "limit=1", f"output_dir={out}") == [
-        f"policy: unknown keys ['sclae'] (known: {', '.join(RandomOptions.model_fields)})"]
+        f"policy.sclae: unknown key (known: {', '.join(RandomOptions.model_fields)})"]
     assert not out.exists()
 
 
