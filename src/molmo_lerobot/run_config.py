@@ -13,8 +13,11 @@ range and cross-field checks (timing ratios, camera options, the work one episod
 for) would stay a second pass; here one pass reports everything. The core's own sections
 are closed (an unknown key is a problem); ``policy``, ``benchmark`` and ``executor`` (config
 groups plugins extend) and the top level (``+key=value`` for a plugin's own key) stay open.
-Missing keys take the fields' defaults: the only place they are stated (``conf/eval.yaml``
-lists them as Hydra's ``molmo_run_defaults`` node, :func:`molmo_lerobot.config.run_defaults`).
+``policy``'s shared keys are typed here (:class:`~molmo_lerobot.policies.base.PolicyOptions`), the
+rest by the model its plugin declares once the run has resolved the plugin
+(:func:`molmo_lerobot.policies.factory.policy_options`). Missing keys take the fields' defaults:
+the only place they are stated (``conf/eval.yaml`` lists them as Hydra's ``molmo_run_defaults``
+node, :func:`molmo_lerobot.config.run_defaults`).
 
 :func:`episode_work_problem` bounds the physics steps one episode may ask for (a horizon
 of 1e12 seconds or a 0.1 µs physics step would otherwise run until the watchdog).
