@@ -63,26 +63,40 @@ def bounded(low: float, high: float, *, integer: bool) -> BeforeValidator:
                 f"{{key}}: expected {kind} in {low:g}..{high:g}, got {{got}}")
 
 
-def problem_lines(exc: ValidationError, known: Callable[[str], list[str]], prefix: str = "") -> list[str]:
-    """One line per problem of ``exc``, each naming its key (``prefix`` + the error's location); a
-    section's unknown keys in one line, with the section's ``known(section)`` keys."""
+def section_model(model: type[BaseModel], path: str) -> type[BaseModel] | None:
+    """The model of the section at the dotted ``path`` of ``model`` (``""``: ``model`` itself); ``None``
+    for a path into a field that is no model (a free-form map)."""
+    for part in [p for p in path.split(".") if p]:
+        field = model.model_fields.get(part)
+        if field is None or not (isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel)):
+            return None
+        model = field.annotation
+    return model
+
+
+def problem_lines(exc: ValidationError, model: type[BaseModel], prefix: str = "") -> list[str]:
+    """One line per problem of validating ``model``, each naming its key (``prefix`` + the error's
+    location); a section's unknown keys in one line, with the keys the section knows."""
     out: list[str] = []
     unknown: dict[str, list[str]] = {}
     for error in exc.errors():
-        key = ".".join([*filter(None, [prefix]), *(str(p) for p in error["loc"])])
+        where = ".".join(str(p) for p in error["loc"])
+        key = ".".join(filter(None, [prefix, where]))
         if error["type"] == PROBLEM:
             out.extend(error["msg"].replace("{key}", key).splitlines())
         elif error["type"] == "missing":
             out.append(f"{key}: missing (it has no default)")
         elif error["type"] == "extra_forbidden":
-            section, _, name = key.rpartition(".")
+            section, _, name = where.rpartition(".")
             unknown.setdefault(section, []).append(name)
         else:
             msg = error["msg"]
             out.append(f"{key}: {msg[:1].lower()}{msg[1:]}, got {error['input']!r}")
     for section, names in unknown.items():
-        keys = ", ".join(".".join(filter(None, [section, name])) for name in sorted(names))
-        out.append(f"{keys}: unknown key{'s' if len(names) > 1 else ''} (known: {', '.join(known(section))})")
+        keys = ", ".join(".".join(filter(None, [prefix, section, name])) for name in sorted(names))
+        known = section_model(model, section)
+        out.append(f"{keys}: unknown key{'s' if len(names) > 1 else ''} "
+                   f"(known: {', '.join(known.model_fields if known else [])})")
     return out
 
 
@@ -92,10 +106,4 @@ def validate_group[M: BaseModel](group: str, model: type[M], data: Mapping[str, 
     try:
         return model.model_validate(dict(data))
     except ValidationError as exc:
-        def known(section: str) -> list[str]:
-            fields: type[BaseModel] | None = model
-            for part in section.split(".")[1:]:
-                annotation = fields.model_fields[part].annotation if fields and part in fields.model_fields else None
-                fields = annotation if isinstance(annotation, type) and issubclass(annotation, BaseModel) else None
-            return list(fields.model_fields) if fields else []
-        raise OptionsError(problem_lines(exc, known, group)) from None
+        raise OptionsError(problem_lines(exc, model, group)) from None

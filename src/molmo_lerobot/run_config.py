@@ -40,7 +40,7 @@ from pydantic import (
 
 from molmo_lerobot.benchmark.schema import MAX_TASK_HORIZON_SEC
 from molmo_lerobot.cameras.options import camera_option_problems
-from molmo_lerobot.options import OptionsError, problem_lines
+from molmo_lerobot.options import OptionsError, problem_lines, section_model
 from molmo_lerobot.options import is_int as _is_int
 from molmo_lerobot.options import is_number as _is_number
 from molmo_lerobot.options import optional as _optional
@@ -445,18 +445,13 @@ class RunConfig(_OpenSection):
 def section_keys(path: str) -> tuple[list[str], bool] | None:
     """The keys the schema knows at ``path`` (``""``: the top level) and whether it refuses
     others; ``None`` for a path inside an open section or a free-form map."""
-    model: type[BaseModel] = RunConfig
-    for part in [p for p in path.split(".") if p]:
-        field = model.model_fields.get(part)
-        if field is None or not (isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel)):
-            return None
-        model = field.annotation
-    return list(model.model_fields), model.model_config.get("extra") == "forbid"
+    model = section_model(RunConfig, path)
+    return None if model is None else (list(model.model_fields), model.model_config.get("extra") == "forbid")
 
 
 def _lines(exc: ValidationError) -> list[str]:
-    """One line per problem, each naming its key; unknown keys grouped per section."""
-    return problem_lines(exc, lambda section: (section_keys(section) or ([], False))[0])
+    """One line per problem, each naming its key; a section's unknown keys in one line."""
+    return problem_lines(exc, RunConfig)
 
 
 def config_problems(cfg: Mapping[str, Any]) -> list[str]:
