@@ -23,11 +23,9 @@ def make_policy(plugins: Plugins, policy_cfg: Mapping[str, Any]) -> Policy:
     validated options as a plain dict; ``policy.convention`` goes to plugins that read it
     (``PolicyType.conventions``), else wraps the policy."""
     policy_type = plugins.policy(str(policy_cfg["name"]))
-    cfg = validate_group("policy", policy_type.options, policy_cfg).model_dump()
-    convention = get_convention(str(cfg.get("convention") or "native"))
-    if not policy_type.conventions:
-        cfg.pop("convention", None)
-    policy = policy_type.factory(cfg)
+    options = validate_group("policy", policy_type.options, policy_cfg)
+    convention = get_convention(options.convention)
+    policy = policy_type.factory(options.model_dump(exclude=set() if policy_type.conventions else {"convention"}))
     if not isinstance(policy, Policy):
         raise TypeError(f"policy plugin {policy_type.name!r} built {type(policy).__name__}, not a Policy")
     if convention.name != "native" and not policy_type.conventions:
