@@ -41,7 +41,8 @@ def custom_mjcf(tmp_path):
 
 def molmo_episode_overrides(episode, config):
     """The built-in overrides under a run context of ``config`` (partial: the rest are RunConfig's defaults)."""
-    return _override(episode, RunContext.build(config))
+    context = RunContext.build(config)
+    return _override(episode, context.config, context)
 
 
 def _rows(out: Path) -> list[dict]:

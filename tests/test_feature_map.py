@@ -17,6 +17,7 @@ from molmo_lerobot.policies.base import EpisodeContext
 from molmo_lerobot.recording import EpisodeInfo
 from molmo_lerobot.results import EpisodeIdentity
 from molmo_lerobot.robots.franka_droid import FrankaDroid
+from molmo_lerobot.run_config import RunConfig
 
 #: the cameras franka_droid's DROID camera system builds, in its order
 DROID_CAMERAS = ["wrist_camera", "exo_camera_1"]
@@ -198,9 +199,9 @@ def test_a_mobile_base_is_one_more_move_group(tmp_path):
         fmap.action_vector({g: a for g, a in action.items() if g != "base"})
 
     # recorded: the dataset's features are the map's
-    factory = LeRobotRecorderFactory.from_config({
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of({
         "benchmark": {"name": "mobile_v1"}, "policy": {"name": "scripted"}, "timing": {"policy_dt_ms": 66.0},
-        "hub": {"repo_id": None, "private": False}, "push": False})
+        "hub": {"repo_id": None, "private": False}, "push": False}))
     rec = factory.make("w0g0", tmp_path)
     info = _info(fmap, MobileRobot.name)
     rec.start_episode(info)

@@ -72,8 +72,8 @@ def test_a_link_on_the_dataset_id_path_is_refused_before_the_run(home, tmp_path)
     (home / "molmo").symlink_to(elsewhere)
     with pytest.raises(RecordConfigError, match=r"^dataset id 'molmo/evals/x': .*/molmo is a symlink; the store "
                                                 r"never goes through one$"):
-        LeRobotRecorderFactory.from_config(compose(["policy=scripted", "benchmark=pick_v1",
-                                                    "dataset_id=molmo/evals/x"]))
+        LeRobotRecorderFactory.from_config(RunConfig.of(compose(["policy=scripted", "benchmark=pick_v1",
+                                                    "dataset_id=molmo/evals/x"])))
     assert not any(elsewhere.iterdir())
 
 

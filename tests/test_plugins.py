@@ -13,6 +13,7 @@ from types import SimpleNamespace
 from typing import ClassVar
 
 import pytest
+from pydantic import ValidationError
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.load import load_benchmark
@@ -285,14 +286,14 @@ def test_a_broken_recorder_plugin_is_skipped_and_marked_broken(capsys):
             raise SystemExit(3)
 
     plugins = _bare((_GoodRecorder(), "good"), (Broken(), "broken"), (Exits(), "exits"))
-    assert plugins.recorder_factories({"record": True}) == ["good-factory"]
+    assert plugins.recorder_factories(RunConfig(record=True)) == ["good-factory"]
     rec = {r.name: r for r in plugins.records}
     assert rec["broken"].error == "molmo_recorders() failed: AttributeError: module 'lerobot' has no attribute 'OldApi'"
     assert rec["exits"].error == "molmo_recorders() failed: SystemExit: 3"
     assert rec["good"].status == "ok"
     err = capsys.readouterr().err
     assert "plugin 'broken' ((in-process) -) is broken and was skipped" in err
-    assert plugins.recorder_factories({}) == ["good-factory"]  # skipped from then on
+    assert plugins.recorder_factories(RunConfig()) == ["good-factory"]  # skipped from then on
 
 
 def test_a_failing_builtin_recorder_fails_the_run_in_one_line(monkeypatch):
@@ -307,10 +308,10 @@ def test_a_failing_builtin_recorder_fails_the_run_in_one_line(monkeypatch):
     monkeypatch.setattr(LeRobotRecorderFactory, "from_config", staticmethod(fail))
     plugins = Plugins()
     with pytest.raises(RunError) as err:  # BuiltinHookError: molmo-eval's one line, exit 2
-        plugins.recorder_factories({"record": True})
+        plugins.recorder_factories(RunConfig(record=True))
     assert str(err.value).startswith("molmo_recorders() of the built-in plugin 'lerobot_export' (molmo-lerobot ")
     assert "failed: OSError: [Errno 36] File name too long" in str(err.value) and "\n" not in str(err.value)
-    assert plugins.broken() == [] and len(plugins.recorder_factories({})) == 1  # still there: only the glance
+    assert plugins.broken() == [] and len(plugins.recorder_factories(RunConfig())) == 1  # still there: only the glance
 
 
 def test_a_recorder_rejecting_the_config_fails_the_run_with_its_message():
@@ -321,8 +322,34 @@ def test_a_recorder_rejecting_the_config_fails_the_run_with_its_message():
 
     plugins = _bare((_GoodRecorder(), "good"), (Picky(), "picky"))
     with pytest.raises(ConfigError, match=r"picky.fps must be positive"):
-        plugins.recorder_factories({})
+        plugins.recorder_factories(RunConfig())
     assert plugins.broken() == []
+
+
+def test_the_run_config_hooks_get_the_validated_frozen_run_config():
+    """``molmo_recorders`` and ``molmo_episode_overrides`` get the run's :class:`RunConfig` itself (typed,
+    defaults filled in, a plugin's own top-level key an attribute), not a plain dict of it."""
+    seen = {}
+
+    class Both:
+        @hookimpl
+        def molmo_recorders(self, config):
+            seen["recorders"] = config
+            return []
+
+        @hookimpl
+        def molmo_episode_overrides(self, episode, config):
+            seen["overrides"] = config
+            return None
+
+    config = RunConfig.of({"policy": {"name": "random"}, "record": True, "my_key": 3})
+    plugins = _bare((Both(), "both"))
+    plugins.recorder_factories(config)
+    plugins.apply_episode_overrides([], SimpleNamespace(config=config))
+    assert seen["recorders"] is config and seen["overrides"] is config
+    assert config.record and config.policy.name == "random" and config.my_key == 3 and config.horizon is None
+    with pytest.raises(ValidationError, match="frozen"):
+        config.record = False
 
 
 def test_a_broken_override_plugin_is_skipped_but_an_inapplicable_override_fails_the_episode(capsys):
@@ -543,4 +570,7 @@ def test_a_policy_plugin_without_a_yaml_is_chosen_by_name(tmp_path):
                          capture_output=True, text=True, env=env, timeout=300)
     assert res.returncode == 0, res.stderr
     assert "pick_v1 · hold_still: success" in res.stdout
-    assert json.loads(seen.read_text()) == {"name": "hold_still", "speed": 2}
+    # its own key as given, the keys every policy shares from PolicyOptions (no model of its own declared)
+    assert json.loads(seen.read_text()) == {"name": "hold_still", "speed": 2, "device": None, "serve": False,
+                                            "serve_max_batch": None, "serve_batch_timeout_ms": 50,
+                                            "serve_transport": "auto"}

@@ -69,7 +69,8 @@ def add_plugin_configs(search_path: ConfigSearchPath) -> None:
 def _default_policy_configs(plugins: Plugins, config_dirs: list[Path]) -> None:
     """``policy/<name>`` = ``{name: <name>}`` (Hydra's ConfigStore) for each registered policy no
     config dir has a ``policy/<name>.yaml`` for, so a plugin that ships no yaml is still
-    ``policy=<name>``; its factory gets ``{"name": <name>}`` plus any ``+policy.<key>=`` given."""
+    ``policy=<name>``; its factory gets ``{"name": <name>}`` plus any ``+policy.<key>=`` given, validated by
+    its options model (``PolicyType.options``) with the model's defaults filled in."""
     store = ConfigStore.instance()
     for name in plugins.names("policy"):
         if not any((d / "policy" / f"{name}.yaml").is_file() for d in config_dirs):

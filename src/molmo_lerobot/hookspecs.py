@@ -37,6 +37,7 @@ if TYPE_CHECKING:
     from molmo_lerobot.policies.base import PolicyType
     from molmo_lerobot.recording import RecorderFactory
     from molmo_lerobot.robots.base import RobotType
+    from molmo_lerobot.run_config import RunConfig
     from molmo_lerobot.sim.scenes import SceneDataset
     from molmo_lerobot.tasks.base import TaskType
 
@@ -166,10 +167,12 @@ def molmo_config_dirs() -> list[str]:
 
 
 @hookspec
-def molmo_recorders(config: dict[str, Any], dataset_layout: DatasetLayout | None) -> list[RecorderFactory]:
+def molmo_recorders(config: RunConfig, dataset_layout: DatasetLayout | None) -> list[RecorderFactory]:
     """Recorder factories (:class:`~molmo_lerobot.recording.RecorderFactory`) for this run.
 
-    Called once in the main process with the resolved run config (a plain dict) and the
+    Called once in the main process with the run config, validated and frozen
+    (:class:`~molmo_lerobot.run_config.RunConfig`: typed sections, defaults filled in; a plugin's own
+    top-level key ``+my_key=…`` is ``getattr(config, "my_key", None)``) and the
     :class:`~molmo_lerobot.dataset_layout.DatasetLayout` the run's benchmark kind records in (an env
     suite's published datasets'; None: a dataset's schema follows its first step); return an
     empty list unless the config asks for your recording, and raise :class:`ConfigError` if
@@ -179,10 +182,11 @@ def molmo_recorders(config: dict[str, Any], dataset_layout: DatasetLayout | None
 
 
 @hookspec
-def molmo_episode_overrides(episode: EpisodeSpec, config: Any, context: Any) -> EpisodeSpec | None:
+def molmo_episode_overrides(episode: EpisodeSpec, config: RunConfig, context: Any) -> EpisodeSpec | None:
     """Edit an episode before it runs (MolmoSpaces' robot eval overrides).
 
-    Called once per episode with the validated spec, the run config (plain data) and the run's
+    Called once per episode with the validated spec, the run config (the validated, frozen
+    :class:`~molmo_lerobot.run_config.RunConfig`, as :func:`molmo_recorders` gets it) and the run's
     :class:`~molmo_lerobot.context.RunContext` (its asset catalog, settings; take only the
     arguments you need). Return a new
     :class:`EpisodeSpec` (e.g. ``episode.model_copy(update=...)``) to replace it, or

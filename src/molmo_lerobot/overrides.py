@@ -38,6 +38,7 @@ from molmo_lerobot.hashing import episode_digest
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetCatalog
     from molmo_lerobot.context import RunContext
+    from molmo_lerobot.run_config import RunConfig
 
 #: per randomization level: position (m), direction (deg), fov (deg), wrist offset (m) jitter
 CAMERA_JITTER = {"pos": 0.02, "dir_deg": 2.0, "fov_deg": 2.0, "offset": 0.005}
@@ -49,36 +50,34 @@ class OverrideError(MolmoError, ValueError):
 
 
 @hookimpl
-def molmo_episode_overrides(episode: EpisodeSpec, context: RunContext) -> EpisodeSpec | None:
-    """The run's options (``context.config``, validated, with :class:`~molmo_lerobot.run_config.RunConfig`'s
-    defaults) applied to ``episode``; ``None`` where none changes it."""
-    run = context.config
+def molmo_episode_overrides(episode: EpisodeSpec, config: RunConfig, context: RunContext) -> EpisodeSpec | None:
+    """The run's options (``config``) applied to ``episode``; ``None`` where none changes it."""
     data = episode.model_dump(mode="json")
     changed = False
-    if run.custom_object.path:
-        _swap_target(data, episode, Path(run.custom_object.path).expanduser(), run.custom_object.name,
-                     run.custom_object.description, context.catalog)
+    if config.custom_object.path:
+        _swap_target(data, episode, Path(config.custom_object.path).expanduser(), config.custom_object.name,
+                     config.custom_object.description, context.catalog)
         changed = True
-    if run.robot.name is not None and run.robot.name != episode.robot.robot_name:
-        data["robot"]["robot_name"] = run.robot.name
+    if config.robot.name is not None and config.robot.name != episode.robot.robot_name:
+        data["robot"]["robot_name"] = config.robot.name
         changed = True
-    if run.robot.base_size != "default":
-        data["robot"]["base_size"] = run.robot.base_size
+    if config.robot.base_size != "default":
+        data["robot"]["base_size"] = config.robot.base_size
         changed = True
-    for name, fields in run.camera.overrides.items():
+    for name, fields in config.camera.overrides.items():
         cams = [c for c in data["cameras"] if c["name"] == name]
         if not cams:
             raise OverrideError(f"camera.overrides: no camera {name!r} in the episode "
                                 f"(cameras: {', '.join(c['name'] for c in data['cameras'])})")
         cams[0].update(fields)
         changed = True
-    if (run_camera_system(run.camera.model_dump()) in EVAL_NAMES
+    if (run_camera_system(config.camera.model_dump()) in EVAL_NAMES
             and tuple(data["img_resolution"]) != EVAL_IMG_RESOLUTION):
         data["img_resolution"] = list(EVAL_IMG_RESOLUTION)
         changed = True
-    if run.camera.randomization:  # 1-3 (RunConfig checks the level)
+    if config.camera.randomization:  # 1-3 (RunConfig checks the level)
         rng = np.random.default_rng(list(episode_digest(episode)[:16]))
-        _jitter_cameras(data["cameras"], run.camera.randomization, rng)
+        _jitter_cameras(data["cameras"], config.camera.randomization, rng)
         changed = True
     return episode.edited(data) if changed else None
 

@@ -50,6 +50,7 @@ if TYPE_CHECKING:
     from molmo_lerobot.policies.base import PolicyType
     from molmo_lerobot.recording import RecorderFactory
     from molmo_lerobot.robots.base import RobotType
+    from molmo_lerobot.run_config import RunConfig
     from molmo_lerobot.sim.scenes import SceneDataset
     from molmo_lerobot.tasks.base import TaskType
 
@@ -461,10 +462,11 @@ class Plugins:
                 self._fail(rec, "molmo_config_dirs", exc)
         return dirs
 
-    def recorder_factories(self, config: dict[str, Any],
+    def recorder_factories(self, config: RunConfig,
                            dataset_layout: DatasetLayout | None = None) -> list[RecorderFactory]:
-        """Every ``molmo_recorders`` implementation's factories for this run config (``dataset_layout``: the
-        :class:`~molmo_lerobot.dataset_layout.DatasetLayout` the run's benchmark kind records in, or None).
+        """Every ``molmo_recorders`` implementation's factories for this run config (validated, frozen) and
+        ``dataset_layout``: the :class:`~molmo_lerobot.dataset_layout.DatasetLayout` the run's benchmark kind
+        records in, or None.
 
         A plugin that rejects the config (``ValueError``) fails the run with a
         :class:`ConfigError`; a third-party one that fails otherwise is marked broken and skipped
@@ -484,15 +486,15 @@ class Plugins:
 
     def apply_episode_overrides(self, episode: EpisodeSpec, context: Any) -> EpisodeSpec:
         """Run every ``molmo_episode_overrides`` implementation in pluggy's call order, with the
-        run's :class:`~molmo_lerobot.context.RunContext` and its config as plain data.
+        run's :class:`~molmo_lerobot.context.RunContext` and its config (the validated, frozen
+        :class:`~molmo_lerobot.run_config.RunConfig`).
 
         Each sees the previous one's result. ``ValueError`` (an override that cannot apply
         to this episode) propagates, failing the episode; any other failure marks the plugin
         broken and skips it (with a warning), so a broken override never breaks every run.
         """
-        config = context.config.plain()
         for rec, impl in self._impls("molmo_episode_overrides"):
-            kwargs = {"episode": episode, "config": config, "context": context}
+            kwargs = {"episode": episode, "config": context.config, "context": context}
             ok, new = self._invoke(rec, "molmo_episode_overrides", impl, kwargs, run_time=True)
             if ok and new is not None:
                 episode = new

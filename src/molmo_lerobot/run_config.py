@@ -13,8 +13,11 @@ range and cross-field checks (timing ratios, camera options, the work one episod
 for) would stay a second pass; here one pass reports everything. The core's own sections
 are closed (an unknown key is a problem); ``policy``, ``benchmark`` and ``executor`` (config
 groups plugins extend) and the top level (``+key=value`` for a plugin's own key) stay open.
-Missing keys take the fields' defaults: the only place they are stated (``conf/eval.yaml``
-lists them as Hydra's ``molmo_run_defaults`` node, :func:`molmo_lerobot.config.run_defaults`).
+``policy``'s shared keys are typed here (:class:`~molmo_lerobot.policies.base.PolicyOptions`), the
+rest by the model its plugin declares once the run has resolved the plugin
+(:func:`molmo_lerobot.policies.factory.policy_options`). Missing keys take the fields' defaults:
+the only place they are stated (``conf/eval.yaml`` lists them as Hydra's ``molmo_run_defaults``
+node, :func:`molmo_lerobot.config.run_defaults`).
 
 :func:`episode_work_problem` bounds the physics steps one episode may ask for (a horizon
 of 1e12 seconds or a 0.1 µs physics step would otherwise run until the watchdog).
@@ -23,8 +26,7 @@ of 1e12 seconds or a 0.1 µs physics step would otherwise run until the watchdog
 from __future__ import annotations
 
 import copy
-import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Annotated, Any
 from xml.etree import ElementTree
 
@@ -35,11 +37,16 @@ from pydantic import (
     ValidationError,
     model_validator,
 )
-from pydantic_core import PydanticCustomError
 
 from molmo_lerobot.benchmark.schema import MAX_TASK_HORIZON_SEC
 from molmo_lerobot.cameras.options import camera_option_problems
-from molmo_lerobot.errors import MolmoError
+from molmo_lerobot.options import OptionsError, problem_lines, section_model
+from molmo_lerobot.options import is_int as _is_int
+from molmo_lerobot.options import is_number as _is_number
+from molmo_lerobot.options import optional as _optional
+from molmo_lerobot.options import problem as _problem
+from molmo_lerobot.options import rule as _rule
+from molmo_lerobot.policies.base import OpenPolicyOptions
 from molmo_lerobot.robots.base import parse_base_size
 from molmo_lerobot.sim.env import CONTROL_MODES, TASK_RULES, Timing
 
@@ -51,43 +58,11 @@ MAX_PHYSICS_STEPS = 2_000_000
 MAX_EPISODE_RETRIES = 10
 MAX_WORKER_THREADS = 1024
 MAX_EPISODE_TIMEOUT_S = 7 * 24 * 3600
-MAX_SERVE_BATCH = 4096
-MAX_SERVE_BATCH_TIMEOUT_MS = 60_000
 MAX_VIDEO_CRF = 63  # libsvtav1's range (0-63); h264/hevc stop at 51 and the encoder says so
-SERVE_TRANSPORTS = ("auto", "shm", "websocket")
-#: ``policy.serve*`` when the policy's config leaves them out (any policy may be served)
-SERVE_DEFAULTS: Mapping[str, Any] = {"serve": False, "serve_max_batch": None, "serve_batch_timeout_ms": 50.0,
-                                     "serve_transport": "auto"}
 
 
-class RunConfigError(MolmoError, ValueError):
+class RunConfigError(OptionsError):
     """The run config is invalid; ``problems`` holds one line per problem."""
-
-    def __init__(self, problems: list[str]) -> None:
-        self.problems = list(problems)
-        super().__init__("\n".join(self.problems))
-
-
-def _is_int(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _is_number(v: Any) -> bool:
-    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-
-
-def _problem(text: str) -> PydanticCustomError:
-    """A problem line; ``{key}`` in it becomes the dotted key (see :func:`_lines`)."""
-    return PydanticCustomError("run_config", text)  # no context: pydantic leaves the text as it is
-
-
-def _rule(ok: Callable[[Any], bool], text: str) -> BeforeValidator:
-    """Values for which ``ok`` is false fail with ``text`` (``{key}``: the key, ``{got}``: the value)."""
-    def check(value: Any) -> Any:
-        if not ok(value):
-            raise _problem(text.replace("{got}", repr(value)))
-        return value
-    return BeforeValidator(check)
 
 
 def _workers(value: Any) -> Any:
@@ -96,10 +71,6 @@ def _workers(value: Any) -> Any:
     if value < 1:
         raise _problem(f"{{key}} must be at least 1, got {value}")
     return value
-
-
-def _optional(ok: Callable[[Any], bool]) -> Callable[[Any], bool]:
-    return lambda v: v is None or ok(v)
 
 
 Flag = Annotated[bool, _rule(lambda v: isinstance(v, bool), "{key}: expected true or false, got {got}")]
@@ -305,11 +276,8 @@ class ExecutorConfig(_OpenSection):
 
 
 def _policy(value: Any) -> Any:
-    if not (isinstance(value, Mapping) and isinstance(value.get("name"), str) and value["name"]):
+    if not isinstance(value, Mapping | OpenPolicyOptions):
         raise _problem(f"{{key}}: expected a mapping with a name (policy=<name>), got {value!r}")
-    problems = serve_problems(value)
-    if problems:
-        raise _problem("\n".join(problems))
     return value
 
 
@@ -324,34 +292,15 @@ def _dataset_id(value: Any) -> Any:
     return value
 
 
-def serve_problems(policy: Mapping[str, Any]) -> list[str]:
-    """Problems of the run's serving keys in ``policy`` (``policy.serve=true``; any policy may be served)."""
-    out = []
-    policy = {**SERVE_DEFAULTS, **policy}
-    serve = policy["serve"]
-    if not isinstance(serve, bool):
-        out.append(f"policy.serve: expected true or false, got {serve!r}")
-    batch = policy["serve_max_batch"]
-    if not (batch is None or (_is_int(batch) and 1 <= batch <= MAX_SERVE_BATCH)):
-        out.append(f"policy.serve_max_batch: expected an integer in 1..{MAX_SERVE_BATCH} "
-                   f"(or null: the number of workers), got {batch!r}")
-    wait = policy["serve_batch_timeout_ms"]
-    if not (_is_number(wait) and 0 <= wait <= MAX_SERVE_BATCH_TIMEOUT_MS):
-        out.append(f"policy.serve_batch_timeout_ms: expected milliseconds in 0..{MAX_SERVE_BATCH_TIMEOUT_MS}, "
-                   f"got {wait!r}")
-    transport = policy["serve_transport"]
-    if transport not in SERVE_TRANSPORTS:
-        out.append(f"policy.serve_transport: expected one of {', '.join(SERVE_TRANSPORTS)}, got {transport!r}")
-    return out
-
-
 class RunConfig(_OpenSection):
     """The run config, typed; fields in the composed config's order (the config groups first).
 
     Keys plugins add at the top level (``+trace_dir=...``) are kept as given.
     """
 
-    policy: Annotated[dict[str, Any], BeforeValidator(_policy)] = {"name": "scripted"}
+    #: the policy plugin's options: the keys every policy shares typed here, the plugin's own kept as given
+    #: until its model (``PolicyType.options``) validates them, when the run resolves the plugin
+    policy: Annotated[OpenPolicyOptions, BeforeValidator(_policy)] = OpenPolicyOptions(name="scripted")
     benchmark: BenchmarkConfig = BenchmarkConfig(name="pick_v1")
     executor: ExecutorConfig = ExecutorConfig.model_validate(
         {"name": "local", "start_method": "forkserver", "egl_devices": None, "cuda_devices": None})
@@ -468,7 +417,7 @@ class RunConfig(_OpenSection):
     @model_validator(mode="after")
     def _shm_is_local(self) -> RunConfig:
         executor = self.executor.name
-        if self.policy.get("serve") and self.policy.get("serve_transport") == "shm" and executor != "local":
+        if self.policy.serve and self.policy.serve_transport == "shm" and executor != "local":
             raise _problem(f"policy.serve_transport=shm needs executor=local (workers on the server's machine), "
                            f"not executor={executor}; use policy.serve_transport=websocket or auto")
         return self
@@ -488,42 +437,21 @@ class RunConfig(_OpenSection):
             raise RunConfigError(_lines(exc)) from None
 
     def plain(self) -> dict[str, Any]:
-        """The validated config as plain data (a fresh copy): what the run and its workers read."""
-        return copy.deepcopy(self.model_dump())
+        """The validated config as plain data (a fresh copy): what the run and its workers read, and
+        ``run.json`` keeps (``policy`` as given: its plugin's model fills in the rest)."""
+        return copy.deepcopy({**self.model_dump(), "policy": self.policy.given()})
 
 
 def section_keys(path: str) -> tuple[list[str], bool] | None:
     """The keys the schema knows at ``path`` (``""``: the top level) and whether it refuses
     others; ``None`` for a path inside an open section or a free-form map."""
-    model: type[BaseModel] = RunConfig
-    for part in [p for p in path.split(".") if p]:
-        field = model.model_fields.get(part)
-        if field is None or not (isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel)):
-            return None
-        model = field.annotation
-    return list(model.model_fields), model.model_config.get("extra") == "forbid"
+    model = section_model(RunConfig, path)
+    return None if model is None else (list(model.model_fields), model.model_config.get("extra") == "forbid")
 
 
 def _lines(exc: ValidationError) -> list[str]:
-    """One line per problem, each naming its key; unknown keys grouped per section."""
-    out: list[str] = []
-    unknown: dict[str, list[str]] = {}
-    for error in exc.errors():
-        key = ".".join(str(p) for p in error["loc"])
-        if error["type"] == "run_config":
-            out.extend(error["msg"].replace("{key}", key).splitlines())
-        elif error["type"] == "missing":
-            out.append(f"{key}: missing (it has no default)")
-        elif error["type"] == "extra_forbidden":
-            section, _, name = key.rpartition(".")
-            unknown.setdefault(section, []).append(name)
-        else:
-            msg = error["msg"]
-            out.append(f"{key}: {msg[:1].lower()}{msg[1:]}, got {error['input']!r}")
-    for section, names in unknown.items():
-        known = (section_keys(section) or ([], False))[0]
-        out.append(f"{section}: unknown keys {sorted(names)} (known: {', '.join(known)})")
-    return out
+    """One line per problem, each naming its key; a section's unknown keys in one line."""
+    return problem_lines(exc, RunConfig)
 
 
 def config_problems(cfg: Mapping[str, Any]) -> list[str]:

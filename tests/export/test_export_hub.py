@@ -11,6 +11,7 @@ import pytest
 from molmo_lerobot.export.hub import push_dataset
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 from molmo_lerobot.results import Push
+from molmo_lerobot.run_config import RunConfig
 
 CFG = {"benchmark": {"name": "synth_v1"}, "policy": {"name": "scripted"}, "timing": {"policy_dt_ms": 66.0},
        "hub": {"repo_id": "molmo-test/synth-rollouts", "private": True}, "push": True}
@@ -36,7 +37,7 @@ def _snapshot(root):
 def test_push_then_load_from_the_hub_gives_the_same_frames(hub, tmp_path):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     results = _record(tmp_path / "run", factory)
     pushed = factory.finalize(tmp_path / "run", results, S.summary_for(results))  # merges and pushes
     assert pushed == Push(repo_id=factory.repo_id, ok=True, error=None)
@@ -62,7 +63,7 @@ def test_failed_push_warns_and_keeps_local_files(tmp_path, monkeypatch, caplog):
     monkeypatch.setenv("HF_TOKEN", secret)
     monkeypatch.setattr(hfc, "ENDPOINT", "http://127.0.0.1:9")  # nothing listens on the discard port
     monkeypatch.setattr(hfc, "HF_HUB_OFFLINE", False)
-    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     out = tmp_path / "run"
     results = _record(out, factory)
     factory.push = False
@@ -79,7 +80,7 @@ def test_failed_push_warns_and_keeps_local_files(tmp_path, monkeypatch, caplog):
 def test_push_respects_private(hub, tmp_path, private):
     from huggingface_hub import HfApi
 
-    factory = LeRobotRecorderFactory.from_config({**CFG, "hub": {**CFG["hub"], "private": private}})
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of({**CFG, "hub": {**CFG["hub"], "private": private}}))
     results = _record(tmp_path / "run", factory)
     factory.finalize(tmp_path / "run", results, S.summary_for(results))
     assert HfApi().dataset_info(factory.repo_id).private is private
@@ -87,7 +88,7 @@ def test_push_respects_private(hub, tmp_path, private):
 
 def test_a_refused_commit_is_recorded_in_the_summary(hub, tmp_path):
     hub.fail_commits = 500
-    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     out = tmp_path / "run"
     results = _record(out, factory)
     pushed = factory.finalize(out, results, S.summary_for(results))

@@ -17,6 +17,7 @@ import pytest
 
 from molmo_lerobot.export.merge import read_eval_records
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
+from molmo_lerobot.run_config import RunConfig
 
 CFG = {"benchmark": {"name": "synth_v1"}, "policy": {"name": "scripted"},
        "timing": {"policy_dt_ms": 66.0}, "hub": {"repo_id": None, "private": False}, "push": False}
@@ -26,7 +27,7 @@ EVAL_FILES = ("meta/eval/episodes.jsonl", "meta/eval/info.json", "results.json",
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
-    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     a, b = factory.make("w0g0", out), factory.make("w1g0", out)
     results = [S.run_episode(a if i % 2 else b, i, 4 + i, success_from=2) for i in range(4)]
     a.close()

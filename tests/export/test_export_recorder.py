@@ -14,6 +14,7 @@ from molmo_lerobot.export.merge import EVAL_EPISODES, read_eval_records
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory, RecordConfigError
 from molmo_lerobot.export.shards import SHARDS_DIR, list_shards
 from molmo_lerobot.features import FeatureError
+from molmo_lerobot.run_config import RunConfig
 
 CFG = {"benchmark": {"name": "synth_v1"}, "policy": {"name": "scripted"},
        "timing": {"policy_dt_ms": 66.0}, "hub": {"repo_id": None, "private": False}, "push": False}
@@ -31,7 +32,7 @@ def two_worker_run(tmp_path_factory):
     import multiprocessing as mp
 
     out = tmp_path_factory.mktemp("run")
-    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     w0 = factory.make("w0g0", out)
     results = {
         0: S.run_episode(w0, 0, 10, success_from=5),
@@ -154,7 +155,7 @@ def test_resume_adds_new_shards_to_the_previous_dataset(two_worker_run, tmp_path
     out0, _, results, _, _ = two_worker_run
     out = tmp_path / "run"
     shutil.copytree(out0, out)
-    factory = LeRobotRecorderFactory.from_config(CFG)  # a new invocation: new session
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))  # a new invocation: new session
     w = factory.make("w0g0", out)  # same worker id as the first run: must not collide
     new = S.run_episode(w, 6, 6, success_from=0, reward=False)
     w.close()
@@ -167,7 +168,7 @@ def test_resume_adds_new_shards_to_the_previous_dataset(two_worker_run, tmp_path
 
 
 def test_reward_feature_when_the_task_defines_one(tmp_path):
-    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     w = factory.make("w0g0", tmp_path)
     r = S.run_episode(w, 0, 5, success_from=2, reward=True)
     w.close()
@@ -177,7 +178,7 @@ def test_reward_feature_when_the_task_defines_one(tmp_path):
 
 
 def test_all_errors_write_no_dataset(tmp_path):
-    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     w = factory.make("w0g0", tmp_path)
     r = S.run_episode(w, 0, 6, success_from=None, error="ValueError: bad action")
     w.close()
@@ -208,13 +209,13 @@ def test_frame_layout_rejects_mismatched_steps():
 ])
 def test_hub_settings_are_validated(hub, push, match):
     with pytest.raises(RecordConfigError, match=match):
-        LeRobotRecorderFactory.from_config({**CFG, "hub": hub, "push": push})
+        LeRobotRecorderFactory.from_config(RunConfig.of({**CFG, "hub": hub, "push": push}))
 
 
 def test_default_repo_id_and_pickling():
     import pickle
 
-    f = LeRobotRecorderFactory.from_config(CFG)
+    f = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     assert f.repo_id == "local/synth_v1-scripted" and f.fps == 15
     assert pickle.loads(pickle.dumps(f)) == f
 
@@ -223,7 +224,7 @@ def test_default_repo_id_and_pickling():
 def test_a_failed_save_leaves_the_shard_torn_and_never_merged(tmp_path, monkeypatch):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     factory.shard_episodes = 1  # episode 0's shard is finished before episode 1's save fails
     w = factory.make("w0g0", tmp_path)
     first = S.run_episode(w, 0, 5, success_from=1)
@@ -247,7 +248,7 @@ def test_a_failed_save_leaves_the_shard_torn_and_never_merged(tmp_path, monkeypa
 
 
 def test_shards_rotate_and_merge_in_order(tmp_path):
-    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     factory.shard_episodes = 2
     w = factory.make("w0g0", tmp_path)
     results = [S.run_episode(w, i, 4 + i, success_from=i) for i in range(5)]
@@ -260,7 +261,7 @@ def test_shards_rotate_and_merge_in_order(tmp_path):
 
 def test_an_episode_stored_twice_is_merged_once(tmp_path):
     """A finished shard holds episode 3, whose result never reached the supervisor; the rerun stores it again."""
-    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     a = factory.make("w0g0", tmp_path)
     r2 = S.run_episode(a, 2, 6, success_from=2)
     S.run_episode(a, 3, 5, success_from=None)  # first attempt: failure recorded in shard A
@@ -282,7 +283,7 @@ def _resume_storing_episode_2(two_worker_run, tmp_path):
     out0, _, results, _, _ = two_worker_run
     out = tmp_path / "run"
     shutil.copytree(out0, out)
-    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     w = factory.make("w0g0", out)
     redo = S.run_episode(w, 2, 5, success_from=1)
     w.close()
@@ -328,7 +329,7 @@ def test_a_merge_killed_between_the_swap_renames_is_completed_by_the_next(two_wo
     out0, _, results, _, _ = two_worker_run
     out = tmp_path / "run"
     shutil.copytree(out0, out)
-    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     w = factory.make("w0g0", out)
     redo = S.run_episode(w, 2, 5, success_from=1)  # the resume stores episode 2 (errored before)
     w.close()
@@ -346,7 +347,7 @@ def test_a_merge_killed_between_the_swap_renames_is_completed_by_the_next(two_wo
     monkeypatch.undo()
     assert not (out / "dataset").exists() and list(out.glob(".dataset-merge-*"))
 
-    again = LeRobotRecorderFactory.from_config(CFG)  # the next resume: a new session
+    again = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))  # the next resume: a new session
     again.finalize(out, everything, S.summary_for(everything))
     records = [r for r in read_eval_records(out / "dataset") if r["episode_index"] is not None]
     assert [r["benchmark_episode_index"] for r in records] == [0, 1, 2, 3, 4]
@@ -382,7 +383,7 @@ def _assert_stats_match(root, repo_id) -> dict:
 
 def test_merged_stats_are_lerobots_stats_of_the_merged_data(tmp_path):
     """3 episodes (245 frames, 3 tasks) from two workers' shards: the bookkeeping columns are re-indexed."""
-    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     w0, w1 = factory.make("w0g0", tmp_path), factory.make("w1g0", tmp_path)
     results = [S.run_episode(w0, 0, 80, success_from=70, prompt="pick up the mug"),
                S.run_episode(w1, 1, 85, success_from=None, prompt="pick up the bowl"),

@@ -15,6 +15,7 @@ from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 from molmo_lerobot.export.report import render_report, task_label, write_report
 from molmo_lerobot.export.wandb_log import log_run, metrics
 from molmo_lerobot.results import EpisodeResult
+from molmo_lerobot.run_config import RunConfig
 
 
 def _results():
@@ -42,7 +43,7 @@ def test_report_links_each_episode_to_its_dataset_video_segment(tmp_path):
     from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 
     cfg = {"benchmark": {"name": "synth_v1"}, "policy": {"name": "scripted"}, "timing": {"policy_dt_ms": 50.0}}
-    factory = LeRobotRecorderFactory.from_config(cfg)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(cfg))
     w = factory.make("w0g0", tmp_path)
     results = [S.run_episode(w, 0, 10, 4), S.run_episode(w, 1, 6, None, error="ValueError: x"),
                S.run_episode(w, 2, 20, 1)]

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
+from molmo_lerobot.run_config import RunConfig
 
 CFG = {"benchmark": {"name": "synth_v1"}, "policy": {"name": "scripted"},
        "timing": {"policy_dt_ms": 66.0}, "hub": {"repo_id": None, "private": False}, "push": False}
@@ -20,7 +21,7 @@ CFG = {"benchmark": {"name": "synth_v1"}, "policy": {"name": "scripted"},
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
-    factory = LeRobotRecorderFactory.from_config(CFG)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(CFG))
     w = factory.make("w0g0", out)
     results = [S.run_episode(w, i, 6, success_from=3) for i in range(2)]
     w.close()

@@ -12,7 +12,7 @@ import pytest
 from molmo_lerobot.config import compose
 from molmo_lerobot.export.merge import read_eval_records
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
-from molmo_lerobot.run_config import RunConfigError
+from molmo_lerobot.run_config import RunConfig, RunConfigError
 from molmo_lerobot.runner.evaluate import run_evaluation
 
 CFG = {"benchmark": {"name": "synth_v1"}, "policy": {"name": "scripted"},
@@ -30,7 +30,7 @@ def _episodes(root, repo_id):
 
 
 def test_an_experts_recording_ends_its_hold_after_the_first_success(tmp_path):
-    factory = LeRobotRecorderFactory.from_config({**CFG, "record_hold_steps": 2})
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of({**CFG, "record_hold_steps": 2}))
     w = factory.make("w0g0", tmp_path)
     results = [
         S.run_episode(w, 0, 12, success_from=3, expert=True),  # success at 3: steps 0..5 recorded
@@ -67,7 +67,7 @@ def test_an_experts_recording_ends_its_hold_after_the_first_success(tmp_path):
 
 
 def test_hold_null_records_the_whole_rollout(tmp_path):
-    factory = LeRobotRecorderFactory.from_config({**CFG, "record_hold_steps": None})
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of({**CFG, "record_hold_steps": None}))
     w = factory.make("w0g0", tmp_path)
     results = [S.run_episode(w, 0, 12, success_from=3, expert=True)]
     w.close()
@@ -78,9 +78,9 @@ def test_hold_null_records_the_whole_rollout(tmp_path):
 def test_an_experts_recording_keeps_record_min_frames(tmp_path):
     """The hold ends no recording before record_min_frames (lerobot-doctor's gate: no demonstration
     shorter than the policy's action chunk); the horizon still ends it."""
-    factory = LeRobotRecorderFactory.from_config({**CFG, "record_hold_steps": 2, "record_min_frames": 9})
-    assert LeRobotRecorderFactory.from_config({k: v for k, v in CFG.items() if k != "record_min_frames"}
-                                              ).min_frames == 100  # the default: ACT's and SmolVLA's chunk
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of({**CFG, "record_hold_steps": 2, "record_min_frames": 9}))
+    assert LeRobotRecorderFactory.from_config(RunConfig.of({k: v for k, v in CFG.items() if k != "record_min_frames"}
+                                              )).min_frames == 100  # the default: ACT's and SmolVLA's chunk
     w = factory.make("w0g0", tmp_path)
     results = [S.run_episode(w, 0, 12, success_from=3, expert=True),  # held to 9 frames, not 6
                S.run_episode(w, 1, 7, success_from=3, expert=True),  # the horizon (7) comes first
@@ -89,13 +89,13 @@ def test_an_experts_recording_keeps_record_min_frames(tmp_path):
     factory.finalize(tmp_path, results, S.summary_for(results))
     assert {e: n for e, (n, _, _) in _episodes(tmp_path / "dataset", factory.repo_id).items()} == {0: 9, 1: 7, 2: 11}
     with pytest.raises(RunConfigError, match="record_min_frames: expected a non-negative integer, got -1"):
-        LeRobotRecorderFactory.from_config({**CFG, "record_min_frames": -1})
+        LeRobotRecorderFactory.from_config(RunConfig.of({**CFG, "record_min_frames": -1}))
 
 
 @pytest.mark.parametrize("hold", [-1, True, 2.5, "10"])
 def test_record_hold_steps_is_validated(hold):
     with pytest.raises(RunConfigError, match="record_hold_steps: expected a non-negative integer or null"):
-        LeRobotRecorderFactory.from_config({**CFG, "record_hold_steps": hold})
+        LeRobotRecorderFactory.from_config(RunConfig.of({**CFG, "record_hold_steps": hold}))
 
 
 def _frozen_fraction(actions: np.ndarray) -> float:

@@ -12,6 +12,7 @@ from lerobot.policies.act.configuration_act import ACTConfig  # noqa: E402
 from lerobot.policies.act.modeling_act import ACTPolicy  # noqa: E402
 from lerobot.policies.factory import make_pre_post_processors  # noqa: E402
 
+from molmo_lerobot.options import OptionsError  # noqa: E402
 from molmo_lerobot.policies.base import EpisodeContext  # noqa: E402
 from molmo_lerobot.policies.lerobot_policy import (  # noqa: E402
     LeRobotPolicy,
@@ -140,8 +141,8 @@ def test_molmospaces_convention_state_and_gripper_units(tmp_path):
 def test_bad_config_names_field(act_dir):
     with pytest.raises(ValueError, match=r"policy.mode"):
         LeRobotPolicy({"name": "lerobot", "path": act_dir, "mode": "sometimes"})
-    with pytest.raises(FileNotFoundError, match="no such directory"):
-        LeRobotPolicy({"name": "lerobot", "path": "/nonexistent/ckpt"})
+    with pytest.raises(OptionsError, match=r"^policy.path='/nonexistent/ckpt': no such directory$"):
+        LeRobotPolicy({"name": "lerobot", "path": "/nonexistent/ckpt"})  # its options model checks the path
 
 
 def test_refuses_checkpoint_whose_weights_did_not_load(act_dir, tmp_path):

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from molmo_lerobot.errors import INFRASTRUCTURE, error_kind
-from molmo_lerobot.policies.base import Policy
+from molmo_lerobot.policies.base import Policy, PolicyOptions
 from molmo_lerobot.protocol import shm
 from molmo_lerobot.protocol.client import PolicyConnectionError, PolicyServerError
 from molmo_lerobot.protocol.codec import CodecError
@@ -276,11 +276,14 @@ def test_a_client_refuses_a_server_of_another_user_before_sending_anything():
 
 
 def test_serve_transport_auto_is_shm_for_the_local_executor_only():
-    assert serve_transport({"serve_transport": "auto"}, "local") == "shm"
-    assert serve_transport({}, "ray") == "websocket"
-    assert serve_transport({"serve_transport": "websocket"}, "local") == "websocket"
+    def policy(**keys):
+        return PolicyOptions(name="any", **keys)
+
+    assert serve_transport(policy(serve_transport="auto"), "local") == "shm"
+    assert serve_transport(policy(), "ray") == "websocket"
+    assert serve_transport(policy(serve_transport="websocket"), "local") == "websocket"
     with pytest.raises(ServeError, match="serve_transport=shm needs executor=local"):
-        serve_transport({"serve_transport": "shm"}, "ray")
+        serve_transport(policy(serve_transport="shm"), "ray")
 
 
 def test_clients_in_step_are_batched_as_over_websockets():

@@ -174,9 +174,9 @@ MODULE = textwrap.dedent('''
 
     @hookimpl
     def molmo_recorders(config):
-        if not config.get("trace_dir"):
+        if not getattr(config, "trace_dir", None):
             return []
-        return [TraceFactory(config["trace_dir"], bool(config.get("trace_fail_finalize")))]
+        return [TraceFactory(config.trace_dir, bool(getattr(config, "trace_fail_finalize", False)))]
 ''')
 
 POLICY_YAML = textwrap.dedent("""\

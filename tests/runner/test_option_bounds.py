@@ -55,7 +55,7 @@ def test_a_custom_object_must_be_an_mjcf_model(tmp_path):
 
 
 def test_plugin_checked_options_are_one_line_naming_the_key():
-    """The policy's own options (its ``PolicyType.check``), camera systems and task types need the plugins."""
+    """The policy's own options (its ``PolicyType.options`` model), camera systems and task types need the plugins."""
     from molmo_lerobot.context import RunContext
     from molmo_lerobot.run_config import RunConfig
     from molmo_lerobot.runner.evaluate import plugin_option_problems

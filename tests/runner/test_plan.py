@@ -45,7 +45,7 @@ class _Tag:
         if episode.house_index % 2:
             raise ValueError("odd house")
         return episode.model_copy(update={"language": episode.language.model_copy(
-            update={"task_description": config["tag"]})})
+            update={"task_description": config.tag})})
 
 
 def test_overrides_apply_before_seeding_and_a_failing_one_is_the_plans_error(bench, in_process_plugins):

@@ -42,7 +42,7 @@ class StepCounterFactory(RecorderFactory):
 class CounterPlugin:
     @hookimpl
     def molmo_recorders(self, config):
-        return [StepCounterFactory()] if config.get("count_steps") else []
+        return [StepCounterFactory()] if getattr(config, "count_steps", False) else []
 
 
 def test_plugin_recorder_sees_every_step(tmp_path, in_process_plugins, fork_servers):

@@ -47,7 +47,7 @@ def test_a_worker_loading_a_torch_policy_runs_it_with_the_cap(tmp_path):
         "from molmo_lerobot.runner.worker import EpisodeWorker, WorkerJob\n"
         f"cfg = RunConfig.of(compose(['policy=lerobot', 'policy.path={act}', 'policy.device=cpu', "
         "'worker_threads=1']))\n"
-        f"job = WorkerJob(config=cfg, policy=cfg.policy, output_dir={str(tmp_path)!r}, "
+        f"job = WorkerJob(config=cfg, policy=cfg.policy.given(), output_dir={str(tmp_path)!r}, "
         "benchmark_name='b', benchmark_sha256='0')\n"
         "EpisodeWorker(job, 'w0')\n"
         "import torch\nprint(torch.get_num_threads())")

@@ -105,4 +105,4 @@ def test_control_options_are_checked_up_front():
     assert config_problems({**base, "timing": {**timing, "sleep": "yes"}}) == [
         "timing: sleep must be true, false or null (the benchmark's scenes decide), got 'yes'"]
     assert config_problems({**base, "timing": {**timing, "mode": "hold"}}) == [
-        "timing: unknown keys ['mode'] (known: policy_dt_ms, ctrl_dt_ms, sim_dt_ms, control, sleep)"]
+        "timing.mode: unknown key (known: policy_dt_ms, ctrl_dt_ms, sim_dt_ms, control, sleep)"]

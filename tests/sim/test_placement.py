@@ -66,13 +66,14 @@ def test_base_size_per_episode_and_per_run():
     from molmo_lerobot.context import RunContext
     from molmo_lerobot.overrides import molmo_episode_overrides
 
-    def base_size(value):
-        return RunContext.build({"robot": {"base_size": value}})
+    def with_base_size(episode, value):
+        run = RunContext.build({"robot": {"base_size": value}})
+        return molmo_episode_overrides(episode, run.config, run)
 
-    spec = molmo_episode_overrides(ithor_pick(), base_size([0.3, 0.3, 0.2]))
+    spec = with_base_size(ithor_pick(), [0.3, 0.3, 0.2])
     assert spec.robot.model_extra["base_size"] == [0.3, 0.3, 0.2]
-    assert molmo_episode_overrides(ithor_pick(), base_size("default")) is None
-    none = molmo_episode_overrides(ithor_pick(base_size=[0.4, 0.4, 0.75]), base_size(None))
+    assert with_base_size(ithor_pick(), "default") is None
+    none = with_base_size(ithor_pick(base_size=[0.4, 0.4, 0.75]), None)
     model, data, _ = placed(none)
     assert data.xpos[model.body("robot_0/fr3_link0").id][2] == pytest.approx(0.07)
     assert "robot_0/base/pedestal" not in {model.geom(i).name for i in range(model.ngeom)}

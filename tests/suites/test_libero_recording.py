@@ -21,6 +21,7 @@ from molmo_lerobot.export.merge import read_eval_records
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 from molmo_lerobot.policies.base import Policy
 from molmo_lerobot.results import summarize
+from molmo_lerobot.run_config import RunConfig
 from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.suites.benchmark import SuiteSession, suite_plan
 from molmo_lerobot.suites.libero import LiberoEpisode, libero_venv
@@ -114,7 +115,7 @@ class Ramp(Policy):
 def test_a_suite_recording_has_lerobots_libero_layout_and_merges_with_theirs(tmp_path):
     config = compose(["policy=random", "benchmark=libero_object", "record=true", f"benchmark.image_size={SIZE}",
                       f"output_dir={tmp_path / 'run'}"])
-    factory = LeRobotRecorderFactory.from_config(config)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(config))
     out = tmp_path / "run"
     recorder = factory.make("w0", out)
     episodes = [LiberoEpisode("libero_object", 0, 0, 0, 6, "pick up the soup and place it in the basket"),

@@ -17,6 +17,7 @@ from molmo_lerobot.export.merge import read_eval_records
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 from molmo_lerobot.policies.base import Policy
 from molmo_lerobot.results import summarize
+from molmo_lerobot.run_config import RunConfig
 from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.suites import pusht
 from molmo_lerobot.suites.benchmark import SuiteSession, suite_plan
@@ -90,7 +91,7 @@ def test_a_pusht_recording_has_lerobots_pusht_layout_and_merges_with_theirs(tmp_
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     config = compose(["policy=random", "benchmark=pusht", "record=true", "horizon=5", f"output_dir={tmp_path / 'run'}"])
-    factory = LeRobotRecorderFactory.from_config(config)
+    factory = LeRobotRecorderFactory.from_config(RunConfig.of(config))
     out = tmp_path / "run"
     recorder = factory.make("w0", out)
     suite = PushTSuite()

@@ -80,9 +80,8 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
         run = RunContext.build(compose(overrides))
-        policy_cfg: dict[str, Any] = run.config.policy
-        name = policy_cfg.get("name")
-        server = build_server(run.plugins, policy_cfg, **options)
+        name = run.config.policy.name
+        server = build_server(run.plugins, run.config.policy.given(), **options)
     except (ConfigError, LookupError, ValueError, FileNotFoundError, ImportError) as exc:  # PluginError, AssetError
         print(f"molmo-serve: {exc}", file=sys.stderr)
         return 2

@@ -9,14 +9,15 @@ from molmo_lerobot import hookimpl
 
 if TYPE_CHECKING:
     from molmo_lerobot.dataset_layout import DatasetLayout
+    from molmo_lerobot.run_config import RunConfig
 
 
 @hookimpl
-def molmo_recorders(config: dict[str, Any], dataset_layout: DatasetLayout | None) -> list[Any]:
+def molmo_recorders(config: RunConfig, dataset_layout: DatasetLayout | None) -> list[Any]:
     from molmo_lerobot.export.glance import GlanceRecorderFactory
 
     factories: list[Any] = [GlanceRecorderFactory()]
-    if config.get("record"):
+    if config.record:
         from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 
         factories.append(LeRobotRecorderFactory.from_config(config, dataset_layout))

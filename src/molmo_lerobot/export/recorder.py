@@ -86,14 +86,11 @@ class LeRobotRecorderFactory(MergedDataset, RecorderFactory):
     min_frames: int = RunConfig.model_fields["record_min_frames"].default
 
     @classmethod
-    def from_config(cls, cfg: RunConfig | dict[str, Any],
-                    layout: DatasetLayout | None = None) -> LeRobotRecorderFactory:
-        """Build from the run config (``record``, ``push``, ``hub``, ``video``, ``timing`` …), validated
-        first (:meth:`RunConfig.of <molmo_lerobot.run_config.RunConfig.of>`: the missing keys take its defaults);
-        ``layout``: the fixed schema the run's benchmark kind records in (an env suite's datasets'), None: each
-        recording's first step decides it."""
-        run = RunConfig.of(cfg)
-        bench, policy = run.benchmark.name, str(run.policy["name"])
+    def from_config(cls, run: RunConfig, layout: DatasetLayout | None = None) -> LeRobotRecorderFactory:
+        """Build from the run config (``record``, ``push``, ``hub``, ``video``, ``timing`` …); ``layout``: the fixed
+        schema the run's benchmark kind records in (an env suite's datasets'), None: each recording's first step
+        decides it."""
+        bench, policy = run.benchmark.name, run.policy.name
         repo_id = run.hub.repo_id
         dataset_id, store_root, remote = _store_target(run)
         if run.push and not repo_id and dataset_id is None:

@@ -40,13 +40,15 @@ into a per-episode error that names the policy, the move group and what was wron
 
 from __future__ import annotations
 
-import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Annotated, Any, Literal, Protocol
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict
+
+from molmo_lerobot.options import is_int, is_number, optional, rule
 
 if TYPE_CHECKING:
     from molmo_lerobot.assets.catalog import AssetCatalog
@@ -55,6 +57,8 @@ if TYPE_CHECKING:
 
 Observation = dict[str, Any]
 Action = dict[str, np.ndarray]
+#: the observation and action layouts a policy may work in (:mod:`molmo_lerobot.policies.convention`)
+ConventionName = Literal["native", "molmospaces"]
 
 
 class PlannedEpisode(Protocol):
@@ -146,13 +150,67 @@ class Policy(ABC):
         raise NotImplementedError(f"{cls.__name__} has no batched act")
 
 
+#: Bounds of the serving keys every policy has (``policy.serve*``)
+MAX_SERVE_BATCH = 4096
+MAX_SERVE_BATCH_TIMEOUT_MS = 60_000
+SERVE_TRANSPORTS = ("auto", "shm", "websocket")
+#: Most action steps one chunk may hold (``policy.chunk``): past it a chunk allocates gigabytes.
+MAX_CHUNK = 10_000
+
+
+class PolicyOptions(BaseModel):
+    """A policy's options: the ``policy`` config group (``conf/policy/<name>.yaml``, ``policy.<key>=``).
+
+    The keys every policy shares are here; a policy plugin subclasses it with its own
+    (:attr:`PolicyType.options`), each default stated once, in the model (a yaml may repeat it, never
+    differ: ``tests/policies/test_policy_options.py``). Unknown keys are refused unless the subclass
+    allows them (``model_config = ConfigDict(extra="allow")``). The run validates its ``policy`` group
+    with the model before any output is written; the factory gets the result as a plain dict.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    #: the plugin (``policy=<name>``)
+    name: Annotated[str, rule(lambda v: isinstance(v, str) and v != "",
+                              "{key}: expected the policy's name (policy=<name>), got {got}")]
+    #: native | molmospaces: the observation and action layout the policy works in (policies.convention)
+    convention: ConventionName = "native"
+    #: where the policy's model runs (auto | cpu | cuda | cuda:N | mps); null: it has none (the
+    #: worker places a policy that says auto or cuda on one of ``executor.cuda_devices``)
+    device: str | None = None
+    #: one local molmo-serve for the run (executor=ray: one per node), the workers its clients
+    serve: Annotated[bool, rule(lambda v: isinstance(v, bool), "{key}: expected true or false, got {got}")] = False
+    #: with serve: requests per batched forward (null: the number of workers)
+    serve_max_batch: Annotated[int | None, rule(
+        optional(lambda v: is_int(v) and 1 <= v <= MAX_SERVE_BATCH),
+        f"{{key}}: expected an integer in 1..{MAX_SERVE_BATCH} (or null: the number of workers), got {{got}}")] = None
+    #: with serve: the longest a request waits for due clients to join its batch
+    serve_batch_timeout_ms: Annotated[int | float, rule(
+        lambda v: is_number(v) and 0 <= v <= MAX_SERVE_BATCH_TIMEOUT_MS,
+        f"{{key}}: expected milliseconds in 0..{MAX_SERVE_BATCH_TIMEOUT_MS}, got {{got}}")] = 50
+    #: with serve: auto (shm for executor=local on Linux, else websocket) | shm | websocket
+    serve_transport: Annotated[str, rule(lambda v: v in SERVE_TRANSPORTS,
+                                         f"{{key}}: expected one of {', '.join(SERVE_TRANSPORTS)}, got {{got}}"),
+                               ] = "auto"
+
+    def given(self) -> dict[str, Any]:
+        """The keys the config gave, as given (what ``run.json`` stores; defaults left out)."""
+        return self.model_dump(exclude_unset=True)
+
+
+class OpenPolicyOptions(PolicyOptions):
+    """The options of a policy whose plugin declares no model: the shared keys checked, its own kept as given."""
+
+    model_config = ConfigDict(extra="allow")
+
+
 @dataclass(frozen=True)
 class PolicyType:
     """A policy plugin's descriptor.
 
-    ``factory(config)`` builds a :class:`Policy` from the resolved ``policy`` config group
-    (a plain dict). It runs inside each worker process, so it must be picklable by name
-    (a module-level function or class).
+    ``factory(config)`` builds a :class:`Policy` from the run's ``policy`` config group validated by
+    :attr:`options`, as a plain dict (every key of the model, defaults filled in). It runs inside each
+    worker process, so it must be picklable by name (a module-level function or class).
     """
 
     name: str
@@ -167,26 +225,6 @@ class PolicyType:
     #: Modules its policies import when built (lazily, past the factory's own module): a worker's
     #: fork server imports them once for every worker (``executor.start_method=forkserver``).
     preload: tuple[str, ...] = ()
-    #: ``check(config)``: the ``policy`` config's problems, one line each naming its key
-    #: (``policy.chunk: ...``), checked before any run directory is made; ``None``: none checked
-    #: up front (the factory checks its config when a worker builds the policy).
-    check: Callable[[dict[str, Any]], list[str]] | None = None
-
-
-#: Most action steps one chunk may hold (``policy.chunk``): past it a chunk allocates gigabytes.
-MAX_CHUNK = 10_000
-
-
-def option_problems(config: dict[str, Any], bounds: dict[str, tuple[float, float, bool]]) -> list[str]:
-    """Problems of ``config``'s numeric options: ``bounds`` maps a key to ``(low, high, integer)``;
-    an absent key takes the policy's default and is not checked."""
-    out = []
-    for key, (low, high, integer) in bounds.items():
-        if key not in config:
-            continue
-        value = config[key]
-        kind = "an integer" if integer else "a number"
-        ok = (isinstance(value, int) if integer else isinstance(value, int | float)) and not isinstance(value, bool)
-        if not (ok and math.isfinite(value) and low <= value <= high):
-            out.append(f"policy.{key}: expected {kind} in {low:g}..{high:g}, got {value!r}")
-    return out
+    #: The model of its options (the ``policy`` group), checked before any run directory is made;
+    #: the default keeps any key of its own as given.
+    options: type[PolicyOptions] = OpenPolicyOptions

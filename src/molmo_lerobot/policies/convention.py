@@ -26,14 +26,13 @@ vector, ``policy=pi0`` (molmo-pi0) for the DROID request; any other policy plugi
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
+from molmo_lerobot.policies.base import Action, ConventionName, EpisodeContext, Observation, Policy
 
-ConventionName = Literal["native", "molmospaces"]
 #: MolmoSpaces' gripper actuator command for fully closed (0 is open)
 GRIPPER_CLOSED_CMD = 255.0
 

@@ -3,6 +3,7 @@ script played as smooth joint-space moves (:class:`PhasedExpert`)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from functools import cache
 from typing import Any
 
@@ -10,7 +11,9 @@ import mink
 import mujoco
 import numpy as np
 
+from molmo_lerobot.options import validate_group
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
+from molmo_lerobot.policies.expert_options import ScriptedOptions
 from molmo_lerobot.poses import frame_matrix
 
 #: largest per-step change of a joint target in contact (rad): the Panda/FR3 shoulder actuators' force
@@ -98,17 +101,14 @@ def _min_jerk(n: int) -> np.ndarray:
 
 class PhasedExpert(Policy):
     """Base of the scripted experts: a list of phases, each planned into queued joint targets
-    when the queue runs dry, played out in chunks. Config: ``chunk`` (steps per action chunk),
-    ``speed`` (rad/s)."""
+    when the queue runs dry, played out in chunks (:class:`ScriptedOptions`: ``chunk``, ``speed``)."""
 
     needs_images = False
     needs_simulator = True
 
-    def __init__(self, config: dict[str, Any]) -> None:
-        self.chunk = int(config.get("chunk", 12))
-        self.speed = float(config.get("speed", 1.0))
-        if self.chunk < 1 or self.speed <= 0:
-            raise ValueError("scripted policy: chunk must be >= 1 and speed > 0")
+    def __init__(self, config: Mapping[str, Any]) -> None:
+        options = validate_group("policy", ScriptedOptions, config)
+        self.chunk, self.speed = options.chunk, float(options.speed)
 
     def _start(self, ctx: EpisodeContext, phases: list[str]) -> Any:
         """Per-episode state every script shares; returns the (privileged) environment."""

@@ -39,10 +39,10 @@ from collections import deque
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BeforeValidator, Field
 
 from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.features import (
@@ -56,8 +56,10 @@ from molmo_lerobot.features import (
     split,
 )
 from molmo_lerobot.hookspecs import hookimpl
-from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
-from molmo_lerobot.policies.convention import ConventionName, get_convention
+from molmo_lerobot.options import problem as options_problem
+from molmo_lerobot.options import validate_group
+from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyOptions, PolicyType
+from molmo_lerobot.policies.convention import get_convention
 from molmo_lerobot.policies.image_ops import resize_with_pad
 
 
@@ -65,13 +67,19 @@ class WeightsNotLoadedError(MolmoError, RuntimeError):
     """A checkpoint's weights are not the ones in the model (missing, renamed or random)."""
 
 
-class LeRobotPolicyConfig(BaseModel):
-    """The ``policy`` config group for ``policy=lerobot`` (see conf/policy/lerobot.yaml)."""
+def _checkpoint_path(path: Any) -> Any:
+    problem = path_problem(path)
+    if problem:
+        raise options_problem(problem)
+    return path
 
-    model_config = ConfigDict(extra="forbid")
+
+class LeRobotOptions(PolicyOptions):
+    """``policy=lerobot``'s options (conf/policy/lerobot.yaml documents them)."""
 
     name: str = "lerobot"
-    path: str
+    #: local directory or Hub repo id (save_pretrained layout); no default: every run names its checkpoint
+    path: Annotated[str, BeforeValidator(_checkpoint_path)] = Field(default=None, validate_default=True)
     device: str = "auto"
     mode: Literal["step", "chunk"] = "step"
     n_action_steps: int | None = Field(default=None, ge=1)
@@ -83,21 +91,6 @@ class LeRobotPolicyConfig(BaseModel):
     resize: Literal["none", "pad", "stretch"] = "none"
     verify_weights: bool = True
     max_unmatched_fraction: float = Field(default=0.01, ge=0.0, le=1.0)
-    serve: bool = False
-    serve_max_batch: int | None = Field(default=None, ge=1)
-    serve_batch_timeout_ms: float = Field(default=50.0, ge=0)
-    serve_transport: Literal["auto", "shm", "websocket"] = "auto"
-    convention: ConventionName = "native"
-
-
-def parse_config(cfg: dict[str, Any], model: type[BaseModel] = LeRobotPolicyConfig) -> Any:
-    """Validate a policy config dict; errors become one line naming the field."""
-    try:
-        return model.model_validate(cfg)
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        where = ".".join(str(p) for p in err["loc"]) or "policy"
-        raise ValueError(f"policy config {cfg.get('name', '?')!r}: policy.{where}: {err['msg']}") from None
 
 
 def pick_device(requested: str) -> str:
@@ -195,8 +188,8 @@ class LeRobotPolicy(Policy):
     :data:`BATCHABLE_TYPES`, without ACT's temporal ensembling).
     """
 
-    def __init__(self, cfg: dict[str, Any]) -> None:
-        self.cfg: LeRobotPolicyConfig = parse_config(cfg)
+    def __init__(self, cfg: Mapping[str, Any]) -> None:
+        self.cfg = validate_group("policy", LeRobotOptions, cfg)
         self.convention = get_convention(self.cfg.convention)
         self.device = pick_device(self.cfg.device)
         self.policy, self.preprocessor, self.postprocessor = self._load()
@@ -220,9 +213,6 @@ class LeRobotPolicy(Policy):
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
         path = self.cfg.path
-        problem = path_problem(path)
-        if problem:
-            raise FileNotFoundError(problem)
         try:
             with _temporary_files_removed():
                 config = PreTrainedConfig.from_pretrained(path)
@@ -425,10 +415,6 @@ def _stretch(img: np.ndarray, h: int, w: int) -> np.ndarray:
     return cv2.resize(np.ascontiguousarray(img, dtype=np.uint8), (w, h), interpolation=cv2.INTER_AREA)
 
 
-def make_lerobot_policy(cfg: dict[str, Any]) -> Policy:
-    return LeRobotPolicy(cfg)
-
-
 #: the policy config file of a LeRobot ``save_pretrained`` directory
 CONFIG_NAME = "config.json"
 
@@ -462,14 +448,7 @@ def path_problem(path: Any) -> str | None:
     return None
 
 
-def lerobot_config_problems(cfg: dict[str, Any]) -> list[str]:
-    """``policy=lerobot``'s problems that show before any run directory: its ``policy.path``."""
-    problem = path_problem(cfg.get("path"))
-    return [problem] if problem else []
-
-
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
-    return [PolicyType("lerobot", make_lerobot_policy, "any LeRobot pretrained policy (policy.path=…)",
-                       conventions=True, preload=("torch", "lerobot.policies.factory"),
-                       check=lerobot_config_problems)]
+    return [PolicyType("lerobot", LeRobotPolicy, "any LeRobot pretrained policy (policy.path=…)",
+                       conventions=True, preload=("torch", "lerobot.policies.factory"), options=LeRobotOptions)]

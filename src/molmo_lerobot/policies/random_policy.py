@@ -11,32 +11,42 @@ from that box. Draws come from a generator seeded by the episode seed, so episod
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Mapping
+from typing import Annotated, Any
 
 import numpy as np
 
 from molmo_lerobot import hookimpl
+from molmo_lerobot.options import bounded, validate_group
 from molmo_lerobot.policies.base import (
     MAX_CHUNK,
     Action,
     EpisodeContext,
     Observation,
     Policy,
+    PolicyOptions,
     PolicyType,
-    option_problems,
 )
 
 
+class RandomOptions(PolicyOptions):
+    """``policy=random``'s options."""
+
+    name: str = "random"
+    #: radians per joint around the current pose (at most a half turn); a delta group's bound
+    scale: Annotated[int | float, bounded(0.0, math.pi, integer=False)] = 0.15
+    #: policy steps per action chunk
+    chunk: Annotated[int, bounded(1, MAX_CHUNK, integer=True)] = 8
+
+
 class RandomPolicy(Policy):
-    """Random joint targets near the current pose and a random gripper. Config: ``scale``, ``chunk``."""
+    """Random joint targets near the current pose and a random gripper (:class:`RandomOptions`)."""
 
     needs_images = False
 
-    def __init__(self, config: dict[str, Any]) -> None:
-        self.scale = float(config.get("scale", 0.15))
-        self.chunk = int(config.get("chunk", 8))
-        if self.scale < 0 or self.chunk < 1:
-            raise ValueError("random policy: scale must be >= 0 and chunk >= 1")
+    def __init__(self, config: Mapping[str, Any]) -> None:
+        options = validate_group("policy", RandomOptions, config)
+        self.scale, self.chunk = float(options.scale), options.chunk
         self.rng = np.random.default_rng(0)
         self.move_groups: dict[str, int] = {}
         self.delta_groups: frozenset[str] = frozenset()
@@ -63,16 +73,7 @@ class RandomPolicy(Policy):
         return out
 
 
-def make_random(config: dict[str, Any]) -> RandomPolicy:
-    return RandomPolicy(config)
-
-
-def random_config_problems(config: dict[str, Any]) -> list[str]:
-    """``scale`` (radians per joint, at most a half turn) and ``chunk`` bounded."""
-    return option_problems(config, {"scale": (0.0, math.pi, False), "chunk": (1, MAX_CHUNK, True)})
-
-
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
-    return [PolicyType(name="random", factory=make_random, description="random joint targets near the current pose",
-                       check=random_config_problems)]
+    return [PolicyType(name="random", factory=RandomPolicy, description="random joint targets near the current pose",
+                       options=RandomOptions)]

@@ -15,22 +15,21 @@ server on this machine over shared memory instead (:mod:`molmo_lerobot.protocol.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from molmo_lerobot.hookspecs import hookimpl
-from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
-from molmo_lerobot.policies.convention import ConventionName, get_convention
-from molmo_lerobot.policies.lerobot_policy import parse_config
+from molmo_lerobot.options import validate_group
+from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyOptions, PolicyType
+from molmo_lerobot.policies.convention import get_convention
 from molmo_lerobot.protocol.client import PolicyClient, PolicyConnectionError
 from molmo_lerobot.protocol.shm import ShmPolicyClient
 
 
-class RemotePolicyConfig(BaseModel):
-    """The ``policy`` group for ``policy=remote`` (see conf/policy/remote.yaml)."""
-
-    model_config = ConfigDict(extra="forbid")
+class RemoteOptions(PolicyOptions):
+    """``policy=remote``'s options (conf/policy/remote.yaml documents them)."""
 
     name: str = "remote"
     host: str = "127.0.0.1"
@@ -39,7 +38,6 @@ class RemotePolicyConfig(BaseModel):
     timeout_s: float = Field(default=120.0, gt=0)
     connect_timeout_s: float = Field(default=60.0, ge=0)
     max_message_bytes: int = Field(default=64 * 2**20, ge=1024)
-    convention: ConventionName = "native"
     transport: Literal["websocket", "shm"] = "websocket"
     socket: str | None = None  # with transport=shm: the server's socket address (@name: abstract)
 
@@ -47,8 +45,8 @@ class RemotePolicyConfig(BaseModel):
 class RemotePolicy(Policy):
     """One connection per instance (= per worker), opened at construction to read the metadata."""
 
-    def __init__(self, cfg: dict[str, Any]) -> None:
-        self.cfg: RemotePolicyConfig = parse_config(cfg, RemotePolicyConfig)
+    def __init__(self, cfg: Mapping[str, Any]) -> None:
+        self.cfg = validate_group("policy", RemoteOptions, cfg)
         self.convention = get_convention(self.cfg.convention)
         self.client: PolicyClient | ShmPolicyClient
         if self.cfg.transport == "shm":
@@ -95,4 +93,4 @@ class RemotePolicy(Policy):
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
     return [PolicyType("remote", RemotePolicy, "any policy served by molmo-serve (policy.host=… policy.port=…)",
-                       conventions=True)]
+                       conventions=True, options=RemoteOptions)]

@@ -8,14 +8,27 @@ dataset's actions, or the same actions through ``molmo-eval`` and the Gymnasium 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import Field
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.features import split
-from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
+from molmo_lerobot.options import rule, validate_group
+from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyOptions, PolicyType
+
+
+class ReplayOptions(PolicyOptions):
+    """``policy=replay``'s options."""
+
+    name: str = "replay"
+    #: the .npy file of shape (T, n) played row by row (no default: every run names its own)
+    actions: Annotated[str, rule(lambda v: isinstance(v, str) and v != "",
+                                 "{key}: missing; give policy.actions=<file.npy> (an array of shape (T, n))")
+                       ] = Field(default=None, validate_default=True)
 
 
 class ReplayPolicy(Policy):
@@ -23,10 +36,8 @@ class ReplayPolicy(Policy):
 
     needs_images = False
 
-    def __init__(self, config: dict[str, Any]) -> None:
-        path = config.get("actions")
-        if not path:
-            raise ValueError("policy=replay needs policy.actions=<file.npy> (an array of shape (T, n))")
+    def __init__(self, config: Mapping[str, Any]) -> None:
+        path = validate_group("policy", ReplayOptions, config).actions
         try:
             actions = np.load(Path(path).expanduser(), allow_pickle=False)
         except (OSError, ValueError) as exc:
@@ -50,10 +61,7 @@ class ReplayPolicy(Policy):
         return split(row, self.move_groups)
 
 
-def make_replay(config: dict[str, Any]) -> ReplayPolicy:
-    return ReplayPolicy(config)
-
-
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
-    return [PolicyType(name="replay", factory=make_replay, description="a fixed action sequence (policy.actions=…)")]
+    return [PolicyType(name="replay", factory=ReplayPolicy, description="a fixed action sequence (policy.actions=…)",
+                       options=ReplayOptions)]

@@ -6,18 +6,13 @@ what they share is in :mod:`.expert_motion`.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.policies.base import (
-    MAX_CHUNK,
-    Action,
-    EpisodeContext,
-    Observation,
-    Policy,
-    PolicyType,
-    option_problems,
-)
+from molmo_lerobot.options import validate_group
+from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
+from molmo_lerobot.policies.expert_options import ScriptedOptions
 from molmo_lerobot.policies.scripted_articulated import ScriptedArticulated
 from molmo_lerobot.policies.scripted_pick import ScriptedPick
 from molmo_lerobot.policies.scripted_place import ScriptedPlace
@@ -33,8 +28,8 @@ class ScriptedExpert(Policy):
     needs_images = False
     needs_simulator = True
 
-    def __init__(self, config: dict[str, Any]) -> None:
-        self.config = config
+    def __init__(self, config: Mapping[str, Any]) -> None:
+        self.config = validate_group("policy", ScriptedOptions, config).model_dump()  # what each expert gets
         self.experts: dict[str, Policy] = {}
         self.current: Policy | None = None
 
@@ -68,13 +63,8 @@ def molmo_experts() -> list[PolicyType]:
                        description="grasp the handle, move it along the joint")]
 
 
-def scripted_config_problems(config: dict[str, Any]) -> list[str]:
-    """The experts' ``chunk`` (steps per action chunk) and ``speed`` (rad/s) bounded."""
-    return option_problems(config, {"chunk": (1, MAX_CHUNK, True), "speed": (1e-3, 100.0, False)})
-
-
 @hookimpl
 def molmo_policies() -> list[PolicyType]:
     return [PolicyType(name="scripted", factory=ScriptedExpert,
                        description="privileged expert of each episode's task type (IK + grasp library)",
-                       check=scripted_config_problems)]
+                       options=ScriptedOptions)]

@@ -14,13 +14,16 @@ gripper hold their start targets. The whole trajectory is planned at reset and p
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.benchmark.task_specs import NavToObjTaskSpec
+from molmo_lerobot.options import validate_group
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
+from molmo_lerobot.policies.expert_options import ScriptedOptions
 from molmo_lerobot.sim.navigation import Grid, descend, free_space, geom_boxes, occupancy, path_lengths
 from molmo_lerobot.tasks.nav_to_obj import candidate_names
 
@@ -45,15 +48,13 @@ def footprint_radius(env: Any) -> float:
 
 
 class ScriptedNav(Policy):
-    """Nav expert: see the module docstring. Config: ``chunk`` (steps per action chunk)."""
+    """Nav expert: see the module docstring (:class:`ScriptedOptions`: ``chunk``)."""
 
     needs_images = False
     needs_simulator = True
 
-    def __init__(self, config: dict[str, Any]) -> None:
-        self.chunk = int(config.get("chunk", 12))
-        if self.chunk < 1:
-            raise ValueError("scripted policy: chunk must be >= 1")
+    def __init__(self, config: Mapping[str, Any]) -> None:
+        self.chunk = validate_group("policy", ScriptedOptions, config).chunk
         self.plan: list[np.ndarray] = []
         self.step = 0
 

@@ -35,7 +35,9 @@ from molmo_lerobot.context import RunContext
 from molmo_lerobot.episode_plan import EpisodePlan
 from molmo_lerobot.errors import ExportError, InfrastructureError, RunError
 from molmo_lerobot.molmospaces.settings import SettingsError
+from molmo_lerobot.options import OptionsError
 from molmo_lerobot.plugins import PluginError, Plugins
+from molmo_lerobot.policies.factory import policy_options
 from molmo_lerobot.results import EpisodeResult, RunSummary, summarize
 from molmo_lerobot.run_config import RunConfig
 from molmo_lerobot.runner.finalizers import finalize_run, run_finalizers
@@ -106,10 +108,13 @@ def safe_name(name: str) -> str:
 
 def plugin_option_problems(run: RunContext) -> list[str]:
     """The run options only the installed plugins can check, one line each naming its key: the
-    policy's own options (its ``PolicyType.check``), ``camera.system``, ``robot.name``, ``horizons.<task type>``."""
+    policy's own options (its ``PolicyType.options``), ``camera.system``, ``robot.name``, ``horizons.<task type>``."""
     config = run.config
-    policy = run.plugins.policy(str(config.policy["name"]))
-    out = list(policy.check(config.policy)) if policy.check is not None else []
+    try:
+        policy_options(run.plugins, config.policy.given())
+        out = []
+    except OptionsError as exc:
+        out = exc.problems
     for key, kind, name in (("camera.system", "camera", config.camera.system), ("robot.name", "robot",
                                                                                config.robot.name)):
         if name is not None:
@@ -159,13 +164,13 @@ def run_evaluation(config: RunConfig | DictConfig | dict[str, Any], fork_servers
         run = RunContext.build(config)
     except (SettingsError, AssetError, GraspError) as exc:
         raise RunError(f"cannot set up MolmoSpaces data: {exc}") from None
-    policy_name = str(config.policy["name"])
+    policy_name = config.policy.name
     problems = plugin_option_problems(run)  # unknown or broken policy plugin: fail before any work
     if problems:
         raise RunError("\n".join(problems))
     kind = _kind(run)  # the benchmark's kind, its options and what it cannot do checked before any work
     # e.g. a bad hub.repo_id fails here, before any output
-    recorders = run.plugins.recorder_factories(config.plain(), kind.recording_layout(config))
+    recorders = run.plugins.recorder_factories(config, kind.recording_layout(config))
     executor = _make_executor(config, run.plugins, fork_servers)
     try:
         bench, run = kind.load(run)
@@ -294,7 +299,7 @@ def _run_plans(config: RunConfig, run: RunContext, bench: BenchmarkEpisodes, pla
     ``episodes.jsonl`` as it comes; ``results`` (those done before a resume) gains every episode,
     ``startups`` each worker's start-up breakdown."""
     todo = [p for p in plans.values() if p.error is None and p.episode_index not in results]
-    progress = Progress(len(plans), len(results), f"{bench.name} · {config.policy['name']}", run_dir.path,
+    progress = Progress(len(plans), len(results), f"{bench.name} · {config.policy.name}", run_dir.path,
                         enabled=config.progress, heartbeat_s=float(config.progress_interval_s or 30.0))
     progress.success = sum(r.success for r in results.values())
     progress.errors = sum(r.error is not None for r in results.values())

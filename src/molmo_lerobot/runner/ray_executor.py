@@ -265,7 +265,7 @@ class RayExecutor(Supervisor):
         one server per node (``serve_stats.json`` by node) and each actor routed to its own node's."""
         options = serve_options(config.policy, workers)
         if options is None:
-            yield config.policy
+            yield config.policy.given()
             return
         t = self.transport
         with t.held(workers), node_servers(config, options, threads, output_dir, t.num_cpus_per_worker,

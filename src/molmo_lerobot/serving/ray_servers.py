@@ -55,7 +55,7 @@ class PolicyServerActor:
         self.error: str | None = None
         cap_threads(threads)
         try:
-            server = build_server(RunContext.build(config).plugins, config.policy, host="127.0.0.1", port=0,
+            server = build_server(RunContext.build(config).plugins, config.policy.given(), host="127.0.0.1", port=0,
                                   **options)
             self.server = self._stack.enter_context(serve_in_thread(server, start_timeout_s))
         except Exception as exc:  # reported by address(): the run fails with this line

@@ -30,9 +30,9 @@ from molmo_lerobot.cpu_threads import cap_threads
 from molmo_lerobot.errors import MolmoError
 from molmo_lerobot.fileio import atomic_write
 from molmo_lerobot.protocol import shm
-from molmo_lerobot.run_config import SERVE_DEFAULTS
 
 if TYPE_CHECKING:
+    from molmo_lerobot.policies.base import PolicyOptions
     from molmo_lerobot.run_config import RunConfig
 
 STATS_FILE = "serve_stats.json"
@@ -44,9 +44,9 @@ class ServeError(MolmoError, RuntimeError):
     """The run's policy server could not start."""
 
 
-def serve_transport(policy_cfg: dict[str, Any], executor: str) -> str:
+def serve_transport(policy: PolicyOptions, executor: str) -> str:
     """``shm`` or ``websocket``: ``policy.serve_transport``, ``auto`` resolved for ``executor``."""
-    requested = {**SERVE_DEFAULTS, **policy_cfg}["serve_transport"]
+    requested = policy.serve_transport
     if requested == "websocket":
         return requested
     if requested == "shm" and executor != "local":
@@ -60,13 +60,12 @@ def serve_transport(policy_cfg: dict[str, Any], executor: str) -> str:
     return "shm" if executor == "local" and shm.available() else "websocket"
 
 
-def serve_options(policy_cfg: dict[str, Any], workers: int) -> dict[str, Any] | None:
-    """Server options when ``policy_cfg`` asks to be served for the run, else None."""
-    serve = {**SERVE_DEFAULTS, **policy_cfg}
-    if not serve["serve"]:
+def serve_options(policy: PolicyOptions, workers: int) -> dict[str, Any] | None:
+    """Server options when ``policy`` asks to be served for the run, else None."""
+    if not policy.serve:
         return None
-    return {"max_batch": int(serve["serve_max_batch"] or workers),
-            "batch_timeout_ms": float(serve["serve_batch_timeout_ms"]),
+    return {"max_batch": int(policy.serve_max_batch or workers),
+            "batch_timeout_ms": float(policy.serve_batch_timeout_ms),
             "max_clients": max(8, workers + 2), "first_request_timeout_s": 600.0, "idle_timeout_s": 3600.0}
 
 
@@ -82,7 +81,7 @@ def _serve(config: RunConfig, transport: str, options: dict[str, Any], threads: 
     cap_threads(threads)  # as many as each in-process worker would use: the same rounding
     try:
         cls, where = (ShmPolicyServer, {}) if transport == "shm" else (PolicyServer, {"host": "127.0.0.1", "port": 0})
-        server = build_server(RunContext.build(config).plugins, config.policy, cls, **where, **options)
+        server = build_server(RunContext.build(config).plugins, config.policy.given(), cls, **where, **options)
         server.run(ready=lambda srv: conn.send(
             ("ready", srv.address if isinstance(srv, ShmPolicyServer) else srv.port)))
     except BaseException as exc:  # reported to the run, which fails with this line
@@ -124,12 +123,11 @@ def served_policy(config: RunConfig, workers: int, output_dir: str | Path | None
     (``serve: true``) a ``remote`` config for a server process started here (with the context
     rebuilt from ``config``, a portable run config) and stopped (and reaped) on exit.
     The server runs torch/BLAS on ``threads`` CPU threads (the run's ``worker_threads``)."""
-    policy_cfg = config.policy
-    options = serve_options(policy_cfg, workers)
+    options = serve_options(config.policy, workers)
     if options is None:
-        yield policy_cfg
+        yield config.policy.given()
         return
-    transport = serve_transport(policy_cfg, config.executor.name)
+    transport = serve_transport(config.policy, config.executor.name)
     ctx = mp.get_context("spawn")
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_serve, args=(config, transport, options, threads, child), name="molmo-serve",

@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
+from molmo_lerobot.options import validate_group
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation
 from molmo_lerobot.policies.image_ops import resize_with_pad_pil
-from molmo_lerobot.policies.lerobot_policy import parse_config
 from molmo_pi0.policy import OpenpiClientPolicy, Pi0Config
 
 IMAGE = "observation/image"
@@ -60,7 +60,7 @@ class Pi0LiberoPolicy(OpenpiClientPolicy):
     """One openpi connection per worker; LIBERO requests, 7-D chunks."""
 
     def __init__(self, cfg: dict[str, Any]) -> None:
-        self.cfg = parse_config(cfg, Pi0Config)
+        self.cfg = validate_group("policy", Pi0Config, cfg)
         if self.cfg.path:
             raise ValueError("policy=pi0_libero talks to an openpi server (policy.host, policy.port); a LeRobot "
                              f"LIBERO checkpoint ({self.cfg.path}) runs with policy=lerobot policy.path=…")

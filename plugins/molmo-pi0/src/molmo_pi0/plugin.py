@@ -7,6 +7,7 @@ from typing import Any
 
 from molmo_lerobot import hookimpl
 from molmo_lerobot.policies.base import Policy, PolicyType
+from molmo_pi0.policy import Pi0Config
 
 
 def make_pi0_policy(cfg: dict[str, Any]) -> Policy:
@@ -27,7 +28,7 @@ def molmo_policies() -> list[PolicyType]:
                        "presets policy=pi0 (MolmoSpaces' eval config), "
                        "policy=pi0_droid (openpi's velocity checkpoints), "
                        "policy=pi0_libero (openpi's LIBERO checkpoints)",
-                       conventions=True)]
+                       conventions=True, options=Pi0Config)]
 
 
 @hookimpl

@@ -9,21 +9,32 @@ import copy
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import ConfigDict, Field
+from pydantic import Field
 
-from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
+from molmo_lerobot.options import validate_group
+from molmo_lerobot.policies.base import Action, ConventionName, EpisodeContext, Observation, Policy, PolicyOptions
 from molmo_lerobot.policies.convention import get_convention
-from molmo_lerobot.policies.lerobot_policy import parse_config
 from molmo_lerobot.protocol.client import PolicyClient
-from molmo_pi0.droid import ACTIONS, JOINTS, DroidConfig, check_checkpoint, droid_actions, droid_request
+from molmo_pi0.droid import (
+    ACTIONS,
+    JOINTS,
+    CameraConfig,
+    DroidConfig,
+    check_checkpoint,
+    droid_actions,
+    droid_request,
+)
 
 
-class Pi0Config(DroidConfig):
+class Pi0Config(DroidConfig, PolicyOptions):
     """The ``policy`` group for ``policy=pi0`` (see conf/policy/pi0.yaml)."""
 
-    model_config = ConfigDict(extra="forbid")
-
     name: str = "pi0"
+    convention: ConventionName = "molmospaces"
+    #: MolmoSpaces' PI_Policy's picks, then our benchmarks' names (the first present)
+    cameras: CameraConfig = Field(default_factory=lambda: CameraConfig(
+        exterior=["droid_shoulder_light_randomization", "exo_camera_1", "exterior"],
+        wrist=["wrist_camera_zed_mini", "wrist_camera", "wrist"]))
     #: the request's keys: openpi's DROID client's (droid.py) or its LIBERO client's (libero.py, policy=pi0_libero)
     protocol: Literal["droid", "libero"] = "droid"
     host: str = "127.0.0.1"
@@ -39,9 +50,6 @@ class Pi0Config(DroidConfig):
     inprocess_state: list[str] = Field(default_factory=lambda: ["arm", "gripper"])
     checkpoint: str | None = None  # the served checkpoint (name or path), recorded and checked against action_mode
     end_on_success: bool = True    # read by the run (top-level end_on_success follows it), not by the policy
-    serve: bool = False            # policy.serve*: read by the run (one molmo-serve for its workers), not by the policy
-    serve_max_batch: int | None = Field(default=None, ge=1)
-    serve_batch_timeout_ms: float = Field(default=50.0, ge=0)
 
 
 class OpenpiClientPolicy(Policy):
@@ -83,7 +91,7 @@ class Pi0RemotePolicy(OpenpiClientPolicy):
     """openpi's DROID protocol; chunk length from the response."""
 
     def __init__(self, cfg: dict[str, Any]) -> None:
-        self.cfg = parse_config(cfg, Pi0Config)
+        self.cfg = validate_group("policy", Pi0Config, cfg)
         check_checkpoint(self.cfg.checkpoint, self.cfg.action_mode)
         self.convention = get_convention(self.cfg.convention)
         self._open_client()
@@ -108,7 +116,7 @@ class Pi0InProcessPolicy(Policy):
     """
 
     def __init__(self, cfg: dict[str, Any]) -> None:
-        self.cfg: Pi0Config = parse_config(cfg, Pi0Config)
+        self.cfg: Pi0Config = validate_group("policy", Pi0Config, cfg)
         check_checkpoint(self.cfg.path, self.cfg.action_mode)
         from molmo_lerobot.policies.lerobot_policy import LeRobotPolicy
         from molmo_pi0.random_init import read_dims, scaled_architecture
