@@ -99,7 +99,7 @@ class EpisodeWorker:
 
     def __init__(self, job: WorkerJob, worker_id: str, startup: Startup | None = None) -> None:
         from molmo_lerobot.context import RunContext
-        from molmo_lerobot.policies.factory import make_policy
+        from molmo_lerobot.policies.factory import make_policy, policy_options
 
         self.job = job
         self.worker_id = worker_id
@@ -112,8 +112,8 @@ class EpisodeWorker:
         with self.startup.phase("context_s"):
             self.run_context = RunContext.build(config, job.render_record)
         self.policy_name = str(job.policy["name"])
-        self.placement = place(slot_of(worker_id), nvidia_gpus(), os.environ, config.executor.model_dump(),
-                               job.policy.get("device"))
+        device = policy_options(self.run_context.plugins, job.policy).device  # its model's default if not given
+        self.placement = place(slot_of(worker_id), nvidia_gpus(), os.environ, config.executor.model_dump(), device)
         policy_config = dict(job.policy)
         if self.placement.egl_device is not None:
             os.environ["MUJOCO_EGL_DEVICE_ID"] = str(self.placement.egl_device)  # read at the first renderer
