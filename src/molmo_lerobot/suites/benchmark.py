@@ -1,8 +1,10 @@
-"""Env-suite benchmarks: ``molmo-eval benchmark=libero_object`` and its kin, ``benchmark=pusht``.
+"""Env-suite benchmarks: ``molmo-eval benchmark=libero_object`` and its kin, ``benchmark=pusht``,
+``benchmark=aloha_insertion`` and ``benchmark=aloha_transfer_cube``.
 
-A suite benchmark is named by a config with ``suite: libero`` or ``suite: pusht`` (``conf/benchmark/libero_*.yaml``,
-``pusht.yaml``); its episodes are the suite's own episode specs (:class:`~molmo_lerobot.suites.libero.LiberoEpisode`,
-:class:`~molmo_lerobot.suites.pusht.PushTEpisode`, planned in ``lerobot-eval``'s order and seeding from the suite's
+A suite benchmark is named by a config with ``suite: libero``, ``suite: pusht`` or ``suite: aloha``
+(``conf/benchmark/libero_*.yaml``, ``pusht.yaml``, ``aloha_*.yaml``); its episodes are the suite's own episode
+specs (:class:`~molmo_lerobot.suites.libero.LiberoEpisode`, :class:`~molmo_lerobot.suites.pusht.PushTEpisode`,
+:class:`~molmo_lerobot.suites.aloha.AlohaEpisode`, planned in ``lerobot-eval``'s order and seeding from the suite's
 task catalogue), not MolmoSpaces episode files. What differs between suites is one :class:`SuiteKind`. Each
 becomes an :class:`~molmo_lerobot.runner.plan.EpisodePlan` (spec: the episode's fields plus ``env_suite``;
 digest: the episode's), so workers, executors, resume, ``results.json`` (one ``per_task`` row per LIBERO task),
@@ -11,8 +13,8 @@ in a :class:`SuiteSession` on its own suite (LIBERO's process, PushT's env), sta
 kept across episodes (:class:`SuiteSessions`).
 
 Options (``benchmark.<key>=``): ``episodes_per_task`` (default 1; ``lerobot-eval``'s ``--eval.n_episodes``),
-``image_size`` (camera images, default LeRobot's: LIBERO 360, PushT 96; at most :data:`MAX_IMAGE_SIZE`),
-LIBERO's ``hard_reset`` (default true, LeRobot's default).
+``image_size`` (camera images, default LeRobot's: LIBERO 360, PushT 96; at most :data:`MAX_IMAGE_SIZE`; ALOHA has
+none: gym-aloha's frames are 480 × 640), LIBERO's ``hard_reset`` (default true, LeRobot's default).
 """
 
 from __future__ import annotations
@@ -27,7 +29,9 @@ import numpy as np
 from molmo_lerobot.errors import InfrastructureError, MolmoError, describe
 from molmo_lerobot.hashing import content_sha256
 from molmo_lerobot.results import EpisodeOutcome
-from molmo_lerobot.suites import libero, pusht
+from molmo_lerobot.suites import aloha, libero, pusht
+from molmo_lerobot.suites.aloha_dataset import ROBOT_TYPE as ALOHA_ROBOT
+from molmo_lerobot.suites.aloha_dataset import aloha_layout
 from molmo_lerobot.suites.dataset import SuiteDatasetLayout
 from molmo_lerobot.suites.libero_dataset import ROBOT_TYPE as LIBERO_ROBOT
 from molmo_lerobot.suites.libero_dataset import libero_layout
@@ -85,6 +89,8 @@ class SuiteKind:
     #: a fault of the installed files its env reads in place (one line naming the file and what to reinstall),
     #: or None: checked before any worker starts, and after an episode failed (then the machine's failure)
     install_problem: Callable[[], str | None] | None = None
+    #: (height, width) of the frames of a suite that draws them at one size (no ``image_size`` option)
+    frame_size: tuple[int, int] | None = None
 
 
 def _libero_label(episode: libero.LiberoEpisode) -> str:
@@ -113,6 +119,13 @@ SUITES: dict[str, SuiteKind] = {
         action_extra={"action_bounds": {pusht.MOVE_GROUP: pusht.WORKSPACE}}, benchmarks={"pusht": pusht.MAX_STEPS},
         check_episode=pusht.episode_problems, distributions=pusht.DISTRIBUTIONS,
         recording=lambda o: pusht_layout(o["image_size"])),
+    "aloha": SuiteKind(
+        episode=aloha.AlohaEpisode, plan=aloha.plan_episodes, open=lambda o: aloha.AlohaSuite(),
+        task_label=aloha.task_label, observation=aloha.policy_observation, move_group=aloha.MOVE_GROUP,
+        action_dim=aloha.ACTION_DIM, control_hz=aloha.CONTROL_HZ, cameras={aloha.CAMERA: "observation.images.top"},
+        options={"episodes_per_task": 1}, action_extra={}, benchmarks=dict.fromkeys(aloha.TASKS, aloha.MAX_STEPS),
+        check_episode=aloha.episode_problems, distributions=aloha.DISTRIBUTIONS, venv="aloha",
+        recording=lambda o: aloha_layout(), robot=ALOHA_ROBOT, frame_size=(aloha.IMAGE_HEIGHT, aloha.IMAGE_WIDTH)),
 }
 
 
@@ -130,10 +143,10 @@ def suite_options(config: RunConfig) -> dict[str, Any]:
     bench = config.benchmark.model_dump()
     kind = suite_kind(config)
     out = {key: bench.get(key, default) for key, default in kind.options.items()}
-    for key in ("episodes_per_task", "image_size"):
+    for key in [k for k in ("episodes_per_task", "image_size") if k in out]:
         if not isinstance(out[key], int) or isinstance(out[key], bool) or out[key] < 1:
             raise SuiteBenchmarkError(f"benchmark.{key}: expected an integer >= 1, got {out[key]!r}")
-    if out["image_size"] > MAX_IMAGE_SIZE:
+    if out.get("image_size", 0) > MAX_IMAGE_SIZE:
         raise SuiteBenchmarkError(f"benchmark.image_size: at most {MAX_IMAGE_SIZE} pixels a side, got "
                                   f"{out['image_size']} (LeRobot's default: {kind.options['image_size']})")
     if not isinstance(out.get("hard_reset", True), bool):
@@ -290,7 +303,8 @@ class SuiteSession(EpisodeOutcome):
     rollout loop plays, over the worker's suite process. ``lerobot-eval``'s rules: the episode ends at its
     first terminated step (LIBERO's goal reached) or at the horizon; it succeeds when its last step did."""
 
-    def __init__(self, plan: EpisodePlan, suite: Any, image_size: int, end_on_success: bool) -> None:
+    def __init__(self, plan: EpisodePlan, suite: Any, image_size: int | tuple[int, int],
+                 end_on_success: bool) -> None:
         self.plan, self.suite, self.image_size = plan, suite, image_size
         self.kind = SUITES[plan.spec[SUITE_KEY]]
         self.episode = plan_episode(plan)
@@ -316,9 +330,14 @@ class SuiteSession(EpisodeOutcome):
         from molmo_lerobot.recording import EpisodeInfo
 
         return EpisodeInfo(identity=self.plan.identity, fps=float(self.kind.control_hz),
-                           camera_names=list(self.kind.cameras), img_resolution=(self.image_size, self.image_size),
+                           camera_names=list(self.kind.cameras), img_resolution=self._resolution(),
                            joint_names={}, move_groups=dict(self.env.move_groups), expert=expert,
                            extra={**self._suite_fields(), **extra})
+
+    def _resolution(self) -> tuple[int, int]:
+        """The frames' (width, height): ``image_size`` is their side, or their (height, width)."""
+        size = self.image_size
+        return (size, size) if isinstance(size, int) else (size[1], size[0])
 
     def observe(self, images: bool = True) -> Observation:
         """The observation now; ``images``: with the camera frames (the last step must have drawn them)."""
@@ -384,7 +403,8 @@ class SuiteSessions:
         if self._suite is None:
             self._suite = kind.open(options)
         try:
-            session = SuiteSession(plan, self._suite, options["image_size"], end_on_success)
+            size = options.get("image_size") or kind.frame_size or 0
+            session = SuiteSession(plan, self._suite, size, end_on_success)
         except SuiteError as exc:  # the episode's, unless the suite's installed files are broken now
             problem = install_problem(kind) if not isinstance(exc, InfrastructureError) else None
             if problem:
