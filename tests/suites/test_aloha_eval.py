@@ -202,3 +202,14 @@ def test_aloha_options_and_plan_problems():
     bench = SuiteBenchmark("aloha_insertion", bad, None, "aloha")  # type: ignore[arg-type]
     assert plan_problems(bench, tasks) == [
         "aloha_insertion episode 2: task 'AlohaTransferCube-v0': aloha_insertion's tasks are 'AlohaInsertion-v0'"]
+
+
+@needs_venv
+def test_molmo_bench_list_reads_gym_aloha_from_the_aloha_venv(capsys):
+    """``molmo-bench list`` names ALOHA's source as the ALOHA venv has it (it said "not installed": gym-aloha is not
+    in ``.venv``)."""
+    from molmo_lerobot.cli.bench import main
+
+    assert main(["list"]) == 0
+    [line] = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("env suite aloha:")]
+    assert line.startswith("env suite aloha: gym-aloha 0.1.") and "not installed" not in line, line

@@ -158,16 +158,18 @@ def _list() -> int:
 
 
 def _distribution(name: str, venv: str) -> str:
-    """``name version (licence)`` of an installed distribution (``venv="libero"``: as the LIBERO venv sees it,
-    its own site-packages first)."""
+    """``name version (licence)`` of an installed distribution (``venv="libero"``, ``"aloha"``: as that suite's venv
+    sees it, its own site-packages first)."""
     import importlib.metadata as md
 
+    from molmo_lerobot.suites.aloha import aloha_venv
     from molmo_lerobot.suites.libero import libero_venv
 
-    path = [str(p) for p in libero_venv().glob("lib/python*/site-packages")] if venv == "libero" else []
+    own = {"libero": libero_venv, "aloha": aloha_venv}.get(venv)
+    path = [str(p) for p in own().glob("lib/python*/site-packages")] if own else []
     found = next(iter(md.distributions(name=name, path=[*path, *sys.path])), None)
     if found is None:
-        return f"{name} (not installed{'; make .libero-venv' if venv == 'libero' else ''})"
+        return f"{name} (not installed{f'; make .{venv}-venv' if own else ''})"
     meta = found.metadata
     licence = meta.get("License-Expression") or meta.get("License") or "licence not declared"
     return f"{name} {found.version} ({licence})"

@@ -79,7 +79,7 @@ class SuiteKind:
     check_episode: Callable[[Any, list[dict[str, Any]]], list[str]]
     #: the distributions its env and assets come from (``molmo-bench list`` shows their version and licence)
     distributions: tuple[str, ...]
-    #: where those distributions live: ``"main"`` (this venv) or ``"libero"`` (the LIBERO venv)
+    #: where those distributions live: ``"main"`` (this venv), ``"libero"`` or ``"aloha"`` (the suite's venv)
     venv: str = "main"
     #: the dataset layout ``record=true`` writes (``recording(options)``: the schema of the suite's LeRobot
     #: datasets, ``lerobot/libero``'s, ``lerobot/pusht``'s); None: ``record=true`` is refused
