@@ -3,7 +3,9 @@
 Both sides play the same episodes of AlohaInsertion-v0 with the same policy: a tiny ACT at random init with ALOHA's
 features (``tests/suites/tiny_policies.py``, 480 × 640 top camera), loaded by ``--policy.path=`` and
 ``policy.path=``. Theirs is ``lerobot-eval`` in the ALOHA venv with its defaults (gym-aloha draws its three 480 × 640
-cameras at every step, a video per episode), with ``--eval.batch_size=1`` and ``=2``; ours ``molmo-eval
+cameras at every step, a video per episode), with ``--eval.batch_size=1`` and ``=2`` (the latter with
+``--eval.use_async_envs=false``: LeRobot 0.6.1's default async envs start their env processes with ``forkserver``,
+which never import ``gym_aloha``, so ``gym.make`` there fails with "Namespace gym_aloha not found"); ours ``molmo-eval
 policy=lerobot policy.mode=chunk benchmark=aloha_insertion workers=2``: the same actions (ACT's ``select_action``
 plays out the chunk it predicts; the chunk runs open loop here), and the server draws only the top camera, only at
 the steps whose frame the policy reads (one in ``n_action_steps``). A last row is ``molmo-eval policy=random`` on the
@@ -45,7 +47,8 @@ def test_aloha_episodes_per_min_against_lerobot_eval(tmp_path):
         wall, cpu, _ = timed(
             [str(venv / "bin" / "python"), "-m", "lerobot.scripts.lerobot_eval", f"--policy.path={act}",
              "--policy.device=cpu", "--env.type=aloha", f"--env.task={TASK}", f"--env.episode_length={steps}",
-             f"--eval.n_episodes={n}", f"--eval.batch_size={batch}", "--seed=0", f"--output_dir={out}"], env)
+             f"--eval.n_episodes={n}", f"--eval.batch_size={batch}", "--eval.use_async_envs=false", "--seed=0",
+             f"--output_dir={out}"], env)
         info = json.loads((out / "eval_info.json").read_text())["overall"]
         assert info["n_episodes"] == n
         table.append({"side": f"lerobot-eval batch_size={batch}", "policy": "tiny ACT", "episodes": n,
