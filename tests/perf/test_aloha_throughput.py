@@ -64,7 +64,8 @@ def test_aloha_episodes_per_min_against_lerobot_eval(tmp_path):
         table.append({"side": f"molmo-eval workers={WORKERS}", "policy": name, "episodes": n, "wall_s": round(wall, 1),
                       "cpu_s": round(cpu, 1), "eps_per_min": round(60 * n / wall, 3),
                       "eps_per_min_excl_startup": round(60 * n / busy, 3),
-                      "successes": sum(bool(r["success"]) for r in rows), "steps": sum(int(r["steps"]) for r in rows)})
+                      "successes": sum(bool(r["success"]) for r in rows),
+                      "env_steps": sum(int(r["steps"]) for r in rows)})
     append_rows(BENCHMARK, table, test="aloha_throughput", steps=steps, ratio_wall=round(
         table[0]["wall_s"] / table[2]["wall_s"], 3))
     print(f"\nALOHA {TASK}: {n} episodes of {steps} steps")
