@@ -145,8 +145,8 @@ def test_an_aloha_recording_has_lerobots_layout_and_merges_with_theirs(tmp_path)
 @pytest.mark.slow
 @needs_venv
 def test_a_recorded_two_worker_aloha_run_merges_with_lerobots_layout(tmp_path):
-    """``molmo-eval policy=random benchmark=aloha_insertion workers=2 limit=2 record=true`` (~50 s here: a recording
-    worker's start)."""
+    """``molmo-eval policy=random benchmark=aloha_insertion workers=2 limit=2 record=true`` (25–50 s here, most of it
+    the recording workers' start)."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     out = tmp_path / "run"
