@@ -3,6 +3,8 @@ SHELL := /bin/bash
 VENV := .venv
 # LIBERO's own venv (robosuite 1.4 beside our 1.5): the LIBERO suite and its parity tests (docs/suites.md).
 LIBERO_VENV := .libero-venv
+# ALOHA's own venv (gym-aloha's dm-control pins mujoco 3.8.1 beside our 3.5.0): the ALOHA suite (docs/suites.md).
+ALOHA_VENV := .aloha-venv
 PY := $(VENV)/bin/python
 export MUJOCO_GL ?= egl
 
@@ -45,10 +47,10 @@ eval: $(VENV)
 # The default run in TEST_WORKERS pytest-xdist processes, a test file per process at a time (module
 # fixtures are built once); TEST_WORKERS=0 runs it in this process.
 TEST_WORKERS ?= 2
-test: $(VENV) $(LIBERO_VENV)
+test: $(VENV) $(LIBERO_VENV) $(ALOHA_VENV)
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
-test-all: $(VENV) $(LIBERO_VENV)
+test-all: $(VENV) $(LIBERO_VENV) $(ALOHA_VENV)
 	$(PY) -m pytest -q -m "slow or not slow"
 
 # mypy over src/ ([tool.mypy] in pyproject.toml); tests/test_types.py runs the same in make test.
@@ -74,6 +76,11 @@ $(LIBERO_VENV): $(VENV) scripts/libero-venv.sh tests/suites/libero-requirements.
 	PYTHON312=$(PYTHON312) scripts/libero-venv.sh $(LIBERO_VENV) $(VENV)
 	touch $(LIBERO_VENV)
 
+# Built by scripts/aloha-venv.sh: gym-aloha, dm-control and their mujoco there, the rest read from $(VENV).
+$(ALOHA_VENV): $(VENV) scripts/aloha-venv.sh tests/suites/aloha-requirements.txt
+	PYTHON312=$(PYTHON312) scripts/aloha-venv.sh $(ALOHA_VENV) $(VENV)
+	touch $(ALOHA_VENV)
+
 parity: $(VENV) $(PARITY_VENV)
 	MOLMO_PARITY_REQUIRED=1 $(PY) -m pytest -q -m parity tests/parity
 
@@ -87,4 +94,4 @@ train-demo: $(VENV)
 	PYTHON=$(PY) scripts/train_demo.sh
 
 clean:
-	rm -rf $(VENV) $(PARITY_VENV) $(LIBERO_VENV) outputs runs .mypy_cache
+	rm -rf $(VENV) $(PARITY_VENV) $(LIBERO_VENV) $(ALOHA_VENV) outputs runs .mypy_cache

@@ -3,8 +3,8 @@
 LeRobot's ``aggregate_datasets`` merges only datasets whose features (names, dtypes, shapes), fps and robot type
 are all equal, so ``record=true`` on an env-suite run writes exactly the features of that suite's datasets
 (:meth:`BenchmarkKind.recording_layout <molmo_lerobot.benchmark_kinds.BenchmarkKind.recording_layout>`, e.g.
-LIBERO's and PushT's) and nothing more; the eval record of each episode is in ``meta/eval/episodes.jsonl``, as
-for every recording.
+LIBERO's, PushT's and ALOHA's) and nothing more; the eval record of each episode is in ``meta/eval/episodes.jsonl``,
+as for every recording.
 """
 
 from __future__ import annotations
@@ -36,10 +36,11 @@ class Vector:
 
 @dataclass(frozen=True)
 class DatasetLayout:
-    """The frame schema of a suite's recording at ``image_size``² (the ``FrameLayout`` interface the recorder
+    """The frame schema of a suite's recording at ``image_size`` (the ``FrameLayout`` interface the recorder
     writes with: ``features``, ``frame``, ``robot_type``, ``fps``; ``describe`` for the dataset card)."""
 
-    image_size: int
+    #: the frames' side, or (height, width) where they are not square (ALOHA's 480 × 640)
+    image_size: int | tuple[int, int]
     #: our policy observation's camera -> the dataset's video feature, with what it shows
     cameras: tuple[tuple[str, str, str], ...]
     #: the move group whose ``qpos`` is the state and whose command is the action
@@ -53,26 +54,26 @@ class DatasetLayout:
     step_hz: float
     #: the image features' ``names``
     image_names: tuple[str, ...] = ("height", "width", "channel")
-    #: the datasets carry :data:`OUTCOMES` per frame
-    outcomes: bool = False
+    #: the keys of :data:`OUTCOMES` the datasets carry per frame
+    outcomes: tuple[str, ...] = ()
     #: what made the frames (the dataset card's words)
     simulator: str = ""
 
     def features(self) -> dict[str, dict[str, Any]]:
         """``LeRobotDataset.create``'s ``features``."""
-        image = {"dtype": "video", "shape": (self.image_size, self.image_size, 3), "names": list(self.image_names)}
+        image = {"dtype": "video", "shape": self.image_shape, "names": list(self.image_names)}
         out: dict[str, dict[str, Any]] = {feature: dict(image) for _, feature, _ in self.cameras}
         for vector in (self.state, self.action):
             out[vector.key] = {"dtype": "float32", "shape": (vector.size,), "names": vector.names}
         if self.outcomes:
-            out.update({key: {"dtype": dtype, "shape": (1,), "names": None} for key, dtype in OUTCOMES.items()})
+            out.update({key: {"dtype": OUTCOMES[key], "shape": (1,), "names": None} for key in self.outcomes})
         return out
 
     def frame(self, obs: dict[str, Any], action: dict[str, Any], reward: float | None, success: bool,
               done: bool, task: str, info: EpisodeInfo | None) -> dict[str, Any]:
         """One ``add_frame`` dict of a suite session's observation and the action taken on it (with the outcome
         after it where the layout has :data:`OUTCOMES`); raises ``FeatureError`` naming the misfit."""
-        shape = (self.image_size, self.image_size, 3)
+        shape = self.image_shape
         frame: dict[str, Any] = {}
         for camera, feature, _ in self.cameras:
             image = np.asarray((obs.get("images") or {}).get(camera))
@@ -81,10 +82,9 @@ class DatasetLayout:
             frame[feature] = image
         frame[self.state.key] = self._vector((obs.get("qpos") or {}).get(self.move_group), self.state)
         frame[self.action.key] = self._vector(action.get(self.move_group), self.action)
-        if self.outcomes:
-            frame["next.reward"] = np.array([0.0 if reward is None else reward], dtype=np.float32)
-            frame["next.success"] = np.array([success], dtype=bool)
-            frame["next.done"] = np.array([done], dtype=bool)
+        outcome = {"next.reward": 0.0 if reward is None else reward, "next.success": success, "next.done": done}
+        for key in self.outcomes:
+            frame[key] = np.array([outcome[key]], dtype=OUTCOMES[key])
         frame["task"] = task
         return frame
 
@@ -92,11 +92,18 @@ class DatasetLayout:
         """What each feature holds, by key (the dataset card's sentences)."""
         out = {feature: about for _, feature, about in self.cameras}
         out.update({self.state.key: self.state.about, self.action.key: self.action.about})
-        if self.outcomes:
-            out.update({"next.reward": "the env's reward after the frame's action",
-                        "next.success": "whether the env's success rule held after it",
-                        "next.done": "whether the episode ended there"})
+        about = {"next.reward": "the env's reward after the frame's action",
+                 "next.success": "whether the env's success rule held after it",
+                 "next.done": "whether the episode ended there"}
+        out.update({key: about[key] for key in self.outcomes})
         return out
+
+    @property
+    def image_shape(self) -> tuple[int, int, int]:
+        """A frame's (height, width, channels)."""
+        size = self.image_size
+        height, width = (size, size) if isinstance(size, int) else size
+        return height, width, 3
 
     def _vector(self, value: Any, vector: Vector) -> np.ndarray:
         if value is None:

@@ -16,9 +16,11 @@ import numpy as np
 import pytest
 import standin_dataset
 
+from molmo_lerobot.benchmark_kinds import run_kind
 from molmo_lerobot.config import compose
 from molmo_lerobot.export.merge import read_eval_records
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.policies.base import Policy
 from molmo_lerobot.results import summarize
 from molmo_lerobot.run_config import RunConfig
@@ -115,7 +117,8 @@ class Ramp(Policy):
 def test_a_suite_recording_has_lerobots_libero_layout_and_merges_with_theirs(tmp_path):
     config = compose(["policy=random", "benchmark=libero_object", "record=true", f"benchmark.image_size={SIZE}",
                       f"output_dir={tmp_path / 'run'}"])
-    factory = LeRobotRecorderFactory.from_config(RunConfig.of(config))
+    run = RunConfig.of(config)
+    factory = LeRobotRecorderFactory.from_config(run, run_kind(Plugins(), run).recording_layout(run))
     out = tmp_path / "run"
     recorder = factory.make("w0", out)
     episodes = [LiberoEpisode("libero_object", 0, 0, 0, 6, "pick up the soup and place it in the basket"),

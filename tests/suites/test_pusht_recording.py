@@ -12,9 +12,11 @@ import numpy as np
 import pytest
 import standin_dataset
 
+from molmo_lerobot.benchmark_kinds import run_kind
 from molmo_lerobot.config import compose
 from molmo_lerobot.export.merge import read_eval_records
 from molmo_lerobot.export.recorder import LeRobotRecorderFactory
+from molmo_lerobot.plugins import Plugins
 from molmo_lerobot.policies.base import Policy
 from molmo_lerobot.results import summarize
 from molmo_lerobot.run_config import RunConfig
@@ -91,7 +93,8 @@ def test_a_pusht_recording_has_lerobots_pusht_layout_and_merges_with_theirs(tmp_
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     config = compose(["policy=random", "benchmark=pusht", "record=true", "horizon=5", f"output_dir={tmp_path / 'run'}"])
-    factory = LeRobotRecorderFactory.from_config(RunConfig.of(config))
+    run = RunConfig.of(config)
+    factory = LeRobotRecorderFactory.from_config(run, run_kind(Plugins(), run).recording_layout(run))
     out = tmp_path / "run"
     recorder = factory.make("w0", out)
     suite = PushTSuite()

@@ -21,15 +21,18 @@ from molmo_lerobot.suites.plugin import LIBERO, PUSHT
 
 def test_every_suite_benchmark_is_a_config_of_its_kinds_defaults():
     plugins = Plugins()
-    assert [kind.name for kind in benchmark_kinds(plugins)] == ["libero", "pusht", "episodes"]
-    suites = {name: kind.name for kind in benchmark_kinds(plugins)[:2] for name in kind.benchmarks(plugins)}
+    assert [kind.name for kind in benchmark_kinds(plugins)] == ["libero", "pusht", "aloha", "episodes"]
+    suites = {name: kind.name for kind in benchmark_kinds(plugins)[:3] for name in kind.benchmarks(plugins)}
     assert suites == {"libero_spatial": "libero", "libero_object": "libero", "libero_goal": "libero",
-                      "libero_10": "libero", "libero_90": "libero", "pusht": "pusht"}
+                      "libero_10": "libero", "libero_90": "libero", "pusht": "pusht",
+                      "aloha_insertion": "aloha", "aloha_transfer_cube": "aloha"}
     assert all(benchmark_kind(plugins, name).name == kind for name, kind in suites.items())
     assert dict(compose(["benchmark=libero_10"]).benchmark) == {
         "name": "libero_10", "path": None, "episodes_per_task": 1, "image_size": 360, "hard_reset": True}
     assert dict(compose(["benchmark=pusht"]).benchmark) == {
         "name": "pusht", "path": None, "episodes_per_task": 50, "image_size": 96}
+    assert dict(compose(["benchmark=aloha_insertion"]).benchmark) == {
+        "name": "aloha_insertion", "path": None, "episodes_per_task": 1}
 
 
 def test_list_names_every_benchmark_with_its_kind_episodes_horizon_and_sources(capsys):

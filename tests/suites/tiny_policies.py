@@ -1,7 +1,9 @@
 """Tiny LeRobot policies at random init with an env suite's features (LeRobot's LIBERO datasets': two cameras, the
-8-D state, the 7-D action; PushT's: ``observation.image``, the 2-D state and action), saved with their pre- and
+8-D state, the 7-D action; PushT's: ``observation.image``, the 2-D state and action; ALOHA's: the top camera, the
+14-D state and action), saved with their pre- and
 post-processors where ``policy.path=`` (ours) and ``--policy.path=`` (``lerobot-eval``) load them. The image size
-they declare is the caller's: the env's, or another one (``lerobot-eval`` hands a policy the env's frames)."""
+they declare is the caller's (a side, or (height, width)): the env's, or another one (``lerobot-eval`` hands a policy
+the env's frames)."""
 
 from __future__ import annotations
 
@@ -12,20 +14,22 @@ from typing import Any
 SUITE_FEATURES = {
     "libero": (("observation.images.image", "observation.images.image2"), 8, 7),
     "pusht": (("observation.image",), 2, 2),
+    "aloha": (("observation.images.top",), 14, 14),
 }
 
 
-def _features(suite: str, image_size: int) -> dict[str, Any]:
+def _features(suite: str, image_size: int | tuple[int, int]) -> dict[str, Any]:
     from lerobot.configs.types import FeatureType, PolicyFeature
 
     images, state, action = SUITE_FEATURES[suite]
-    image = PolicyFeature(FeatureType.VISUAL, (3, image_size, image_size))
+    height, width = (image_size, image_size) if isinstance(image_size, int) else image_size
+    image = PolicyFeature(FeatureType.VISUAL, (3, height, width))
     return {"input_features": {**{key: image for key in images},
                                "observation.state": PolicyFeature(FeatureType.STATE, (state,))},
             "output_features": {"action": PolicyFeature(FeatureType.ACTION, (action,))}}
 
 
-def save_act(path: Path, suite: str, image_size: int) -> Path:
+def save_act(path: Path, suite: str, image_size: int | tuple[int, int]) -> Path:
     """A tiny ACT (chunks of 4, no VAE: deterministic at inference) for ``suite``'s features; returns ``path``."""
     from lerobot.policies.act.configuration_act import ACTConfig
     from lerobot.policies.act.modeling_act import ACTPolicy

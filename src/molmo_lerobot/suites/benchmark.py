@@ -62,12 +62,11 @@ ImageSize = Annotated[int, Field(ge=1, le=MAX_IMAGE_SIZE)]
 
 
 class SuiteOptions(BenchmarkOptions):
-    """The options of every env-suite benchmark; a suite's subclass sets ``image_size``'s default (LeRobot's)."""
+    """The options of every env-suite benchmark; a suite's subclass adds its own (``image_size: ImageSize`` where
+    its frames' side is an option, with LeRobot's default)."""
 
     #: episodes per task (``lerobot-eval``'s ``--eval.n_episodes``): episode ``k`` of a task, seed ``seed + k``
     episodes_per_task: int = Field(1, ge=1)
-    #: the side of the camera images, in pixels
-    image_size: ImageSize
 
 
 @dataclass(frozen=True)
@@ -87,6 +86,8 @@ class SuiteKind[OptionsT: SuiteOptions]:
     control_hz: float
     #: our camera -> the feature LeRobot's env hands a policy its frames as (``preprocess_observation``'s name)
     cameras: dict[str, str]
+    #: its frames' side (``options.image_size``), or (height, width) where they are fixed and not square (ALOHA's)
+    frame_size: Callable[[OptionsT], int | tuple[int, int]]
     options: type[OptionsT]
     #: what the policy learns of the action (``EpisodeContext.extra``): ``delta_groups`` (LIBERO's delta-EEF
     #: command) or ``action_bounds`` (PushT's target position, within the workspace)
@@ -299,7 +300,7 @@ class SuiteSession(EpisodeOutcome):
     #: a suite env draws its frames in its own step: no renderer of ours to set up
     renderer_setup_s = 0.0
 
-    def __init__(self, kind: SuiteKind[Any], plan: EpisodePlan, suite: Any, image_size: int,
+    def __init__(self, kind: SuiteKind[Any], plan: EpisodePlan, suite: Any, image_size: int | tuple[int, int],
                  end_on_success: bool) -> None:
         if plan.kind != kind.name:
             raise ValueError(f"episode {plan.episode_index}: a plan of kind {plan.kind!r}, not of env suite "
@@ -329,9 +330,14 @@ class SuiteSession(EpisodeOutcome):
         from molmo_lerobot.recording import EpisodeInfo
 
         return EpisodeInfo(identity=self.plan.identity, fps=float(self.kind.control_hz),
-                           camera_names=list(self.kind.cameras), img_resolution=(self.image_size, self.image_size),
+                           camera_names=list(self.kind.cameras), img_resolution=self._resolution(),
                            joint_names={}, move_groups=self.move_groups, expert=expert,
                            extra={**self._suite_fields(), **extra})
+
+    def _resolution(self) -> tuple[int, int]:
+        """The frames' (width, height): ``image_size`` is their side, or their (height, width)."""
+        size = self.image_size
+        return (size, size) if isinstance(size, int) else (size[1], size[0])
 
     def observe(self, images: bool = True) -> Observation:
         """The observation now; ``images``: with the camera frames (the last step must have drawn them)."""
@@ -399,7 +405,7 @@ class SuiteSessions(EpisodeSessions):
         if self._suite is None:
             self._suite = self.kind.open(self.options)
         try:
-            session = SuiteSession(self.kind, plan, self._suite, self.options.image_size, end_on_success)
+            session = SuiteSession(self.kind, plan, self._suite, self.kind.frame_size(self.options), end_on_success)
         except SuiteError as exc:  # the episode's, unless the suite's installed files are broken now
             problem = self.kind.problem() if not isinstance(exc, InfrastructureError) else None
             if problem:

@@ -1,5 +1,6 @@
 """Built-in plugin: LeRobot's env suites as benchmark kinds (``libero``: ``benchmark=libero_object`` and the other
-LIBERO suites; ``pusht``: ``benchmark=pusht``), each with its typed options and defaults, stated here once."""
+LIBERO suites; ``pusht``: ``benchmark=pusht``; ``aloha``: ``benchmark=aloha_insertion``, ``aloha_transfer_cube``),
+each with its typed options and defaults, stated here once."""
 
 from __future__ import annotations
 
@@ -8,7 +9,9 @@ from typing import Any
 from pydantic import Field
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.suites import libero, pusht
+from molmo_lerobot.suites import aloha, libero, pusht
+from molmo_lerobot.suites.aloha_dataset import ROBOT_TYPE as ALOHA_ROBOT
+from molmo_lerobot.suites.aloha_dataset import aloha_layout
 from molmo_lerobot.suites.benchmark import EnvSuiteKind, ImageSize, SuiteKind, SuiteOptions
 from molmo_lerobot.suites.libero_dataset import ROBOT_TYPE as LIBERO_ROBOT
 from molmo_lerobot.suites.libero_dataset import libero_layout
@@ -30,6 +33,12 @@ class PushTOptions(SuiteOptions):
     image_size: ImageSize = pusht.IMAGE_SIZE
 
 
+class AlohaOptions(SuiteOptions):
+    """ALOHA's options: ``lerobot-eval``'s 50 episodes; gym-aloha's frames are 480 × 640, no option."""
+
+    episodes_per_task: int = Field(50, ge=1)
+
+
 def _open_libero(options: LiberoOptions) -> libero.LiberoSuite:
     return libero.LiberoSuite(image_size=options.image_size, hard_reset=options.hard_reset)
 
@@ -46,11 +55,20 @@ def _libero_site_packages() -> list[str]:
     return [str(p) for p in libero.libero_venv().glob("lib/python*/site-packages")]
 
 
+def _aloha_site_packages() -> list[str]:
+    return [str(p) for p in aloha.aloha_venv().glob("lib/python*/site-packages")]
+
+
+def _open_aloha(options: AlohaOptions) -> aloha.AlohaSuite:
+    return aloha.AlohaSuite()
+
+
 LIBERO: SuiteKind[LiberoOptions] = SuiteKind(
     name="libero", episode=libero.LiberoEpisode, plan=libero.plan_episodes, open=_open_libero,
     task_label=_libero_label, observation=libero.policy_observation, move_group=libero.MOVE_GROUP,
     action_dim=libero.ACTION_DIM, control_hz=libero.CONTROL_HZ,
-    cameras={"image": "observation.images.image", "image2": "observation.images.image2"}, options=LiberoOptions,
+    cameras={"image": "observation.images.image", "image2": "observation.images.image2"},
+    frame_size=lambda o: o.image_size, options=LiberoOptions,
     action_extra={"delta_groups": [libero.MOVE_GROUP]}, benchmarks=dict(libero.MAX_STEPS),
     check_episode=libero.episode_problems, distributions=libero.DISTRIBUTIONS, site_packages=_libero_site_packages,
     recording=lambda o: libero_layout(o.image_size), robot=LIBERO_ROBOT, install_problem=libero.install_problem,
@@ -60,11 +78,21 @@ PUSHT: SuiteKind[PushTOptions] = SuiteKind(
     name="pusht", episode=pusht.PushTEpisode, plan=pusht.plan_episodes, open=_open_pusht,
     task_label=pusht.task_label, observation=pusht.policy_observation, move_group=pusht.MOVE_GROUP,
     action_dim=pusht.ACTION_DIM, control_hz=pusht.CONTROL_HZ, cameras={pusht.CAMERA: "observation.image"},
-    options=PushTOptions, action_extra={"action_bounds": {pusht.MOVE_GROUP: pusht.WORKSPACE}},
+    frame_size=lambda o: o.image_size, options=PushTOptions,
+    action_extra={"action_bounds": {pusht.MOVE_GROUP: pusht.WORKSPACE}},
     benchmarks={"pusht": pusht.MAX_STEPS}, check_episode=pusht.episode_problems, distributions=pusht.DISTRIBUTIONS,
     recording=lambda o: pusht_layout(o.image_size))
+
+ALOHA: SuiteKind[AlohaOptions] = SuiteKind(
+    name="aloha", episode=aloha.AlohaEpisode, plan=aloha.plan_episodes, open=_open_aloha,
+    task_label=aloha.task_label, observation=aloha.policy_observation, move_group=aloha.MOVE_GROUP,
+    action_dim=aloha.ACTION_DIM, control_hz=aloha.CONTROL_HZ, cameras={aloha.CAMERA: "observation.images.top"},
+    frame_size=lambda o: (aloha.IMAGE_HEIGHT, aloha.IMAGE_WIDTH), options=AlohaOptions, action_extra={},
+    benchmarks=dict.fromkeys(aloha.TASKS, aloha.MAX_STEPS), check_episode=aloha.episode_problems,
+    distributions=aloha.DISTRIBUTIONS, site_packages=_aloha_site_packages, recording=lambda o: aloha_layout(),
+    robot=ALOHA_ROBOT, remedy="make .aloha-venv")
 
 
 @hookimpl
 def molmo_benchmark_kinds() -> list[EnvSuiteKind[Any]]:
-    return [EnvSuiteKind(LIBERO), EnvSuiteKind(PUSHT)]
+    return [EnvSuiteKind(LIBERO), EnvSuiteKind(PUSHT), EnvSuiteKind(ALOHA)]

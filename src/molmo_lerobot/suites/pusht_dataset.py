@@ -19,7 +19,7 @@ The images are the ones the policy saw, at ``benchmark.image_size`` (default 96,
 
 from __future__ import annotations
 
-from molmo_lerobot.dataset_layout import DatasetLayout, Vector
+from molmo_lerobot.dataset_layout import OUTCOMES, DatasetLayout, Vector
 from molmo_lerobot.suites.pusht import ACTION_DIM, CAMERA, CONTROL_HZ, MOVE_GROUP
 
 #: ``convert_dataset_v1_to_v2``'s robot type for a dataset converted without a robot config
@@ -41,5 +41,5 @@ def pusht_layout(image_size: int) -> DatasetLayout:
                      "the agent's 2-D position in the 512 × 512 workspace"),
         action=Vector("action", ACTION_DIM, _motors(ACTION_DIM),
                       "the agent's 2-D target position in that workspace"),
-        robot_type=ROBOT_TYPE, fps=CONTROL_HZ, step_hz=CONTROL_HZ, outcomes=True,
+        robot_type=ROBOT_TYPE, fps=CONTROL_HZ, step_hz=CONTROL_HZ, outcomes=tuple(OUTCOMES),
         simulator="gym_pusht's 2-D table, simulated with the pymunk physics engine and drawn with pygame")

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.dataset_layout import DatasetLayout, Vector
+from molmo_lerobot.dataset_layout import OUTCOMES, DatasetLayout, Vector
 from molmo_lerobot.suites.benchmark import EnvSuiteKind, ImageSize, SuiteKind, SuiteOptions
 from molmo_lerobot.suites.episode import SuiteEpisode
 
@@ -93,13 +93,14 @@ def layout(options: DotOptions) -> DatasetLayout:
         image_size=options.image_size, cameras=(("top", "observation.image", "the line, the point and the dot"),),
         move_group="point", state=Vector("observation.state", 1, None, "the point's position on [0, 1]"),
         action=Vector("action", 1, None, "the point's velocity command in [-1, 1]"),
-        robot_type="point", fps=10, step_hz=10.0, outcomes=True, simulator="one line of numpy")
+        robot_type="point", fps=10, step_hz=10.0, outcomes=tuple(OUTCOMES), simulator="one line of numpy")
 
 
 DOT: SuiteKind[DotOptions] = SuiteKind(
     name="dot", episode=DotEpisode, plan=plan_episodes, open=DotEnv, task_label=lambda e: f"dot/{e.task}",
     observation=observation, move_group="point", action_dim=1, control_hz=10, cameras={"top": "observation.image"},
-    options=DotOptions, action_extra={"action_bounds": {"point": (-1.0, 1.0)}}, benchmarks={"dot_reach": MAX_STEPS},
+    frame_size=lambda o: o.image_size, options=DotOptions, action_extra={"action_bounds": {"point": (-1.0, 1.0)}},
+    benchmarks={"dot_reach": MAX_STEPS},
     check_episode=episode_problems, distributions=("molmo-example-suite",), recording=layout, robot="point")
 
 
