@@ -32,7 +32,7 @@ def test_every_suite_benchmark_is_a_config_of_its_kinds_defaults():
     assert dict(compose(["benchmark=pusht"]).benchmark) == {
         "name": "pusht", "path": None, "episodes_per_task": 50, "image_size": 96}
     assert dict(compose(["benchmark=aloha_insertion"]).benchmark) == {
-        "name": "aloha_insertion", "path": None, "episodes_per_task": 1}
+        "name": "aloha_insertion", "path": None, "episodes_per_task": 50}
 
 
 def test_list_names_every_benchmark_with_its_kind_episodes_horizon_and_sources(capsys):
