@@ -17,6 +17,7 @@ LIBERO's ``hard_reset`` (default true, LeRobot's default).
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
@@ -27,15 +28,18 @@ import numpy as np
 from molmo_lerobot.errors import InfrastructureError, MolmoError, describe
 from molmo_lerobot.hashing import content_sha256
 from molmo_lerobot.results import EpisodeOutcome
-from molmo_lerobot.suites import libero, pusht
+from molmo_lerobot.suites import libero, metaworld, pusht
 from molmo_lerobot.suites.dataset import SuiteDatasetLayout
 from molmo_lerobot.suites.libero_dataset import ROBOT_TYPE as LIBERO_ROBOT
 from molmo_lerobot.suites.libero_dataset import libero_layout
+from molmo_lerobot.suites.metaworld_dataset import ROBOT_TYPE as METAWORLD_ROBOT
+from molmo_lerobot.suites.metaworld_dataset import metaworld_layout
 from molmo_lerobot.suites.pipe import SuiteError
 from molmo_lerobot.suites.pusht_dataset import pusht_layout
 
 if TYPE_CHECKING:
-    from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
+    from molmo_lerobot.plugins import Plugins
+    from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
     from molmo_lerobot.recording import EpisodeInfo
     from molmo_lerobot.results import EpisodeResult
     from molmo_lerobot.run_config import RunConfig
@@ -113,6 +117,17 @@ SUITES: dict[str, SuiteKind] = {
         action_extra={"action_bounds": {pusht.MOVE_GROUP: pusht.WORKSPACE}}, benchmarks={"pusht": pusht.MAX_STEPS},
         check_episode=pusht.episode_problems, distributions=pusht.DISTRIBUTIONS,
         recording=lambda o: pusht_layout(o["image_size"])),
+    "metaworld": SuiteKind(
+        episode=metaworld.MetaWorldEpisode, plan=metaworld.plan_episodes,
+        open=lambda o: metaworld.MetaWorldSuite(image_size=o["image_size"]),
+        task_label=metaworld.task_label, observation=metaworld.policy_observation, move_group=metaworld.MOVE_GROUP,
+        action_dim=metaworld.ACTION_DIM, control_hz=metaworld.CONTROL_HZ,
+        cameras={metaworld.CAMERA: "observation.image"},
+        options={"episodes_per_task": 1, "image_size": metaworld.IMAGE_SIZE},
+        action_extra={"action_bounds": {metaworld.MOVE_GROUP: metaworld.ACTION_BOUNDS}},
+        benchmarks=metaworld.benchmarks(), check_episode=metaworld.episode_problems,
+        distributions=metaworld.DISTRIBUTIONS, recording=lambda o: metaworld_layout(o["image_size"]),
+        robot=METAWORLD_ROBOT),
 }
 
 
@@ -304,13 +319,18 @@ class SuiteSession(EpisodeOutcome):
     def horizon(self) -> int:
         return int(self.plan.horizon or 0)
 
-    def policy_context(self) -> EpisodeContext:
+    def policy_context(self, expert: PolicyType | None = None, privileged: bool = False) -> EpisodeContext:
+        """What the policy learns at reset; ``privileged`` (scripted experts): the suite's env too, as
+        ``extra["suite"]``, and ``expert``, the one registered for the episode's task type."""
         from molmo_lerobot.policies.base import EpisodeContext
 
+        extra = {**self.kind.action_extra, "camera_features": dict(self.kind.cameras)}
+        if privileged:
+            extra["suite"] = self.suite
         return EpisodeContext(spec=None, episode_index=self.plan.episode_index, seed=self.plan.seed,
                               prompt=self.plan.prompt, move_groups=dict(self.env.move_groups),
-                              policy_dt_s=1.0 / self.kind.control_hz,
-                              extra={**self.kind.action_extra, "camera_features": dict(self.kind.cameras)})
+                              policy_dt_s=1.0 / self.kind.control_hz, expert=expert if privileged else None,
+                              extra=extra)
 
     def recorder_info(self, *, expert: bool, extra: dict[str, Any]) -> EpisodeInfo:
         from molmo_lerobot.recording import EpisodeInfo
@@ -373,6 +393,7 @@ class SuiteSessions:
     def __init__(self, config: RunConfig) -> None:
         self.config = config
         self._suite: Any = None
+        self._plugins: Plugins | None = None
 
     def open(self, plan: EpisodePlan, policy: Policy | None, end_on_success: bool) -> SuiteSession:
         """``plan`` opened on the worker's suite, started now if it is not running (the first episode, or
@@ -391,8 +412,19 @@ class SuiteSessions:
                 raise InfrastructureError(f"{problem} (the episode failed to start: {describe(exc)})") from exc
             raise
         if policy is not None:
-            policy.reset(session.policy_context())
+            privileged = policy.needs_simulator
+            policy.reset(session.policy_context(self._expert(plan) if privileged else None, privileged))
         return session
+
+    def _expert(self, plan: EpisodePlan) -> PolicyType | None:
+        """The scripted expert registered for the plan's task type, or None (the policy says whether it needs one)."""
+        from molmo_lerobot.plugins import Plugins
+
+        if self._plugins is None:
+            self._plugins = Plugins()
+        with contextlib.suppress(LookupError):
+            return self._plugins.expert(plan.task_type)
+        return None
 
     def close(self) -> None:
         suite, self._suite = self._suite, None
