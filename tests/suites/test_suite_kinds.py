@@ -60,7 +60,7 @@ def test_libero_session_keeps_libero_conventions():
 
 def test_every_suite_kind_plans_what_it_reads_back():
     for name, kind in SUITES.items():
-        tasks = [{"task_id": 0, "task": "T", "init_states": 2, "instruction": ""}]
+        tasks = [{"task_id": 0, "task": "T", "group": "g", "init_states": 2, "instruction": ""}]
         suite = "libero_goal" if name == "libero" else name
         episodes = kind.plan(suite, tasks, 2, seed=5, horizon=4)
         assert [e.seed for e in episodes] == [5, 6]

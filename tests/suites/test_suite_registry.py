@@ -28,8 +28,11 @@ def test_every_suite_benchmark_has_its_config_and_every_suite_config_is_listed()
     configs = {p.stem: (yaml.safe_load(p.read_text()) or {}).get("suite")
                for p in (data_path("conf") / "benchmark").glob("*.yaml")}
     assert {k: v for k, v in configs.items() if v} == suite_benchmarks()
-    assert suite_benchmarks() == {"libero_spatial": "libero", "libero_object": "libero", "libero_goal": "libero",
-                                  "libero_10": "libero", "libero_90": "libero", "pusht": "pusht"}
+    others = {k: v for k, v in suite_benchmarks().items() if v != "metaworld"}
+    assert others == {"libero_spatial": "libero", "libero_object": "libero", "libero_goal": "libero",
+                      "libero_10": "libero", "libero_90": "libero", "pusht": "pusht"}
+    # MetaWorld: LeRobot's four groups, all of them, and each of its 50 tasks
+    assert len(suite_benchmarks()) - len(others) == 55 and "metaworld_reach-v3" in suite_benchmarks()
 
 
 def test_list_names_every_benchmark_with_its_kind_episodes_horizon_and_sources(capsys):
@@ -115,7 +118,7 @@ def test_plan_problems_name_each_episode_and_field():
     pusht_bench = SuiteBenchmark("pusht", [pusht.PushTEpisode("pusht", "PushT-v1", 0, 10, "")], None, "pusht")  # type: ignore[arg-type]
     assert plan_problems(pusht_bench, [{"task_id": 0, "task": "PushT-v0", "instruction": ""}]) == [
         "pusht episode 0: task 'PushT-v1': PushT's tasks are 'PushT-v0'"]
-    assert set(SUITES) == {"libero", "pusht"}
+    assert set(SUITES) == {"libero", "pusht", "metaworld"}
 
 
 def test_the_gymnasium_entry_point_refuses_a_suite_benchmark_in_one_line():
