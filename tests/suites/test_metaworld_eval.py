@@ -35,7 +35,7 @@ def test_random_run_with_two_workers_scores_per_task_and_records_a_lerobot_datas
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     run_evaluation(compose(["policy=random", "benchmark=metaworld_hard", "benchmark.episodes_per_task=1",
-                            "benchmark.image_size=64", "horizon=12", "workers=2", "limit=2", "record=true",
+                            "benchmark.image_size=64", "horizon=8", "workers=2", "limit=2", "record=true",
                             "progress=false", f"output_dir={tmp_path}"]))
     doc = json.loads((tmp_path / "results.json").read_text())
     assert doc["n_episodes"] == 2 and doc["n_errors"] == 0
@@ -44,12 +44,12 @@ def test_random_run_with_two_workers_scores_per_task_and_records_a_lerobot_datas
     lines = sorted((json.loads(line) for line in (tmp_path / "episodes.jsonl").read_text().splitlines()),
                    key=lambda e: e["episode_index"])
     assert [(e["seed"], e["steps"], e["extra"]["group"], e["extra"]["task_id"], e["error"]) for e in lines] == [
-        (0, 12, "hard", 0, None), (0, 12, "hard", 1, None)]
+        (0, 8, "hard", 0, None), (0, 8, "hard", 1, None)]
     info = json.loads((tmp_path / "eval_info.json").read_text())
     assert [(t["task_group"], t["task_id"]) for t in info["per_task"]] == [("metaworld_hard", 0),
                                                                           ("metaworld_hard", 1)]
     ds = LeRobotDataset("local/x", root=tmp_path / "dataset", video_backend="pyav")
-    assert ds.meta.total_episodes == 2 and ds.meta.total_frames == 24
+    assert ds.meta.total_episodes == 2 and ds.meta.total_frames == 16
     assert (ds.meta.fps, ds.meta.robot_type) == (metaworld.CONTROL_HZ, "metaworld")
     features = ds.meta.features
     assert {k: {"dtype": features[k]["dtype"], "shape": list(features[k]["shape"]), "names": features[k]["names"]}
@@ -88,3 +88,27 @@ def test_benchmarks_mirror_lerobot_eval_s_env_task_values():
     long = planned("benchmark=metaworld_reach-v3", "benchmark.episodes_per_task=1", "horizon=501")
     assert plan_problems(long, metaworld.catalogue("metaworld_reach-v3")) == [
         "metaworld_reach-v3 episode 0: horizon 501: MetaWorld plays at most 500 steps"]
+
+
+def test_an_episode_plays_the_same_whatever_the_worker_s_env_played_before():
+    """A worker keeps its task's env across episodes, in whatever order the run hands it seeds (``lerobot-eval``
+    plays them in order on one env): the seeded reset leaves nothing of the episode before."""
+    import numpy as np
+
+    from molmo_lerobot.suites.metaworld import MetaWorldEpisode, MetaWorldSuite
+
+    def play(suite: MetaWorldSuite, seed: int, steps: int) -> list:
+        first = suite.reset(MetaWorldEpisode("metaworld_push-v3", "push-v3", 0, "push-v3", seed, steps, ""))
+        out, rng = [suite.raw_observation.tolist(), first["observation.image"].tolist()], np.random.default_rng(seed)
+        for _ in range(steps):
+            reply = suite.step(rng.uniform(-1, 1, 4), images=False)
+            out.append((suite.raw_observation.tolist(), reply["reward"], reply["success"]))
+        return out
+
+    fresh, used = MetaWorldSuite(image_size=32), MetaWorldSuite(image_size=32)
+    try:
+        play(used, 3, 60)
+        assert play(used, 5, 30) == play(fresh, 5, 30)
+    finally:
+        fresh.close()
+        used.close()

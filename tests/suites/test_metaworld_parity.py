@@ -9,7 +9,8 @@ LeRobot's ``TASK_POLICY_MAPPING`` names, on the 39-D observation its env formatt
 success (any step's ``is_success`` up to the first done) and step count, and bit for bit on every step's reward
 and every observation the policy was shown (4-D state, 480² image). LeRobot's step limit is its env's
 ``_max_episode_steps`` (500, not ``--env.episode_length``), so the short episodes set that attribute.
-The default run plays 2 short random episodes; ``-m slow`` 20 episodes, 12 of them the expert's (each successful).
+The default run plays 2 short random episodes; ``-m slow`` 20 episodes (:data:`SLOW_RUNS`), 12 of them the experts'
+(each successful).
 """
 
 from __future__ import annotations
@@ -184,16 +185,20 @@ def test_metaworld_constants_are_lerobots():
 
 
 def test_metaworld_matches_lerobot_eval(monkeypatch):
-    compare("push-v3", "random", seed=1000, episodes=2, horizon=6, monkeypatch=monkeypatch)
+    compare("push-v3", "random", seed=1000, episodes=2, horizon=4, monkeypatch=monkeypatch)
+
+
+#: the slow run: 12 expert episodes (each successful) on three tasks whose experts finish in ~40 steps, 8 random
+SLOW_RUNS = [("handle-press-side-v3", "expert", 4, metaworld.MAX_STEPS), ("coffee-button-v3", "expert", 4,
+             metaworld.MAX_STEPS), ("handle-press-v3", "expert", 4, metaworld.MAX_STEPS), ("push-v3", "random", 8, 15)]
 
 
 @pytest.mark.slow
-def test_metaworld_matches_lerobot_eval_on_expert_and_random_episodes(monkeypatch):
-    rows = [*compare("handle-press-side-v3", "expert", 0, 4, metaworld.MAX_STEPS, monkeypatch),
-            *compare("coffee-button-v3", "expert", 0, 4, metaworld.MAX_STEPS, monkeypatch),
-            *compare("plate-slide-back-side-v3", "expert", 0, 4, metaworld.MAX_STEPS, monkeypatch),
-            *compare("push-v3", "random", 0, 8, 30, monkeypatch)]
-    assert len(rows) == 20 and sum(r[3] for r in rows if r[1] == "expert") >= 10
+@pytest.mark.timeout(3600)  # LeRobot's env draws 480² every step: ~0.5-1 s a step a side on this loaded machine
+@pytest.mark.parametrize(("task", "policy", "episodes", "horizon"), SLOW_RUNS)
+def test_metaworld_matches_lerobot_eval_on_expert_and_random_episodes(monkeypatch, task, policy, episodes, horizon):
+    rows = compare(task, policy, 0, episodes, horizon, monkeypatch)
+    assert policy != "expert" or all(row[3] for row in rows), rows  # every expert episode succeeds
     print("\ntask policy seed success steps")
     for row in rows:
         print(*row)
@@ -231,4 +236,4 @@ def policy_parity(tmp_path, monkeypatch, task: str, seed: int, episodes: int, ho
 
 
 def test_metaworld_act_actions_are_lerobot_evals(tmp_path, monkeypatch):
-    policy_parity(tmp_path, monkeypatch, "reach-v3", seed=1000, episodes=2, horizon=5)
+    policy_parity(tmp_path, monkeypatch, "reach-v3", seed=1000, episodes=1, horizon=5)  # two ACT chunks
