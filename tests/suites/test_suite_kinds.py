@@ -12,7 +12,7 @@ import numpy as np
 
 from molmo_lerobot.suites import libero
 from molmo_lerobot.suites.benchmark import SuiteSession, suite_plan
-from molmo_lerobot.suites.plugin import LIBERO, PUSHT
+from molmo_lerobot.suites.plugin import LIBERO, METAWORLD, PUSHT
 
 
 class LiberoStandIn:
@@ -60,8 +60,8 @@ def test_libero_session_keeps_libero_conventions():
 
 
 def test_every_suite_kind_plans_what_it_reads_back():
-    for kind in (LIBERO, PUSHT):
-        tasks = [{"task_id": 0, "task": "T", "init_states": 2, "instruction": ""}]
+    for kind in (LIBERO, PUSHT, METAWORLD):
+        tasks = [{"task_id": 0, "task": "T", "group": "g", "init_states": 2, "instruction": ""}]
         suite = "libero_goal" if kind is LIBERO else kind.name
         episodes = kind.plan(suite, tasks, 2, seed=5, horizon=4)
         assert [e.seed for e in episodes] == [5, 6]

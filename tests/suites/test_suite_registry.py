@@ -21,11 +21,14 @@ from molmo_lerobot.suites.plugin import LIBERO, PUSHT
 
 def test_every_suite_benchmark_is_a_config_of_its_kinds_defaults():
     plugins = Plugins()
-    assert [kind.name for kind in benchmark_kinds(plugins)] == ["libero", "pusht", "aloha", "episodes"]
-    suites = {name: kind.name for kind in benchmark_kinds(plugins)[:3] for name in kind.benchmarks(plugins)}
-    assert suites == {"libero_spatial": "libero", "libero_object": "libero", "libero_goal": "libero",
+    assert [kind.name for kind in benchmark_kinds(plugins)] == ["libero", "pusht", "aloha", "metaworld", "episodes"]
+    suites = {name: kind.name for kind in benchmark_kinds(plugins)[:4] for name in kind.benchmarks(plugins)}
+    others = {name: kind for name, kind in suites.items() if kind != "metaworld"}
+    assert others == {"libero_spatial": "libero", "libero_object": "libero", "libero_goal": "libero",
                       "libero_10": "libero", "libero_90": "libero", "pusht": "pusht",
                       "aloha_insertion": "aloha", "aloha_transfer_cube": "aloha"}
+    # MetaWorld: LeRobot's four groups, all of them, and each of its 50 tasks
+    assert len(suites) - len(others) == 55 and suites["metaworld_reach-v3"] == "metaworld"
     assert all(benchmark_kind(plugins, name).name == kind for name, kind in suites.items())
     assert dict(compose(["benchmark=libero_10"]).benchmark) == {
         "name": "libero_10", "path": None, "episodes_per_task": 1, "image_size": 360, "hard_reset": True}

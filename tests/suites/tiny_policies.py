@@ -1,6 +1,6 @@
 """Tiny LeRobot policies at random init with an env suite's features (LeRobot's LIBERO datasets': two cameras, the
 8-D state, the 7-D action; PushT's: ``observation.image``, the 2-D state and action; ALOHA's: the top camera, the
-14-D state and action), saved with their pre- and
+14-D state and action; MetaWorld's: ``observation.image``, the 4-D state and action), saved with their pre- and
 post-processors where ``policy.path=`` (ours) and ``--policy.path=`` (``lerobot-eval``) load them. The image size
 they declare is the caller's (a side, or (height, width)): the env's, or another one (``lerobot-eval`` hands a policy
 the env's frames)."""
@@ -15,6 +15,7 @@ SUITE_FEATURES = {
     "libero": (("observation.images.image", "observation.images.image2"), 8, 7),
     "pusht": (("observation.image",), 2, 2),
     "aloha": (("observation.images.top",), 14, 14),
+    "metaworld": (("observation.image",), 4, 4),
 }
 
 

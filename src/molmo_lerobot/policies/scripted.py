@@ -1,7 +1,7 @@
 """``policy=scripted`` (a policy plugin) and the scripted experts it dispatches to (hook ``molmo_experts``).
 
 The experts: :mod:`.scripted_pick`, :mod:`.scripted_place`, :mod:`.scripted_articulated`;
-what they share is in :mod:`.expert_motion`.
+what they share is in :mod:`.expert_motion`. MetaWorld's own experts: :mod:`.scripted_metaworld`.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from molmo_lerobot.options import validate_group
 from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
 from molmo_lerobot.policies.expert_options import ScriptedOptions
 from molmo_lerobot.policies.scripted_articulated import ScriptedArticulated
+from molmo_lerobot.policies.scripted_metaworld import metaworld_experts
 from molmo_lerobot.policies.scripted_pick import ScriptedPick
 from molmo_lerobot.policies.scripted_place import ScriptedPlace
 
@@ -34,7 +35,7 @@ class ScriptedExpert(Policy):
         self.current: Policy | None = None
 
     def reset(self, ctx: EpisodeContext) -> None:
-        if ctx.env is None:
+        if ctx.env is None and "suite" not in ctx.extra:  # an env suite's episode: its env in ``extra``
             raise ValueError("scripted policy needs privileged simulator access (EpisodeContext.env)")
         if ctx.expert is None:
             task = ctx.spec.task_name if ctx.spec else None
@@ -60,7 +61,8 @@ def molmo_experts() -> list[PolicyType]:
             PolicyType(name="pick_and_place", aliases=("pick_and_place_next_to", "pick_and_place_color"),
                        factory=ScriptedPlace, description="pick, carry, place, release"),
             PolicyType(name="open", aliases=("close",), factory=ScriptedArticulated,
-                       description="grasp the handle, move it along the joint")]
+                       description="grasp the handle, move it along the joint"),
+            *metaworld_experts()]
 
 
 @hookimpl

@@ -18,6 +18,7 @@ Options (``benchmark.<key>=``, :class:`SuiteOptions` and each suite's subclass):
 
 from __future__ import annotations
 
+import contextlib
 import importlib.metadata as md
 import sys
 from collections import Counter
@@ -47,7 +48,7 @@ if TYPE_CHECKING:
     from molmo_lerobot.context import RunContext
     from molmo_lerobot.dataset_layout import DatasetLayout
     from molmo_lerobot.plugins import Plugins
-    from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy
+    from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Policy, PolicyType
     from molmo_lerobot.recording import EpisodeInfo
     from molmo_lerobot.results import EpisodeResult
     from molmo_lerobot.run_config import RunConfig
@@ -181,11 +182,14 @@ class EnvSuiteKind[OptionsT: SuiteOptions](BenchmarkKind[OptionsT]):
         return RunPlan({i: suite_plan(i, self.suite, bench.episodes[i], cli) for i in indices})
 
     def sessions(self, run: RunContext) -> SuiteSessions:
-        return self.sessions_of(run.config)
+        return self.sessions_of(run.config, run.plugins)
 
-    def sessions_of(self, config: RunConfig) -> SuiteSessions:
-        """A worker's opener of ``config``'s sessions (what :meth:`sessions` gives; no run context needed)."""
-        return SuiteSessions(self.suite, self.options_of(config))
+    def sessions_of(self, config: RunConfig, plugins: Plugins | None = None) -> SuiteSessions:
+        """A worker's opener of ``config``'s sessions (what :meth:`sessions` gives; no run context needed), its
+        experts from ``plugins`` (None: the installed ones)."""
+        from molmo_lerobot.plugins import Plugins
+
+        return SuiteSessions(self.suite, self.options_of(config), plugins or Plugins())
 
     def run_options(self, config: RunConfig) -> dict[str, Any]:
         """The suite's options (they change its frames, ``image_size``, or its episodes)."""
@@ -320,11 +324,16 @@ class SuiteSession(EpisodeOutcome):
     def move_groups(self) -> dict[str, int]:
         return {self.kind.move_group: self.kind.action_dim}
 
-    def policy_context(self) -> EpisodeContext:
+    def policy_context(self, expert: PolicyType | None = None) -> EpisodeContext:
+        """What the policy learns at reset; ``expert`` (for a scripted policy, privileged): the expert registered
+        for the episode's task type, and the suite's env as ``extra["suite"]``."""
         from molmo_lerobot.policies.base import EpisodeContext
 
-        return EpisodeContext.of_plan(self.plan, self.move_groups, 1.0 / self.kind.control_hz,
-                                      extra={**self.kind.action_extra, "camera_features": dict(self.kind.cameras)})
+        extra = {**self.kind.action_extra, "camera_features": dict(self.kind.cameras)}
+        if expert is not None:
+            extra["suite"] = self.suite
+        return EpisodeContext.of_plan(self.plan, self.move_groups, 1.0 / self.kind.control_hz, expert=expert,
+                                      extra=extra)
 
     def recorder_info(self, *, expert: bool, extra: dict[str, Any]) -> EpisodeInfo:
         from molmo_lerobot.recording import EpisodeInfo
@@ -389,8 +398,8 @@ class SuiteSessions(EpisodeSessions):
     """A worker's suite env (LIBERO's process, PushT's env), started at its first episode and kept until
     :meth:`close`; one whose process was lost is replaced at the next episode."""
 
-    def __init__(self, kind: SuiteKind[Any], options: SuiteOptions) -> None:
-        self.kind, self.options = kind, options
+    def __init__(self, kind: SuiteKind[Any], options: SuiteOptions, plugins: Plugins) -> None:
+        self.kind, self.options, self.plugins = kind, options, plugins
         self._suite: Any = None
 
     def open(self, plan: EpisodePlan, policy: Policy | None, *, environment_state: str | None = None,
@@ -412,8 +421,15 @@ class SuiteSessions(EpisodeSessions):
                 raise InfrastructureError(f"{problem} (the episode failed to start: {describe(exc)})") from exc
             raise
         if policy is not None:
-            policy.reset(session.policy_context())
+            policy.reset(session.policy_context(self._expert(plan) if policy.needs_simulator else None))
         return session
+
+    def _expert(self, plan: EpisodePlan) -> PolicyType | None:
+        """The scripted expert registered for the plan's task type (MetaWorld's per task), or None: the policy
+        says whether it needs one."""
+        with contextlib.suppress(LookupError):
+            return self.plugins.expert(plan.task_type)
+        return None
 
     def close(self) -> None:
         suite, self._suite = self._suite, None

@@ -1,6 +1,7 @@
 """Built-in plugin: LeRobot's env suites as benchmark kinds (``libero``: ``benchmark=libero_object`` and the other
-LIBERO suites; ``pusht``: ``benchmark=pusht``; ``aloha``: ``benchmark=aloha_insertion``, ``aloha_transfer_cube``),
-each with its typed options and defaults, stated here once."""
+LIBERO suites; ``pusht``: ``benchmark=pusht``; ``aloha``: ``benchmark=aloha_insertion``, ``aloha_transfer_cube``;
+``metaworld``: ``benchmark=metaworld_<group>``, ``metaworld_mt50``, ``metaworld_<task>``), each with its typed
+options and defaults, stated here once."""
 
 from __future__ import annotations
 
@@ -9,12 +10,14 @@ from typing import Any
 from pydantic import Field
 
 from molmo_lerobot import hookimpl
-from molmo_lerobot.suites import aloha, libero, pusht
+from molmo_lerobot.suites import aloha, libero, metaworld, pusht
 from molmo_lerobot.suites.aloha_dataset import ROBOT_TYPE as ALOHA_ROBOT
 from molmo_lerobot.suites.aloha_dataset import aloha_layout
 from molmo_lerobot.suites.benchmark import EnvSuiteKind, ImageSize, SuiteKind, SuiteOptions
 from molmo_lerobot.suites.libero_dataset import ROBOT_TYPE as LIBERO_ROBOT
 from molmo_lerobot.suites.libero_dataset import libero_layout
+from molmo_lerobot.suites.metaworld_dataset import ROBOT_TYPE as METAWORLD_ROBOT
+from molmo_lerobot.suites.metaworld_dataset import metaworld_layout
 from molmo_lerobot.suites.pusht_dataset import pusht_layout
 
 
@@ -37,6 +40,17 @@ class AlohaOptions(SuiteOptions):
     """ALOHA's options: ``lerobot-eval``'s 50 episodes; gym-aloha's frames are 480 × 640, no option."""
 
     episodes_per_task: int = Field(50, ge=1)
+
+
+class MetaWorldOptions(SuiteOptions):
+    """MetaWorld's options: ``lerobot-eval``'s 50 episodes per task, LeRobot's 480² frames."""
+
+    episodes_per_task: int = Field(50, ge=1)
+    image_size: ImageSize = metaworld.IMAGE_SIZE
+
+
+def _open_metaworld(options: MetaWorldOptions) -> metaworld.MetaWorldSuite:
+    return metaworld.MetaWorldSuite(image_size=options.image_size)
 
 
 def _open_libero(options: LiberoOptions) -> libero.LiberoSuite:
@@ -92,7 +106,16 @@ ALOHA: SuiteKind[AlohaOptions] = SuiteKind(
     distributions=aloha.DISTRIBUTIONS, site_packages=_aloha_site_packages, recording=lambda o: aloha_layout(),
     robot=ALOHA_ROBOT, remedy="make .aloha-venv")
 
+METAWORLD: SuiteKind[MetaWorldOptions] = SuiteKind(
+    name="metaworld", episode=metaworld.MetaWorldEpisode, plan=metaworld.plan_episodes, open=_open_metaworld,
+    task_label=metaworld.task_label, observation=metaworld.policy_observation, move_group=metaworld.MOVE_GROUP,
+    action_dim=metaworld.ACTION_DIM, control_hz=metaworld.CONTROL_HZ, cameras={metaworld.CAMERA: "observation.image"},
+    frame_size=lambda o: o.image_size, options=MetaWorldOptions,
+    action_extra={"action_bounds": {metaworld.MOVE_GROUP: metaworld.ACTION_BOUNDS}},
+    benchmarks=metaworld.benchmarks(), check_episode=metaworld.episode_problems,
+    distributions=metaworld.DISTRIBUTIONS, recording=lambda o: metaworld_layout(o.image_size), robot=METAWORLD_ROBOT)
+
 
 @hookimpl
 def molmo_benchmark_kinds() -> list[EnvSuiteKind[Any]]:
-    return [EnvSuiteKind(LIBERO), EnvSuiteKind(PUSHT), EnvSuiteKind(ALOHA)]
+    return [EnvSuiteKind(LIBERO), EnvSuiteKind(PUSHT), EnvSuiteKind(ALOHA), EnvSuiteKind(METAWORLD)]
