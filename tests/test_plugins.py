@@ -302,7 +302,7 @@ def test_a_failing_builtin_recorder_fails_the_run_in_one_line(monkeypatch):
     from molmo_lerobot.errors import RunError
     from molmo_lerobot.export.recorder import LeRobotRecorderFactory
 
-    def fail(cfg):
+    def fail(cfg, layout=None):
         raise OSError(errno.ENAMETOOLONG, "File name too long", "/store/" + "x" * 300)
 
     monkeypatch.setattr(LeRobotRecorderFactory, "from_config", staticmethod(fail))

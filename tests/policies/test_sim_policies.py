@@ -18,6 +18,7 @@ from molmo_lerobot.run_config import RunConfig
 from molmo_lerobot.runner.episode import EpisodeSession
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.runner.plan import plan_spec
+from molmo_lerobot.tasks.base import Task
 from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.sim.env import Timing
 
@@ -135,7 +136,7 @@ class _Scripted:
         return self.chunks.pop(0) if self.chunks else {"gripper": np.zeros(1)}
 
 
-class _SuccessAt:
+class _SuccessAt(Task):
     """A task that succeeds exactly at the given (1-based) steps."""
 
     def __init__(self, steps):
