@@ -105,6 +105,7 @@ def test_a_libero_suite_run_is_refused_before_any_worker_or_run_directory(broken
 def test_a_libero_suite_episode_that_fails_on_a_broken_install_is_infrastructure(broken_install, monkeypatch):
     from dataclasses import replace
 
+    from molmo_lerobot.plugins import Plugins
     from molmo_lerobot.suites.benchmark import SuiteSessions, suite_plan
     from molmo_lerobot.suites.libero import LiberoEpisode
     from molmo_lerobot.suites.pipe import SuiteError
@@ -120,7 +121,7 @@ def test_a_libero_suite_episode_that_fails_on_a_broken_install_is_infrastructure
 
     kind = replace(LIBERO, open=lambda o: MeshFails())
     plan = suite_plan(0, kind, LiberoEpisode("libero_object", 0, 0, 0, 5, "pick"), False)
-    sessions = SuiteSessions(kind, kind.options.model_validate({"name": "libero_object"}))
+    sessions = SuiteSessions(kind, kind.options.model_validate({"name": "libero_object"}), Plugins())
     with pytest.raises(InfrastructureError) as failed:
         sessions.open(plan, None, end_on_success=False)
     assert error_kind(failed.value) == INFRASTRUCTURE and f"{broken_install} is missing" in str(failed.value)

@@ -18,9 +18,9 @@ from molmo_lerobot.run_config import RunConfig
 from molmo_lerobot.runner.episode import EpisodeSession
 from molmo_lerobot.runner.episode_env import build_env
 from molmo_lerobot.runner.plan import plan_spec
-from molmo_lerobot.tasks.base import Task
 from molmo_lerobot.runner.rollout import rollout
 from molmo_lerobot.sim.env import Timing
+from molmo_lerobot.tasks.base import Task
 
 HORIZON = 100  # the script needs about 60 policy steps; 100 also checks that the hold lasts
 

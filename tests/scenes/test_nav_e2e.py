@@ -18,6 +18,7 @@ from molmo_lerobot.runner.evaluate import run_evaluation
 BASE = ["base_x", "base_y", "base_theta"]
 
 
+@pytest.mark.slow  # the default run keeps it under 10 minutes; make test-all runs it
 def test_a_recorded_nav_episode_loads_in_lerobot_with_the_base_group(tmp_path, fork_servers):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 

@@ -282,6 +282,7 @@ def test_their_model_is_loaded_when_installed(tmp_path, monkeypatch):
     franka_droid.FrankaDroid().bind(m)
 
 
+@pytest.mark.slow  # the default run keeps it under 10 minutes; make test-all runs it
 def test_molmospaces_pick_episode_runs_and_records_an_open_gripper(tmp_path, fork_servers):
     """Must-show: their wrist camera spec and init_qpos on franka_droid through molmo-eval; the first
     recorded frame has the gripper open; the scripted expert picks."""

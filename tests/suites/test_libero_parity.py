@@ -252,6 +252,7 @@ def policy_parity(venv: Path, suite_env: LiberoSuite, checkpoints: list[tuple[st
     return theirs
 
 
+@pytest.mark.slow  # the default run keeps it under 10 minutes; make test-all runs it
 def test_a_checkpoint_at_another_image_size_acts_as_under_lerobot_eval(venv, suite_env, tmp_path):
     """The tiny ACT declared at 256², ``policy=lerobot`` at its defaults: LeRobot hands it the env's 128² frames (its
     pre-processor decides), so must we; one 6-step episode, every action LeRobot's (the other checkpoints: slow)."""

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import importlib.util
 import json
-from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +21,6 @@ from molmo_lerobot.policies.base import Action, EpisodeContext, Observation, Pol
 LABEL_PREFIX = "metaworld/"
 
 
-@cache
 def lerobot_metaworld_config() -> dict[str, Any]:
     """LeRobot's ``envs/metaworld_config.json`` (task descriptions, groups, expert classes), read without importing
     LeRobot or MetaWorld; ``{}`` where LeRobot is not installed. The MetaWorld suite's catalogue is read from it too."""
