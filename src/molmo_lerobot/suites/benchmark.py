@@ -124,7 +124,8 @@ class EnvSuiteKind[OptionsT: SuiteOptions](BenchmarkKind[OptionsT]):
         self.suite = suite
         self.name = suite.name
         self.options = suite.options
-        self.description = f"LeRobot's {suite.name} env suite"
+        source = f", from {suite.distributions[0]}" if suite.distributions else ""
+        self.description = f"env suite {suite.name}{source}"
 
     def benchmarks(self, plugins: Plugins) -> dict[str, Listing]:
         per_task = self.suite.options.model_fields["episodes_per_task"].default
