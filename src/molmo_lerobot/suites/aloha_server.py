@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from molmo_lerobot.suites.pipe import serve
+from molmo_lerobot.suites.pipe import serve_env_server
 
 #: LeRobot's ``AlohaEnv.gym_kwargs`` (besides ``render_mode="rgb_array"``)
 OBS_TYPE, MAX_EPISODE_STEPS = "pixels_agent_pos", 400
@@ -101,18 +101,7 @@ class AlohaServer:
 
 
 def main() -> None:
-    servers: list[AlohaServer] = []
-
-    def start() -> dict[str, Any]:
-        server = AlohaServer()
-        servers.append(server)
-        return {"tasks": server.tasks, "reset": server.reset, "step": server.step, "close_envs": server.close_envs}
-
-    try:
-        serve(start)
-    finally:
-        for server in servers:
-            server.close_envs()
+    serve_env_server(AlohaServer)
 
 
 if __name__ == "__main__":

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from molmo_lerobot.suites.pipe import serve
+from molmo_lerobot.suites.pipe import serve_env_server
 
 #: no-op steps after setting the init state, so that objects settle (LeRobot's ``num_steps_wait``)
 SETTLE_STEPS = 10
@@ -243,18 +243,7 @@ class LiberoServer:
 
 
 def main() -> None:
-    servers: list[LiberoServer] = []
-
-    def start() -> dict[str, Any]:
-        server = LiberoServer()
-        servers.append(server)
-        return {"tasks": server.tasks, "reset": server.reset, "step": server.step, "close_envs": server.close_envs}
-
-    try:
-        serve(start)
-    finally:
-        for server in servers:
-            server.close_envs()
+    serve_env_server(LiberoServer)
 
 
 if __name__ == "__main__":

@@ -122,6 +122,23 @@ def serve(handlers: Mapping[str, Callable[..., Any]] | Callable[[], Mapping[str,
         write_frame(out, reply)
 
 
+def serve_env_server(make: Callable[[], Any]) -> None:
+    """:func:`serve` the env server ``make`` builds (its imports and set-up are the hello's): its ``tasks``,
+    ``reset``, ``step`` and ``close_envs`` are the ops, and its envs are closed however the serving ends."""
+    made: list[Any] = []
+
+    def start() -> dict[str, Callable[..., Any]]:
+        server = make()
+        made.append(server)
+        return {"tasks": server.tasks, "reset": server.reset, "step": server.step, "close_envs": server.close_envs}
+
+    try:
+        serve(start)
+    finally:
+        for server in made:
+            server.close_envs()
+
+
 def _die_with_parent() -> None:
     """Have the kernel SIGKILL this process when the thread that started it ends (Linux); exit now if the
     parent is already gone (it died before this process asked)."""
