@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from molmo_lerobot.allocator import child_env
-from molmo_lerobot.suites.episode import SuiteEpisode
+from molmo_lerobot.suites.episode import TaskEpisode, plan_task_episodes, task_episode_problems
 from molmo_lerobot.suites.pipe import SuiteProcess
 
 #: our benchmark -> gym-aloha's task (``gym_aloha/<task>``, LeRobot's ``--env.task``)
@@ -55,13 +55,9 @@ def aloha_venv() -> Path:
 
 
 @dataclass(frozen=True)
-class AlohaEpisode(SuiteEpisode):
-    suite: str
-    task: str
-    seed: int
-    horizon: int
-    #: the prompt: ``lerobot-eval`` gives an ALOHA policy gym-aloha's ``task`` (``insertion``, ``transfer_cube``)
-    instruction: str
+class AlohaEpisode(TaskEpisode):
+    """One ALOHA episode; its ``instruction`` is what ``lerobot-eval`` gives the policy as its ``task``: gym-aloha's
+    (``insertion``, ``transfer_cube``)."""
 
 
 def plan_episodes(suite: str, tasks: Iterable[Mapping[str, Any]], episodes_per_task: int, seed: int = 0,
@@ -69,24 +65,12 @@ def plan_episodes(suite: str, tasks: Iterable[Mapping[str, Any]], episodes_per_t
     """``episodes_per_task`` episodes of each task (a benchmark has one), episode ``k`` seeded ``seed + k``;
     ``horizon`` overrides LeRobot's ``episode_length``."""
     steps = MAX_STEPS if horizon is None else int(horizon)
-    return [AlohaEpisode(suite, str(task["task"]), seed + k, steps, str(task["instruction"]))
-            for task in tasks for k in range(episodes_per_task)]
+    return plan_task_episodes(AlohaEpisode, suite, tasks, episodes_per_task, seed, steps)
 
 
 def episode_problems(episode: AlohaEpisode, tasks: Iterable[Mapping[str, Any]]) -> list[str]:
     """What is wrong with ``episode`` against the catalogue: the benchmark's task, with its instruction."""
-    by_name = {str(task["task"]): task for task in tasks}
-    task = by_name.get(episode.task)
-    if task is None:
-        return [f"task {episode.task!r}: {episode.suite}'s tasks are {', '.join(map(repr, by_name))}"]
-    if episode.instruction != task["instruction"]:
-        return [f"instruction {episode.instruction!r}: task {episode.task}'s is {task['instruction']!r}"]
-    return []
-
-
-def task_label(episode: AlohaEpisode) -> str:
-    """The episode's ``per_task`` key: ``aloha_insertion/AlohaInsertion-v0``."""
-    return f"{episode.suite}/{episode.task}"
+    return task_episode_problems(episode, tasks, episode.suite)
 
 
 def policy_observation(obs: Mapping[str, Any], step: int) -> dict[str, Any]:

@@ -5,6 +5,7 @@ options and defaults, stated here once."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from pydantic import Field
@@ -14,6 +15,7 @@ from molmo_lerobot.suites import aloha, libero, metaworld, pusht
 from molmo_lerobot.suites.aloha_dataset import ROBOT_TYPE as ALOHA_ROBOT
 from molmo_lerobot.suites.aloha_dataset import aloha_layout
 from molmo_lerobot.suites.benchmark import EnvSuiteKind, ImageSize, SuiteKind, SuiteOptions
+from molmo_lerobot.suites.episode import task_label
 from molmo_lerobot.suites.libero_dataset import ROBOT_TYPE as LIBERO_ROBOT
 from molmo_lerobot.suites.libero_dataset import libero_layout
 from molmo_lerobot.suites.metaworld_dataset import ROBOT_TYPE as METAWORLD_ROBOT
@@ -65,12 +67,9 @@ def _libero_label(episode: libero.LiberoEpisode) -> str:
     return f"{episode.suite}/task_{episode.task_id:02d}"
 
 
-def _libero_site_packages() -> list[str]:
-    return [str(p) for p in libero.libero_venv().glob("lib/python*/site-packages")]
-
-
-def _aloha_site_packages() -> list[str]:
-    return [str(p) for p in aloha.aloha_venv().glob("lib/python*/site-packages")]
+def _site_packages(venv: Path) -> list[str]:
+    """The site-packages directories of a suite's own venv."""
+    return [str(p) for p in venv.glob("lib/python*/site-packages")]
 
 
 def _open_aloha(options: AlohaOptions) -> aloha.AlohaSuite:
@@ -84,13 +83,14 @@ LIBERO: SuiteKind[LiberoOptions] = SuiteKind(
     cameras={"image": "observation.images.image", "image2": "observation.images.image2"},
     frame_size=lambda o: o.image_size, options=LiberoOptions,
     action_extra={"delta_groups": [libero.MOVE_GROUP]}, benchmarks=dict(libero.MAX_STEPS),
-    check_episode=libero.episode_problems, distributions=libero.DISTRIBUTIONS, site_packages=_libero_site_packages,
+    check_episode=libero.episode_problems, distributions=libero.DISTRIBUTIONS,
+    site_packages=lambda: _site_packages(libero.libero_venv()),
     recording=lambda o: libero_layout(o.image_size), robot=LIBERO_ROBOT, install_problem=libero.install_problem,
     remedy="make .libero-venv")
 
 PUSHT: SuiteKind[PushTOptions] = SuiteKind(
     name="pusht", episode=pusht.PushTEpisode, plan=pusht.plan_episodes, open=_open_pusht,
-    task_label=pusht.task_label, observation=pusht.policy_observation, move_group=pusht.MOVE_GROUP,
+    task_label=task_label, observation=pusht.policy_observation, move_group=pusht.MOVE_GROUP,
     action_dim=pusht.ACTION_DIM, control_hz=pusht.CONTROL_HZ, cameras={pusht.CAMERA: "observation.image"},
     frame_size=lambda o: o.image_size, options=PushTOptions,
     action_extra={"action_bounds": {pusht.MOVE_GROUP: pusht.WORKSPACE}},
@@ -99,11 +99,12 @@ PUSHT: SuiteKind[PushTOptions] = SuiteKind(
 
 ALOHA: SuiteKind[AlohaOptions] = SuiteKind(
     name="aloha", episode=aloha.AlohaEpisode, plan=aloha.plan_episodes, open=_open_aloha,
-    task_label=aloha.task_label, observation=aloha.policy_observation, move_group=aloha.MOVE_GROUP,
+    task_label=task_label, observation=aloha.policy_observation, move_group=aloha.MOVE_GROUP,
     action_dim=aloha.ACTION_DIM, control_hz=aloha.CONTROL_HZ, cameras={aloha.CAMERA: "observation.images.top"},
     frame_size=lambda o: (aloha.IMAGE_HEIGHT, aloha.IMAGE_WIDTH), options=AlohaOptions, action_extra={},
     benchmarks=dict.fromkeys(aloha.TASKS, aloha.MAX_STEPS), check_episode=aloha.episode_problems,
-    distributions=aloha.DISTRIBUTIONS, site_packages=_aloha_site_packages, recording=lambda o: aloha_layout(),
+    distributions=aloha.DISTRIBUTIONS, site_packages=lambda: _site_packages(aloha.aloha_venv()),
+    recording=lambda o: aloha_layout(),
     robot=ALOHA_ROBOT, remedy="make .aloha-venv")
 
 METAWORLD: SuiteKind[MetaWorldOptions] = SuiteKind(

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from molmo_lerobot.suites.episode import SuiteEpisode
+from molmo_lerobot.suites.episode import TaskEpisode, plan_task_episodes, task_episode_problems
 
 #: gym_pusht's env id as LeRobot's ``pusht`` config names it (``gym_<type>/<task>``)
 ENV_ID = "gym_pusht/PushT-v0"
@@ -50,13 +50,8 @@ _GYM_KWARGS: dict[str, Any] = {"obs_type": "pixels_agent_pos", "render_mode": "r
 
 
 @dataclass(frozen=True)
-class PushTEpisode(SuiteEpisode):
-    suite: str
-    task: str
-    seed: int
-    horizon: int
-    #: the prompt: ``lerobot-eval`` gives PushT policies an empty ``task``
-    instruction: str
+class PushTEpisode(TaskEpisode):
+    """One PushT episode; its ``instruction`` is empty (``lerobot-eval`` gives PushT policies an empty ``task``)."""
 
 
 def plan_episodes(suite: str, tasks: Iterable[Mapping[str, Any]], episodes_per_task: int, seed: int = 0,
@@ -64,24 +59,12 @@ def plan_episodes(suite: str, tasks: Iterable[Mapping[str, Any]], episodes_per_t
     """``episodes_per_task`` episodes of each task (PushT has one), episode ``k`` seeded ``seed + k``;
     ``horizon`` overrides LeRobot's ``episode_length``."""
     steps = MAX_STEPS if horizon is None else int(horizon)
-    return [PushTEpisode(suite, str(task["task"]), seed + k, steps, str(task["instruction"]))
-            for task in tasks for k in range(episodes_per_task)]
+    return plan_task_episodes(PushTEpisode, suite, tasks, episodes_per_task, seed, steps)
 
 
 def episode_problems(episode: PushTEpisode, tasks: Iterable[Mapping[str, Any]]) -> list[str]:
     """What is wrong with ``episode`` against the catalogue: a task PushT has, with its (empty) instruction."""
-    by_name = {str(task["task"]): task for task in tasks}
-    task = by_name.get(episode.task)
-    if task is None:
-        return [f"task {episode.task!r}: PushT's tasks are {', '.join(map(repr, by_name))}"]
-    if episode.instruction != task["instruction"]:
-        return [f"instruction {episode.instruction!r}: task {episode.task}'s is {task['instruction']!r}"]
-    return []
-
-
-def task_label(episode: PushTEpisode) -> str:
-    """The episode's ``per_task`` key: ``pusht/PushT-v0``."""
-    return f"{episode.suite}/{episode.task}"
+    return task_episode_problems(episode, tasks, "PushT")
 
 
 def policy_observation(obs: Mapping[str, Any], step: int) -> dict[str, Any]:
